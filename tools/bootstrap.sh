@@ -1,0 +1,109 @@
+#!/usr/bin/env bash
+# GraspGuide developer/CI bootstrap (Debian 12). Idempotent and quick when
+# everything is already in place:
+#   1. Debian packages (installed as root, `apt-get update` only if needed);
+#   2. Eigen must be exactly 3.4.0;
+#   3. ./.venv with the pinned tools/requirements-dev.txt (re-installed only
+#      when that file changes);
+#   4. the Python package in tools/ (if tools/pyproject.toml exists),
+#      re-installed only when its sources (tools/, lib/graspguide/) change.
+# Exports nothing. Set GRASPGUIDE_PYTHON to choose the interpreter for .venv
+# (default: python3 on PATH).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+say() { printf 'bootstrap: %s\n' "$*"; }
+die() { printf 'bootstrap: ERROR: %s\n' "$*" >&2; exit 1; }
+
+# --- 1. Debian packages ------------------------------------------------------
+APT_PACKAGES=(libeigen3-dev libgtest-dev cmake ninja-build g++ python3-venv)
+missing=()
+for pkg in "${APT_PACKAGES[@]}"; do
+    if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
+        missing+=("$pkg")
+    fi
+done
+if ((${#missing[@]})); then
+    say "installing Debian packages: ${missing[*]}"
+    SUDO=()
+    if [[ $(id -u) -ne 0 ]]; then
+        command -v sudo >/dev/null 2>&1 || die "need root (or sudo) to install: ${missing[*]}"
+        SUDO=(sudo)
+    fi
+    export DEBIAN_FRONTEND=noninteractive
+    "${SUDO[@]}" apt-get update -qq
+    "${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+    say "Debian packages present"
+fi
+
+# --- 2. Eigen 3.4.0 exactly ----------------------------------------------------
+EIGEN_MACROS=/usr/include/eigen3/Eigen/src/Core/util/Macros.h
+[[ -f $EIGEN_MACROS ]] || die "Eigen not found ($EIGEN_MACROS missing); install libeigen3-dev"
+eigen_ver="$(awk '/#define EIGEN_WORLD_VERSION/{w=$3} /#define EIGEN_MAJOR_VERSION/{M=$3}
+                  /#define EIGEN_MINOR_VERSION/{m=$3} END{print w "." M "." m}' "$EIGEN_MACROS")"
+[[ $eigen_ver == 3.4.0 ]] ||
+    die "Eigen 3.4.0 is required, found $eigen_ver in $EIGEN_MACROS (GraspGuide is validated against 3.4.0 only)"
+say "Eigen $eigen_ver"
+
+# --- 3. Python venv ------------------------------------------------------------
+VENV="$ROOT/.venv"
+PY="$VENV/bin/python"
+REQS="$ROOT/tools/requirements-dev.txt"
+[[ -f $REQS ]] || die "missing $REQS"
+
+if [[ -x $PY ]] && ! "$PY" -c 'import sys' >/dev/null 2>&1; then
+    say "existing .venv is broken (base interpreter gone?); recreating it"
+    rm -rf "$VENV"
+fi
+if [[ ! -x $PY ]]; then
+    base_py="${GRASPGUIDE_PYTHON:-python3}"
+    command -v "$base_py" >/dev/null 2>&1 || die "no '$base_py' on PATH to create .venv"
+    say "creating .venv with $("$base_py" --version 2>&1)"
+    "$base_py" -m venv "$VENV"
+fi
+
+py_id="$("$PY" -c 'import sys; print(sys.version)')"
+reqs_hash="$( { cat "$REQS"; echo "$py_id"; } | sha256sum | cut -d' ' -f1)"
+REQS_STAMP="$VENV/.graspguide-requirements.sha256"
+if [[ ! -f $REQS_STAMP || $(cat "$REQS_STAMP") != "$reqs_hash" ]]; then
+    say "installing tools/requirements-dev.txt into .venv"
+    "$PY" -m pip install --quiet --disable-pip-version-check -r "$REQS"
+    echo "$reqs_hash" >"$REQS_STAMP"
+    rm -f "$VENV/.graspguide-tools.sha256" # new environment: reinstall tools too
+else
+    say ".venv requirements up to date"
+fi
+
+# --- 4. The Python package in tools/ -------------------------------------------
+if [[ -f $ROOT/tools/pyproject.toml ]]; then
+    # Everything that can change what `pip install ./tools` builds.
+    src_dirs=(tools)
+    [[ -d lib/graspguide ]] && src_dirs+=(lib/graspguide)
+    src_hash="$(
+        {
+            find "${src_dirs[@]}" -type f \
+                -not -path 'tools/pio/*' -not -path 'tools/tests/*' \
+                -not -path 'tools/build/*' -not -path 'tools/dist/*' \
+                -not -path '*/__pycache__/*' -not -path '*.egg-info/*' \
+                -not -path '*/.pytest_cache/*' -not -name '*.pyc' \
+                -not -name 'bootstrap.sh' -not -name 'run-tests.sh' \
+                -not -name 'requirements-dev.txt' -print0 2>/dev/null |
+                LC_ALL=C sort -z | xargs -0 -r sha256sum
+            echo "$reqs_hash"
+        } | sha256sum | cut -d' ' -f1
+    )"
+    TOOLS_STAMP="$VENV/.graspguide-tools.sha256"
+    if [[ ! -f $TOOLS_STAMP || $(cat "$TOOLS_STAMP") != "$src_hash" ]]; then
+        say "installing ./tools into .venv (pip --no-build-isolation)"
+        rm -f "$TOOLS_STAMP"
+        "$PY" -m pip install --quiet --disable-pip-version-check --no-build-isolation ./tools
+        echo "$src_hash" >"$TOOLS_STAMP"
+    else
+        say "./tools package up to date"
+    fi
+fi
+
+say "done"
