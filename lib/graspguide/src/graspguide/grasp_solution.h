@@ -1,0 +1,94 @@
+// Steps 1-6 for one posture and wrench: everything that does not depend on the hand's
+// orientation, so it can be kept while the posture stays fixed.
+#pragma once
+
+#include "graspguide/force_qp.h"
+#include "graspguide/motor_levels.h"
+#include "graspguide/relevance.h"
+
+namespace graspguide {
+
+// Sized for the largest scene; a k-contact scene fills the first k (3k) entries.
+template <typename T>
+struct GraspSolution {
+  int k = 0;
+  Eigen::Matrix<T, 3 * kMaxContacts, 1> lambda = Eigen::Matrix<T, 3 * kMaxContacts, 1>::Zero();
+  Eigen::Matrix<T, kMaxContacts, 1> levels = Eigen::Matrix<T, kMaxContacts, 1>::Zero();
+  Vec3<T> force_unit = Vec3<T>::Zero();   // f_hat, hand frame
+  ConstraintModel used = ConstraintModel::kNone;
+  uint8_t relevant_mask = 0;
+  uint8_t fallback_mask = 0;
+  uint16_t active = 0;
+  int iterations = 0;
+  T rank_ratio = T(0);
+};
+
+struct WarmStart {
+  ConstraintModel model = ConstraintModel::kNone;
+  uint16_t active = 0;
+};
+
+template <typename T, int K>
+Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const Vec3<T>& y_axis,
+                   ConstraintModel model, Policy policy, const SolverSettings& settings,
+                   const WarmStart& warm, GraspSolution<T>& out) {
+  if (!wrench.allFinite()) return Status::kNonFiniteInput;
+  ContactFrames<T, K> frames;
+  Status s = contact_frames<T, K>(contacts, y_axis, frames);
+  if (s != Status::kOk) return s;
+  const Vec6<T> w = scaled_wrench<T>(wrench, frames.length_scale);
+  const T w_norm = w.norm();
+  if (!(w_norm > T(0))) return Status::kZeroWrench;
+  const Vec3<T> force = wrench.template head<3>();
+  const T f_norm = force.norm();
+  if (!(f_norm > T(kZeroForceRelTol) * w_norm)) return Status::kZeroForce;
+
+  GraspMat<T, K> g;
+  grasp_matrix<T, K>(frames, g);
+  Equilibrium<T, K> eq;
+  s = equilibrium<T, K>(g, w, settings.decomposition, eq);
+  out.rank_ratio = eq.rank_ratio;
+  if (s != Status::kOk) return s;
+
+  const uint8_t relevant = relevance<T, K>(frames, force);
+  const ForceVec<T, K> des = desired_forces<T, K>(eq.lambda0, relevant);
+  ForceSolution<T, K> forces;
+  s = solve_forces<T, K>(eq, des, model, settings.max_iterations, warm.model,
+                         settings.warm_start ? warm.active : uint16_t(0), forces);
+  out.iterations = forces.iterations;
+  if (s != Status::kOk) return s;
+
+  LevelVec<T, K> levels;
+  s = motor_levels<T, K>(forces.lambda, policy, levels);
+  if (s != Status::kOk) return s;
+
+  out.k = K;
+  out.lambda.setZero();
+  out.lambda.template head<3 * K>() = forces.lambda;
+  out.levels.setZero();
+  out.levels.template head<K>() = levels;
+  out.force_unit = force / f_norm;
+  out.used = forces.used;
+  out.relevant_mask = relevant;
+  out.fallback_mask = frames.fallback_mask;
+  out.active = forces.active;
+  return Status::kOk;
+}
+
+#ifndef GRASPGUIDE_INSTANTIATING  // instantiated once in grasp_solution.cpp
+#define GRASPGUIDE_GRASP_SOLUTION(T, K)                                                       \
+  extern template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&,            \
+                                           const Vec3<T>&, ConstraintModel, Policy,           \
+                                           const SolverSettings&, const WarmStart&,           \
+                                           GraspSolution<T>&);                                \
+  extern template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,  \
+                                            ConstraintModel, int, ConstraintModel, uint16_t,  \
+                                            ForceSolution<T, K>&);
+GRASPGUIDE_GRASP_SOLUTION(float, 3)
+GRASPGUIDE_GRASP_SOLUTION(float, 4)
+GRASPGUIDE_GRASP_SOLUTION(double, 3)
+GRASPGUIDE_GRASP_SOLUTION(double, 4)
+#undef GRASPGUIDE_GRASP_SOLUTION
+#endif
+
+}  // namespace graspguide

@@ -1,0 +1,109 @@
+// Algorithm 1 per tracker frame. The grasp part (steps 1-6) is kept until the contacts,
+// the wrench or the scene change; with a fixed posture a frame costs only the
+// orientation error, alpha and the PWM mapping.
+#pragma once
+
+#include "graspguide/grasp_solution.h"
+#include "graspguide/orientation.h"
+
+namespace graspguide {
+
+template <typename T>
+struct FrameResult {
+  Status status = Status::kOk;
+  Pwm pwm;                 // all zero unless status is kOk
+  T error_deg = T(0);
+  T alpha = T(0);
+  bool recomputed = false; // the grasp part ran in this frame
+};
+
+template <typename T>
+class Guidance {
+ public:
+  using ContactsMax = Eigen::Matrix<T, 3, kMaxContacts>;
+  using QuatVec = Eigen::Matrix<T, 4, 1>;
+
+  // Checks the scene's parameters (not its geometry: that needs a wrench and is reported
+  // by update()).
+  Status set_scene(const Scene<T>& scene) {
+    if (scene.k != 3 && scene.k != 4) return Status::kBadContactCount;
+    if (!scene.y_axis.allFinite() || !scene.contacts.leftCols(scene.k).allFinite())
+      return Status::kNonFiniteInput;
+    if (!(scene.y_axis.norm() > T(0))) return Status::kBadAxis;
+    const Status s = validate_trial_config(scene.trial);
+    if (s != Status::kOk) return s;
+    if (scene.solver.max_iterations < 1) return Status::kBadConfig;
+    scene_ = scene;
+    dirty_ = true;
+    warm_ = WarmStart{};
+    return Status::kOk;
+  }
+
+  Status set_wrench(const Vec6<T>& wrench) {
+    if (!wrench.allFinite()) return Status::kNonFiniteInput;
+    if (wrench != wrench_) dirty_ = true;
+    wrench_ = wrench;
+    has_wrench_ = true;
+    return Status::kOk;
+  }
+
+  // New contact positions (first k columns used); exact comparison decides whether the
+  // grasp part must run again.
+  Status set_contacts(const ContactsMax& contacts) {
+    if (!contacts.leftCols(scene_.k).allFinite()) return Status::kNonFiniteInput;
+    if (contacts.leftCols(scene_.k) != scene_.contacts.leftCols(scene_.k)) dirty_ = true;
+    scene_.contacts = contacts;
+    return Status::kOk;
+  }
+
+  Status update(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
+    out = FrameResult<T>{};
+    out.status = run(orientation_wxyz, out);
+    if (out.status != Status::kOk) out.pwm = Pwm{};  // motors off on any error
+    return out.status;
+  }
+
+  const GraspSolution<T>& grasp() const { return grasp_; }
+  const Scene<T>& scene() const { return scene_; }
+
+ private:
+  Status run(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
+    Quat<T> q;
+    Status s = unit_quaternion<T>(orientation_wxyz, q);
+    if (s != Status::kOk) return s;
+    if (!has_wrench_) return Status::kZeroWrench;
+    if (dirty_) {
+      grasp_status_ = scene_.k == 3 ? solve_k<3>() : solve_k<4>();
+      dirty_ = false;
+      out.recomputed = true;
+    }
+    if (grasp_status_ != Status::kOk) return grasp_status_;
+    const Alignment<T> a = alignment<T>(q, grasp_.force_unit);
+    out.error_deg = a.error_deg;
+    out.alpha = a.alpha;
+    const T gain = scene_.mode == Mode::kC ? T(kPwmSpan) : a.alpha;
+    out.pwm = pwm_from_levels<T, kMaxContacts>(grasp_.levels, gain);
+    return Status::kOk;
+  }
+
+  template <int K>
+  Status solve_k() {
+    GraspSolution<T> next;
+    const Contacts<T, K> c = scene_.contacts.template leftCols<K>();
+    const Status s = solve_grasp<T, K>(c, wrench_, scene_.y_axis, scene_.constraints,
+                                       scene_.policy, scene_.solver, warm_, next);
+    grasp_ = next;
+    if (s == Status::kOk) warm_ = WarmStart{next.used, next.active};
+    return s;
+  }
+
+  Scene<T> scene_;
+  Vec6<T> wrench_ = Vec6<T>::Zero();
+  bool has_wrench_ = false;
+  bool dirty_ = true;
+  Status grasp_status_ = Status::kOk;
+  GraspSolution<T> grasp_;
+  WarmStart warm_;
+};
+
+}  // namespace graspguide

@@ -1,0 +1,34 @@
+// Named tolerances (see docs/algorithm.md, "Tolerances"). Geometry decisions use the
+// same value for float and double so both make the same call; QP tolerances follow the
+// precision because a float QR of a hand grasp carries relative errors near 1e-6.
+#pragma once
+
+namespace graspguide {
+
+template <typename T>
+struct Tolerances;
+
+template <>
+struct Tolerances<float> {
+  static constexpr float kFeasRel = 1e-4f;
+  static constexpr float kDependentRel = 1e-4f;
+};
+
+template <>
+struct Tolerances<double> {
+  static constexpr double kFeasRel = 1e-9;
+  static constexpr double kDependentRel = 1e-9;
+};
+
+inline constexpr double kCoincidentRelTol = 1e-4;
+inline constexpr double kAxisParallelTol = 1e-3;
+inline constexpr double kRankRelTol = 1e-4;
+inline constexpr double kZeroForceRelTol = 1e-6;
+inline constexpr double kRelevanceCosTol = 1e-5;
+inline constexpr double kTinyRel = 1e-12;
+inline constexpr double kMotorOffLevel = 1e-3;
+inline constexpr double kMinQuaternionNorm = 1e-6;
+
+inline constexpr int kDefaultMaxIterations = 64;
+
+}  // namespace graspguide
