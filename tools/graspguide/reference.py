@@ -1,0 +1,527 @@
+"""Independent float64 reference of Algorithm 1 (docs/algorithm.md).
+
+This module deliberately shares no method with the C++ core (`lib/graspguide`), which
+uses a column-pivoted QR, an explicit null-space basis and a dual active-set solver.
+Here instead:
+
+* the rank and the minimum-norm solution come from numpy's (LAPACK) SVD;
+* the QP is solved directly in lambda-space,
+      min ||lam - lam_des||^2  s.t.  G lam = -w_L,  lam_j >= 0 (j in S),
+  by EXHAUSTIVE enumeration of active sets (smallest first) with a KKT solve for each;
+* the feasibility of each constraint model is cross-checked with a linear program
+  (scipy.optimize.linprog, HiGHS) that computes a margin t (negative = infeasible).
+
+Only the geometry (frames, grasp matrix, relevance, motor levels, PWM, error) follows
+the same formulas as the C++, because those formulas are the specification.
+
+Public API: :func:`solve`. Everything is float64. Works standalone (only numpy and
+scipy) so that `tools/scripts/gen_known_answers.py` can import it by adding `tools/`
+to ``sys.path``.
+
+Decisions where docs/algorithm.md is silent or ambiguous (see also the module-level
+constants below):
+
+* coincident_contacts also fires when two contacts coincide pairwise,
+  ``||r_i - r_j|| <= kCoincidentRelTol * L`` (the status name and the C++ message say
+  "two contacts coincide"; the doc's formula only tests ``||r_i||``).
+* ``bad_axis``: y_O all zero (after the finiteness check), i.e. ``not ||y_O|| > 0``.
+* ``zero_wrench``: every wrench component is exactly 0.
+* ``nothing_to_display``: ``||m|| == 0`` exactly, as written in the doc.
+* Outputs that are not defined for a status are ``None`` (``lambda``, ``levels``,
+  ``relevant``, ``error_deg``); ``pwm`` is always a list of ``k`` ints (all 0 unless
+  status is ok); ``constraints_used`` is ``""`` unless status is ok.
+* ``levels`` are the normalised ``m`` (signed for policy Fperp) *before* the off
+  threshold; the threshold only affects ``pwm``.
+* ``error_deg``, ``alpha`` and ``fallback_mask`` are reported for statuses ok and
+  nothing_to_display only (``None``, ``None`` and 0 otherwise).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+# --------------------------------------------------------------------------------------
+# Tolerances: the float64 column of the table in docs/algorithm.md.
+# --------------------------------------------------------------------------------------
+kCoincidentRelTol = 1e-4   # ||r_i|| (or ||r_i - r_j||) <= this * L: coincident contacts
+kAxisParallelTol = 1e-3    # ||y_i x y_O|| below this: fallback axis
+kRankRelTol = 1e-4         # sigma_6 / sigma_1 below this: rank deficient
+kZeroForceRelTol = 1e-6    # ||f|| <= this * ||w_L||: zero force
+kRelevanceCosTol = 1e-5    # f.r_i <= this * ||f|| ||r_i||: relevant
+kTinyRel = 1e-12           # ||lam_des|| <= this * ||lam0||: lam_des left at zero
+kFeasRelTol = 1e-9         # violation allowed, relative to ||lam0||
+kDependentRelTol = 1e-9    # reference: [G; I_S'] with sigma_min/sigma_max below: dependent
+kMotorOffLevel = 1e-3      # |m_i| <= this: motor off
+kMinQuaternionNorm = 1e-6  # ||q|| below this: bad_quaternion
+
+# Reference-only tolerances (not in the doc's table).
+kMultiplierRelTol = 1e-9   # KKT multipliers >= -this * (||lam0|| + ||lam_des||)
+kLpTol = 1e-10             # HiGHS primal/dual feasibility tolerance for the margin LP
+
+PWM_BASE = 70
+PWM_RANGE = 185
+GRAVITY = np.array([0.0, 0.0, -1.0])
+
+TOLERANCES = {
+    "kCoincidentRelTol": kCoincidentRelTol,
+    "kAxisParallelTol": kAxisParallelTol,
+    "kRankRelTol": kRankRelTol,
+    "kZeroForceRelTol": kZeroForceRelTol,
+    "kRelevanceCosTol": kRelevanceCosTol,
+    "kTinyRel": kTinyRel,
+    "kFeasRelTol": kFeasRelTol,
+    "kDependentRelTol": kDependentRelTol,
+    "kMotorOffLevel": kMotorOffLevel,
+    "kMinQuaternionNorm": kMinQuaternionNorm,
+    "kMultiplierRelTol": kMultiplierRelTol,
+    "kLpTol": kLpTol,
+}
+
+STATUSES = (
+    "ok",
+    "non_finite_input",
+    "bad_contact_count",
+    "coincident_contacts",
+    "rank_deficient",
+    "zero_wrench",
+    "zero_force",
+    "bad_axis",
+    "bad_quaternion",
+    "nothing_to_display",
+)
+MODELS = ("paper", "normal", "none")
+POLICIES = ("F", "Fperp")
+MODES = ("C", "V")
+FALLBACK_CHAIN = {"paper": ("paper", "normal", "none"),
+                  "normal": ("normal", "none"),
+                  "none": ("none",)}
+
+
+# --------------------------------------------------------------------------------------
+# Small helpers
+# --------------------------------------------------------------------------------------
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _as_float_array(x: Any) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+def fallback_axis(y_o: np.ndarray) -> np.ndarray:
+    """a = unit(y_O x e), e the basis vector with the smallest |e . y_O| (first on ties)."""
+    least = 0
+    for j in (1, 2):
+        if abs(y_o[j]) < abs(y_o[least]):
+            least = j
+    e = np.zeros(3)
+    e[least] = 1.0
+    return _unit(np.cross(y_o, e))
+
+
+def quaternion_to_matrix(q: Sequence[float]) -> np.ndarray:
+    """Rotation matrix of q = [w, x, y, z] (normalised here), hand -> world."""
+    q = _as_float_array(q)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+# --------------------------------------------------------------------------------------
+# Step 1: contact frames
+# --------------------------------------------------------------------------------------
+def contact_frames(contacts: np.ndarray, y_o: np.ndarray) -> Tuple[str, Optional[dict]]:
+    """Centroid, offsets and right-handed contact frames. y_o must be unit.
+
+    Returns (status, frames) with frames = {O, r (k x 3), L, R (k x 3 x 3),
+    fallback_mask}; status is "ok" or "coincident_contacts".
+    """
+    k = contacts.shape[0]
+    rel = contacts - contacts[0]
+    mean_rel = rel.mean(axis=0)
+    origin = contacts[0] + mean_rel
+    r = rel - mean_rel
+    norms = np.linalg.norm(r, axis=1)
+    L = float(norms.max())
+    if not L > 0.0:
+        return "coincident_contacts", None
+    tol = kCoincidentRelTol * L
+    if np.any(norms <= tol):
+        return "coincident_contacts", None
+    for i in range(k):
+        for j in range(i + 1, k):
+            if np.linalg.norm(r[i] - r[j]) <= tol:
+                return "coincident_contacts", None
+    R = np.zeros((k, 3, 3))
+    mask = 0
+    for i in range(k):
+        y = r[i] / norms[i]
+        x = np.cross(y, y_o)
+        s = np.linalg.norm(x)
+        if s < kAxisParallelTol:
+            x = _unit(np.cross(y, fallback_axis(y_o)))
+            mask |= 1 << i
+        else:
+            x = x / s
+        z = np.cross(x, y)
+        R[i] = np.column_stack([x, y, z])
+    return "ok", {"O": origin, "r": r, "L": L, "R": R, "fallback_mask": mask}
+
+
+# --------------------------------------------------------------------------------------
+# Step 2: grasp matrix (moment rows scaled by 1/L)
+# --------------------------------------------------------------------------------------
+def grasp_matrix(frames: dict) -> np.ndarray:
+    r, L, R = frames["r"], frames["L"], frames["R"]
+    k = r.shape[0]
+    G = np.zeros((6, 3 * k))
+    for i in range(k):
+        G[0:3, 3 * i:3 * i + 3] = R[i]
+        G[3:6, 3 * i:3 * i + 3] = _skew(r[i] / L) @ R[i]
+    return G
+
+
+# --------------------------------------------------------------------------------------
+# Step 3: rank and minimum-norm solution (SVD)
+# --------------------------------------------------------------------------------------
+def rank_ratio(G: np.ndarray) -> float:
+    s = np.linalg.svd(G, compute_uv=False)
+    return float(s[5] / s[0]) if s[0] > 0 else 0.0
+
+
+def min_norm_solution(G: np.ndarray, w_l: np.ndarray) -> np.ndarray:
+    """lam0 = -pinv(G) w_L."""
+    return -np.linalg.pinv(G) @ w_l
+
+
+# --------------------------------------------------------------------------------------
+# Step 4: relevance and desired forces
+# --------------------------------------------------------------------------------------
+def relevance(f: np.ndarray, r: np.ndarray) -> np.ndarray:
+    nf = np.linalg.norm(f)
+    return np.array([float(f @ ri) <= kRelevanceCosTol * nf * np.linalg.norm(ri) for ri in r])
+
+
+def desired_forces(relevant: np.ndarray, lam0: np.ndarray) -> np.ndarray:
+    mask = np.repeat(relevant.astype(np.float64), 3)
+    lam_des = mask * lam0
+    n = np.linalg.norm(lam_des)
+    if n <= kTinyRel * np.linalg.norm(lam0):
+        return np.zeros_like(lam0)
+    return lam_des / n
+
+
+# --------------------------------------------------------------------------------------
+# Step 5: the QP by exhaustive active-set enumeration, and the LP margin
+# --------------------------------------------------------------------------------------
+def constrained_components(model: str, k: int) -> List[int]:
+    if model == "paper":
+        return list(range(3 * k))
+    if model == "normal":
+        return [3 * i + 1 for i in range(k)]
+    if model == "none":
+        return []
+    raise ValueError(f"unknown constraint model {model!r}")
+
+
+def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
+                      S: Sequence[int], lam0_norm: float
+                      ) -> Tuple[bool, Optional[np.ndarray], Optional[Tuple[int, ...]]]:
+    """Euclidean projection of lam_des onto {G lam = -w_L, lam_S >= 0}.
+
+    Tries every active subset S' of S, smallest first (lexicographic within a size),
+    skipping subsets whose [G; I_S'] is not of full row rank 6 + |S'| (numpy SVD,
+    sigma_min / sigma_max <= kDependentRelTol). For each, solves the KKT system of
+    min 1/2||lam - lam_des||^2 s.t. G lam = -w_L, lam_S' = 0:
+
+        [ I   A^T ] [lam  ]   [lam_des]        A = [G; I_S'],  b = [-w_L; 0]
+        [ A   0   ] [kappa] = [b      ],
+
+    so lam - lam_des + G^T nu - sum mu_j e_j = 0 with nu = kappa[:6], mu = -kappa[6:].
+    A subset is accepted when lam_S >= -kFeasRelTol ||lam0|| and mu >= -tol. The first
+    accepted subset gives the (unique) optimum. Returns (feasible, lam, active_set).
+
+    Speed: the SVD rank test is the expensive part, so each size is solved in one batch
+    first and the rank test is applied only to the subsets that pass the KKT test (a
+    rank-deficient subset's solve is garbage and is discarded by the rank test). The
+    outcome is the same as testing the rank first.
+    """
+    n = G.shape[1]
+    b_eq = -w_l
+    delta = kFeasRelTol * lam0_norm
+    mu_tol = kMultiplierRelTol * (lam0_norm + float(np.linalg.norm(lam_des)))
+    S = list(S)
+    S_arr = np.array(S, dtype=int)
+    max_size = min(len(S), n - 6)
+
+    def independent(A: np.ndarray) -> np.ndarray:
+        sv = np.linalg.svd(A, compute_uv=False)
+        return sv[:, -1] > kDependentRelTol * sv[:, 0]
+
+    for size in range(0, max_size + 1):
+        combos = list(itertools.combinations(S, size))
+        subsets = np.array(combos, dtype=int).reshape(len(combos), size)
+        m = subsets.shape[0]
+        rows = 6 + size
+        A = np.zeros((m, rows, n))
+        A[:, :6, :] = G
+        if size:
+            A[np.arange(m)[:, None], 6 + np.arange(size)[None, :], subsets] = 1.0
+        K = np.zeros((m, n + rows, n + rows))
+        K[:, :n, :n] = np.eye(n)
+        K[:, :n, n:] = np.transpose(A, (0, 2, 1))
+        K[:, n:, :n] = A
+        rhs = np.zeros((m, n + rows, 1))
+        rhs[:, :n, 0] = lam_des
+        rhs[:, n:n + 6, 0] = b_eq
+        checked = np.zeros(m, dtype=bool)
+        try:
+            with np.errstate(all="ignore"):
+                sol = np.linalg.solve(K, rhs)[..., 0]
+        except np.linalg.LinAlgError:
+            # An exactly singular KKT matrix in the batch: rank-test everything first.
+            keep = independent(A)
+            checked[:] = True
+            sol = np.full((m, n + rows), np.nan)
+            if np.any(keep):
+                sol[keep] = np.linalg.solve(K[keep], rhs[keep])[..., 0]
+        lam = sol[:, :n]
+        mu = -sol[:, n + 6:]
+        with np.errstate(invalid="ignore"):
+            primal_ok = np.all(lam[:, S_arr] >= -delta, axis=1) if S else np.ones(m, bool)
+            dual_ok = np.all(mu >= -mu_tol, axis=1) if size else np.ones(m, bool)
+        candidates = np.nonzero(primal_ok & dual_ok)[0]
+        if candidates.size == 0:
+            continue
+        full_rank = np.ones(candidates.size, bool)
+        unchecked = ~checked[candidates]
+        if np.any(unchecked):
+            full_rank[unchecked] = independent(A[candidates[unchecked]])
+        if np.any(full_rank):
+            i = int(candidates[np.argmax(full_rank)])
+            return True, lam[i].copy(), tuple(int(j) for j in subsets[i])
+    return False, None, None
+
+
+def feasibility_margin(G: np.ndarray, w_l: np.ndarray, S: Sequence[int],
+                       lam0_norm: float) -> Optional[float]:
+    """max t s.t. G lam = -w_L, lam_j >= t ||lam0|| (j in S), t <= 1 (HiGHS LP).
+
+    Solved in units of ||lam0|| (lam' = lam / ||lam0||) so the LP tolerances are
+    relative. Negative t: the model is infeasible. None for an empty S.
+    """
+    from scipy.optimize import linprog
+
+    S = list(S)
+    if not S:
+        return None
+    n = G.shape[1]
+    c = np.zeros(n + 1)
+    c[-1] = -1.0
+    A_eq = np.hstack([G, np.zeros((6, 1))])
+    b_eq = -w_l / lam0_norm
+    A_ub = np.zeros((len(S), n + 1))
+    for row, j in enumerate(S):
+        A_ub[row, j] = -1.0
+        A_ub[row, -1] = 1.0
+    b_ub = np.zeros(len(S))
+    bounds = [(None, None)] * n + [(None, 1.0)]
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds,
+                  method="highs",
+                  options={"primal_feasibility_tolerance": kLpTol,
+                           "dual_feasibility_tolerance": kLpTol})
+    if res.status != 0:
+        raise RuntimeError(f"margin LP failed: {res.message}")
+    return float(res.x[-1])
+
+
+# --------------------------------------------------------------------------------------
+# Steps 6-7: motor levels, PWM, orientation
+# --------------------------------------------------------------------------------------
+def motor_levels(lam: np.ndarray, policy: str) -> np.ndarray:
+    """Unnormalised m (before m <- m / ||m||)."""
+    lam_star = lam / np.linalg.norm(lam)
+    per_contact = lam_star.reshape(-1, 3)
+    if policy == "F":
+        return np.linalg.norm(per_contact, axis=1)
+    if policy == "Fperp":
+        return per_contact[:, 1].copy()
+    raise ValueError(f"unknown policy {policy!r}")
+
+
+def round_half_away(x: float) -> int:
+    return int(math.copysign(math.floor(abs(x) + 0.5), x))
+
+
+def pwm_from_levels(levels: np.ndarray, mode: str, alpha: float) -> List[int]:
+    out = []
+    for mi in levels:
+        a = abs(float(mi))
+        if a <= kMotorOffLevel:
+            out.append(0)
+            continue
+        gain = PWM_RANGE if mode == "C" else alpha
+        out.append(min(255, max(0, round_half_away(PWM_BASE + a * gain))))
+    return out
+
+
+def guidance(q: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
+    """(error_deg, alpha) for orientation q (hand -> world) and force f (hand frame)."""
+    Rq = quaternion_to_matrix(q)
+    d = Rq @ (f / np.linalg.norm(f))
+    err = math.degrees(math.atan2(float(np.linalg.norm(np.cross(d, GRAVITY))),
+                                  float(d @ GRAVITY)))
+    alpha = float(np.linalg.norm(d - GRAVITY)) / 2.0 * PWM_RANGE
+    return err, alpha
+
+
+# --------------------------------------------------------------------------------------
+# The whole pipeline
+# --------------------------------------------------------------------------------------
+def _result(status: str, k: int, **kw) -> Dict[str, Any]:
+    out = {
+        "status": status,
+        "pwm": [0] * k,
+        "levels": None,
+        "lambda": None,
+        "constraints_used": "",
+        "relevant": None,
+        "error_deg": None,
+        "fallback_mask": 0,
+        "margins": {},
+        "alpha": None,
+        "active_set": None,
+        "diagnostics": None,
+    }
+    out.update(kw)
+    return out
+
+
+def _all_finite(x: Any) -> bool:
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(a)))
+
+
+def solve(contacts, wrench, policy: str = "F", mode: str = "C",
+          constraints: str = "paper", orientation=(1.0, 0.0, 0.0, 0.0),
+          y_axis=(0.0, 1.0, 0.0), compute_margins: bool = True) -> Dict[str, Any]:
+    """Run Algorithm 1 on one scene; see the module docstring for the output keys.
+
+    contacts: k x 3 (hand frame, any length unit); wrench: [fx fy fz mx my mz] in the
+    object frame (moment in force x length unit); orientation: [w x y z] hand -> world.
+    """
+    if policy not in POLICIES:
+        raise ValueError(f"unknown policy {policy!r}")
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}")
+    if constraints not in MODELS:
+        raise ValueError(f"unknown constraint model {constraints!r}")
+
+    contact_list = [list(c) for c in contacts]
+    k = len(contact_list)
+
+    # non_finite_input: any NaN/Inf anywhere.
+    if not (all(_all_finite(c) for c in contact_list) and _all_finite(wrench)
+            and _all_finite(y_axis) and _all_finite(orientation)):
+        return _result("non_finite_input", k)
+    if k not in (3, 4) or any(len(c) != 3 for c in contact_list):
+        return _result("bad_contact_count", k)
+    C = _as_float_array(contact_list)
+    w = _as_float_array(wrench).reshape(6)
+    y = _as_float_array(y_axis).reshape(3)
+    q = _as_float_array(orientation).reshape(4)
+
+    y_norm = float(np.linalg.norm(y))
+    if not y_norm > 0.0:
+        return _result("bad_axis", k)
+    y_o = y / y_norm
+    if not float(np.linalg.norm(q)) >= kMinQuaternionNorm:
+        return _result("bad_quaternion", k)
+
+    status, frames = contact_frames(C, y_o)
+    if status != "ok":
+        return _result(status, k)
+    mask = frames["fallback_mask"]
+
+    if np.all(w == 0.0):
+        return _result("zero_wrench", k)
+    f = w[:3]
+    w_l = np.concatenate([f, w[3:] / frames["L"]])
+    if np.linalg.norm(f) <= kZeroForceRelTol * np.linalg.norm(w_l):
+        return _result("zero_force", k)
+
+    G = grasp_matrix(frames)
+    if rank_ratio(G) < kRankRelTol:
+        return _result("rank_deficient", k)
+
+    lam0 = min_norm_solution(G, w_l)
+    lam0_norm = float(np.linalg.norm(lam0))
+    rel = relevance(f, frames["r"])
+    lam_des = desired_forces(rel, lam0)
+
+    margins: Dict[str, Optional[float]] = {}
+    if compute_margins:
+        for model in MODELS:
+            margins[model] = feasibility_margin(G, w_l, constrained_components(model, k),
+                                                lam0_norm)
+
+    used = None
+    lam = None
+    active = None
+    for model in FALLBACK_CHAIN[constraints]:
+        feasible, lam_m, active_m = project_enumerate(
+            G, w_l, lam_des, constrained_components(model, k), lam0_norm)
+        if feasible:
+            used, lam, active = model, lam_m, active_m
+            break
+    assert used is not None, "the 'none' model is always feasible"
+
+    err, alpha = guidance(q, f)
+    m = motor_levels(lam, policy)
+    m_norm = float(np.linalg.norm(m))
+    diagnostics = {
+        "L": frames["L"],
+        "rank_ratio": rank_ratio(G),
+        "relevance_cos": [float(f @ ri / (np.linalg.norm(f) * np.linalg.norm(ri)))
+                          for ri in frames["r"]],
+        "axis_sin": [float(np.linalg.norm(np.cross(ri / np.linalg.norm(ri), y_o)))
+                     for ri in frames["r"]],
+        "lam0": [float(v) for v in lam0],
+        "lam_des": [float(v) for v in lam_des],
+        "model_used": used,
+    }
+    common = dict(fallback_mask=mask, margins=margins, relevant=[bool(b) for b in rel],
+                  **{"lambda": [float(v) for v in lam]}, error_deg=err, alpha=alpha,
+                  active_set=active)
+    if m_norm == 0.0:
+        return _result("nothing_to_display", k, levels=[0.0] * k, diagnostics=diagnostics,
+                       **common)
+    levels = m / m_norm
+    gain = PWM_RANGE if mode == "C" else alpha
+    diagnostics["pwm_raw"] = [PWM_BASE + abs(float(v)) * gain for v in levels]
+    return _result("ok", k, levels=[float(v) for v in levels],
+                   pwm=pwm_from_levels(levels, mode, alpha), constraints_used=used,
+                   diagnostics=diagnostics, **common)
+
+
+__all__ = [
+    "solve", "contact_frames", "grasp_matrix", "rank_ratio", "min_norm_solution",
+    "relevance", "desired_forces", "constrained_components", "project_enumerate",
+    "feasibility_margin", "motor_levels", "pwm_from_levels", "guidance",
+    "quaternion_to_matrix", "fallback_axis", "round_half_away", "TOLERANCES", "STATUSES",
+    "MODELS", "POLICIES", "MODES",
+]
