@@ -243,29 +243,40 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
     Tries every active subset S' of S, smallest first (lexicographic within a size),
     skipping subsets whose [G; I_S'] is not of full row rank 6 + |S'| (numpy SVD,
     sigma_min / sigma_max <= kDependentRelTol). For each, solves the KKT system of
-    min 1/2||lam - lam_des||^2 s.t. G lam = -w_L, lam_S' = 0:
+    min 1/2||lam - lam_des||^2 s.t. G lam = -w_L, lam_S' = 0, with Lagrangian
+    1/2||lam - lam_des||^2 - mu^T lam_S' + nu^T (G lam + w_L):
 
-        [ I   A^T ] [lam  ]   [lam_des]        A = [G; I_S'],  b = [-w_L; 0]
-        [ A   0   ] [kappa] = [b      ],
+        lam - lam_des - sum_{j in S'} mu_j e_j + G^T nu = 0,  G lam = -w_L,  lam_S' = 0.
 
-    so lam - lam_des + G^T nu - sum mu_j e_j = 0 with nu = kappa[:6], mu = -kappa[6:].
-    A subset is accepted when lam_S >= -kFeasRelTol ||lam0|| and mu >= -tol. The first
-    accepted subset gives the (unique) optimum. Returns (feasible, lam, active_set).
+    Eliminating lam_S' = 0 (exact) leaves, with F the components not in S',
+
+        [ I    G_F^T ] [lam_F]   [lam_des_F]
+        [ G_F  0     ] [nu   ] = [-w_L     ],     mu_j = (G^T nu)_j - lam_des_j (j in S'),
+
+    which is nonsingular exactly when [G; I_S'] has full row rank. A subset is accepted
+    when lam_S >= -kFeasRelTol ||lam0|| and mu >= -kMultiplierRelTol (||lam0|| +
+    ||lam_des||). The first accepted subset gives the (unique) optimum. Returns
+    (feasible, lam, active_set).
 
     Speed: the SVD rank test is the expensive part, so each size is solved in one batch
     first and the rank test is applied only to the subsets that pass the KKT test (a
-    rank-deficient subset's solve is garbage and is discarded by the rank test). The
-    outcome is the same as testing the rank first.
+    rank-deficient subset's solve is garbage and is discarded by the rank test), in
+    order, until one passes. The outcome is the same as testing the rank first.
     """
     n = G.shape[1]
-    b_eq = -w_l
     delta = kFeasRelTol * lam0_norm
     mu_tol = kMultiplierRelTol * (lam0_norm + float(np.linalg.norm(lam_des)))
     S = list(S)
     S_arr = np.array(S, dtype=int)
     max_size = min(len(S), n - 6)
 
-    def independent(A: np.ndarray) -> np.ndarray:
+    def independent(subs: np.ndarray) -> np.ndarray:
+        """[G; I_S'] of full row rank, for each row S' of subs (SVD, relative tol)."""
+        cnt, size = subs.shape
+        A = np.zeros((cnt, 6 + size, n))
+        A[:, :6, :] = G
+        if size:
+            A[np.arange(cnt)[:, None], 6 + np.arange(size)[None, :], subs] = 1.0
         sv = np.linalg.svd(A, compute_uv=False)
         return sv[:, -1] > kDependentRelTol * sv[:, 0]
 
@@ -273,44 +284,62 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
         combos = list(itertools.combinations(S, size))
         subsets = np.array(combos, dtype=int).reshape(len(combos), size)
         m = subsets.shape[0]
-        rows = 6 + size
-        A = np.zeros((m, rows, n))
-        A[:, :6, :] = G
-        if size:
-            A[np.arange(m)[:, None], 6 + np.arange(size)[None, :], subsets] = 1.0
-        K = np.zeros((m, n + rows, n + rows))
-        K[:, :n, :n] = np.eye(n)
-        K[:, :n, n:] = np.transpose(A, (0, 2, 1))
-        K[:, n:, :n] = A
-        rhs = np.zeros((m, n + rows, 1))
-        rhs[:, :n, 0] = lam_des
-        rhs[:, n:n + 6, 0] = b_eq
+        nf = n - size
+        in_subset = np.zeros((m, n), dtype=bool)
+        in_subset[np.arange(m)[:, None], subsets] = True
+        free = np.nonzero(~in_subset)[1].reshape(m, nf)   # sorted complement of S'
+        G_F = G.T[free]                                   # (m, nf, 6) = G_F^T
+        K = np.zeros((m, nf + 6, nf + 6))
+        K[:, :nf, :nf] = np.eye(nf)
+        K[:, :nf, nf:] = G_F
+        K[:, nf:, :nf] = np.transpose(G_F, (0, 2, 1))
+        rhs = np.zeros((m, nf + 6, 1))
+        rhs[:, :nf, 0] = lam_des[free]
+        rhs[:, nf:, 0] = -w_l
         checked = np.zeros(m, dtype=bool)
-        try:
-            with np.errstate(all="ignore"):
-                sol = np.linalg.solve(K, rhs)[..., 0]
-        except np.linalg.LinAlgError:
-            # An exactly singular KKT matrix in the batch: rank-test everything first.
-            keep = independent(A)
-            checked[:] = True
-            sol = np.full((m, n + rows), np.nan)
+        sol = np.full((m, nf + 6), np.nan)
+
+        def solve_batch(idx: np.ndarray) -> None:
+            # np.linalg.solve refuses a whole batch if one matrix is exactly singular:
+            # bisect down to small groups, which are rank-tested first.
+            try:
+                with np.errstate(all="ignore"):
+                    sol[idx] = np.linalg.solve(K[idx], rhs[idx])[..., 0]
+                return
+            except np.linalg.LinAlgError:
+                pass
+            if idx.size > 4:
+                solve_batch(idx[: idx.size // 2])
+                solve_batch(idx[idx.size // 2:])
+                return
+            keep = independent(subsets[idx])
+            checked[idx] = True
             if np.any(keep):
-                sol[keep] = np.linalg.solve(K[keep], rhs[keep])[..., 0]
-        lam = sol[:, :n]
-        mu = -sol[:, n + 6:]
+                sol[idx[keep]] = np.linalg.solve(K[idx[keep]], rhs[idx[keep]])[..., 0]
+
+        solve_batch(np.arange(m))
+        lam = np.zeros((m, n))
+        lam[np.arange(m)[:, None], free] = sol[:, :nf]
+        nu = sol[:, nf:]
         with np.errstate(invalid="ignore"):
-            primal_ok = np.all(lam[:, S_arr] >= -delta, axis=1) if S else np.ones(m, bool)
+            mu = (nu @ G)[np.arange(m)[:, None], subsets] - lam_des[subsets]
+            primal_ok = (np.all(lam[:, S_arr] >= -delta, axis=1) if S else np.ones(m, bool))
+            primal_ok &= np.all(np.isfinite(sol), axis=1)
             dual_ok = np.all(mu >= -mu_tol, axis=1) if size else np.ones(m, bool)
         candidates = np.nonzero(primal_ok & dual_ok)[0]
         if candidates.size == 0:
             continue
-        full_rank = np.ones(candidates.size, bool)
-        unchecked = ~checked[candidates]
-        if np.any(unchecked):
-            full_rank[unchecked] = independent(A[candidates[unchecked]])
-        if np.any(full_rank):
-            i = int(candidates[np.argmax(full_rank)])
-            return True, lam[i].copy(), tuple(int(j) for j in subsets[i])
+        # The first candidate (in lexicographic order) of full rank wins; rank-test the
+        # candidates in small chunks, since the first is usually independent.
+        for start in range(0, candidates.size, 8):
+            chunk = candidates[start:start + 8]
+            full_rank = np.ones(chunk.size, bool)
+            unchecked = ~checked[chunk]
+            if np.any(unchecked):
+                full_rank[unchecked] = independent(subsets[chunk[unchecked]])
+            if np.any(full_rank):
+                i = int(chunk[np.argmax(full_rank)])
+                return True, lam[i].copy(), tuple(int(j) for j in subsets[i])
     return False, None, None
 
 
