@@ -11,7 +11,7 @@ Deterministic: every scene comes from numpy.random.default_rng with a fixed seed
 --check regenerates in memory and compares with the checked-in files. The header must
 be exactly what this script renders from the checked-in JSON, and the JSON must equal
 the regenerated data: strings, ints, booleans and nulls exactly, floats to within
-1e-9 relative (so a different LAPACK/BLAS or HiGHS build that changes the last bits of
+1e-7 relative (so a different LAPACK/BLAS or HiGHS build that changes the last bits of
 a result does not count as stale; --strict makes it byte-exact).
 """
 
@@ -51,7 +51,7 @@ SLACK_COS = 1e-4          # |cos(f, r_i) - kRelevanceCosTol| must exceed this
 SLACK_SIN = 1e-4          # |sin(y_i, y_O) - kAxisParallelTol| must exceed this
 MIN_RANK_RATIO = 1e-2     # sigma_6 / sigma_1 must exceed this
 MARGIN_BAND = (-1e-3, -1e-8)  # margins of the tried models must lie outside this band
-FLOAT_TOL = 1e-9          # --check: relative float tolerance
+FLOAT_TOL = 1e-7          # --check: relative float tolerance (ill-conditioned cases: ~1e-9)
 
 NOTES = [
     "Inputs: non-finite numbers are stored as the strings \"nan\", \"inf\" and \"-inf\" "
@@ -448,6 +448,7 @@ def fallback_stats(count: int, seed: int = BASE_SEED + 1) -> None:
         fell = {"normal": 0, "none": 0}
         pure = [0, 0]      # [scenes, fell back] with zero moment
         slow = 0.0
+        band = disagree = 0  # margin within [-2e-9, 1e-9]; margin contradicting enumeration
         for sc in scenes.random_scenes(seed, k, count):
             t1 = time.perf_counter()
             res = run_case(sc, "F", "C", "paper")
@@ -456,6 +457,9 @@ def fallback_stats(count: int, seed: int = BASE_SEED + 1) -> None:
             used = res["constraints_used"]
             if used != "paper":
                 fell[used] += 1
+            t = res["margins"]["paper"]
+            band += -2e-9 <= t <= 1e-9
+            disagree += (t < -ref.kFeasRelTol - 1e-9) if used == "paper" else (t >= 1e-9)
             if not any(sc["wrench"][3:]):
                 pure[0] += 1
                 pure[1] += used != "paper"
@@ -467,7 +471,8 @@ def fallback_stats(count: int, seed: int = BASE_SEED + 1) -> None:
               f"{pure[1]} fell back ({100 * pure[1] / max(pure[0], 1):.1f}%); with moment "
               f"{count - pure[0]}, of which {n_fell - pure[1]} fell back "
               f"({100 * (n_fell - pure[1]) / max(count - pure[0], 1):.1f}%); "
-              f"{1e3 * dt / count:.1f} ms/scene mean, {1e3 * slow:.1f} ms max")
+              f"{1e3 * dt / count:.1f} ms/scene mean, {1e3 * slow:.1f} ms max; paper margin "
+              f"in [-2e-9, 1e-9] for {band}, contradicting the enumeration for {disagree}")
 
 
 def main(argv: Optional[List[str]] = None) -> int:
