@@ -56,6 +56,21 @@ class Guidance {
     return Status::kOk;
   }
 
+  // Scene, wrench and pose in one call (the CLI's requests), with one order of checks
+  // whatever is wrong: non-finite input, contact count, axis, quaternion, then geometry.
+  Status solve(const Scene<T>& scene, const Vec6<T>& wrench, const QuatVec& orientation_wxyz,
+               FrameResult<T>& out) {
+    out = FrameResult<T>{};
+    const int shown = scene.k < 0 ? 0 : (scene.k > kMaxContacts ? kMaxContacts : scene.k);
+    if (!scene.contacts.leftCols(shown).allFinite() || !scene.y_axis.allFinite() ||
+        !wrench.allFinite() || !orientation_wxyz.allFinite())
+      out.status = Status::kNonFiniteInput;
+    else if ((out.status = set_scene(scene)) == Status::kOk &&
+             (out.status = set_wrench(wrench)) == Status::kOk)
+      return update(orientation_wxyz, out);
+    return out.status;
+  }
+
   Status update(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
     out = FrameResult<T>{};
     out.status = run(orientation_wxyz, out);

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <Eigen/QR>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -22,7 +23,8 @@ struct ProjectionQp {
   int m = 0;
   Eigen::Matrix<T, N, 1> x_unconstrained;
   T violation_tol = T(0);     // a constraint counts as violated below b - violation_tol
-  T dependent_tol = T(0);     // |projection of a row| / |row| below this: dependent
+  T dependent_tol = T(0);     // |projection of a row| below this times the largest row
+                              // norm: the row depends on the active rows
 };
 
 struct QpInfo {
@@ -95,6 +97,12 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
   int q = 0;
   info = QpInfo{};
   x = p.x_unconstrained;
+  // Dependence is judged against the largest row, not the row itself: a row that is
+  // rounding noise (a force component fixed by equilibrium) must count as dependent,
+  // or its 1e-16 norm would turn into a 1e32 step.
+  T row_scale = T(0);
+  for (int j = 0; j < p.m; ++j) row_scale = std::max(row_scale, p.a.row(j).norm());
+  const T dependent_below = p.dependent_tol * row_scale;
 
   // Warm start: project onto the previous active set, keep the independent rows, and drop
   // rows with negative multipliers until the pair (x, u) is dual feasible again.
@@ -106,7 +114,7 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
       f.build(p.a, w, q);
       const Vec aj = p.a.row(j).transpose();
       f.split(aj, z, r);
-      if (z.norm() > p.dependent_tol * aj.norm()) w[q++] = j;
+      if (z.norm() > dependent_below) w[q++] = j;
     }
     while (q > 0) {
       f.build(p.a, w, q);
@@ -142,7 +150,6 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
     if (cand < 0) break;
 
     const Vec ap = p.a.row(cand).transpose();
-    const T ap_norm = ap.norm();
     T u_cand = T(0);
     for (;;) {
       if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
@@ -151,7 +158,7 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
       Small r;
       f.split(ap, z, r);
       const T z_norm = z.norm();
-      const bool dependent = !(z_norm > p.dependent_tol * ap_norm);
+      const bool dependent = !(z_norm > dependent_below);
 
       // Dual step limit: the first active multiplier to reach zero.
       T t_dual = inf;
