@@ -236,13 +236,14 @@ def constrained_components(model: str, k: int) -> List[int]:
 
 
 def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
-                      S: Sequence[int], lam0_norm: float
+                      S: Sequence[int], lam0_norm: float,
+                      feas_rel_tol: float = kFeasRelTol
                       ) -> Tuple[bool, Optional[np.ndarray], Optional[Tuple[int, ...]]]:
     """Euclidean projection of lam_des onto {G lam = -w_L, lam_S >= 0}.
 
     Tries every active subset S' of S, smallest first (lexicographic within a size),
     skipping subsets whose [G; I_S'] is not of full row rank 6 + |S'| (numpy SVD,
-    sigma_min / sigma_max <= kDependentRelTol). For each, solves the KKT system of
+    sigma_min / sigma_max <= kDependentRelTol). For each, solves the KKT conditions of
     min 1/2||lam - lam_des||^2 s.t. G lam = -w_L, lam_S' = 0, with Lagrangian
     1/2||lam - lam_des||^2 - mu^T lam_S' + nu^T (G lam + w_L):
 
@@ -253,18 +254,20 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
         [ I    G_F^T ] [lam_F]   [lam_des_F]
         [ G_F  0     ] [nu   ] = [-w_L     ],     mu_j = (G^T nu)_j - lam_des_j (j in S'),
 
-    which is nonsingular exactly when [G; I_S'] has full row rank. A subset is accepted
-    when lam_S >= -kFeasRelTol ||lam0|| and mu >= -kMultiplierRelTol (||lam0|| +
-    ||lam_des||). The first accepted subset gives the (unique) optimum. Returns
-    (feasible, lam, active_set).
+    which is solved through the SVD G_F = U Sigma V^T (equivalent to the KKT solve, but
+    with the conditioning of G_F instead of its square, which matters on the degenerate
+    vertices of the paper model):
 
-    Speed: the SVD rank test is the expensive part, so each size is solved in one batch
-    first and the rank test is applied only to the subsets that pass the KKT test (a
-    rank-deficient subset's solve is garbage and is discarded by the rank test), in
-    order, until one passes. The outcome is the same as testing the rank first.
+        lam_F = lam_des_F - V Sigma^-1 U^T r,   nu = U Sigma^-2 U^T r,   r = G_F lam_des_F + w_L.
+
+    A subset is accepted when lam_S >= -feas_rel_tol ||lam0|| and
+    mu >= -kMultiplierRelTol (||lam0|| + ||lam_des||). The first accepted subset gives the
+    (unique) optimum. The [G; I_S'] rank test is applied, in order, only to subsets that
+    pass the KKT test (the same outcome as testing it first, for less work). Returns
+    (feasible, lam, active_set).
     """
     n = G.shape[1]
-    delta = kFeasRelTol * lam0_norm
+    delta = feas_rel_tol * lam0_norm
     mu_tol = kMultiplierRelTol * (lam0_norm + float(np.linalg.norm(lam_des)))
     S = list(S)
     S_arr = np.array(S, dtype=int)
@@ -285,58 +288,33 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
         subsets = np.array(combos, dtype=int).reshape(len(combos), size)
         m = subsets.shape[0]
         nf = n - size
+        rows = np.arange(m)[:, None]
         in_subset = np.zeros((m, n), dtype=bool)
-        in_subset[np.arange(m)[:, None], subsets] = True
+        in_subset[rows, subsets] = True
         free = np.nonzero(~in_subset)[1].reshape(m, nf)   # sorted complement of S'
-        G_F = G.T[free]                                   # (m, nf, 6) = G_F^T
-        K = np.zeros((m, nf + 6, nf + 6))
-        K[:, :nf, :nf] = np.eye(nf)
-        K[:, :nf, nf:] = G_F
-        K[:, nf:, :nf] = np.transpose(G_F, (0, 2, 1))
-        rhs = np.zeros((m, nf + 6, 1))
-        rhs[:, :nf, 0] = lam_des[free]
-        rhs[:, nf:, 0] = -w_l
-        checked = np.zeros(m, dtype=bool)
-        sol = np.full((m, nf + 6), np.nan)
-
-        def solve_batch(idx: np.ndarray) -> None:
-            # np.linalg.solve refuses a whole batch if one matrix is exactly singular:
-            # bisect down to small groups, which are rank-tested first.
-            try:
-                with np.errstate(all="ignore"):
-                    sol[idx] = np.linalg.solve(K[idx], rhs[idx])[..., 0]
-                return
-            except np.linalg.LinAlgError:
-                pass
-            if idx.size > 4:
-                solve_batch(idx[: idx.size // 2])
-                solve_batch(idx[idx.size // 2:])
-                return
-            keep = independent(subsets[idx])
-            checked[idx] = True
-            if np.any(keep):
-                sol[idx[keep]] = np.linalg.solve(K[idx[keep]], rhs[idx[keep]])[..., 0]
-
-        solve_batch(np.arange(m))
-        lam = np.zeros((m, n))
-        lam[np.arange(m)[:, None], free] = sol[:, :nf]
-        nu = sol[:, nf:]
-        with np.errstate(invalid="ignore"):
-            mu = (nu @ G)[np.arange(m)[:, None], subsets] - lam_des[subsets]
-            primal_ok = (np.all(lam[:, S_arr] >= -delta, axis=1) if S else np.ones(m, bool))
-            primal_ok &= np.all(np.isfinite(sol), axis=1)
-            dual_ok = np.all(mu >= -mu_tol, axis=1) if size else np.ones(m, bool)
-        candidates = np.nonzero(primal_ok & dual_ok)[0]
-        if candidates.size == 0:
-            continue
+        G_F = np.transpose(G[:, free], (1, 0, 2))         # (m, 6, nf)
+        U, sig, Vt = np.linalg.svd(G_F, full_matrices=False)
+        usable = sig[:, -1] > kDependentRelTol * sig[:, 0]
+        lam_des_F = lam_des[free]
+        r = np.einsum("mij,mj->mi", G_F, lam_des_F) + w_l
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            y = np.einsum("mji,mj->mi", U, r) / sig            # Sigma^-1 U^T r
+            lam_F = lam_des_F - np.einsum("mji,mj->mi", Vt, y)
+            nu = np.einsum("mij,mj->mi", U, y / sig)
+            lam = np.zeros((m, n))
+            lam[rows, free] = lam_F
+            mu = (nu @ G)[rows, subsets] - lam_des[subsets]
+            ok = usable & np.all(np.isfinite(lam), axis=1) & np.all(np.isfinite(nu), axis=1)
+            if S:
+                ok &= np.all(lam[:, S_arr] >= -delta, axis=1)
+            if size:
+                ok &= np.all(mu >= -mu_tol, axis=1)
+        candidates = np.nonzero(ok)[0]
         # The first candidate (in lexicographic order) of full rank wins; rank-test the
         # candidates in small chunks, since the first is usually independent.
         for start in range(0, candidates.size, 8):
             chunk = candidates[start:start + 8]
-            full_rank = np.ones(chunk.size, bool)
-            unchecked = ~checked[chunk]
-            if np.any(unchecked):
-                full_rank[unchecked] = independent(subsets[chunk[unchecked]])
+            full_rank = independent(subsets[chunk])
             if np.any(full_rank):
                 i = int(chunk[np.argmax(full_rank)])
                 return True, lam[i].copy(), tuple(int(j) for j in subsets[i])
@@ -447,11 +425,13 @@ def _all_finite(x: Any) -> bool:
 
 def solve(contacts, wrench, policy: str = "F", mode: str = "C",
           constraints: str = "paper", orientation=(1.0, 0.0, 0.0, 0.0),
-          y_axis=(0.0, 1.0, 0.0), compute_margins: bool = True) -> Dict[str, Any]:
+          y_axis=(0.0, 1.0, 0.0), compute_margins: bool = True,
+          feas_rel_tol: float = kFeasRelTol) -> Dict[str, Any]:
     """Run Algorithm 1 on one scene; see the module docstring for the output keys.
 
     contacts: k x 3 (hand frame, any length unit); wrench: [fx fy fz mx my mz] in the
     object frame (moment in force x length unit); orientation: [w x y z] hand -> world.
+    feas_rel_tol overrides kFeasRelTol (used to find decisions that depend on it).
     """
     if policy not in POLICIES:
         raise ValueError(f"unknown policy {policy!r}")
@@ -513,7 +493,7 @@ def solve(contacts, wrench, policy: str = "F", mode: str = "C",
     active = None
     for model in FALLBACK_CHAIN[constraints]:
         feasible, lam_m, active_m = project_enumerate(
-            G, w_l, lam_des, constrained_components(model, k), lam0_norm)
+            G, w_l, lam_des, constrained_components(model, k), lam0_norm, feas_rel_tol)
         if feasible:
             used, lam, active = model, lam_m, active_m
             break
