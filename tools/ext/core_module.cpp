@@ -199,16 +199,15 @@ nb::dict result_dict(gg::Status status, int k, const gg::FrameResult<T>& fr,
   return d;
 }
 
-// One-shot Algorithm 1. The wrench is set before the scene so that a non-finite wrench
-// is reported as non_finite_input even when the contact count is also wrong.
+// One-shot Algorithm 1 through Guidance<T>::solve, which checks in one order whatever is
+// wrong: non-finite input, contact count, axis, quaternion, then the geometry.
 template <typename T>
 nb::dict solve_t(const ContactList& contacts, const Wrench& wrench, const SceneOptions& o,
                  const Quat4& orientation, const Axis3& y_axis) {
   gg::Guidance<T> guidance;
   gg::FrameResult<T> fr;
-  gg::Status s = guidance.set_wrench(make_wrench<T>(wrench));
-  if (s == gg::Status::kOk) s = guidance.set_scene(make_scene<T>(contacts, y_axis, o));
-  if (s == gg::Status::kOk) s = guidance.update(make_quat<T>(orientation), fr);
+  const gg::Status s = guidance.solve(make_scene<T>(contacts, y_axis, o), make_wrench<T>(wrench),
+                                      make_quat<T>(orientation), fr);
   return result_dict<T>(s, contact_count(contacts), fr, guidance.grasp());
 }
 
@@ -332,8 +331,8 @@ NB_MODULE(_core, m) {
         "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "qr",
         "max_iterations"_a = gg::kDefaultMaxIterations,
         (std::string(
-             "Run Algorithm 1 once with graspguide::Guidance<T> (set_wrench, set_scene, "
-             "update).\n\n"
+             "Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
+             "orientation in one call).\n\n"
              "contacts: k triples [x, y, z] in the hand frame (k must be 3 or 4, anything "
              "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
              "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "

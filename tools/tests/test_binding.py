@@ -145,10 +145,23 @@ def test_contact_count_is_the_cores_status(k):
         assert r["pwm"] == [0] * k
 
 
-def test_non_finite_wrench_is_reported_before_the_contact_count():
-    # known answers: order_nan_before_count
-    r = _core.solve(HAND3[:2], [0.3, -1.2, math.nan, 0, 0, 0])
-    assert r["status"] == "non_finite_input"
+@pytest.mark.parametrize("scalar", ["double", "float"])
+def test_order_of_checks(scalar):
+    """Guidance::solve: non-finite input, contact count, axis, quaternion, geometry."""
+    nan = math.nan
+    cases = [
+        ((HAND3[:2], [0.3, -1.2, nan, 0, 0, 0]), {}, "non_finite_input"),
+        ((HAND3[:1] + [[nan, 0, 0]], PURE_F), {}, "non_finite_input"),
+        ((HAND3[:2], PURE_F), {"orientation": [nan, 0, 0, 0]}, "non_finite_input"),
+        ((HAND3, PURE_F), {"orientation": [nan, 0, 0, 0], "y_axis": [0, 0, 0]},
+         "non_finite_input"),
+        ((HAND3[:2], PURE_F), {"y_axis": [0, 0, 0]}, "bad_contact_count"),
+        ((HAND3, PURE_F), {"y_axis": [0, 0, 0], "orientation": [0, 0, 0, 0]}, "bad_axis"),
+        (([HAND3[0]] * 3, PURE_F), {"orientation": [0, 0, 0, 0]}, "bad_quaternion"),
+        (([HAND3[0]] * 3, [0.0] * 6), {}, "coincident_contacts"),
+    ]
+    for args, kw, status in cases:
+        assert _core.solve(*args, scalar=scalar, **kw)["status"] == status, (args, kw)
 
 
 @pytest.mark.parametrize("field,index", [("contacts", (1, 2)), ("wrench", 4),

@@ -460,6 +460,17 @@ def test_known_answer_double(name, known_answers):
     assert not problems, f"{name}: " + "; ".join(problems)
 
 
+def _float_input_distortion(case) -> float:
+    """How far rounding the contacts to float moves them relative to each other, in units
+    of the hand's size (a diagnostic for the float comparison: ~1e-7 for a hand near the
+    origin, order 1 for a hand 1e6 away from it)."""
+    c = np.asarray(_decode_numbers(case["contacts"]), float)
+    c32 = c.astype(np.float32).astype(float)
+    rel, rel32 = c - c[0], c32 - c32[0]
+    size = np.max(np.linalg.norm(rel - rel.mean(axis=0), axis=1))
+    return float(np.max(np.abs(rel32 - rel)) / size) if size > 0 else math.inf
+
+
 def test_known_answers_float_pwm(known_answers):
     """Float: the status always, and PWM within 1 count on >= 99.9 % of the ok cases."""
     n_ok = 0
@@ -477,7 +488,9 @@ def test_known_answers_float_pwm(known_answers):
         if max(abs(a - b) for a, b in zip(answer["pwm"], expect["pwm"])) <= 1:
             within += 1
         else:
-            off.append(f"{name}: {answer['pwm']} vs {expect['pwm']}")
+            off.append(f"{name}: {answer['pwm']} vs {expect['pwm']} (rounding the inputs "
+                       f"to float moves the contacts by {_float_input_distortion(case):.2g} "
+                       "of the hand's size)")
     share = within / n_ok if n_ok else 0.0
     print(f"\nfloat: PWM within 1 count on {within}/{n_ok} ok cases ({100 * share:.2f} %)")
     assert not status_mismatch, status_mismatch
