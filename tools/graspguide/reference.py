@@ -7,14 +7,20 @@ Here instead:
 * the rank and the minimum-norm solution come from numpy's (LAPACK) SVD;
 * the QP is solved directly in lambda-space,
       min ||lam - lam_des||^2  s.t.  G lam = -w_L,  lam_j >= 0 (j in S),
-  by EXHAUSTIVE enumeration of active sets (smallest first) with a KKT solve for each;
+  by EXHAUSTIVE enumeration of active sets (smallest first), the KKT conditions of
+  each solved through the SVD of the free columns of G;
 * the feasibility of each constraint model is cross-checked with a linear program
   (scipy.optimize.linprog, HiGHS) that computes a margin t (negative = infeasible).
 
 Only the geometry (frames, grasp matrix, relevance, motor levels, PWM, error) follows
 the same formulas as the C++, because those formulas are the specification.
 
-Public API: :func:`solve`. Everything is float64. Works standalone (only numpy and
+Public API: :func:`solve`, returning a dict with keys status, pwm (k ints), levels (k),
+lambda (3k, contact-frame [x y z] per contact: the QP optimum lambda0 + N xi before
+normalisation), constraints_used, relevant (k bools), error_deg, alpha, fallback_mask
+(bit i: contact i used the fallback axis), margins ({model: t}, None for 'none'),
+active_set (the accepted active set, indices into lambda) and diagnostics (internal
+quantities used by the known-answer generator). Everything is float64. Works standalone (only numpy and
 scipy) so that `tools/scripts/gen_known_answers.py` can import it by adding `tools/`
 to ``sys.path``.
 
