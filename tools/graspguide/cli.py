@@ -45,8 +45,10 @@ Request fields (anything else is rejected, so a typo is never ignored):
   constraints  "paper" (default) | "normal" | "none"
   orientation  [w, x, y, z] hand -> world; default [1, 0, 0, 0] (identity)
   y_axis       the object axis y_O in the hand frame; default [0, 1, 0]
-Numbers may be the JSON extensions NaN, Infinity and -Infinity (so may overflow,
-like 1e400): they reach the core, which answers non_finite_input.
+Numbers may also be the JSON extensions NaN, Infinity and -Infinity, and a number
+beyond the double range (1e400) is infinite: they reach the core, which answers
+non_finite_input. Booleans and strings are never numbers. A contact count other
+than 3 or 4 is the core's bad_contact_count.
 
 Success:
   {"ok": true, "pwm": [k ints 0..255], "levels": [k], "lambda": [3k],
@@ -61,7 +63,8 @@ Error:
         "coincident_contacts", "rank_deficient", "zero_force", "bad_quaternion"
 
 Exit status: 0 when the input ends (even if some requests were bad), 2 for a usage
-error, 130 when interrupted (Ctrl-C; every answer so far is flushed).
+error, 130 when interrupted (Ctrl-C; every answer so far is flushed), 1 when the
+reader closes the output pipe.
 """
 
 SOLVE_EPILOG = """\
