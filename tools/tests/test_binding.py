@@ -355,3 +355,37 @@ def test_guidance_setter_errors_change_nothing():
     assert again["status"] == "ok" and again["recomputed"] is True
     assert again["pwm"] == good["pwm"]
     assert np.allclose(again["lambda"], good["lambda"], rtol=0, atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# Against the float64 reference where the QP is degenerate
+# --------------------------------------------------------------------------------------
+def test_contacts_in_a_plane_containing_y_axis_match_the_reference():
+    """All contacts in z = 0 (a plane containing y_O = +y): every lambda_ix is fixed by
+    equilibrium, so its constraint row is rounding noise (~1e-16). Such a row must count
+    as dependent (an infeasibility certificate), not as a direction for a 1e30 step."""
+    from graspguide import reference as ref
+
+    rng = np.random.default_rng(1)
+    disagree = []
+    for t in range(60):
+        contacts = rng.uniform(-0.05, 0.05, (3, 3))
+        contacts[:, 2] = 0.0
+        wrench = np.concatenate([rng.normal(size=3), rng.normal(size=3) * 0.02 * (t % 2)])
+        expect = ref.solve(contacts.tolist(), wrench.tolist(), constraints="paper",
+                           compute_margins=False)
+        for scalar in ("double", "float"):
+            r = _core.solve(contacts.tolist(), wrench.tolist(), constraints="paper",
+                            scalar=scalar)
+            same = r["status"] == expect["status"]
+            if same and r["status"] == "ok":
+                same = (r["constraints_used"] == expect["constraints_used"] and
+                        max(abs(a - b) for a, b in zip(r["pwm"], expect["pwm"])) <= 1 and
+                        max(abs(v) for v in r["lambda"]) < 1e3)
+            if not same:
+                disagree.append((t, scalar, r["constraints_used"], expect["constraints_used"],
+                                 r["pwm"], expect["pwm"]))
+    assert not disagree, disagree[:5]
+    r = _core.solve([[0.045, 0.045, 0.0], [0.015, 0.095, 0.0], [-0.01, 0.1, 0.0]],
+                    [0, 0, 1.0, 0, 0, 0])
+    assert r["constraints_used"] == "normal" and r["pwm"] == [177, 177, 177]
