@@ -106,22 +106,39 @@ TEST(ExtremesDouble, OffsetOfAMillionFromTheOriginChangesNothing) {
   EXPECT_LT((r.grasp.lambda - base.grasp.lambda).norm(), 1e-6 * base.grasp.lambda.norm());
 }
 
-TEST(ExtremesFloat, OffsetOfAMillionIsFineInMillimetresAndAnErrorWhenItErasesTheHand) {
-  // In mm, float keeps 1/16 mm at 1e6: the hand survives the rounding of its inputs.
+TEST(ExtremesFloat, ContactsTheFloatCannotResolveAreRefusedNotRendered) {
+  // 1e4 mm from the origin: float still resolves the hand to ~1e-3 mm.
   auto mm = hand_scene<float>();
   mm.contacts *= 1000.f;
   const auto base = solve_once<float>(mm, weight(), kIdentity);
-  mm.contacts.colwise() += Eigen::Vector3f(1e6f, -1e6f, 1e6f);
-  const auto r = solve_once<float>(mm, weight(), kIdentity);
-  ASSERT_EQ(r.status, gg::Status::kOk);
-  EXPECT_LE(graspguide_test::max_pwm_diff(r.frame.pwm, base.frame.pwm), 3);
-  // In metres the float inputs themselves are on a 6 cm grid: the hand is gone, and the
-  // result must be an error or a well-formed frame, never NaN PWM or a crash.
-  auto m = hand_scene<float>();
-  m.contacts.colwise() += Eigen::Vector3f(1e6f, -1e6f, 1e6f);
-  const auto bad = solve_once<float>(m, weight(), kIdentity);
-  EXPECT_NE(bad.status, gg::Status::kOk);
-  expect_off(bad.frame.pwm);
+  mm.contacts.colwise() += Eigen::Vector3f(1e4f, -1e4f, 1e4f);
+  const auto near = solve_once<float>(mm, weight(), kIdentity);
+  ASSERT_EQ(near.status, gg::Status::kOk);
+  EXPECT_LE(graspguide_test::max_pwm_diff(near.frame.pwm, base.frame.pwm), 1);
+  // 1e6 away (m or mm): the inputs themselves are rounded by a sizeable part of the hand.
+  for (float unit : {1.f, 1000.f}) {
+    auto far = hand_scene<float>();
+    far.contacts *= unit;
+    far.contacts.colwise() += Eigen::Vector3f(1e6f, -1e6f, 1e6f);
+    const auto r = solve_once<float>(far, weight(), kIdentity);
+    EXPECT_EQ(r.status, gg::Status::kImpreciseContacts) << unit;
+    expect_off(r.frame.pwm);
+  }
+}
+
+TYPED_TEST(Extremes, HugeAndTinyInputScalesDoNotOverflow) {
+  using T = TypeParam;
+  const T big = std::is_same<T, float>::value ? T(1e30) : T(1e200);
+  auto s = hand_scene<T>();
+  const auto base = solve_once<T>(s, weight(), Eigen::Vector4d(1, 1, 0, 0).normalized());
+  gg::Guidance<T> g;
+  gg::FrameResult<T> r;
+  // A quaternion whose squared norm overflows is still a 90 degree turn.
+  ASSERT_EQ(g.solve(s, weight().cast<T>(), Eigen::Matrix<T, 4, 1>(big, big, T(0), T(0)), r),
+            gg::Status::kOk);
+  EXPECT_NEAR(r.error_deg, base.frame.error_deg, T(1e-3));
+  s.y_axis = gg::Vec3<T>(T(0), big, T(0));
+  ASSERT_EQ(g.solve(s, weight().cast<T>(), kIdentity.cast<T>(), r), gg::Status::kOk);
 }
 
 TYPED_TEST(Extremes, ZeroForceAndZeroWrench) {

@@ -73,12 +73,16 @@ TEST(KnownAnswers, DoubleMatchesTheReference) {
 }
 
 TEST(KnownAnswers, FloatMatchesTheReferenceWithinOnePwmCount) {
-  int compared = 0, exact = 0;
+  int compared = 0, exact = 0, refused = 0;
   for (const auto& ka : kKnownAnswers) {
     SCOPED_TRACE(ka.name);
     const auto r = run_case<float>(ka);
-    // Extreme inputs that float cannot represent are checked in test_extremes.
-    if (std::strstr(ka.name, "offset_1e6") != nullptr) continue;
+    // Float may refuse a hand its rounding cannot resolve, never render it distorted.
+    if (r.status == gg::Status::kImpreciseContacts && std::strcmp(ka.status, "ok") == 0) {
+      EXPECT_NE(std::strstr(ka.name, "offset_1e6"), nullptr);
+      ++refused;
+      continue;
+    }
     ASSERT_STREQ(gg::status_name(r.status), ka.status);
     if (r.status != gg::Status::kOk) continue;
     ++compared;
@@ -90,5 +94,6 @@ TEST(KnownAnswers, FloatMatchesTheReferenceWithinOnePwmCount) {
     exact += worst == 0;
   }
   EXPECT_GT(compared, 200);
-  std::printf("float vs float64 reference: %d/%d scenes with identical PWM\n", exact, compared);
+  std::printf("float vs float64 reference: %d/%d scenes with identical PWM, %d refused as "
+              "imprecise_contacts\n", exact, compared, refused);
 }

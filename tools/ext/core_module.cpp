@@ -32,15 +32,8 @@ using Wrench = std::array<double, 6>;
 using Quat4 = std::array<double, 4>;
 using Axis3 = std::array<double, 3>;
 
-constexpr gg::Status kAllStatuses[] = {
-    gg::Status::kOk,           gg::Status::kNonFiniteInput,     gg::Status::kBadContactCount,
-    gg::Status::kBadAxis,      gg::Status::kBadQuaternion,      gg::Status::kCoincidentContacts,
-    gg::Status::kZeroWrench,   gg::Status::kZeroForce,          gg::Status::kRankDeficient,
-    gg::Status::kQpInfeasible, gg::Status::kQpIterationLimit,   gg::Status::kNothingToDisplay,
-    gg::Status::kTimeWentBackwards, gg::Status::kBadConfig,
-};
-static_assert(sizeof(kAllStatuses) / sizeof(kAllStatuses[0]) == gg::kStatusCount,
-              "a status was added to status.h: list it here too");
+// The statuses are contiguous from kOk to the last one (status.h keeps kStatusCount).
+inline gg::Status status_at(int i) { return static_cast<gg::Status>(i); }
 
 constexpr const char* decomposition_name(gg::Decomposition d) {
   return d == gg::Decomposition::kQR ? "qr" : "svd";
@@ -296,7 +289,8 @@ NB_MODULE(_core, m) {
 
   nb::list names;
   nb::dict messages;
-  for (gg::Status s : kAllStatuses) {
+  for (int i = 0; i < gg::kStatusCount; ++i) {
+    const gg::Status s = status_at(i);
     names.append(gg::status_name(s));
     messages[gg::status_name(s)] = gg::status_message(s);
   }
@@ -320,8 +314,8 @@ NB_MODULE(_core, m) {
   m.def(
       "status_message",
       [](const std::string& name) -> std::string {
-        for (gg::Status s : kAllStatuses)
-          if (name == gg::status_name(s)) return gg::status_message(s);
+        for (int i = 0; i < gg::kStatusCount; ++i)
+          if (name == gg::status_name(status_at(i))) return gg::status_message(status_at(i));
         throw nb::value_error(("unknown status name '" + shown(name) + "'").c_str());
       },
       "name"_a, "What a status means and how to fix it (status.h's status_message).");

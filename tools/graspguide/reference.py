@@ -54,6 +54,7 @@ import numpy as np
 # Tolerances: the float64 column of the table in docs/algorithm.md.
 # --------------------------------------------------------------------------------------
 kCoincidentRelTol = 1e-4   # ||r_i|| (or ||r_i - r_j||) <= this * L: coincident contacts
+kInputPrecisionRelTol = 1e-3  # max|C| * eps above this * L: imprecise_contacts
 kAxisParallelTol = 1e-3    # ||y_i x y_O|| below this: fallback axis
 kRankRelTol = 1e-4         # sigma_6 / sigma_1 below this: rank deficient
 kZeroForceRelTol = 1e-6    # ||f|| <= this * ||w_L||: zero force
@@ -74,6 +75,7 @@ GRAVITY = np.array([0.0, 0.0, -1.0])
 
 TOLERANCES = {
     "kCoincidentRelTol": kCoincidentRelTol,
+    "kInputPrecisionRelTol": kInputPrecisionRelTol,
     "kAxisParallelTol": kAxisParallelTol,
     "kRankRelTol": kRankRelTol,
     "kZeroForceRelTol": kZeroForceRelTol,
@@ -92,6 +94,7 @@ STATUSES = (
     "non_finite_input",
     "bad_contact_count",
     "coincident_contacts",
+    "imprecise_contacts",
     "rank_deficient",
     "zero_wrench",
     "zero_force",
@@ -151,7 +154,7 @@ def contact_frames(contacts: np.ndarray, y_o: np.ndarray) -> Tuple[str, Optional
     """Centroid, offsets and right-handed contact frames. y_o must be unit.
 
     Returns (status, frames) with frames = {O, r (k x 3), L, R (k x 3 x 3),
-    fallback_mask}; status is "ok" or "coincident_contacts".
+    fallback_mask}; status is "ok", "coincident_contacts" or "imprecise_contacts".
     """
     k = contacts.shape[0]
     rel = contacts - contacts[0]
@@ -162,6 +165,8 @@ def contact_frames(contacts: np.ndarray, y_o: np.ndarray) -> Tuple[str, Optional
     L = float(norms.max())
     if not L > 0.0:
         return "coincident_contacts", None
+    if np.abs(contacts).max() * np.finfo(np.float64).eps > kInputPrecisionRelTol * L:
+        return "imprecise_contacts", None
     tol = kCoincidentRelTol * L
     if np.any(norms <= tol):
         return "coincident_contacts", None

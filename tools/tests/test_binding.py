@@ -57,9 +57,9 @@ def _scenes():
 # --------------------------------------------------------------------------------------
 def test_module_constants():
     assert _core.STATUS_NAMES[0] == "ok"
-    assert len(set(_core.STATUS_NAMES)) == len(_core.STATUS_NAMES) == 14
+    assert len(set(_core.STATUS_NAMES)) == len(_core.STATUS_NAMES) == 15
     for name in ("non_finite_input", "bad_contact_count", "bad_axis", "bad_quaternion",
-                 "coincident_contacts", "zero_wrench", "zero_force", "rank_deficient",
+                 "coincident_contacts", "imprecise_contacts", "zero_wrench", "zero_force", "rank_deficient",
                  "qp_infeasible", "qp_iteration_limit", "nothing_to_display", "bad_config"):
         assert name in _core.STATUS_NAMES
     for name in _core.STATUS_NAMES:

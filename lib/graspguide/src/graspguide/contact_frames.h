@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "graspguide/status.h"
 #include "graspguide/tolerances.h"
@@ -34,7 +35,7 @@ Status contact_frames(const Contacts<T, K>& contacts, const Vec3<T>& y_axis,
                       ContactFrames<T, K>& out) {
   static_assert(K == 3 || K == 4, "3 or 4 contacts");
   if (!contacts.allFinite() || !y_axis.allFinite()) return Status::kNonFiniteInput;
-  const T axis_norm = y_axis.norm();
+  const T axis_norm = y_axis.stableNorm();
   if (!(axis_norm > T(0))) return Status::kBadAxis;
   const Vec3<T> y_o = y_axis / axis_norm;
 
@@ -50,6 +51,11 @@ Status contact_frames(const Contacts<T, K>& contacts, const Vec3<T>& y_axis,
   for (int i = 0; i < K; ++i) scale = std::max(scale, r.col(i).norm());
   const T coincident = T(kCoincidentRelTol) * scale;
   if (!(scale > T(0))) return Status::kCoincidentContacts;
+  // Inputs far from the origin carry their rounding into the geometry: refuse rather than
+  // render a hand this precision cannot resolve (a float tracker 1 km away, say).
+  const T magnitude = contacts.cwiseAbs().maxCoeff();
+  if (magnitude * std::numeric_limits<T>::epsilon() > T(kInputPrecisionRelTol) * scale)
+    return Status::kImpreciseContacts;
   for (int i = 0; i < K; ++i) {
     if (r.col(i).norm() <= coincident) return Status::kCoincidentContacts;
     for (int j = i + 1; j < K; ++j)

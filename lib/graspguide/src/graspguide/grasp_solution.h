@@ -37,10 +37,10 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   Status s = contact_frames<T, K>(contacts, y_axis, frames);
   if (s != Status::kOk) return s;
   const Vec6<T> w = scaled_wrench<T>(wrench, frames.length_scale);
-  const T w_norm = w.norm();
+  const T w_norm = w.stableNorm();
   if (!(w_norm > T(0))) return Status::kZeroWrench;
   const Vec3<T> force = wrench.template head<3>();
-  const T f_norm = force.norm();
+  const T f_norm = force.stableNorm();
   if (!(f_norm > T(kZeroForceRelTol) * w_norm)) return Status::kZeroForce;
 
   GraspMat<T, K> g;

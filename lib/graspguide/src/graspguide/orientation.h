@@ -14,7 +14,7 @@ namespace graspguide {
 template <typename T>
 Status unit_quaternion(const Eigen::Matrix<T, 4, 1>& wxyz, Quat<T>& q) {
   if (!wxyz.allFinite()) return Status::kNonFiniteInput;
-  const T n = wxyz.norm();
+  const T n = wxyz.stableNorm();  // no overflow for huge, no underflow for tiny scales
   if (!(n >= T(kMinQuaternionNorm))) return Status::kBadQuaternion;
   q = Quat<T>(wxyz(0) / n, wxyz(1) / n, wxyz(2) / n, wxyz(3) / n);
   return Status::kOk;

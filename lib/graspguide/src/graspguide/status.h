@@ -12,6 +12,7 @@ enum class Status : uint8_t {
   kBadAxis,
   kBadQuaternion,
   kCoincidentContacts,
+  kImpreciseContacts,
   kZeroWrench,
   kZeroForce,
   kRankDeficient,
@@ -33,6 +34,7 @@ constexpr const char* status_name(Status s) {
     case Status::kBadAxis: return "bad_axis";
     case Status::kBadQuaternion: return "bad_quaternion";
     case Status::kCoincidentContacts: return "coincident_contacts";
+    case Status::kImpreciseContacts: return "imprecise_contacts";
     case Status::kZeroWrench: return "zero_wrench";
     case Status::kZeroForce: return "zero_force";
     case Status::kRankDeficient: return "rank_deficient";
@@ -59,6 +61,9 @@ constexpr const char* status_message(Status s) {
       return "orientation must be a finite, non-zero quaternion [w, x, y, z]";
     case Status::kCoincidentContacts:
       return "two contacts (or a contact and the centroid) coincide; check the tracked positions";
+    case Status::kImpreciseContacts:
+      return "the contacts are so far from the origin that this precision cannot resolve the "
+             "hand; send positions relative to a point near the hand (e.g. the palm)";
     case Status::kZeroWrench:
       return "the wrench is zero; give the virtual object a non-zero force";
     case Status::kZeroForce:

@@ -21,6 +21,8 @@ struct Tolerances<double> {
 };
 
 inline constexpr double kCoincidentRelTol = 1e-4;
+// Rounding of the inputs may move a contact by at most this fraction of the hand size.
+inline constexpr double kInputPrecisionRelTol = 1e-3;
 inline constexpr double kAxisParallelTol = 1e-3;
 inline constexpr double kRankRelTol = 1e-4;
 inline constexpr double kZeroForceRelTol = 1e-6;
