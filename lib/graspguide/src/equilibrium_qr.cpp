@@ -1,10 +1,7 @@
 // The one place the QR route is compiled, for both scalars and both contact counts.
-#define GRASPGUIDE_INSTANTIATING
+#define GRASPGUIDE_INSTANTIATING_EQUILIBRIUM
 #include "graspguide/equilibrium.h"
 
 namespace graspguide {
-template Status equilibrium_qr<float, 3>(const GraspMat<float, 3>&, const Vec6<float>&, Equilibrium<float, 3>&);
-template Status equilibrium_qr<float, 4>(const GraspMat<float, 4>&, const Vec6<float>&, Equilibrium<float, 4>&);
-template Status equilibrium_qr<double, 3>(const GraspMat<double, 3>&, const Vec6<double>&, Equilibrium<double, 3>&);
-template Status equilibrium_qr<double, 4>(const GraspMat<double, 4>&, const Vec6<double>&, Equilibrium<double, 4>&);
+GRASPGUIDE_EQUILIBRIA(, equilibrium_qr)
 }  // namespace graspguide

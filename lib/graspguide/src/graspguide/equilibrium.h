@@ -60,19 +60,19 @@ Status equilibrium(const GraspMat<T, K>& g, const Vec6<T>& w, Decomposition d,
                                   : equilibrium_qr<T, K>(g, w, out);
 }
 
-// Instantiated once in equilibrium_qr.cpp / equilibrium_svd.cpp: Eigen's decompositions
-// are slow to compile, and every test would otherwise compile them again.
-#define GRASPGUIDE_EQUILIBRIUM(T, K)                                                       \
-  extern template Status equilibrium_qr<T, K>(const GraspMat<T, K>&, const Vec6<T>&,       \
-                                              Equilibrium<T, K>&);                         \
-  extern template Status equilibrium_svd<T, K>(const GraspMat<T, K>&, const Vec6<T>&,      \
-                                               Equilibrium<T, K>&);
-#ifndef GRASPGUIDE_INSTANTIATING
-GRASPGUIDE_EQUILIBRIUM(float, 3)
-GRASPGUIDE_EQUILIBRIUM(float, 4)
-GRASPGUIDE_EQUILIBRIUM(double, 3)
-GRASPGUIDE_EQUILIBRIUM(double, 4)
+// Instantiated once in equilibrium_qr.cpp / equilibrium_svd.cpp (EXTERN empty) and
+// declared extern everywhere else: Eigen's decompositions are slow to compile, and every
+// test would otherwise compile them again.
+#define GRASPGUIDE_EQUILIBRIUM(EXTERN, ROUTE, T, K) \
+  EXTERN template Status ROUTE<T, K>(const GraspMat<T, K>&, const Vec6<T>&, Equilibrium<T, K>&);
+#define GRASPGUIDE_EQUILIBRIA(EXTERN, ROUTE)                                    \
+  GRASPGUIDE_EQUILIBRIUM(EXTERN, ROUTE, float, 3)                               \
+  GRASPGUIDE_EQUILIBRIUM(EXTERN, ROUTE, float, 4)                               \
+  GRASPGUIDE_EQUILIBRIUM(EXTERN, ROUTE, double, 3)                              \
+  GRASPGUIDE_EQUILIBRIUM(EXTERN, ROUTE, double, 4)
+#ifndef GRASPGUIDE_INSTANTIATING_EQUILIBRIUM
+GRASPGUIDE_EQUILIBRIA(extern, equilibrium_qr)
+GRASPGUIDE_EQUILIBRIA(extern, equilibrium_svd)
 #endif
-#undef GRASPGUIDE_EQUILIBRIUM
 
 }  // namespace graspguide

@@ -75,20 +75,20 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   return Status::kOk;
 }
 
-#ifndef GRASPGUIDE_INSTANTIATING  // instantiated once in grasp_solution.cpp
-#define GRASPGUIDE_GRASP_SOLUTION(T, K)                                                       \
-  extern template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&,            \
+// Declared here with EXTERN = extern, defined once in grasp_solution.cpp with EXTERN empty.
+#define GRASPGUIDE_GRASP_SOLUTION(EXTERN, T, K)                                              \
+  EXTERN template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&,            \
                                            const Vec3<T>&, ConstraintModel, Policy,           \
                                            const SolverSettings&, const WarmStart&,           \
                                            GraspSolution<T>&);                                \
-  extern template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,  \
+  EXTERN template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,  \
                                             ConstraintModel, int, ConstraintModel, uint16_t,  \
                                             ForceSolution<T, K>&);
-GRASPGUIDE_GRASP_SOLUTION(float, 3)
-GRASPGUIDE_GRASP_SOLUTION(float, 4)
-GRASPGUIDE_GRASP_SOLUTION(double, 3)
-GRASPGUIDE_GRASP_SOLUTION(double, 4)
-#undef GRASPGUIDE_GRASP_SOLUTION
+#define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN) \
+  GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \
+  GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 4)
+#ifndef GRASPGUIDE_INSTANTIATING_GRASP_SOLUTION
+GRASPGUIDE_GRASP_SOLUTIONS(extern)
 #endif
 
 }  // namespace graspguide

@@ -192,15 +192,16 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
   return x.allFinite() ? Status::kOk : Status::kNonFiniteInput;
 }
 
-#ifndef GRASPGUIDE_INSTANTIATING  // instantiated once in projection_qp.cpp
-extern template Status solve_projection<float, 3, 9>(const ProjectionQp<float, 3, 9>&, int,
-                                                     uint16_t, Eigen::Matrix<float, 3, 1>&, QpInfo&);
-extern template Status solve_projection<float, 6, 12>(const ProjectionQp<float, 6, 12>&, int,
-                                                      uint16_t, Eigen::Matrix<float, 6, 1>&, QpInfo&);
-extern template Status solve_projection<double, 3, 9>(const ProjectionQp<double, 3, 9>&, int,
-                                                      uint16_t, Eigen::Matrix<double, 3, 1>&, QpInfo&);
-extern template Status solve_projection<double, 6, 12>(const ProjectionQp<double, 6, 12>&, int,
-                                                       uint16_t, Eigen::Matrix<double, 6, 1>&, QpInfo&);
+// Defined once in projection_qp.cpp (EXTERN empty), extern everywhere else: 3 or 6
+// variables with 9 or 12 rows.
+#define GRASPGUIDE_PROJECTION_QP(EXTERN, T, N, M)                                             \
+  EXTERN template Status solve_projection<T, N, M>(const ProjectionQp<T, N, M>&, int, uint16_t, \
+                                                   Eigen::Matrix<T, N, 1>&, QpInfo&);
+#define GRASPGUIDE_PROJECTION_QPS(EXTERN)                                                    \
+  GRASPGUIDE_PROJECTION_QP(EXTERN, float, 3, 9) GRASPGUIDE_PROJECTION_QP(EXTERN, float, 6, 12) \
+  GRASPGUIDE_PROJECTION_QP(EXTERN, double, 3, 9) GRASPGUIDE_PROJECTION_QP(EXTERN, double, 6, 12)
+#ifndef GRASPGUIDE_INSTANTIATING_PROJECTION_QP
+GRASPGUIDE_PROJECTION_QPS(extern)
 #endif
 
 }  // namespace graspguide
