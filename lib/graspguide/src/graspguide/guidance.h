@@ -17,6 +17,25 @@ struct FrameResult {
   bool recomputed = false; // the grasp part ran in this frame
 };
 
+// Whether the scene's contacts form a usable grasp (frames and rank), before any wrench is
+// known: what a device checks when a scene arrives, so a bad one is refused at once.
+template <typename T, int K>
+Status geometry_status_k(const Scene<T>& scene) {
+  ContactFrames<T, K> frames;
+  const Status s = contact_frames<T, K>(scene.contacts.template leftCols<K>(), scene.y_axis, frames);
+  if (s != Status::kOk) return s;
+  GraspMat<T, K> g;
+  grasp_matrix<T, K>(frames, g);
+  Equilibrium<T, K> eq;
+  return equilibrium<T, K>(g, Vec6<T>::Unit(2), scene.solver.decomposition, eq);
+}
+
+template <typename T>
+Status geometry_status(const Scene<T>& scene) {
+  if (scene.k != 3 && scene.k != 4) return Status::kBadContactCount;
+  return scene.k == 3 ? geometry_status_k<T, 3>(scene) : geometry_status_k<T, 4>(scene);
+}
+
 template <typename T>
 class Guidance {
  public:

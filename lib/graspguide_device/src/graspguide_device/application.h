@@ -1,0 +1,243 @@
+// The wearable controller's application, independent of any board: scene, trial,
+// pose-driven guidance, watchdog and motor output. The protocol layer turns frames into
+// these calls; a board provides the MotorOutputs and Clock.
+#pragma once
+
+#include "graspguide.h"
+#include "graspguide_device/hal.h"
+
+#ifndef GRASPGUIDE_STALE_TIMEOUT_MS
+#define GRASPGUIDE_STALE_TIMEOUT_MS 200  // no POSE for this long: motors off
+#endif
+
+namespace graspguide::device {
+
+inline constexpr uint32_t kDefaultStaleTimeoutUs = uint32_t(GRASPGUIDE_STALE_TIMEOUT_MS) * 1000u;
+
+enum class DeviceState : uint8_t { kIdle = 0, kSceneSet = 1, kTrialRunning = 2, kStopped = 3 };
+
+// Why a request was refused without reaching the core.
+enum class Refusal : uint8_t { kNone = 0, kNotAllowedInState, kNoScene };
+
+struct Reply {
+  Status status = Status::kOk;
+  Refusal refusal = Refusal::kNone;
+  bool ok() const { return status == Status::kOk && refusal == Refusal::kNone; }
+};
+
+struct PoseIn {
+  uint32_t host_time_us = 0;
+  Eigen::Matrix<Real, 4, 1> quat_wxyz = Eigen::Matrix<Real, 4, 1>(1, 0, 0, 0);
+  bool has_contacts = false;
+  Eigen::Matrix<Real, 3, kMaxContacts> contacts = Eigen::Matrix<Real, 3, kMaxContacts>::Zero();
+};
+
+struct Telemetry {
+  uint32_t host_time_us = 0;
+  Real error_deg = 0;
+  Real alpha = 0;
+  Pwm pwm;                       // what the motors were set to
+  ConstraintModel used = ConstraintModel::kNone;
+  Status status = Status::kOk;
+  uint8_t iterations = 0;
+  bool recomputed = false;
+  bool trial_running = false;
+  uint32_t compute_time_us = 0;
+};
+
+struct TrialReport {
+  uint16_t trial_id = 0;
+  TrialResult result;
+};
+
+struct Counters {
+  uint32_t poses = 0;
+  uint32_t stale_events = 0;
+  uint32_t refused = 0;
+};
+
+class Application {
+ public:
+  Application(MotorOutputs& motors, Clock& clock, uint32_t stale_timeout_us = kDefaultStaleTimeoutUs)
+      : motors_(motors), clock_(clock), stale_timeout_us_(stale_timeout_us) {
+    motors_off();  // whatever the pins did before boot
+  }
+
+  // A new scene; refused while a trial runs. An invalid one is reported and the previous
+  // valid scene stays.
+  Reply set_scene(const Scene<Real>& scene) {
+    if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
+    Status s = geometry_status<Real>(scene);
+    if (s == Status::kOk) s = guidance_.set_scene(scene);
+    if (s != Status::kOk) return fail(s);
+    good_contacts_ = scene.contacts;
+    state_ = DeviceState::kSceneSet;
+    return Reply{};
+  }
+
+  Reply start_trial(uint16_t trial_id, const Vec6<Real>& wrench) {
+    if (state_ == DeviceState::kIdle) return refuse(Refusal::kNoScene);
+    if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
+    // Solving the grasp now reports a bad wrench at once, and the first pose then finds the
+    // grasp part already computed (the posture has not changed).
+    FrameResult<Real> probe;
+    Status s = guidance_.set_wrench(wrench);
+    if (s == Status::kOk) s = guidance_.update(Eigen::Matrix<Real, 4, 1>(1, 0, 0, 0), probe);
+    if (s != Status::kOk) return fail(s);
+    trial_id_ = trial_id;
+    trial_started_ = false;  // the trial's clock starts with its first pose
+    state_ = DeviceState::kTrialRunning;
+    return Reply{};
+  }
+
+  // One tracker frame. Fills the telemetry; fills report and sets *ended when the trial
+  // ends with this pose.
+  Reply pose(const PoseIn& in, Telemetry& out, TrialReport& report, bool& ended) {
+    ended = false;
+    out = Telemetry{};
+    out.host_time_us = in.host_time_us;
+    if (state_ == DeviceState::kIdle) return refuse(Refusal::kNoScene);
+    ++counters_.poses;
+    last_pose_us_ = clock_.now_us();
+    stale_ = false;
+    if (state_ != DeviceState::kTrialRunning) {
+      motors_off();
+      return refuse(Refusal::kNotAllowedInState);  // no wrench to render outside a trial
+    }
+    if (in.has_contacts) {
+      const Status s = guidance_.set_contacts(in.contacts);
+      if (s != Status::kOk) return fail(s, &out);
+    }
+    const int64_t t_us = unwrap(in.host_time_us);
+    if (!trial_started_) {
+      trial_.start(guidance_.scene().trial, t_us);
+      trial_started_ = true;
+    }
+    const uint32_t t0 = clock_.now_us();
+    FrameResult<Real> frame;
+    const Status s = guidance_.update(in.quat_wxyz, frame);
+    out.compute_time_us = clock_.now_us() - t0;
+    out.recomputed = frame.recomputed;
+    out.iterations = static_cast<uint8_t>(guidance_.grasp().iterations > 255 ? 255 : guidance_.grasp().iterations);
+    if (s != Status::kOk) {
+      // Back to the last contacts that worked, so the next pose without contacts renders.
+      if (in.has_contacts) guidance_.set_contacts(good_contacts_);
+      return fail(s, &out);
+    }
+    if (in.has_contacts) good_contacts_ = in.contacts;
+    out.error_deg = frame.error_deg;
+    out.alpha = frame.alpha;
+    out.used = guidance_.grasp().used;
+
+    const Status ts = trial_.update(t_us, double(frame.error_deg));
+    if (ts != Status::kOk) return fail(ts, &out);
+    if (!trial_.running()) {
+      motors_off();
+      state_ = DeviceState::kSceneSet;
+      report.trial_id = trial_id_;
+      report.result = trial_.result();
+      ended = true;
+      out.pwm = Pwm{};
+      return Reply{};
+    }
+    motors_.write(frame.pwm);
+    motors_on_ = !all_zero(frame.pwm);
+    out.pwm = frame.pwm;
+    out.trial_running = true;
+    return Reply{};
+  }
+
+  // Acts at once, whatever the state.
+  void stop() {
+    motors_off();
+    trial_.abort();
+    if (state_ != DeviceState::kIdle) state_ = DeviceState::kStopped;
+  }
+
+  // Direct PWM for calibration; the watchdog still switches it off without poses.
+  Reply set_motors(const Pwm& pwm) {
+    if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
+    motors_.write(pwm);
+    motors_on_ = !all_zero(pwm);
+    last_pose_us_ = clock_.now_us();
+    return Reply{};
+  }
+
+  // Call as often as possible: switches the motors off when poses stop coming.
+  void tick() {
+    if (!motors_on_) return;
+    if (clock_.now_us() - last_pose_us_ >= stale_timeout_us_) {
+      motors_off();
+      if (!stale_) ++counters_.stale_events;
+      stale_ = true;
+    }
+  }
+
+  DeviceState state() const { return state_; }
+  const Counters& counters() const { return counters_; }
+  Status last_error() const { return last_error_; }
+  bool motors_on() const { return motors_on_; }
+
+ private:
+  static bool all_zero(const Pwm& p) {
+    for (uint8_t d : p.duty)
+      if (d != 0) return false;
+    return true;
+  }
+
+  void motors_off() {
+    motors_.write(Pwm{});
+    motors_on_ = false;
+  }
+
+  Reply refuse(Refusal r) {
+    ++counters_.refused;
+    Reply reply;
+    reply.refusal = r;
+    return reply;
+  }
+
+  Reply fail(Status s, Telemetry* out = nullptr) {
+    motors_off();
+    last_error_ = s;
+    if (out) {
+      out->status = s;
+      out->pwm = Pwm{};
+    }
+    Reply reply;
+    reply.status = s;
+    return reply;
+  }
+
+  // Host timestamps are 32-bit microseconds; the trial needs a monotonic 64-bit time.
+  // A step back of more than half the range is "time went backwards", not a wrap.
+  int64_t unwrap(uint32_t host_us) {
+    if (!trial_started_) {
+      last_host_us_ = host_us;
+      host_time_us_ = host_us;
+      return host_time_us_;
+    }
+    host_time_us_ += static_cast<int32_t>(host_us - last_host_us_);
+    last_host_us_ = host_us;
+    return host_time_us_;
+  }
+
+  MotorOutputs& motors_;
+  Clock& clock_;
+  uint32_t stale_timeout_us_;
+  Guidance<Real> guidance_;
+  Trial trial_;
+  DeviceState state_ = DeviceState::kIdle;
+  Counters counters_;
+  Status last_error_ = Status::kOk;
+  Eigen::Matrix<Real, 3, kMaxContacts> good_contacts_ = Eigen::Matrix<Real, 3, kMaxContacts>::Zero();
+  uint16_t trial_id_ = 0;
+  bool trial_started_ = false;
+  bool motors_on_ = false;
+  bool stale_ = false;
+  uint32_t last_pose_us_ = 0;
+  uint32_t last_host_us_ = 0;
+  int64_t host_time_us_ = 0;
+};
+
+}  // namespace graspguide::device
