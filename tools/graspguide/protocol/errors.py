@@ -1,0 +1,83 @@
+"""Typed errors of the GraspGuide link protocol.
+
+Each decode error names the wire ErrorCode it corresponds to (``code``), so a host can
+log it like the device's ERROR messages.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+
+class ProtocolError(Exception):
+    """Base of every protocol error."""
+
+    code: str = ""
+
+
+class FrameError(ProtocolError):
+    """A frame could not be decoded. ``header`` is (version, msg_id, seq) when the CRC
+    passed, so the header can be trusted; None otherwise."""
+
+    def __init__(self, message: str, header: Optional[tuple] = None) -> None:
+        super().__init__(message)
+        self.header = header
+
+
+class BadCrcError(FrameError):
+    code = "bad_crc"
+
+
+class BadCobsError(FrameError):
+    code = "bad_cobs"
+
+
+class TooLongError(FrameError):
+    code = "too_long"
+
+
+class TooShortError(FrameError):
+    code = "too_short"
+
+
+class BadVersionError(FrameError):
+    code = "bad_version"
+
+
+class UnknownIdError(FrameError):
+    code = "unknown_id"
+
+
+class BadLengthError(FrameError):
+    code = "bad_length"
+
+
+class IncompleteFrameError(FrameError):
+    """decode_frame() was not given exactly one frame ending in its 0x00 delimiter."""
+
+    code = "incomplete_frame"
+
+
+class BadEnumValueError(ProtocolError):
+    """A payload's enum, bool or ascii field holds a value outside its declared set.
+    ``field`` is the field's index in the message (ERROR.detail of the device)."""
+
+    code = "bad_enum_value"
+
+    def __init__(self, message: str, field: int) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+class FieldValueError(ProtocolError, ValueError):
+    """A message was built with a value its field cannot carry (wrong type, shape or
+    range, a float beyond float32, an unknown enum value)."""
+
+    code = "field_value"
+
+
+__all__ = [
+    "ProtocolError", "FrameError", "BadCrcError", "BadCobsError", "TooLongError",
+    "TooShortError", "BadVersionError", "UnknownIdError", "BadLengthError",
+    "IncompleteFrameError", "BadEnumValueError", "FieldValueError",
+]
