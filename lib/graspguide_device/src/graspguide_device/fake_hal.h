@@ -2,6 +2,8 @@
 // every write.
 #pragma once
 
+#include <cstring>
+
 #include "graspguide_device/hal.h"
 
 namespace graspguide::device {
@@ -33,6 +35,48 @@ class RecordingMotors final : public MotorOutputs {
  private:
   Pwm last_;
   uint32_t writes_ = 0;
+};
+
+// Two in-memory queues: what the host sends (read by the device) and what the device
+// writes (read by the test), with fixed capacities.
+class MemoryStream final : public ByteStream {
+ public:
+  static constexpr size_t kCapacity = 1 << 14;
+
+  // Host side.
+  bool host_send(const uint8_t* data, size_t n) {
+    if (in_size_ + n > kCapacity) return false;
+    std::memcpy(in_ + in_size_, data, n);
+    in_size_ += n;
+    return true;
+  }
+  size_t host_receive(uint8_t* out, size_t capacity) {
+    const size_t n = out_size_ < capacity ? out_size_ : capacity;
+    std::memcpy(out, out_, n);
+    std::memmove(out_, out_ + n, out_size_ - n);
+    out_size_ -= n;
+    return n;
+  }
+
+  // Device side.
+  size_t read(uint8_t* buffer, size_t capacity) override {
+    const size_t n = in_size_ - in_read_ < capacity ? in_size_ - in_read_ : capacity;
+    std::memcpy(buffer, in_ + in_read_, n);
+    in_read_ += n;
+    if (in_read_ == in_size_) in_read_ = in_size_ = 0;
+    return n;
+  }
+  size_t write(const uint8_t* data, size_t length) override {
+    const size_t n = out_size_ + length > kCapacity ? kCapacity - out_size_ : length;
+    std::memcpy(out_ + out_size_, data, n);
+    out_size_ += n;
+    return n;
+  }
+
+ private:
+  uint8_t in_[kCapacity] = {};
+  uint8_t out_[kCapacity] = {};
+  size_t in_size_ = 0, in_read_ = 0, out_size_ = 0;
 };
 
 }  // namespace graspguide::device

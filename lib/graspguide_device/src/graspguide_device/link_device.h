@@ -1,0 +1,225 @@
+// The device end of the serial link: bytes in, frames parsed, requests turned into
+// Application calls, replies and telemetry framed and written. Portable: a board gives it a
+// ByteStream; the simulated device gives it a pseudo-terminal.
+#pragma once
+
+#include <cstring>
+
+#include "graspguide_device/application.h"
+#include "graspguide_link/parser.h"
+#include "graspguide_link/writer.h"
+
+namespace graspguide::device {
+
+namespace link = ::graspguide_link;
+
+static_assert(uint8_t(link::DeviceState::kTrialRunning) == uint8_t(DeviceState::kTrialRunning) &&
+                  uint8_t(link::DeviceState::kStopped) == uint8_t(DeviceState::kStopped),
+              "device states must match the protocol schema");
+static_assert(link::kMaxContacts == kMaxContacts, "contact slots must match the schema");
+
+struct DeviceInfo {
+  uint8_t firmware_version[3] = {0, 1, 0};
+  const char* board = "unknown";
+  uint32_t build_id = 0;
+};
+
+// Told the host time of every POSE before it is handled: the simulated device's virtual
+// clock follows it.
+class PoseTimeListener {
+ public:
+  virtual void on_pose_time(uint32_t host_time_us) = 0;
+
+ protected:
+  ~PoseTimeListener() = default;
+};
+
+class LinkDevice {
+ public:
+  LinkDevice(ByteStream& stream, Application& app, const DeviceInfo& info,
+             PoseTimeListener* pose_time = nullptr)
+      : stream_(stream), app_(app), info_(info), pose_time_(pose_time) {}
+
+  // Reads what the stream has, handles every complete frame, runs the watchdog.
+  // Returns the number of bytes read.
+  size_t poll() {
+    uint8_t chunk[64];
+    size_t total = 0;
+    for (;;) {
+      const size_t n = stream_.read(chunk, sizeof chunk);
+      for (size_t i = 0; i < n; ++i) handle(parser_.push(chunk[i]));
+      total += n;
+      if (n < sizeof chunk) break;
+    }
+    app_.tick();
+    return total;
+  }
+
+  const link::FrameParser& parser() const { return parser_; }
+
+ private:
+  void handle(link::ParseEvent event) {
+    if (event == link::ParseEvent::kNone) return;
+    link::ErrorCode code;
+    if (event != link::ParseEvent::kFrame) {
+      // Only frames whose header passed the CRC are answered: their seq can be trusted.
+      if (link::has_trusted_header(event) && link::error_code_for(event, &code)) {
+        const auto& h = parser_.frame().header;
+        send_error(h.seq, code, event == link::ParseEvent::kBadVersion ? h.version : h.msg_id);
+      }
+      return;
+    }
+    const link::FrameView& f = parser_.frame();
+    request_seq_ = f.header.seq;
+    uint8_t bad_field = 0;
+    const link::LinkStatus s = link::visit_payload(
+        f.header.msg_id, f.payload, f.payload_size, [this](const auto& m) { on(m); }, &bad_field);
+    if (s == link::LinkStatus::kBadEnumValue) send_error(request_seq_, link::ErrorCode::kBadEnumValue, bad_field);
+    else if (s != link::LinkStatus::kOk) send_error(request_seq_, link::ErrorCode::kBadLength, f.header.msg_id);
+  }
+
+  // ---- requests
+  void on(const link::Hello&) {
+    link::HelloReply r;
+    r.request_seq = request_seq_;
+    r.protocol_version = link::kProtocolVersion;
+    std::memcpy(r.firmware_version, info_.firmware_version, sizeof r.firmware_version);
+    std::strncpy(r.board, info_.board, sizeof r.board);
+    r.scalar = sizeof(Real);
+    r.max_contacts = kMaxContacts;
+    r.build_id = info_.build_id;
+    send(r);
+  }
+
+  void on(const link::SetScene& m) {
+    Scene<Real> scene;
+    scene.k = m.k;
+    for (int i = 0; i < kMaxContacts; ++i)
+      for (int j = 0; j < 3; ++j) scene.contacts(j, i) = m.contacts[i][j];
+    scene.y_axis = Vec3<Real>(m.y_axis[0], m.y_axis[1], m.y_axis[2]);
+    scene.constraints = static_cast<ConstraintModel>(m.constraints);
+    scene.policy = static_cast<Policy>(m.policy);
+    scene.mode = static_cast<Mode>(m.mode);
+    scene.trial.threshold_deg = m.threshold_deg;
+    scene.trial.hold_s = m.hold_s;
+    scene.trial.timeout_s = m.timeout_s;
+    answer(app_.set_scene(scene), link::MsgId::kSetScene);
+  }
+
+  void on(const link::StartTrial& m) {
+    Vec6<Real> w;
+    for (int j = 0; j < 6; ++j) w(j) = m.wrench[j];
+    answer(app_.start_trial(m.trial_id, w), link::MsgId::kStartTrial);
+  }
+
+  void on(const link::Pose& m) {
+    if (pose_time_) {
+      pose_time_->on_pose_time(m.host_time_us);
+      app_.tick();  // a jump in virtual time is a silence the watchdog must see
+    }
+    PoseIn in;
+    in.host_time_us = m.host_time_us;
+    in.quat_wxyz = Eigen::Matrix<Real, 4, 1>(m.quat_wxyz[0], m.quat_wxyz[1], m.quat_wxyz[2], m.quat_wxyz[3]);
+    in.has_contacts = m.has_contacts;
+    for (int i = 0; i < kMaxContacts; ++i)
+      for (int j = 0; j < 3; ++j) in.contacts(j, i) = m.contacts[i][j];
+    Telemetry tel;
+    TrialReport report;
+    bool ended = false;
+    const Reply reply = app_.pose(in, tel, report, ended);
+    if (reply.refusal != Refusal::kNone) {
+      answer(reply, link::MsgId::kPose);
+      return;
+    }
+    link::Telemetry t;
+    t.host_time_us = tel.host_time_us;
+    t.error_deg = tel.error_deg;
+    t.alpha = tel.alpha;
+    for (int i = 0; i < kMaxContacts; ++i) t.pwm[i] = tel.pwm.duty[i];
+    t.constraints_used = static_cast<link::ConstraintModel>(tel.used);
+    t.solver_status = static_cast<link::ErrorCode>(tel.status);
+    t.iterations = tel.iterations;
+    t.flags = uint8_t((tel.recomputed ? link::kTelemetryFlagGraspRecomputed : 0) |
+                      (tel.trial_running ? link::kTelemetryFlagTrialRunning : 0));
+    t.compute_time_us = tel.compute_time_us;
+    if (tel.status != Status::kOk) last_error_ = t.solver_status;
+    send(t);
+    if (ended) {
+      link::TrialResult r;
+      r.trial_id = report.trial_id;
+      r.success = report.result.success;
+      r.completion_s = float(report.result.completion_s);
+      r.first_entry_s = float(report.result.first_entry_s);
+      r.final_error_deg = float(report.result.final_error_deg);
+      send(r);
+    }
+  }
+
+  void on(const link::Stop&) {
+    app_.stop();
+    answer(Reply{}, link::MsgId::kStop);
+  }
+
+  void on(const link::SetMotors& m) {
+    Pwm pwm;
+    for (int i = 0; i < kMaxContacts; ++i) pwm.duty[i] = m.pwm[i];
+    answer(app_.set_motors(pwm), link::MsgId::kSetMotors);
+  }
+
+  void on(const link::GetStatus&) {
+    link::Status s;
+    s.state = static_cast<link::DeviceState>(app_.state());
+    s.frames_received = parser_.good_frames();
+    s.bad_frames = parser_.bad_frames();
+    s.stale_events = app_.counters().stale_events;
+    s.last_error = last_error_;
+    send(s);
+  }
+
+  // Device -> host ids never reach here (the parser accepts host -> device only).
+  template <class Msg>
+  void on(const Msg&) {}
+
+  // ---- replies
+  void answer(const Reply& reply, link::MsgId id) {
+    if (reply.ok()) {
+      link::Ack a;
+      a.request_seq = request_seq_;
+      send(a);
+    } else if (reply.refusal == Refusal::kNoScene) {
+      send_error(request_seq_, link::ErrorCode::kNoScene, uint8_t(id));
+    } else if (reply.refusal == Refusal::kNotAllowedInState) {
+      send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+    } else {
+      send_error(request_seq_, static_cast<link::ErrorCode>(reply.status), 0);
+    }
+  }
+
+  void send_error(uint16_t seq, link::ErrorCode code, uint8_t detail) {
+    link::Error e;
+    e.request_seq = seq;
+    e.code = code;
+    e.detail = detail;
+    last_error_ = code;
+    send(e);
+  }
+
+  template <class Msg>
+  void send(const Msg& m) {
+    uint8_t out[link::kMaxWireFrameSize];
+    size_t n = 0;
+    if (link::write_frame(m, seq_.next(), out, sizeof out, &n) == link::LinkStatus::kOk)
+      stream_.write(out, n);
+  }
+
+  ByteStream& stream_;
+  Application& app_;
+  DeviceInfo info_;
+  PoseTimeListener* pose_time_;
+  link::FrameParser parser_{link::Accept::kHostToDevice};
+  link::SequenceCounter seq_;
+  uint16_t request_seq_ = 0;
+  link::ErrorCode last_error_ = link::ErrorCode::kOk;
+};
+
+}  // namespace graspguide::device
