@@ -32,7 +32,8 @@ void usage(FILE* out) {
                "usage: graspguide-sim [--virtual-clock] [--trace FILE.csv] [--stale-ms N]\n"
                "  Opens a pseudo-terminal and prints 'GRASPGUIDE_SIM_PTY <path>' on stdout;\n"
                "  connect to <path> as to a board's serial port (any baud rate).\n"
-               "  --virtual-clock  device time = the host's POSE timestamps (default: real time)\n"
+               "  --virtual-clock  device time = the host's POSE timestamps (default: real time);\n"
+               "                   a silent link still advances it, so the watchdog fires\n"
                "  --trace FILE     append every motor change as device_time_us,pwm0..pwm3\n"
                "  --stale-ms N     POSE watchdog in ms (default %d)\n",
                GRASPGUIDE_STALE_TIMEOUT_MS);
@@ -112,9 +113,21 @@ int main(int argc, char** argv) {
   std::printf("GRASPGUIDE_SIM_PTY %s\n", stream.slave_path().c_str());
   std::fflush(stdout);
 
+  // In virtual time a host that dies sends no more timestamps, so the clock would freeze
+  // with the motors on. A real-time silence as long as the watchdog therefore moves the
+  // virtual clock on by the same amount, and the watchdog fires as on a board.
+  const uint32_t stale_us = uint32_t(opt.stale_ms) * 1000u;
+  uint32_t last_activity_us = real_clock.now_us();
   while (!g_stop) {
     stream.wait_readable(1);  // 1 ms: the watchdog's resolution in real time
-    device.poll();
+    const uint32_t now = real_clock.now_us();
+    if (device.poll() > 0) {
+      last_activity_us = now;
+    } else if (opt.virtual_clock && now - last_activity_us >= stale_us) {
+      virtual_clock.set_us(virtual_clock.now_us() + stale_us);
+      device.poll();
+      last_activity_us = now;
+    }
   }
   app.stop();  // motors off on the way out, and in the trace
   if (trace) std::fclose(trace);
