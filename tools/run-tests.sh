@@ -3,6 +3,8 @@
 #   1. tools/bootstrap.sh        (Debian packages, Eigen check, .venv, ./tools)
 #   2. pio test -e native        (GoogleTest suites in test/test_*/, offline)
 #   3. pytest tools/tests        (if that directory exists)
+#   4. pio run -e cortex_m4f     (only if arm-none-eabi-g++ is on PATH, see
+#                                 tools/install-arm.sh; the build counts as 1 case)
 # Output of every stage goes to the console. Test cases are counted from
 # machine-readable reports (PlatformIO's JSON report, pytest's JUnit XML), and
 # the run ends with exactly one line "N passed, N failed".
@@ -137,6 +139,26 @@ if [[ -d $ROOT/tools/tests ]]; then
 else
     echo
     echo "run-tests: no tools/tests directory, skipping pytest"
+fi
+
+# --- 4. Cortex-M4F firmware build ------------------------------------------------
+# Optional: the ARM toolchain is large and bootstrap.sh does not install it.
+if command -v arm-none-eabi-g++ >/dev/null 2>&1; then
+    banner "pio run -e cortex_m4f"
+    set +e
+    "$ROOT/.venv/bin/pio" run -e cortex_m4f 2>&1 | tee "$REPORT_DIR/m4f.log"
+    m4f_rc=${PIPESTATUS[0]}
+    set -e
+    if ((m4f_rc == 0)); then
+        echo "run-tests: cortex_m4f build: 1 passed, 0 failed"
+        PASSED=$((PASSED + 1))
+    else
+        echo "run-tests: cortex_m4f build: 0 passed, 1 failed (exit code $m4f_rc)"
+        FAILED=$((FAILED + 1))
+    fi
+else
+    echo
+    echo "run-tests: arm-none-eabi-g++ not on PATH, skipping the cortex_m4f build (tools/install-arm.sh installs it)"
 fi
 
 finish
