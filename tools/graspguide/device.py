@@ -1,0 +1,717 @@
+"""Talk to a GraspGuide device (a board or the simulated device) over the serial protocol
+of docs/protocol.md.
+
+>>> from graspguide.transport import open_port
+>>> from graspguide.device import DeviceClient
+>>> with DeviceClient(open_port("sim")) as dev:
+...     info = dev.hello()
+...     dev.set_scene(contacts, policy="F", mode="V")
+...     dev.start_trial(1, wrench)
+...     tel = dev.pose(t_us, quat)          # one POSE -> its TELEMETRY
+...     res = dev.stream(poses, window=32)  # pipelined: TELEMETRY list + TRIAL_RESULTs
+...     dev.stop()
+
+Requests are numbered by a :class:`SequenceCounter` and their answers matched by seq
+(ACK, ERROR, HELLO_REPLY carry ``request_seq``); a POSE's TELEMETRY is matched by its
+echoed ``host_time_us`` and order, a GET_STATUS by the next STATUS. Frames that answer
+nothing pending are kept, never dropped: TRIAL_RESULTs in :attr:`DeviceClient.trial_results`,
+unmatched TELEMETRY in :attr:`DeviceClient.telemetry_backlog`, the rest in
+:attr:`DeviceClient.unmatched`.
+
+Errors (all :class:`LinkError` subclasses): :class:`DeviceError` (the device answered
+ERROR: ``code`` is the generated :class:`ErrorCode`, ``code_name`` its schema name,
+``detail``, ``meaning``), :class:`LinkTimeout` (no answer within the per-request
+``timeout``, or a stream's ``overall_timeout``; the message says what was and was not
+received), :class:`ProtocolMismatch` (the device speaks another protocol version),
+:class:`DeviceDisconnected`, :class:`DeviceNotFound`.
+
+Not thread-safe: one thread talks to one client.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+from .protocol.errors import BadEnumValueError, ProtocolError
+from .protocol.framing import (Accept, FrameParser, ParseEvent, SequenceCounter, encode_message,
+                               message_of)
+from .protocol.messages import (MAX_CONTACTS, MESSAGES, PROTOCOL_VERSION, Ack, ConstraintModel,
+                                DeviceState, Error, ErrorCode, GetStatus, Hello, HelloReply, Mode,
+                                MsgId, Policy, Pose, SetMotors, SetScene, StartTrial, Status, Stop,
+                                Telemetry, TrialResult)
+from .transport import (DeviceDisconnected, DeviceNotFound, LinkError, LinkTimeout, SimNotBuilt,
+                        Transport)
+
+DEFAULT_TIMEOUT = 1.0      # s, per request: a board answers in a few ms at 115200 baud
+READ_CHUNK = 4096          # bytes per transport read
+POLL_INTERVAL = 0.05       # s, longest single blocking read (keeps deadlines responsive)
+
+# What each ErrorCode means: the schema's text (tools/protocol/messages.toml), checked
+# against it by tools/tests/test_device_client.py so the two cannot drift.
+ERROR_MEANINGS: Dict[str, str] = {
+    "ok": "no error",
+    "non_finite_input": "an input is NaN or infinite",
+    "bad_contact_count": "k is not 3 or 4",
+    "bad_axis": "y_axis is zero or not finite",
+    "bad_quaternion": "quat_wxyz is zero or not finite",
+    "coincident_contacts": "two contacts (or a contact and the centroid) coincide",
+    "imprecise_contacts": "contacts too far from the origin for float",
+    "zero_wrench": "the wrench is zero",
+    "zero_force": "the wrench has no force part",
+    "rank_deficient": "contacts (nearly) collinear",
+    "qp_infeasible": "no forces satisfy the constraint model",
+    "qp_iteration_limit": "the QP hit its iteration cap",
+    "nothing_to_display": "every motor level is zero for this policy",
+    "time_went_backwards": "host_time_us decreased within a trial",
+    "bad_config": "threshold, hold or timeout out of range",
+    "bad_crc": "frame CRC mismatch (counted; never answered, the header cannot be trusted)",
+    "bad_cobs": "COBS block ran past the delimiter (counted; never answered)",
+    "too_long": "frame longer than the largest message (counted; never answered)",
+    "too_short": "frame shorter than header + CRC (counted; never answered)",
+    "bad_version": "frame version is not this protocol's; detail = the version received",
+    "unknown_id": "no message has this id (or it is a device -> host id); detail = the id",
+    "bad_length": "payload size does not match the id; detail = the id",
+    "not_allowed_in_state": "request refused in the device's state; detail = STATUS.state",
+    "no_scene": "POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id",
+    "bad_enum_value": "an enum, bool or ascii field holds an unlisted value; detail = the "
+                      "field's index",
+}
+
+# The names the core and `graspguide solve` use, and the wire enums.
+POLICY_NAMES = {"F": Policy.F, "Fperp": Policy.FPERP}
+MODE_NAMES = {"C": Mode.C, "V": Mode.V}
+CONSTRAINT_NAMES = {"paper": ConstraintModel.PAPER, "normal": ConstraintModel.NORMAL,
+                    "none": ConstraintModel.NONE}
+_F32 = struct.Struct("<f")
+
+
+def code_name(code: Union[int, ErrorCode]) -> str:
+    """The schema name of an ErrorCode value (``"coincident_contacts"``), or ``"0x.."``."""
+    try:
+        return ErrorCode(code).name.lower()
+    except ValueError:
+        return f"0x{int(code):02x}"
+
+
+def _msg_name(msg_id: int) -> str:
+    cls = MESSAGES.get(msg_id)
+    return cls.NAME if cls is not None else f"id 0x{msg_id:02X}"
+
+
+# --------------------------------------------------------------------------------------
+# Errors
+# --------------------------------------------------------------------------------------
+class ProtocolMismatch(LinkError):
+    """The device speaks another protocol version (HELLO_REPLY, or ERROR bad_version, or
+    frames of another version)."""
+
+    def __init__(self, message: str, device_version: Optional[int] = None):
+        super().__init__(message)
+        self.device_version = device_version
+
+
+class UnexpectedAnswer(LinkError):
+    """The device answered a request with a message that does not answer it."""
+
+
+class DeviceError(LinkError):
+    """The device refused a request with ERROR (or a POSE's TELEMETRY carried a core
+    status other than ok, when asked to raise for it).
+
+    ``code`` (:class:`ErrorCode`, or int if unknown), ``code_name`` (the schema's name,
+    e.g. ``"not_allowed_in_state"``), ``detail`` (the ERROR's detail byte), ``meaning``
+    (the schema's text), ``request`` (the refused message's name), ``request_seq``.
+    """
+
+    def __init__(self, request: str, request_seq: Optional[int], code: int, detail: int = 0,
+                 source: str = "ERROR"):
+        try:
+            self.code: Union[ErrorCode, int] = ErrorCode(code)
+        except ValueError:
+            self.code = int(code)
+        self.code_name = code_name(code)
+        self.detail = int(detail)
+        self.request = request
+        self.request_seq = request_seq
+        self.source = source
+        self.meaning = ERROR_MEANINGS.get(self.code_name, "unknown error code")
+        super().__init__(self._describe())
+
+    def _detail_text(self) -> str:
+        d, name = self.detail, self.code_name
+        if name == "not_allowed_in_state":
+            try:
+                state = DeviceState(d).name.lower()
+            except ValueError:
+                state = f"state {d}"
+            hint = {"trial_running": "send STOP first",
+                    "scene_set": "send START_TRIAL first",
+                    "stopped": "send START_TRIAL first (STOP ended the trial)",
+                    "idle": "send SET_SCENE first"}.get(state, "")
+            return f"; the device is {state}" + (f": {hint}" if hint else "")
+        if name == "no_scene":
+            return f"; {_msg_name(d)} needs a valid SET_SCENE first"
+        if name in ("unknown_id", "bad_length"):
+            return f"; message {_msg_name(d)} (id 0x{d:02X})"
+        if name == "bad_version":
+            return (f"; the device received protocol version {d}, it speaks "
+                    f"{PROTOCOL_VERSION}")
+        if name == "bad_enum_value":
+            cls = next((c for c in MESSAGES.values() if c.NAME == self.request), None)
+            if cls is not None and d < len(cls.FIELDS):
+                return f"; field {cls.FIELDS[d].name!r} (index {d})"
+            return f"; field index {d}"
+        return f"; detail {d}" if d else ""
+
+    def _describe(self) -> str:
+        seq = "" if self.request_seq is None else f" (seq {self.request_seq})"
+        verb = "refused" if self.source == "ERROR" else "could not solve"
+        meaning = self.meaning.split("; detail = ")[0]  # the detail is spelled out below
+        return (f"device {verb} {self.request}{seq}: {self.code_name} -- {meaning}"
+                f"{self._detail_text()}")
+
+
+# --------------------------------------------------------------------------------------
+# Values
+# --------------------------------------------------------------------------------------
+def to_f32(x: Any) -> float:
+    """A number as float32 (round to nearest); beyond the float32 range it is +-inf, as
+    C++ converts a double to float. NaN stays NaN."""
+    x = float(x)
+    try:
+        return _F32.unpack(_F32.pack(x))[0]
+    except (OverflowError, struct.error):
+        return math.copysign(math.inf, x)
+
+
+def _enum(value: Any, names: Dict[str, Any], enum_cls, what: str):
+    if isinstance(value, enum_cls):
+        return value
+    if isinstance(value, str):
+        if value in names:
+            return names[value]
+        try:
+            return enum_cls[value.upper()]
+        except KeyError:
+            pass
+    elif isinstance(value, int) and not isinstance(value, bool):
+        try:
+            return enum_cls(value)
+        except ValueError:
+            pass
+    raise ValueError(f"unknown {what} {value!r}; accepted: {', '.join(names)}")
+
+
+def _contact_slots(contacts: Optional[Sequence[Sequence[float]]]) -> Tuple[int, tuple]:
+    """(k, 4 slots of [x, y, z] float32). A count other than 3 or 4 is passed on as is
+    (the device answers bad_contact_count); only the first 4 contacts fit the frame."""
+    rows = [] if contacts is None else [list(r) for r in contacts]
+    for i, r in enumerate(rows):
+        if len(r) != 3:
+            raise ValueError(f"contacts[{i}] must be [x, y, z], got {len(r)} numbers")
+    k = min(len(rows), 255)
+    slots = [tuple(to_f32(v) for v in r) for r in rows[:MAX_CONTACTS]]
+    slots += [(0.0, 0.0, 0.0)] * (MAX_CONTACTS - len(slots))
+    return k, tuple(slots)
+
+
+def _floats(values: Sequence[float], n: int, what: str) -> tuple:
+    values = list(values)
+    if len(values) != n:
+        raise ValueError(f"{what} must have {n} numbers, got {len(values)}")
+    return tuple(to_f32(v) for v in values)
+
+
+def host_time_us() -> int:
+    """The host's monotonic clock in microseconds, wrapped to u32 (POSE.host_time_us)."""
+    return (time.monotonic_ns() // 1000) & 0xFFFFFFFF
+
+
+@dataclass
+class PoseSpec:
+    """One POSE of a stream: host time (u32 us), quaternion [w, x, y, z], optional
+    contacts (3 or 4 [x, y, z] that replace the scene's)."""
+
+    t_us: int
+    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
+    contacts: Optional[Sequence[Sequence[float]]] = None
+
+
+@dataclass
+class StreamResult:
+    """What :meth:`DeviceClient.stream` collected, in order."""
+
+    telemetry: List[Telemetry] = field(default_factory=list)
+    trial_results: List[TrialResult] = field(default_factory=list)
+    sent: int = 0
+    refused_after_trial_end: int = 0  # POSEs already in flight when the trial ended
+    lost: int = 0                     # POSEs whose answer never came (skipped over)
+    elapsed_s: float = 0.0
+
+    @property
+    def trial_result(self) -> Optional[TrialResult]:
+        return self.trial_results[0] if self.trial_results else None
+
+    @property
+    def round_trips_per_s(self) -> float:
+        return len(self.telemetry) / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+
+@dataclass
+class _Received:
+    seq: int
+    message: Any
+    t_rx: float
+
+
+@dataclass
+class _Outstanding:
+    seq: int
+    t_us: int
+    index: int
+
+
+# --------------------------------------------------------------------------------------
+# Client
+# --------------------------------------------------------------------------------------
+class DeviceClient:
+    """Requests to one device through a :class:`Transport`.
+
+    ``timeout``: seconds to wait for each answer (per request; a stream's per-answer
+    progress limit). On creation it sends one 0x00 so the device drops any partial frame
+    (docs/protocol.md). Counters of what the host saw: :attr:`host_bad_frames` (frames
+    the host's parser or decoder rejected), :attr:`device_frames_lost` (gaps in the
+    device's frame numbers), :attr:`frames_received`.
+    """
+
+    def __init__(self, transport: Transport, timeout: float = DEFAULT_TIMEOUT,
+                 send_idle_delimiter: bool = True):
+        self.transport = transport
+        self.timeout = float(timeout)
+        self._seq = SequenceCounter()
+        self._parser = FrameParser(Accept.DEVICE_TO_HOST)
+        self._inbox: Deque[_Received] = deque()
+        self.trial_results: Deque[TrialResult] = deque()
+        self.telemetry_backlog: Deque[Telemetry] = deque()
+        self.unmatched: Deque[Any] = deque()
+        self.device_info: Optional[HelloReply] = None
+        self.device_version: Optional[int] = None  # set when frames of another version came
+        self.bytes_received = 0
+        self.frames_received = 0
+        self.undecodable_frames = 0  # CRC passed but a field value is not in its set
+        self.device_frames_lost = 0
+        self._last_device_seq: Optional[int] = None
+        if send_idle_delimiter:
+            self.transport.write(b"\x00")
+
+    # ---- context manager
+    def close(self) -> None:
+        self.transport.close()
+
+    def __enter__(self) -> "DeviceClient":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ---- counters
+    @property
+    def host_bad_frames(self) -> int:
+        """Frames from the device the host dropped: parser errors (CRC, COBS, length,
+        version, id) plus frames whose fields could not be decoded."""
+        return self._parser.bad_frames + self.undecodable_frames
+
+    @property
+    def parse_counts(self) -> Dict[str, int]:
+        counts = {e.value: n for e, n in self._parser.counts.items()}
+        counts["undecodable"] = self.undecodable_frames
+        return counts
+
+    def counters(self) -> Dict[str, int]:
+        return {"bytes_received": self.bytes_received, "frames_received": self.frames_received,
+                "host_bad_frames": self.host_bad_frames,
+                "device_frames_lost": self.device_frames_lost,
+                "trial_results_queued": len(self.trial_results),
+                "unmatched": len(self.unmatched),
+                "telemetry_backlog": len(self.telemetry_backlog)}
+
+    # ---- receiving
+    def _pump(self, timeout: float) -> int:
+        """One read (waiting at most ``timeout`` s); parses it into the inbox. Returns the
+        number of bytes read."""
+        data = self.transport.read(READ_CHUNK, timeout)
+        if not data:
+            return 0
+        self.bytes_received += len(data)
+        now = time.monotonic()
+        for byte in data:
+            event = self._parser.push(byte)
+            if event is ParseEvent.NONE:
+                continue
+            if event is ParseEvent.BAD_VERSION:
+                self.device_version = self._parser.frame.version
+                continue
+            if event is not ParseEvent.FRAME:
+                continue
+            frame = self._parser.frame
+            try:
+                msg = message_of(frame)
+            except (BadEnumValueError, ProtocolError):
+                self.undecodable_frames += 1
+                continue
+            self.frames_received += 1
+            if self._last_device_seq is not None:
+                gap = (frame.seq - self._last_device_seq - 1) & 0xFFFF
+                if gap < 0x8000:
+                    self.device_frames_lost += gap
+            self._last_device_seq = frame.seq
+            self._inbox.append(_Received(frame.seq, msg, now))
+        return len(data)
+
+    def _park(self, item: _Received) -> None:
+        """Keep a frame that answers nothing pending."""
+        msg = item.message
+        if isinstance(msg, TrialResult):
+            self.trial_results.append(msg)
+        elif isinstance(msg, Telemetry):
+            self.telemetry_backlog.append(msg)
+        else:
+            self.unmatched.append(msg)
+
+    def _settle(self) -> None:
+        while self._inbox:
+            self._park(self._inbox.popleft())
+
+    def drain(self, timeout: float = 0.0) -> int:
+        """Read whatever arrives within ``timeout`` s and park it (TRIAL_RESULTs into
+        :attr:`trial_results`, ...). Returns the bytes read."""
+        deadline = time.monotonic() + timeout
+        total = self._pump(0.0)
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            total += self._pump(min(left, POLL_INTERVAL))
+        self._pump(0.0)
+        self._settle()
+        return total
+
+    def _send(self, message) -> int:
+        seq = self._seq.next()
+        self.transport.write(encode_message(message, seq))
+        return seq
+
+    def _timeout_error(self, what: str, timeout: float, bytes_before: int, frames_before: int,
+                       bad_before: int) -> LinkError:
+        if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
+            return self._mismatch()
+        where = getattr(self.transport, "name", "the device")
+        msg = f"no answer to {what} from {where} within {timeout:g} s"
+        got_bytes = self.bytes_received - bytes_before
+        got_frames = self.frames_received - frames_before
+        got_bad = self.host_bad_frames - bad_before
+        if self.bytes_received == 0:
+            msg += ("; nothing at all has been received from it: is it powered and running "
+                    "the GraspGuide firmware, and is this its port (`graspguide ports`)?")
+        elif got_bytes and not got_frames:
+            msg += (f"; {got_bytes} bytes arrived meanwhile but no valid frame "
+                    f"({got_bad} rejected): wrong baud rate (the firmware uses 115200) or not "
+                    "a GraspGuide device?")
+        elif got_frames:
+            msg += f"; {got_frames} other frames arrived meanwhile (none answers it)"
+        else:
+            msg += "; the device went silent (busy, reset, or the request was corrupted)"
+        return LinkTimeout(msg)
+
+    def _mismatch(self) -> ProtocolMismatch:
+        v = self.device_version
+        return ProtocolMismatch(
+            f"the device speaks protocol version {v}, this host {PROTOCOL_VERSION}: flash "
+            "firmware built from the same schema as these host tools (or install the host "
+            "tools that match the firmware)", device_version=v)
+
+    def _wait(self, match: Callable[[_Received], bool], what: str,
+              timeout: Optional[float]) -> _Received:
+        timeout = self.timeout if timeout is None else float(timeout)
+        deadline = time.monotonic() + timeout
+        b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+        while True:
+            while self._inbox:
+                item = self._inbox.popleft()
+                if match(item):
+                    return item
+                self._park(item)
+            if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
+                raise self._mismatch()
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise self._timeout_error(what, timeout, b0, f0, bad0)
+            self._pump(min(left, POLL_INTERVAL))
+
+    def _request(self, message, answer_type=Ack, timeout: Optional[float] = None,
+                 match: Optional[Callable[[Any], bool]] = None):
+        """Send one request and return its answer (``answer_type``); ERROR raises
+        DeviceError. ``match`` overrides how an answer is recognised."""
+        self._pump(0.0)
+        self._settle()
+        seq = self._send(message)
+        name = message.NAME
+
+        def is_answer(item: _Received) -> bool:
+            m = item.message
+            if isinstance(m, Error):
+                return m.request_seq == seq
+            if match is not None:
+                return match(m)
+            return isinstance(m, answer_type) and getattr(m, "request_seq", None) == seq
+
+        item = self._wait(is_answer, f"{name} (seq {seq})", timeout)
+        m = item.message
+        if isinstance(m, Error):
+            raise DeviceError(name, seq, m.code, m.detail)
+        # What the device sent right behind the answer (e.g. a TRIAL_RESULT) is parked now.
+        self._pump(0.0)
+        self._settle()
+        return m
+
+    # ---- requests
+    def hello(self, timeout: Optional[float] = None) -> HelloReply:
+        """HELLO -> HELLO_REPLY (kept in :attr:`device_info`); ProtocolMismatch if the
+        device's protocol version differs from this host's."""
+        reply = self._request(Hello(protocol_version=PROTOCOL_VERSION), HelloReply, timeout)
+        self.device_info = reply
+        if reply.protocol_version != PROTOCOL_VERSION:
+            self.device_version = reply.protocol_version
+            raise self._mismatch()
+        return reply
+
+    def set_scene(self, contacts: Sequence[Sequence[float]],
+                  y_axis: Sequence[float] = (0.0, 1.0, 0.0),
+                  constraints: Union[str, ConstraintModel] = "paper",
+                  policy: Union[str, Policy] = "F", mode: Union[str, Mode] = "C",
+                  threshold_deg: float = 3.0, hold_s: float = 0.5, timeout_s: float = 90.0,
+                  timeout: Optional[float] = None) -> Ack:
+        """SET_SCENE. ``contacts``: 3 or 4 [x, y, z] (another count is sent as is and the
+        device answers bad_contact_count); names as in `graspguide solve` ("F"/"Fperp",
+        "C"/"V", "paper"/"normal"/"none") or the wire enums. Values go on the wire as
+        float32 (beyond its range: infinite)."""
+        k, slots = _contact_slots(contacts)
+        msg = SetScene(k=k, contacts=slots, y_axis=_floats(y_axis, 3, "y_axis"),
+                       constraints=_enum(constraints, CONSTRAINT_NAMES, ConstraintModel,
+                                         "constraints"),
+                       policy=_enum(policy, POLICY_NAMES, Policy, "policy"),
+                       mode=_enum(mode, MODE_NAMES, Mode, "mode"),
+                       threshold_deg=to_f32(threshold_deg), hold_s=to_f32(hold_s),
+                       timeout_s=to_f32(timeout_s))
+        return self._request(msg, Ack, timeout)
+
+    def start_trial(self, trial_id: int, wrench: Sequence[float],
+                    timeout: Optional[float] = None) -> Ack:
+        """START_TRIAL with the virtual object's wrench [fx, fy, fz, mx, my, mz]."""
+        return self._request(StartTrial(trial_id=int(trial_id) & 0xFFFF,
+                                        wrench=_floats(wrench, 6, "wrench")), Ack, timeout)
+
+    @staticmethod
+    def _pose_message(t_us: int, quat: Sequence[float],
+                      contacts: Optional[Sequence[Sequence[float]]]) -> Pose:
+        if contacts is None:
+            has, slots = False, ((0.0, 0.0, 0.0),) * MAX_CONTACTS
+        else:
+            has = True
+            _, slots = _contact_slots(contacts)
+        return Pose(host_time_us=int(t_us) & 0xFFFFFFFF, quat_wxyz=_floats(quat, 4, "quat"),
+                    has_contacts=has, contacts=slots)
+
+    def pose(self, t_us: Optional[int] = None, quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+             contacts: Optional[Sequence[Sequence[float]]] = None,
+             timeout: Optional[float] = None, check: bool = False) -> Telemetry:
+        """POSE -> its TELEMETRY. ``t_us`` defaults to :func:`host_time_us`. A core
+        failure is in ``Telemetry.solver_status`` (motors off); ``check=True`` raises it as
+        DeviceError instead. A TRIAL_RESULT the pose caused lands in
+        :attr:`trial_results` (see :meth:`wait_trial_result`)."""
+        if t_us is None:
+            t_us = host_time_us()
+        msg = self._pose_message(t_us, quat, contacts)
+        tel = self._request(msg, Telemetry, timeout,
+                            match=lambda m: isinstance(m, Telemetry)
+                            and m.host_time_us == msg.host_time_us)
+        if check and tel.solver_status != ErrorCode.OK:
+            raise DeviceError("POSE", None, tel.solver_status, 0, source="TELEMETRY")
+        return tel
+
+    def stop(self, timeout: Optional[float] = None) -> Ack:
+        """STOP: motors off now; a running trial ends without TRIAL_RESULT."""
+        return self._request(Stop(), Ack, timeout)
+
+    def set_motors(self, pwm: Sequence[int], timeout: Optional[float] = None) -> Ack:
+        """SET_MOTORS (bench test): up to 4 duties 0..255; the POSE watchdog switches them
+        off again unless repeated."""
+        pwm = [int(p) for p in pwm]
+        if len(pwm) > MAX_CONTACTS or any(not 0 <= p <= 255 for p in pwm):
+            raise ValueError(f"pwm must be at most {MAX_CONTACTS} values in 0..255, got {pwm}")
+        pwm += [0] * (MAX_CONTACTS - len(pwm))
+        return self._request(SetMotors(pwm=tuple(pwm)), Ack, timeout)
+
+    def status(self, timeout: Optional[float] = None) -> Status:
+        """GET_STATUS -> STATUS (state, frames_received, bad_frames, stale_events,
+        last_error as counted by the device)."""
+        return self._request(GetStatus(), Status, timeout,
+                             match=lambda m: isinstance(m, Status))
+
+    def wait_trial_result(self, timeout: Optional[float] = None) -> TrialResult:
+        """The oldest queued TRIAL_RESULT, waiting up to ``timeout`` s for one."""
+        if self.trial_results:
+            return self.trial_results.popleft()
+        self._settle()
+        if self.trial_results:
+            return self.trial_results.popleft()
+        item = self._wait(lambda it: isinstance(it.message, TrialResult), "a TRIAL_RESULT",
+                          timeout)
+        return item.message
+
+    # ---- pipelined stream
+    def stream(self, poses: Iterable[Union[PoseSpec, Tuple]], window: int = 32,
+               timeout: Optional[float] = None, overall_timeout: Optional[float] = None,
+               stop_at_trial_end: bool = True) -> StreamResult:
+        """Send POSEs without waiting for each answer (at most ``window`` unanswered) and
+        collect their TELEMETRY in order, and every TRIAL_RESULT.
+
+        ``poses``: PoseSpec or (t_us, quat[, contacts]) tuples, any iterable (a generator
+        is consumed only as far as needed). With ``stop_at_trial_end`` no POSE is sent
+        after a TRIAL_RESULT arrived, and the ERROR not_allowed_in_state answers of POSEs
+        already in flight are counted (``refused_after_trial_end``), not raised. Any other
+        ERROR stops the stream and raises DeviceError with the result so far in
+        ``.partial``. ``timeout``: longest wait for the next answer; ``overall_timeout``:
+        for the whole stream (LinkTimeout, also with ``.partial``).
+        """
+        if window < 1:
+            raise ValueError("window must be >= 1")
+        step = self.timeout if timeout is None else float(timeout)
+        t_start = time.monotonic()
+        overall_deadline = None if overall_timeout is None else t_start + overall_timeout
+        result = StreamResult()
+        outstanding: Deque[_Outstanding] = deque()
+        it = iter(poses)
+        exhausted = False
+        ended = False
+        error: Optional[DeviceError] = None
+        self._pump(0.0)
+        self._settle()
+        last_progress = time.monotonic()
+        b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+        index = 0
+
+        def fail(exc: LinkError) -> LinkError:
+            result.elapsed_s = time.monotonic() - t_start
+            exc.partial = result  # type: ignore[attr-defined]
+            return exc
+
+        while True:
+            # Fill the window, in one write.
+            if not exhausted and not ended and error is None and len(outstanding) < window:
+                out = bytearray()
+                while len(outstanding) < window:
+                    try:
+                        p = next(it)
+                    except StopIteration:
+                        exhausted = True
+                        break
+                    spec = p if isinstance(p, PoseSpec) else PoseSpec(*p)
+                    msg = self._pose_message(spec.t_us, spec.quat, spec.contacts)
+                    seq = self._seq.next()
+                    out += encode_message(msg, seq)
+                    outstanding.append(_Outstanding(seq, msg.host_time_us, index))
+                    index += 1
+                if out:
+                    self.transport.write(bytes(out))
+            if not outstanding:
+                break
+            # Take answers.
+            progressed = False
+            while self._inbox:
+                item = self._inbox.popleft()
+                m = item.message
+                if isinstance(m, Telemetry):
+                    pos = next((i for i, o in enumerate(outstanding) if o.t_us == m.host_time_us),
+                               None)
+                    if pos is None:
+                        self.telemetry_backlog.append(m)
+                        continue
+                    for _ in range(pos):  # answers that never came
+                        outstanding.popleft()
+                        result.lost += 1
+                    outstanding.popleft()
+                    result.telemetry.append(m)
+                    progressed = True
+                elif isinstance(m, Error) and any(o.seq == m.request_seq for o in outstanding):
+                    while outstanding and outstanding[0].seq != m.request_seq:
+                        outstanding.popleft()
+                        result.lost += 1
+                    outstanding.popleft()
+                    progressed = True
+                    if ended and m.code == ErrorCode.NOT_ALLOWED_IN_STATE:
+                        result.refused_after_trial_end += 1
+                    elif error is None:
+                        error = DeviceError("POSE", m.request_seq, m.code, m.detail)
+                elif isinstance(m, TrialResult):
+                    result.trial_results.append(m)
+                    if stop_at_trial_end:
+                        ended = True
+                    progressed = True
+                else:
+                    self._park(item)
+            now = time.monotonic()
+            if progressed:
+                last_progress = now
+                b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+                continue
+            if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
+                raise fail(self._mismatch())
+            if overall_deadline is not None and now >= overall_deadline:
+                raise fail(LinkTimeout(
+                    f"stream not finished within its overall timeout of {overall_timeout:g} s "
+                    f"({len(result.telemetry)} TELEMETRY received, {len(outstanding)} POSEs "
+                    "unanswered)"))
+            left = last_progress + step - now
+            if left <= 0:
+                raise fail(self._timeout_error(
+                    f"POSE (seq {outstanding[0].seq}, {len(outstanding)} unanswered)", step,
+                    b0, f0, bad0))
+            if overall_deadline is not None:
+                left = min(left, overall_deadline - now)
+            self._pump(min(max(left, 0.0), POLL_INTERVAL))
+        result.sent = index
+        # A TRIAL_RESULT right behind the last TELEMETRY belongs to this stream too.
+        self._pump(0.0)
+        while self._inbox:
+            item = self._inbox.popleft()
+            if isinstance(item.message, TrialResult):
+                result.trial_results.append(item.message)
+            else:
+                self._park(item)
+        result.elapsed_s = time.monotonic() - t_start
+        if error is not None:
+            raise fail(error)
+        return result
+
+
+def telemetry_dict(tel: Telemetry, k: Optional[int] = None) -> Dict[str, Any]:
+    """A TELEMETRY as a JSON-friendly dict (``pwm`` cut to ``k`` motors when given)."""
+    d = tel.to_dict()
+    if k is not None:
+        d["pwm"] = d["pwm"][:k]
+    d["flags"] = int(tel.flags)
+    return d
+
+
+__all__ = [
+    "DeviceClient", "DeviceError", "ProtocolMismatch", "UnexpectedAnswer", "LinkError",
+    "LinkTimeout", "DeviceNotFound", "DeviceDisconnected", "SimNotBuilt", "PoseSpec",
+    "StreamResult", "ERROR_MEANINGS", "code_name", "host_time_us", "to_f32", "telemetry_dict",
+    "POLICY_NAMES", "MODE_NAMES", "CONSTRAINT_NAMES", "DEFAULT_TIMEOUT",
+]
