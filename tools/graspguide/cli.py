@@ -2,7 +2,9 @@
 
 ``graspguide solve`` reads JSON Lines (one request per line) and writes exactly one JSON
 line per request, in order, flushed after each line, so it can be driven through a pipe
-one request at a time. See ``graspguide solve --help``.
+one request at a time; with ``--engine device --port PORT|sim`` a device answers instead
+of the core. ``graspguide ports`` lists serial ports (and ``sim``), ``graspguide info``
+identifies a device. See ``graspguide COMMAND --help``.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import sys
 from typing import Any, BinaryIO, Dict, Iterator, Optional, TextIO, Tuple, Union
 
 from . import __version__
+from .transport import DEFAULT_BAUDRATE, SIM_PORT, LinkError
 
 # A request is a few hundred bytes; a longer line is answered with bad_json without
 # being parsed (the rest of it is read and dropped, so the stream goes on).
@@ -62,9 +65,16 @@ Error:
         otherwise the core's status, e.g. "non_finite_input", "bad_contact_count",
         "coincident_contacts", "rank_deficient", "zero_force", "bad_quaternion"
 
+With --engine device --port PORT|sim a device answers instead (the firmware's float
+and QR route): per request SET_SCENE, START_TRIAL, one POSE, its TELEMETRY, STOP.
+Its answers have the keys the wire carries: ok, pwm, constraints_used, error_deg,
+iterations, alpha (levels, lambda, relevant and fallback_mask are not on the wire).
+Bad requests get the same codes and messages; compare with --scalar float.
+
 Exit status: 0 when the input ends (even if some requests were bad), 2 for a usage
 error, 130 when interrupted (Ctrl-C; every answer so far is flushed), 1 when the
-reader closes the output pipe.
+reader closes the output pipe, or when the link to the device fails (that request
+is answered with error "link_error" and the reason goes to stderr).
 """
 
 SOLVE_EPILOG = """\
@@ -72,6 +82,7 @@ examples:
   echo '{"contacts": [[0.045,0.045,0.035], [0.015,0.095,0.04], [-0.01,0.1,0.04]],
   "wrench": [0.3,-1.2,-0.8,0,0,0]}' | tr -d '\\n' | graspguide solve
   graspguide solve --scalar float --input tools/examples/solve_requests.jsonl
+  graspguide solve --engine device --port sim --input tools/examples/solve_requests.jsonl
 """
 
 
@@ -185,9 +196,10 @@ def _error(code: str, message: str) -> Dict[str, Any]:
 
 
 def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double",
-           decomposition: str = "qr", max_iterations: Optional[int] = None
-           ) -> Optional[Dict[str, Any]]:
-    """The response to one input line, or None for a blank line."""
+           decomposition: str = "qr", max_iterations: Optional[int] = None,
+           engine: Optional["DeviceEngine"] = None) -> Optional[Dict[str, Any]]:
+    """The response to one input line, or None for a blank line. With ``engine`` (a
+    :class:`DeviceEngine`) the device answers instead of the core."""
     from . import solver
 
     if isinstance(line, _LineTooLong):
@@ -205,6 +217,8 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
         if not message.startswith("line "):
             message = f"line {number}: {message}"
         return _error(e.code, message)
+    if engine is not None:
+        return engine.answer(kwargs)
     try:
         res = solver.solve(scalar=scalar, decomposition=decomposition,
                            max_iterations=(solver.DEFAULT_MAX_ITERATIONS
@@ -225,17 +239,83 @@ def _dumps(obj: Dict[str, Any]) -> str:
 
 
 def run_solve(inp: BinaryIO, out: TextIO, scalar: str = "double", decomposition: str = "qr",
-              max_iterations: Optional[int] = None) -> int:
+              max_iterations: Optional[int] = None,
+              engine: Optional["DeviceEngine"] = None) -> int:
     """Answer every line of ``inp`` on ``out``; returns the number of answers."""
     count = 0
     for number, line in enumerate(_read_lines(inp), start=1):
-        response = answer(line, number, scalar, decomposition, max_iterations)
+        try:
+            response = answer(line, number, scalar, decomposition, max_iterations, engine)
+        except LinkError as e:
+            # The link failed (only with --engine device): this request gets its error
+            # line, every earlier answer is already out, and the command stops.
+            out.write(_dumps(_error("link_error", f"line {number}: {e}")) + "\n")
+            out.flush()
+            raise
         if response is None:
             continue
         out.write(_dumps(response) + "\n")
         out.flush()
         count += 1
     return count
+
+
+# --------------------------------------------------------------------------------------
+# The device as the solve engine
+# --------------------------------------------------------------------------------------
+class DeviceEngine:
+    """Answers `graspguide solve` requests with a device (--engine device): per request
+    SET_SCENE (contacts, y_axis, constraints, policy, mode), START_TRIAL (wrench), one
+    POSE (orientation), its TELEMETRY, then STOP (motors off).
+
+    The answer has the core's keys that the wire carries: ok, pwm, constraints_used,
+    error_deg, iterations, alpha. ``levels``, ``lambda``, ``relevant`` and
+    ``fallback_mask`` are not in TELEMETRY and are left out. Bad requests are answered by
+    the same checks as the core engine (bad_json, bad_request) on the host; the device's
+    refusals and TELEMETRY.solver_status come back with the core's code and message.
+    """
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self._trial_id = 0
+        client.stop()  # a trial left running by an earlier session would refuse SET_SCENE
+
+    def answer(self, kw: Dict[str, Any]) -> Dict[str, Any]:
+        from . import solver
+        from .device import DeviceError
+
+        client = self.client
+        self._trial_id = (self._trial_id + 1) & 0xFFFF
+        k = len(kw["contacts"])
+        try:
+            try:
+                client.set_scene(kw["contacts"], y_axis=kw["y_axis"],
+                                 constraints=kw["constraints"], policy=kw["policy"],
+                                 mode=kw["mode"])
+                client.start_trial(self._trial_id, kw["wrench"])
+                tel = client.pose(quat=kw["orientation"])
+            finally:
+                client.stop()
+        except DeviceError as e:
+            return self._device_error(e, solver)
+        status = int(tel.solver_status)
+        if status != 0:
+            return self._device_error(DeviceError("POSE", None, status, 0, source="TELEMETRY"),
+                                      solver)
+        return {
+            "ok": True,
+            "pwm": [int(p) for p in tel.pwm[:k]],
+            "constraints_used": tel.constraints_used.name.lower(),
+            "error_deg": _finite_or_none(float(tel.error_deg)),
+            "iterations": int(tel.iterations),
+            "alpha": _finite_or_none(float(tel.alpha)),
+        }
+
+    @staticmethod
+    def _device_error(e, solver) -> Dict[str, Any]:
+        if e.code_name in solver.STATUS_NAMES:  # a core status: the core's message
+            return _error(e.code_name, solver.status_message(e.code_name))
+        return _error(e.code_name, str(e))
 
 
 # --------------------------------------------------------------------------------------
@@ -264,9 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
         "solve", help="answer JSON Lines requests (contacts, wrench -> PWM) with the C++ core",
         description=SOLVE_DESCRIPTION, epilog=SOLVE_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    solve.add_argument("--scalar", choices=("double", "float"), default="double",
+    solve.add_argument("--scalar", choices=("double", "float"), default=None,
                        help="precision of the core: double (default, the host) or float "
-                            "(what a microcontroller with a single-precision FPU runs)")
+                            "(what a microcontroller with a single-precision FPU runs; "
+                            "compare --engine device with this)")
     solve.add_argument("--decomposition", choices=("qr", "svd"), default="qr",
                        help="equilibrium route: column-pivoting QR (default, the firmware's) "
                             "or Jacobi SVD (reference route)")
@@ -278,8 +359,156 @@ def build_parser() -> argparse.ArgumentParser:
                        help="read requests from FILE instead of stdin ('-': stdin)")
     solve.add_argument("--output", "-o", metavar="FILE", default="-",
                        help="write responses to FILE instead of stdout ('-': stdout)")
+    solve.add_argument("--engine", choices=("core", "device"), default="core",
+                       help="who answers: core (default, the C++ core in this process) or "
+                            "device (the board or simulated device on --port: SET_SCENE, "
+                            "START_TRIAL, one POSE, TELEMETRY, STOP per request; answers "
+                            "carry ok, pwm, constraints_used, error_deg, iterations, alpha)")
+    _add_port_arguments(solve, required=False)
     solve.set_defaults(handler=_cmd_solve, command_parser=solve)
+
+    ports = sub.add_parser(
+        "ports", help="list serial ports (and the simulated device 'sim')",
+        description="List the serial ports pyserial finds, plus the pseudo-port 'sim' (the "
+                    "simulated device, started on demand by --port sim).")
+    ports.add_argument("--json", action="store_true", help="one JSON object per line")
+    ports.set_defaults(handler=_cmd_ports, command_parser=ports)
+
+    info = sub.add_parser(
+        "info", help="identify a device: HELLO_REPLY and STATUS",
+        description="Ask a device who it is (HELLO -> HELLO_REPLY: protocol and firmware "
+                    "version, board, scalar, contacts, build id) and how it is (GET_STATUS "
+                    "-> STATUS: state, frames received, bad frames, stale events, last "
+                    "error).",
+        epilog="examples:\n  graspguide info --port sim\n"
+               "  graspguide info --port /dev/ttyACM0 --json",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_port_arguments(info, required=True)
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    info.set_defaults(handler=_cmd_info, command_parser=info)
     return parser
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 < value <= 3600:
+        raise argparse.ArgumentTypeError(f"must be in (0, 3600] seconds, got {value}")
+    return value
+
+
+def _add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
+    p.add_argument("--port", "-p", metavar="PORT", required=required,
+                   help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
+                        "`graspguide ports` lists them), or 'sim' to start the simulated "
+                        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM)")
+    p.add_argument("--baud", type=_positive_int, default=DEFAULT_BAUDRATE, metavar="RATE",
+                   help=f"baud rate (default {DEFAULT_BAUDRATE})")
+    p.add_argument("--timeout", type=_positive_float, default=1.0, metavar="S",
+                   help="seconds to wait for each answer of the device (default 1)")
+
+
+def _connect(args):
+    """(transport, client) for --port, or raise LinkError."""
+    from .device import DeviceClient
+    from .transport import open_port
+
+    transport = open_port(args.port, baudrate=args.baud)
+    try:
+        client = DeviceClient(transport, timeout=args.timeout)
+        client.hello()
+    except BaseException:
+        transport.close()
+        raise
+    return transport, client
+
+
+def _fail(command: str, e: BaseException) -> int:
+    print(f"graspguide {command}: error: {e}", file=sys.stderr)
+    return EXIT_FAILURE
+
+
+def _cmd_ports(args) -> int:
+    from .transport import LinkError as _LinkError, find_sim_binary, list_serial_ports
+
+    try:
+        ports = list_serial_ports()
+    except _LinkError as e:
+        return _fail("ports", e)
+    try:
+        sim = {"device": SIM_PORT, "description": "simulated device",
+               "hwid": find_sim_binary()}
+    except _LinkError as e:
+        sim = {"device": SIM_PORT, "description": "simulated device (not available)",
+               "hwid": str(e).replace("\n", " ")}
+    rows = ports + [sim]
+    if args.json:
+        for row in rows:
+            print(json.dumps(row))
+        return EXIT_OK
+    width = max(len(r["device"]) for r in rows)
+    for row in rows:
+        extra = f"  [{row['hwid']}]" if row["hwid"] and row["hwid"] != "n/a" else ""
+        print(f"{row['device']:<{width}}  {row['description']}{extra}")
+    if not ports:
+        print("(no serial ports found: is the board plugged in?)", file=sys.stderr)
+    return EXIT_OK
+
+
+def _cmd_info(args) -> int:
+    from .protocol.messages import PROTOCOL_VERSION
+
+    try:
+        transport, client = _connect(args)
+    except LinkError as e:
+        return _fail("info", e)
+    try:
+        hello = client.hello()
+        status = client.status()
+    except LinkError as e:
+        return _fail("info", e)
+    finally:
+        transport.close()
+    scalar = {4: "float", 8: "double"}.get(hello.scalar, "unknown")
+    data = {
+        "port": args.port,
+        "transport": transport.name,
+        "protocol_version": hello.protocol_version,
+        "firmware_version": ".".join(str(v) for v in hello.firmware_version),
+        "board": hello.board,
+        "scalar": scalar,
+        "scalar_bytes": hello.scalar,
+        "max_contacts": hello.max_contacts,
+        "build_id": f"{hello.build_id:08x}",
+        "state": status.state.name.lower(),
+        "frames_received": status.frames_received,
+        "bad_frames": status.bad_frames,
+        "stale_events": status.stale_events,
+        "last_error": status.last_error.name.lower(),
+        "host_bad_frames": client.host_bad_frames,
+    }
+    if args.json:
+        print(json.dumps(data))
+        return EXIT_OK
+    rows = [
+        ("port", data["transport"]),
+        ("protocol", f"{hello.protocol_version} (host {PROTOCOL_VERSION})"),
+        ("firmware", data["firmware_version"]),
+        ("board", hello.board),
+        ("scalar", f"{scalar} ({hello.scalar} bytes)"),
+        ("max contacts", str(hello.max_contacts)),
+        ("build id", data["build_id"]),
+        ("state", data["state"]),
+        ("frames received", str(status.frames_received)),
+        ("bad frames", f"{status.bad_frames} (device), {client.host_bad_frames} (host)"),
+        ("stale events", str(status.stale_events)),
+        ("last error", data["last_error"]),
+    ]
+    for key, value in rows:
+        print(f"{key + ':':<17}{value}")
+    return EXIT_OK
 
 
 def _open_streams(parser: argparse.ArgumentParser, args) -> Tuple[BinaryIO, TextIO]:
@@ -300,13 +529,51 @@ def _open_streams(parser: argparse.ArgumentParser, args) -> Tuple[BinaryIO, Text
     return inp, out
 
 
+def _check_engine_options(args) -> None:
+    parser = args.command_parser
+    if args.engine == "core":
+        if args.port is not None:
+            parser.error("--port is for --engine device (the core engine runs in this "
+                         "process); add --engine device")
+        return
+    if args.port is None:
+        parser.error("--engine device needs --port PORT (see `graspguide ports`) or "
+                     "--port sim")
+    if args.scalar == "double":
+        parser.error("--engine device computes in the firmware's float; drop --scalar "
+                     "double (compare with --engine core --scalar float)")
+    if args.decomposition != "qr":
+        parser.error("--engine device uses the firmware's QR route; drop --decomposition")
+    if args.max_iterations is not None:
+        parser.error("--engine device uses the firmware's QP iteration cap; drop "
+                     "--max-iterations")
+
+
 def _cmd_solve(args) -> int:
+    _check_engine_options(args)
     inp, out = _open_streams(args.command_parser, args)
+    engine = None
+    transport = None
+    if args.engine == "device":
+        try:
+            transport, client = _connect(args)
+            engine = DeviceEngine(client)
+        except LinkError as e:
+            if transport is not None:
+                transport.close()
+            if out is not sys.stdout:
+                out.close()
+            if inp is not sys.stdin.buffer:
+                inp.close()
+            return _fail("solve", e)
     if args.input == "-" and sys.stdin.isatty() and sys.stderr.isatty():
         print("graspguide solve: reading JSON requests, one per line (Ctrl-D to end, "
               "--help for the format)", file=sys.stderr)
     try:
-        run_solve(inp, out, args.scalar, args.decomposition, args.max_iterations)
+        run_solve(inp, out, args.scalar or "double", args.decomposition, args.max_iterations,
+                  engine)
+    except LinkError as e:
+        return _fail("solve", e)
     except KeyboardInterrupt:
         try:
             out.flush()
@@ -323,6 +590,8 @@ def _cmd_solve(args) -> int:
             out.close()
         if inp is not sys.stdin.buffer:
             inp.close()
+        if transport is not None:
+            transport.close()
     return EXIT_OK
 
 
