@@ -6,7 +6,9 @@
 #   3. ./.venv with the pinned tools/requirements-dev.txt (re-installed only
 #      when that file changes);
 #   4. the Python package in tools/ (if tools/pyproject.toml exists),
-#      re-installed only when its sources (tools/, lib/graspguide/) change.
+#      re-installed only when its sources (tools/, lib/graspguide/) change;
+#   5. the simulated device (.pio/build/sim/program, `pio run -e sim`) when
+#      platformio.ini has [env:sim]; pio rebuilds only what changed.
 # Exports nothing. Set GRASPGUIDE_PYTHON to choose the interpreter for .venv
 # (default: python3 on PATH).
 set -euo pipefail
@@ -104,6 +106,24 @@ if [[ -f $ROOT/tools/pyproject.toml ]]; then
     else
         say "./tools package up to date"
     fi
+fi
+
+# --- 5. The simulated device ------------------------------------------------------
+# `graspguide ... --port sim` and tools/tests/test_device_e2e.py run it. Offline, like
+# the native tests; pio recompiles only what changed (about 1 s when nothing did).
+if grep -q '^\[env:sim\]' "$ROOT/platformio.ini" 2>/dev/null; then
+    sim_log="$(mktemp "${TMPDIR:-/tmp}/graspguide-sim-build.XXXXXX")"
+    if PLATFORMIO_CORE_DIR="$ROOT/.pio-core" PLATFORMIO_DISABLE_UPGRADE_CHECK=true \
+        PLATFORMIO_SETTING_ENABLE_TELEMETRY=No \
+        "$ROOT/.venv/bin/pio" run -e sim >"$sim_log" 2>&1; then
+        say "simulated device ready (.pio/build/sim/program)"
+        rm -f "$sim_log"
+    else
+        tail -n 40 "$sim_log" >&2
+        die "building the simulated device failed (\`pio run -e sim\`; full log: $sim_log)"
+    fi
+else
+    say "platformio.ini has no [env:sim]: not building the simulated device"
 fi
 
 say "done"
