@@ -53,3 +53,50 @@ def subprocess_env() -> dict:
     env.pop("PYTHONPATH", None)
     env["PYTHONIOENCODING"] = "utf-8"
     return env
+
+
+# --------------------------------------------------------------------------------------
+# Devices: `--port PATH` runs the hardware subset of test_device_e2e.py against a board;
+# without it those tests are skipped (and say so). The simulated-device tests always run.
+# --------------------------------------------------------------------------------------
+HARDWARE_SKIP_REASON = ("hardware test: no board given; run pytest with --port PATH "
+                        "(e.g. --port /dev/ttyACM0) to run it against a real device")
+
+
+def pytest_addoption(parser):
+    group = parser.getgroup("graspguide", "GraspGuide device tests")
+    group.addoption("--port", action="store", default=None, metavar="PATH",
+                    help="serial port of a GraspGuide board: runs the hardware tests of "
+                         "test_device_e2e.py against it (skipped without this option)")
+    group.addoption("--baud", action="store", type=int, default=115200, metavar="RATE",
+                    help="baud rate for --port (default 115200)")
+
+
+@pytest.fixture(scope="session")
+def hardware_port(request):
+    """The --port given on the command line; skips the test without one."""
+    port = request.config.getoption("--port")
+    if not port:
+        pytest.skip(HARDWARE_SKIP_REASON)
+    return port
+
+
+# Figures the device tests measure (start time, frames/s, latencies, agreement counts),
+# printed together at the end of the run so they show in tools/run-tests.sh's output.
+_MEASUREMENTS = []
+
+
+@pytest.fixture(scope="session")
+def report_figure():
+    """report_figure(name, value_text): one line in the end-of-run summary."""
+    def add(name: str, text: str) -> None:
+        _MEASUREMENTS.append((name, text))
+    return add
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if _MEASUREMENTS:
+        terminalreporter.section("device measurements")
+        width = max(len(n) for n, _ in _MEASUREMENTS)
+        for name, text in _MEASUREMENTS:
+            terminalreporter.write_line(f"{name:<{width}}  {text}")
