@@ -41,18 +41,24 @@ size_t PtyStream::read(uint8_t* buffer, size_t capacity) {
 }
 
 size_t PtyStream::write(const uint8_t* data, size_t length) {
+  // LinkDevice writes one whole frame per call. A host that stops reading for
+  // kWriteTimeoutMs loses this frame; if part of it went out, a delimiter ends it there, so
+  // the host's parser drops only this frame instead of merging it with the next.
+  constexpr int kWriteTimeoutMs = 200;
   size_t done = 0;
   while (done < length) {
     const ssize_t n = ::write(master_fd_, data + done, length - done);
     if (n > 0) {
       done += static_cast<size_t>(n);
-    } else if (n < 0 && errno == EAGAIN) {
-      // The host is slow to read: wait a little rather than drop a reply.
-      pollfd p{master_fd_, POLLOUT, 0};
-      if (::poll(&p, 1, 50) <= 0) break;
-    } else {
-      break;
+      continue;
     }
+    pollfd p{master_fd_, POLLOUT, 0};
+    if (!(n < 0 && errno == EAGAIN) || ::poll(&p, 1, kWriteTimeoutMs) <= 0) break;
+  }
+  if (done > 0 && done < length) {
+    const uint8_t delimiter = 0;
+    pollfd p{master_fd_, POLLOUT, 0};
+    if (::poll(&p, 1, kWriteTimeoutMs) > 0) (void)::write(master_fd_, &delimiter, 1);
   }
   return done;
 }

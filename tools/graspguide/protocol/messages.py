@@ -527,7 +527,7 @@ class TrialResult(_Message):
 
 @dataclass(frozen=True)
 class Status(_Message):
-    """STATUS (0x85, device -> host): Answer to GET_STATUS; the device may also send it unprompted when its state changes other than by a request (a trial's end)."""
+    """STATUS (0x85, device -> host): Answer to GET_STATUS, and only that: the device never sends it unprompted, so a STATUS always answers the oldest unanswered GET_STATUS."""
 
     MSG_ID: ClassVar[int] = MsgId.STATUS
     NAME: ClassVar[str] = "STATUS"

@@ -1154,7 +1154,7 @@ void for_each_field(TrialResult& m, Fn&& fn) {
   fn("final_error_deg", m.final_error_deg);
 }
 
-// STATUS (0x85, device -> host): Answer to GET_STATUS; the device may also send it unprompted when its state changes other than by a request (a trial's end).
+// STATUS (0x85, device -> host): Answer to GET_STATUS, and only that: the device never sends it unprompted, so a STATUS always answers the oldest unanswered GET_STATUS.
 struct Status {
   static constexpr MsgId kId = MsgId::kStatus;
   static constexpr const char* kName = "STATUS";
