@@ -1,0 +1,208 @@
+"""`scene.toml`: one experiment's scene (contacts, object axis, constraint model, policy,
+mode) and trial parameters, as `graspguide stream` sends them to a device.
+
+Format (every key is checked; an unknown key is an error, so a typo is never ignored)::
+
+    [scene]
+    units = "mm"                 # "m" or "mm"; contacts are converted to metres
+
+    [contacts]
+    thumb  = [45.0, 45.0, 35.0]  # hand frame, in `units`
+    index  = [15.0, 95.0, 40.0]
+    middle = [-10.0, 100.0, 40.0]
+    palm   = [20.0, 40.0, 0.0]   # optional: k = 4 when present, else k = 3
+    y_axis = [0.0, 1.0, 0.0]     # object axis y_O in the hand frame (default [0, 1, 0])
+    constraints = "paper"        # "paper" | "normal" | "none" (default "paper")
+    policy = "F"                 # "F" | "Fperp" (default "F")
+    mode = "C"                   # "C" | "V" (default "C")
+
+    [trial]                      # the paper's defaults
+    threshold_deg = 3.0
+    hold_s = 0.5
+    timeout_s = 90.0
+
+:func:`load_scene` returns a :class:`Scene`; :meth:`Scene.to_dict` is its normalised form
+(metres, every default filled in) and :meth:`Scene.config_hash` the sha256 of that form as
+canonical JSON (sorted keys, no spaces), stable across runs and machines.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple
+
+FINGERS = ("thumb", "index", "middle", "palm")
+UNITS = {"m": 1.0, "mm": 1000.0}   # divisor to metres (x / 1000 is correctly rounded)
+POLICIES = ("F", "Fperp")
+MODES = ("C", "V")
+CONSTRAINTS = ("paper", "normal", "none")
+TRIAL_DEFAULTS = {"threshold_deg": 3.0, "hold_s": 0.5, "timeout_s": 90.0}
+
+_TABLES = {
+    "scene": {"units"},
+    "contacts": set(FINGERS) | {"y_axis", "constraints", "policy", "mode"},
+    "trial": set(TRIAL_DEFAULTS),
+}
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used; the message names the file, the key and the fix."""
+
+
+@dataclass(frozen=True)
+class Scene:
+    contacts: Tuple[Tuple[float, float, float], ...]   # metres, thumb, index, middle(, palm)
+    y_axis: Tuple[float, float, float] = (0.0, 1.0, 0.0)
+    constraints: str = "paper"
+    policy: str = "F"
+    mode: str = "C"
+    threshold_deg: float = 3.0
+    hold_s: float = 0.5
+    timeout_s: float = 90.0
+    source: Optional[str] = field(default=None, compare=False)
+    units: str = field(default="m", compare=False)   # units of the file (informational)
+
+    @property
+    def k(self) -> int:
+        return len(self.contacts)
+
+    @property
+    def fingers(self) -> Tuple[str, ...]:
+        return FINGERS[: self.k]
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The normalised configuration (metres, defaults filled in)."""
+        return {
+            "k": self.k,
+            "contacts_m": [list(c) for c in self.contacts],
+            "y_axis": list(self.y_axis),
+            "constraints": self.constraints,
+            "policy": self.policy,
+            "mode": self.mode,
+            "threshold_deg": self.threshold_deg,
+            "hold_s": self.hold_s,
+            "timeout_s": self.timeout_s,
+        }
+
+    def canonical_json(self) -> str:
+        return canonical_json(self.to_dict())
+
+    def config_hash(self) -> str:
+        return config_hash(self.to_dict())
+
+    def set_scene_kwargs(self) -> Dict[str, Any]:
+        """Keyword arguments of :meth:`graspguide.device.DeviceClient.set_scene`."""
+        return {"contacts": [list(c) for c in self.contacts], "y_axis": list(self.y_axis),
+                "constraints": self.constraints, "policy": self.policy, "mode": self.mode,
+                "threshold_deg": self.threshold_deg, "hold_s": self.hold_s,
+                "timeout_s": self.timeout_s}
+
+
+def canonical_json(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
+                      allow_nan=False)
+
+
+def config_hash(obj: Any) -> str:
+    """sha256 (hex) of ``obj`` as canonical JSON."""
+    return hashlib.sha256(canonical_json(obj).encode("ascii")).hexdigest()
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _vector(where: str, key: str, value: Any, divisor: float = 1.0) -> Tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3 or not all(_is_number(x) for x in value):
+        raise SceneError(f"{where}: {key} must be a list of 3 numbers [x, y, z], got "
+                         f"{value!r}")
+    out = tuple(float(x) / divisor for x in value)
+    if not all(math.isfinite(x) for x in out):
+        raise SceneError(f"{where}: {key} must be finite numbers, got {value!r}")
+    return out  # type: ignore[return-value]
+
+
+def _choice(where: str, key: str, value: Any, allowed: Tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        raise SceneError(f"{where}: {key} must be one of "
+                         f"{', '.join(repr(a) for a in allowed)}, got {value!r}")
+    return value
+
+
+def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
+    """A :class:`Scene` from the parsed TOML ``data``; ``source`` names it in errors."""
+    if not isinstance(data, dict):
+        raise SceneError(f"{source}: expected a TOML document with tables")
+    for table in data:
+        if table not in _TABLES:
+            raise SceneError(f"{source}: unknown table [{table}]; the tables are "
+                             f"{', '.join('[' + t + ']' for t in _TABLES)}")
+        if not isinstance(data[table], dict):
+            raise SceneError(f"{source}: {table} must be a table ([{table}]), got "
+                             f"{type(data[table]).__name__}")
+        for key in data[table]:
+            if key not in _TABLES[table]:
+                raise SceneError(f"{source}: unknown key {key!r} in [{table}]; allowed: "
+                                 f"{', '.join(sorted(_TABLES[table]))}")
+    scene_t = data.get("scene", {})
+    if "units" not in scene_t:
+        raise SceneError(f"{source}: [scene] units is missing: add units = \"m\" or "
+                         "units = \"mm\" (the unit of the contact positions)")
+    units = _choice(f"{source}: [scene]", "units", scene_t["units"], tuple(UNITS))
+    scale = UNITS[units]
+
+    ct = data.get("contacts")
+    if ct is None:
+        raise SceneError(f"{source}: the [contacts] table is missing: add thumb, index, "
+                         "middle (and optionally palm) as [x, y, z]")
+    where = f"{source}: [contacts]"
+    missing = [f for f in FINGERS[:3] if f not in ct]
+    if missing:
+        raise SceneError(f"{where}: missing {', '.join(missing)}: thumb, index and middle "
+                         "are required ([x, y, z] each), palm is optional")
+    names = list(FINGERS[:3]) + (["palm"] if "palm" in ct else [])
+    contacts = tuple(_vector(where, n, ct[n], scale) for n in names)
+    y_axis = _vector(where, "y_axis", ct.get("y_axis", [0.0, 1.0, 0.0]))
+    if math.sqrt(sum(x * x for x in y_axis)) < 1e-9:
+        raise SceneError(f"{where}: y_axis must not be zero")
+    constraints = _choice(where, "constraints", ct.get("constraints", "paper"), CONSTRAINTS)
+    policy = _choice(where, "policy", ct.get("policy", "F"), POLICIES)
+    mode = _choice(where, "mode", ct.get("mode", "C"), MODES)
+
+    trial = dict(TRIAL_DEFAULTS)
+    for key, value in data.get("trial", {}).items():
+        if not _is_number(value) or not math.isfinite(value):
+            raise SceneError(f"{source}: [trial] {key} must be a number, got {value!r}")
+        if value <= 0 and key != "hold_s" or value < 0:
+            raise SceneError(f"{source}: [trial] {key} must be positive, got {value!r}")
+        trial[key] = float(value)
+    return Scene(contacts=contacts, y_axis=y_axis, constraints=constraints, policy=policy,
+                 mode=mode, source=source, units=units, **trial)
+
+
+def load_scene(path: str) -> Scene:
+    """Read and check a scene.toml; SceneError (naming the file) on any problem."""
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read the scene file: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: not valid TOML: {e}") from None
+    return parse_scene(data, path)
+
+
+def loads_scene(text: str, source: str = "<string>") -> Scene:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{source}: not valid TOML: {e}") from None
+    return parse_scene(data, source)
+
+
+__all__ = ["Scene", "SceneError", "load_scene", "loads_scene", "parse_scene", "config_hash",
+           "canonical_json", "FINGERS"]
