@@ -1,0 +1,384 @@
+"""Pose sources for `graspguide stream`: each yields samples ``(t_s, quat_wxyz,
+contacts_or_None)`` -- time in seconds from the source's start, the hand -> world
+orientation as a unit quaternion [w, x, y, z] in this project's world (z up,
+right-handed), and optionally the contacts (metres, hand frame) -- at the source's rate.
+
+Spec strings (:func:`open_source`):
+
+* ``replay:FILE.csv`` -- a recorded stream. A header line is required; the columns are
+  ``t_s,qw,qx,qy,qz`` and optionally ``thumb_x,thumb_y,thumb_z,index_x,index_y,index_z,
+  middle_x,middle_y,middle_z[,palm_x,palm_y,palm_z]`` (metres, hand frame). Values are in
+  this project's world convention (convert tracker data first, see
+  :class:`TrackerConvention`). ``t_s`` must increase. Errors name the file and line.
+* ``synthetic[:rate=240,duration=10,seed=0]`` -- a scripted hand: from a start orientation
+  (seeded, 40..80 degrees away) it turns smoothly (minimum-jerk profile over 60 % of the
+  duration) to the orientation that aligns the scene's force with gravity, then holds it,
+  with a small physiological tremor (~0.3 degrees at 8-12 Hz plus noise) all along.
+  Deterministic for a seed. Needs the scene and wrench (:meth:`SyntheticSource.aim`) to
+  know the target; without them it turns towards the identity.
+
+Tracker conventions (:class:`TrackerConvention`, :data:`TRACKER_PRESETS`) convert a
+tracker's positions and quaternions to the world here: metres, z up, right-handed,
+quaternion order w, x, y, z. The presets are typical defaults; verify against your
+tracker's settings (units, up axis and quaternion order are configurable in most of them).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+Sample = Tuple[float, Tuple[float, float, float, float], Optional[List[List[float]]]]
+FINGERS = ("thumb", "index", "middle", "palm")
+QUAT_COLUMNS = ["t_s", "qw", "qx", "qy", "qz"]
+
+
+class SourceError(ValueError):
+    """A pose source that cannot be used (bad spec, bad file); says what to fix."""
+
+
+# --------------------------------------------------------------------------------------
+# Quaternion helpers (w, x, y, z; Hamilton product; active rotations)
+# --------------------------------------------------------------------------------------
+def quat_mul(a, b) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def quat_from_axis_angle(axis, angle_rad: float) -> np.ndarray:
+    axis = np.asarray(axis, dtype=float)
+    n = np.linalg.norm(axis)
+    if n < 1e-15:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    axis = axis / n
+    return np.concatenate([[math.cos(angle_rad / 2)], math.sin(angle_rad / 2) * axis])
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def matrix_to_quat(m) -> np.ndarray:
+    m = np.asarray(m, dtype=float)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def quat_angle_deg(a, b) -> float:
+    """The rotation angle between two orientations, in degrees."""
+    d = abs(float(np.dot(np.asarray(a) / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b))))
+    return math.degrees(2 * math.acos(min(1.0, d)))
+
+
+def slerp(a, b, u: float) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    d = float(np.dot(a, b))
+    if d < 0:
+        b, d = -b, -d
+    if d > 0.9995:
+        q = a + u * (b - a)
+        return q / np.linalg.norm(q)
+    th = math.acos(d)
+    return (math.sin((1 - u) * th) * a + math.sin(u * th) * b) / math.sin(th)
+
+
+# --------------------------------------------------------------------------------------
+# Tracker conventions
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TrackerConvention:
+    """How a tracker reports poses: ``units`` "m"/"mm", ``up_axis`` "y"/"z", ``handedness``
+    "right"/"left", ``quat_order`` "wxyz"/"xyzw".
+
+    Conversion to this project's world (m, z up, right-handed, w, x, y, z): positions
+    ``p_w = M p_t / scale``; orientations ``R_w = M R_t M^T`` -- the world *and* the
+    tracked body's axes get the same axis change, so a rotation about the tracker's up
+    axis becomes a rotation about world z. ``M``: identity for z-up, a +90 degree turn
+    about x for y-up (tracker y -> world z, tracker z -> world -y); for left-handed
+    trackers the axis that is neither x nor up is mirrored first.
+    """
+
+    units: str = "m"
+    up_axis: str = "z"
+    handedness: str = "right"
+    quat_order: str = "wxyz"
+
+    def __post_init__(self):
+        for name, value, allowed in (("units", self.units, ("m", "mm")),
+                                     ("up_axis", self.up_axis, ("y", "z")),
+                                     ("handedness", self.handedness, ("right", "left")),
+                                     ("quat_order", self.quat_order, ("wxyz", "xyzw"))):
+            if value not in allowed:
+                raise SourceError(f"TrackerConvention {name} must be one of {allowed}, "
+                                  f"got {value!r}")
+
+    @property
+    def matrix(self) -> np.ndarray:
+        mirror = np.eye(3)
+        if self.handedness == "left":
+            mirror[2 if self.up_axis == "y" else 1, 2 if self.up_axis == "y" else 1] = -1
+        if self.up_axis == "z":
+            up = np.eye(3)
+        else:
+            up = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+        return up @ mirror
+
+    def position(self, p: Sequence[float]) -> List[float]:
+        scale = 1000.0 if self.units == "mm" else 1.0
+        return list(self.matrix @ (np.asarray(p, dtype=float) / scale))
+
+    def quaternion(self, q: Sequence[float]) -> Tuple[float, float, float, float]:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (4,):
+            raise SourceError(f"a quaternion has 4 components, got {list(q)}")
+        wxyz = q if self.quat_order == "wxyz" else np.array([q[3], q[0], q[1], q[2]])
+        m = self.matrix
+        return tuple(matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))  # type: ignore
+
+    def convert(self, q, positions=None):
+        """(quat_wxyz, positions in metres, world axes) from the tracker's values."""
+        return (self.quaternion(q),
+                None if positions is None else [self.position(p) for p in positions])
+
+
+WORLD = TrackerConvention("m", "z", "right", "wxyz")
+# Typical defaults; verify against your tracker's settings.
+TRACKER_PRESETS: Dict[str, TrackerConvention] = {
+    # Vicon (Nexus/Tracker, DataStream SDK): millimetres, z up, right-handed, x,y,z,w.
+    "vicon": TrackerConvention("mm", "z", "right", "xyzw"),
+    # OptiTrack (Motive, NatNet streaming): metres, y up, right-handed, x,y,z,w.
+    "optitrack": TrackerConvention("m", "y", "right", "xyzw"),
+    # Leap Motion / Ultraleap: millimetres, y up, right-handed, x,y,z,w.
+    "leap": TrackerConvention("mm", "y", "right", "xyzw"),
+    "world": WORLD,
+}
+
+
+# --------------------------------------------------------------------------------------
+# Sources
+# --------------------------------------------------------------------------------------
+class Source:
+    """Iterable of samples; ``rate_hz`` is the nominal rate (None if unknown)."""
+
+    name = "source"
+    rate_hz: Optional[float] = None
+
+    def __iter__(self) -> Iterator[Sample]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def describe(self) -> Dict[str, object]:
+        return {"source": self.name, "rate_hz": self.rate_hz}
+
+
+class ReplaySource(Source):
+    name = "replay"
+
+    def __init__(self, path: str):
+        self.path = path
+        self.samples = self._load(path)
+        dts = np.diff([s[0] for s in self.samples])
+        self.rate_hz = float(1.0 / np.median(dts)) if len(dts) and np.median(dts) > 0 else None
+
+    @staticmethod
+    def _load(path: str) -> List[Sample]:
+        try:
+            f = open(path, newline="", encoding="utf-8")
+        except OSError as e:
+            raise SourceError(f"replay: cannot read {path}: {e.strerror}") from None
+        with f:
+            reader = csv.reader(f)
+            try:
+                header = [h.strip() for h in next(reader)]
+            except StopIteration:
+                raise SourceError(f"{path}: empty file; the first line must be the header "
+                                  f"{','.join(QUAT_COLUMNS)}[,thumb_x,...]") from None
+            if header[:5] != QUAT_COLUMNS:
+                raise SourceError(f"{path}:1: the header must start with "
+                                  f"{','.join(QUAT_COLUMNS)}, got {','.join(header)}")
+            extra = header[5:]
+            k = len(extra) // 3
+            expected = [f"{n}_{a}" for n in FINGERS[:k] for a in "xyz"]
+            if extra and (k not in (3, 4) or extra != expected):
+                raise SourceError(
+                    f"{path}:1: contact columns must be "
+                    f"{','.join(f'{n}_{a}' for n in FINGERS[:3] for a in 'xyz')}"
+                    f"[,palm_x,palm_y,palm_z], got {','.join(extra)}")
+            samples: List[Sample] = []
+            last_t = -math.inf
+            for row in reader:
+                line = reader.line_num
+                if not row or all(not c.strip() for c in row):
+                    continue
+                if len(row) != len(header):
+                    raise SourceError(f"{path}:{line}: {len(row)} values, the header has "
+                                      f"{len(header)}")
+                try:
+                    vals = [float(c) for c in row]
+                except ValueError:
+                    bad = next(c for c in row if not _is_float(c))
+                    raise SourceError(f"{path}:{line}: not a number: {bad!r}") from None
+                if not all(math.isfinite(v) for v in vals):
+                    raise SourceError(f"{path}:{line}: values must be finite")
+                t, q = vals[0], vals[1:5]
+                if t <= last_t:
+                    raise SourceError(f"{path}:{line}: t_s must increase ({t} after {last_t})")
+                n = math.sqrt(sum(x * x for x in q))
+                if abs(n - 1) > 1e-3:
+                    raise SourceError(f"{path}:{line}: the quaternion qw,qx,qy,qz is not "
+                                      f"unit length (|q| = {n:.6g})")
+                last_t = t
+                contacts = [vals[5 + 3 * i: 8 + 3 * i] for i in range(k)] if k else None
+                samples.append((t, tuple(q), contacts))  # type: ignore[arg-type]
+        if not samples:
+            raise SourceError(f"{path}: no samples after the header")
+        return samples
+
+    def __iter__(self) -> Iterator[Sample]:
+        t0 = self.samples[0][0]
+        for t, q, c in self.samples:
+            yield (t - t0, q, c)
+
+    def describe(self):
+        return {"source": self.name, "path": self.path, "rate_hz": self.rate_hz,
+                "samples": len(self.samples)}
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def aligned_quaternion(contacts, wrench, policy="F", constraints="paper",
+                       y_axis=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """An orientation with zero guidance error (the scene's force along gravity), from the
+    core: the force direction f (hand frame) probed through mode V's gain
+    alpha = |R f - g| / 2 * span for three orientations, then rotated onto g = -z."""
+    from . import solver
+
+    s = math.sqrt(0.5)
+
+    def fz(q):  # z of R f, from |R f - g|^2 = 2 + 2 (R f)_z
+        r = solver.solve(contacts, wrench, policy=policy, mode="V", constraints=constraints,
+                         orientation=q, y_axis=y_axis)
+        if r["status"] != "ok":
+            raise SourceError(f"synthetic: the core cannot solve the scene: {r['status']}")
+        d = 2 * r["alpha"] / solver.PWM_SPAN
+        return (d * d - 2) / 2
+
+    f = np.array([fz([s, 0, -s, 0]), fz([s, s, 0, 0]), fz([1, 0, 0, 0])])
+    f /= np.linalg.norm(f)
+    axis = np.cross(f, [0, 0, -1.0])
+    angle = math.atan2(np.linalg.norm(axis), -f[2])
+    if np.linalg.norm(axis) < 1e-12:
+        axis = np.array([1.0, 0, 0])
+    return quat_from_axis_angle(axis, angle)
+
+
+class SyntheticSource(Source):
+    name = "synthetic"
+
+    def __init__(self, rate: float = 240.0, duration: float = 10.0, seed: int = 0,
+                 tremor_deg: float = 0.3, start_deg: Tuple[float, float] = (40.0, 80.0),
+                 converge_fraction: float = 0.6):
+        if not 1 <= rate <= 10000:
+            raise SourceError(f"synthetic: rate must be in 1..10000 Hz, got {rate}")
+        if not 0 < duration <= 3600:
+            raise SourceError(f"synthetic: duration must be in (0, 3600] s, got {duration}")
+        self.rate_hz = float(rate)
+        self.duration = float(duration)
+        self.seed = int(seed)
+        self.tremor_deg = float(tremor_deg)
+        self.start_deg = start_deg
+        self.converge_fraction = converge_fraction
+        self.target = np.array([1.0, 0.0, 0.0, 0.0])
+
+    def aim(self, contacts, wrench, policy="F", constraints="paper",
+            y_axis=(0.0, 1.0, 0.0)) -> "SyntheticSource":
+        """Turn towards the orientation aligning this scene's force with gravity."""
+        self.target = aligned_quaternion(contacts, wrench, policy, constraints, y_axis)
+        return self
+
+    def __iter__(self) -> Iterator[Sample]:
+        rng = np.random.default_rng(self.seed)
+        axis = rng.normal(size=3)
+        offset = math.radians(rng.uniform(*self.start_deg))
+        start = quat_mul(self.target, quat_from_axis_angle(axis, offset))
+        t_conv = self.converge_fraction * self.duration
+        freqs = rng.uniform(8.0, 12.0, size=3)
+        phases = rng.uniform(0, 2 * math.pi, size=3)
+        amp = math.radians(self.tremor_deg)
+        n = int(round(self.duration * self.rate_hz))
+        for i in range(n + 1):
+            t = i / self.rate_hz
+            u = min(1.0, t / t_conv) if t_conv > 0 else 1.0
+            s = u * u * u * (10 - 15 * u + 6 * u * u)   # minimum jerk
+            q = slerp(start, self.target, s)
+            tremor = amp * (np.sin(2 * math.pi * freqs * t + phases)
+                            + 0.3 * rng.normal(size=3))
+            q = quat_mul(q, quat_from_axis_angle(tremor, float(np.linalg.norm(tremor))))
+            q /= np.linalg.norm(q)
+            yield (t, (float(q[0]), float(q[1]), float(q[2]), float(q[3])), None)
+
+    def describe(self):
+        return {"source": self.name, "rate_hz": self.rate_hz, "duration_s": self.duration,
+                "seed": self.seed, "target_wxyz": [float(x) for x in self.target]}
+
+
+def open_source(spec: str) -> Source:
+    """A Source from ``replay:FILE.csv`` or ``synthetic[:rate=..,duration=..,seed=..]``."""
+    kind, _, rest = spec.partition(":")
+    if kind == "replay":
+        if not rest:
+            raise SourceError("replay needs a file: --source replay:FILE.csv")
+        return ReplaySource(rest)
+    if kind == "synthetic":
+        kw: Dict[str, float] = {}
+        conv = {"rate": float, "duration": float, "seed": int, "tremor_deg": float}
+        for item in filter(None, rest.split(",")):
+            key, eq, value = item.partition("=")
+            key = key.strip()
+            if not eq or key not in conv:
+                raise SourceError(f"synthetic: bad option {item!r}; options are "
+                                  f"{', '.join(k + '=N' for k in conv)}")
+            try:
+                kw[key] = conv[key](value)
+            except ValueError:
+                raise SourceError(f"synthetic: {key} must be a number, got {value!r}") from None
+        return SyntheticSource(**kw)  # type: ignore[arg-type]
+    raise SourceError(f"unknown source {spec!r}: use replay:FILE.csv or "
+                      "synthetic[:rate=240,duration=10,seed=0]")
+
+
+__all__ = ["Source", "ReplaySource", "SyntheticSource", "SourceError", "TrackerConvention",
+           "TRACKER_PRESETS", "WORLD", "open_source", "aligned_quaternion", "quat_mul",
+           "quat_from_axis_angle", "quat_to_matrix", "matrix_to_quat", "quat_angle_deg"]
