@@ -14,6 +14,7 @@ import json
 import math
 import os
 import sys
+import time
 from typing import Any, BinaryIO, Dict, Iterator, Optional, TextIO, Tuple, Union
 
 from . import __version__
@@ -386,6 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_port_arguments(info, required=True)
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.set_defaults(handler=_cmd_info, command_parser=info)
+    _add_stream_parser(sub)
     return parser
 
 
@@ -593,6 +595,268 @@ def _cmd_solve(args) -> int:
         if transport is not None:
             transport.close()
     return EXIT_OK
+
+
+# --------------------------------------------------------------------------------------
+# graspguide stream
+# --------------------------------------------------------------------------------------
+STREAM_DESCRIPTION = """\
+Run one trial on a device: HELLO, SET_SCENE (from --scene), START_TRIAL (--wrench), then
+stream the poses of --source at the source's rate (real time; with --port sim
+--virtual-clock as fast as the link allows, the device's clock following the poses'
+times) while showing the guidance error, the motors' PWM, the rate and dropped frames.
+Stops at the TRIAL_RESULT or at the end of the source, and always sends STOP on the way
+out (also on Ctrl-C or an error).
+
+sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]),
+         synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
+         scene's force with gravity)."""
+
+STREAM_EPILOG = """\
+examples:
+  graspguide stream --port sim --virtual-clock --scene tools/examples/scene_paper_3.toml \\
+      --wrench 0.3,-1.2,-0.8 --source synthetic --log runs/s1
+  graspguide stream --port /dev/ttyACM0 --scene my_scene.toml --wrench 0,0,-2 \\
+      --source replay:poses.csv --trial-id 3
+
+exit status: 0 when the trial ended (success or failure) or the source ended, 1 on a link
+error, 2 on a usage error (bad scene, wrench or source), 130 on Ctrl-C."""
+
+
+def _wrench(text: str):
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--wrench must be fx,fy,fz or fx,fy,fz,mx,my,mz (numbers), got {text!r}") from None
+    if len(values) not in (3, 6) or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(
+            f"--wrench must be 3 or 6 finite numbers (fx,fy,fz[,mx,my,mz]), got {text!r}")
+    return values + [0.0] * (6 - len(values))
+
+
+def _add_stream_parser(sub) -> None:
+    p = sub.add_parser("stream", help="run a trial: stream poses from a source to a device",
+                       description=STREAM_DESCRIPTION, epilog=STREAM_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_port_arguments(p, required=True)
+    p.add_argument("--scene", required=True, metavar="SCENE.toml",
+                   help="scene file (tools/examples/scene_paper_3.toml shows the format)")
+    p.add_argument("--wrench", required=True, type=_wrench, metavar="FX,FY,FZ[,MX,MY,MZ]",
+                   help="the virtual object's wrench in the object frame (N, N m)")
+    p.add_argument("--source", required=True, metavar="SOURCE",
+                   help="replay:FILE.csv or synthetic[:rate=240,duration=10,seed=0]")
+    p.add_argument("--log", metavar="DIR", default=None,
+                   help="write the session folder DIR (scene.json, device.json, "
+                        "config.json, poses.csv, telemetry.csv, results.jsonl)")
+    p.add_argument("--trial-id", type=int, default=1, metavar="N",
+                   help="START_TRIAL trial id, 0..65535 (default 1)")
+    p.add_argument("--virtual-clock", action="store_true",
+                   help="with --port sim: the device's clock follows the poses' times, so "
+                        "the trial runs as fast as possible")
+    p.set_defaults(handler=_cmd_stream, command_parser=p)
+
+
+class _StatusView:
+    """Live status: a rich panel on a terminal, plain periodic lines otherwise."""
+
+    def __init__(self, k: int, out: TextIO = None, period_s: float = 1.0):
+        self.out = out or sys.stdout
+        self.k = k
+        self.period_s = period_s
+        self.next_t = 0.0
+        self.live = None
+        self.last_draw = 0.0
+        if self.out.isatty():
+            try:
+                from rich.live import Live
+                self.live = Live(self._render({}), refresh_per_second=10, transient=False)
+                self.live.start()
+            except ImportError:  # pragma: no cover - rich is a dependency
+                self.live = None
+
+    def _render(self, s):
+        from rich.table import Table
+        table = Table(title="graspguide stream", show_header=False, expand=False)
+        table.add_row("time", f"{s.get('t_s', 0.0):7.2f} s")
+        table.add_row("error", f"{s.get('error_deg', float('nan')):7.2f} deg")
+        for i, pwm in enumerate(s.get("pwm", [0] * self.k)[: self.k]):
+            bar = "#" * (pwm * 30 // 255)
+            table.add_row(f"motor {i + 1}", f"{pwm:3d} [green]{bar:<30}[/green]")
+        table.add_row("rate", f"{s.get('rate_hz', 0.0):7.1f} poses/s")
+        table.add_row("sent / telemetry", f"{s.get('sent', 0)} / {s.get('received', 0)}")
+        table.add_row("dropped", str(s.get("dropped", 0)))
+        return table
+
+    def update(self, s, force: bool = False) -> None:
+        if self.live is not None:
+            now = time.monotonic()
+            if force or now - self.last_draw >= 0.1:
+                self.live.update(self._render(s))
+                self.last_draw = now
+            return
+        if force or s["t_s"] >= self.next_t:
+            self.next_t = s["t_s"] + self.period_s
+            pwm = " ".join(f"{p:3d}" for p in s["pwm"][: self.k])
+            print(f"t={s['t_s']:7.2f}s error={s['error_deg']:7.2f}deg pwm=[{pwm}] "
+                  f"rate={s['rate_hz']:.1f}/s sent={s['sent']} dropped={s['dropped']}",
+                  file=self.out, flush=True)
+
+    def close(self) -> None:
+        if self.live is not None:
+            self.live.stop()
+            self.live = None
+
+
+def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: bool = False,
+               log=None, view=None) -> Dict[str, Any]:
+    """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
+    (paced in real time unless ``virtual_clock``), until TRIAL_RESULT or the end of the
+    source. Returns a summary dict; raises LinkError. STOP is the caller's job."""
+    from .device import DeviceError, host_time_us
+    from .protocol.messages import ErrorCode
+
+    client.set_scene(**scene.set_scene_kwargs())
+    client.start_trial(trial_id, wrench)
+    client.trial_results.clear()
+    period = 1.0 / source.rate_hz if source.rate_hz else 0.0
+    sent = received = dropped = 0
+    last_tel = None
+    result = None
+    t_wall0 = time.monotonic()
+    status = {"t_s": 0.0, "error_deg": float("nan"), "pwm": [0] * 4, "rate_hz": 0.0,
+              "sent": 0, "received": 0, "dropped": 0}
+    for t_s, quat, contacts in source:
+        if not virtual_clock:
+            wait = t_wall0 + t_s - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            elif period and -wait > 2 * period:
+                dropped += 1          # too late for this sample: skip it, keep the pace
+                continue
+            t_us = host_time_us()
+        else:
+            t_us = int(round(t_s * 1e6)) & 0xFFFFFFFF
+        if log is not None:
+            log.pose(t_us, t_s, quat, contacts is not None)
+        try:
+            tel = client.pose(t_us, quat, contacts)
+        except DeviceError as e:
+            client.drain(0.05)
+            if e.code == ErrorCode.NOT_ALLOWED_IN_STATE and client.trial_results:
+                sent += 1
+                break
+            raise
+        sent += 1
+        received += 1
+        last_tel = tel
+        if log is not None:
+            log.telemetry(tel)
+        if not client.trial_results:
+            client.drain(0.0)
+        elapsed = max(time.monotonic() - t_wall0, 1e-9)
+        status.update(t_s=t_s, error_deg=tel.error_deg, pwm=list(tel.pwm),
+                      rate_hz=sent / elapsed, sent=sent, received=received,
+                      dropped=dropped + client.device_frames_lost + client.host_bad_frames)
+        if view is not None:
+            view.update(status)
+        if client.trial_results:
+            break
+    if not client.trial_results:
+        client.drain(0.05)
+    if client.trial_results:
+        result = client.trial_results.popleft()
+        if log is not None:
+            log.result(result)
+    if view is not None:
+        view.update(status, force=True)
+    elapsed = time.monotonic() - t_wall0
+    return {"trial_result": result, "sent": sent, "received": received,
+            "dropped": status["dropped"] if sent else dropped,
+            "late_skipped": dropped, "elapsed_s": elapsed,
+            "last_error_deg": None if last_tel is None else last_tel.error_deg}
+
+
+def _cmd_stream(args) -> int:
+    from .scene import SceneError, config_hash, load_scene
+    from .session_log import SessionLog
+    from .sources import SourceError, SyntheticSource, open_source
+    from .transport import SIM_PORT as _SIM, open_port
+
+    parser = args.command_parser
+    if args.virtual_clock and args.port != _SIM:
+        parser.error("--virtual-clock is for --port sim (a board's clock is its own)")
+    if not 0 <= args.trial_id <= 0xFFFF:
+        parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
+    try:
+        scene = load_scene(args.scene)
+        source = open_source(args.source)
+        if isinstance(source, SyntheticSource):
+            source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints,
+                       scene.y_axis)
+    except (SceneError, SourceError) as e:
+        print(f"graspguide stream: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    kwargs = {"virtual_clock": True} if args.virtual_clock else {}
+    try:
+        transport = open_port(args.port, baudrate=args.baud, **kwargs)
+    except LinkError as e:
+        return _fail("stream", e)
+    from .device import DeviceClient
+
+    client = DeviceClient(transport, timeout=args.timeout)
+    log = view = None
+    code = EXIT_OK
+    summary = None
+    try:
+        hello = client.hello()
+        config = {"scene": scene.to_dict(), "wrench": args.wrench}
+        config["config_hash"] = config_hash(config)
+        config.update(source=source.describe(), source_spec=args.source, port=args.port,
+                      trial_id=args.trial_id, virtual_clock=args.virtual_clock,
+                      scene_file=args.scene)
+        if args.log:
+            log = SessionLog(args.log)
+            log.scene(scene.to_dict())
+            log.device(hello)
+            log.config(config)
+        view = _StatusView(scene.k)
+        summary = run_stream(client, scene, args.wrench, source, args.trial_id,
+                             args.virtual_clock, log, view)
+    except LinkError as e:
+        code = EXIT_FAILURE
+        print(f"graspguide stream: error: {e}", file=sys.stderr)
+    except KeyboardInterrupt:
+        code = EXIT_INTERRUPTED
+        print("graspguide stream: interrupted", file=sys.stderr)
+    finally:
+        if view is not None:
+            view.close()
+        try:
+            client.stop()
+        except LinkError as e:
+            print(f"graspguide stream: STOP failed: {e}", file=sys.stderr)
+            code = code or EXIT_FAILURE
+        except KeyboardInterrupt:
+            pass
+        transport.close()
+        if log is not None:
+            end = {"event": "end", "exit_code": code}
+            if summary is not None:
+                end.update({k: v for k, v in summary.items() if k != "trial_result"})
+            log.result(end)
+            log.close()
+    if summary is not None:
+        r = summary["trial_result"]
+        if r is None:
+            print(f"no trial result: the source ended first ({summary['sent']} poses sent, "
+                  f"last error {summary['last_error_deg']})")
+        else:
+            print(f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
+                  f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
+                  f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
+                  f"{summary['dropped']} dropped)")
+    return code
 
 
 def main(argv=None) -> int:

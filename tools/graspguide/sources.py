@@ -11,7 +11,8 @@ Spec strings (:func:`open_source`):
   this project's world convention (convert tracker data first, see
   :class:`TrackerConvention`). ``t_s`` must increase. Errors name the file and line.
 * ``synthetic[:rate=240,duration=10,seed=0]`` -- a scripted hand: from a start orientation
-  (seeded, 40..80 degrees away) it turns smoothly (minimum-jerk profile over 60 % of the
+  (seeded: tilted 40..80 degrees about a horizontal axis, so
+  the force starts that far off gravity) it turns smoothly (minimum-jerk profile over 60 % of the
   duration) to the orientation that aligns the scene's force with gravity, then holds it,
   with a small physiological tremor (~0.3 degrees at 8-12 Hz plus noise) all along.
   Deterministic for a seed. Needs the scene and wrench (:meth:`SyntheticSource.aim`) to
@@ -330,9 +331,11 @@ class SyntheticSource(Source):
 
     def __iter__(self) -> Iterator[Sample]:
         rng = np.random.default_rng(self.seed)
-        axis = rng.normal(size=3)
+        # tilt about a horizontal world axis: the force starts offset degrees off gravity
+        phi = rng.uniform(0, 2 * math.pi)
+        axis = np.array([math.cos(phi), math.sin(phi), 0.0])
         offset = math.radians(rng.uniform(*self.start_deg))
-        start = quat_mul(self.target, quat_from_axis_angle(axis, offset))
+        start = quat_mul(quat_from_axis_angle(axis, offset), self.target)
         t_conv = self.converge_fraction * self.duration
         freqs = rng.uniform(8.0, 12.0, size=3)
         phases = rng.uniform(0, 2 * math.pi, size=3)

@@ -134,7 +134,7 @@ def test_synthetic_converges_to_aligned_orientation():
     s = src.SyntheticSource(rate=50, duration=6, seed=1).aim(HAND3, WRENCH)
     samples = list(s)
     err = [solver.solve(HAND3, WRENCH, orientation=list(q))["error_deg"] for _, q, _ in samples]
-    assert err[0] > 20          # starts 40..80 degrees away
+    assert 39 < err[0] < 81     # starts 40..80 degrees off (plus tremor)
     tail = [e for (t, _, _), e in zip(samples, err) if t >= 0.65 * 6]
     assert max(tail) < 2.0      # holds below the paper's 3 degree threshold
     # smooth: no jump of more than a few degrees between samples at 50 Hz

@@ -1,0 +1,110 @@
+"""`graspguide stream` end to end against the simulated device (virtual clock) with the
+synthetic source, and its session folder."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from graspguide import scene as gs
+
+_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
+SCENE4 = os.path.join(_TOOLS, "examples", "scene_paper_4.toml")
+CLI = [sys.executable, "-m", "graspguide.cli", "stream"]
+WRENCH = "0.3,-1.2,-0.8"
+
+
+def run(args, timeout=60):
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    return subprocess.run(CLI + args, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+@pytest.mark.parametrize("scene_file", [SCENE3, SCENE4])
+def test_synthetic_trial_succeeds_and_log_is_consistent(tmp_path, scene_file):
+    folder = tmp_path / "session"
+    p = run(["--port", "sim", "--virtual-clock", "--scene", scene_file, "--wrench", WRENCH,
+             "--source", "synthetic:rate=240,duration=10,seed=0", "--log", str(folder),
+             "--trial-id", "17"])
+    assert p.returncode == 0, p.stderr
+    assert "trial 17: success" in p.stdout, p.stdout
+    assert "error=" in p.stdout          # plain periodic status lines (stdout not a TTY)
+    assert sorted(os.listdir(folder)) == ["config.json", "device.json", "poses.csv",
+                                          "results.jsonl", "scene.json", "telemetry.csv"]
+    scene = json.load(open(folder / "scene.json"))
+    config = json.load(open(folder / "config.json"))
+    device = json.load(open(folder / "device.json"))
+    assert scene == gs.load_scene(scene_file).to_dict() == config["scene"]
+    assert config["config_hash"] == gs.config_hash({"scene": scene,
+                                                    "wrench": config["wrench"]})
+    assert config["wrench"] == [0.3, -1.2, -0.8, 0.0, 0.0, 0.0] and config["trial_id"] == 17
+    assert device["protocol_version"] >= 1 and device["max_contacts"] >= scene["k"]
+    poses = list(csv.DictReader(open(folder / "poses.csv")))
+    tel = list(csv.DictReader(open(folder / "telemetry.csv")))
+    results = [json.loads(line) for line in open(folder / "results.jsonl")]
+    # every POSE sent got its TELEMETRY, in order
+    assert len(poses) == len(tel) > 100
+    assert [r["host_time_us"] for r in poses] == [r["host_time_us"] for r in tel]
+    assert all(r["solver_status"] == "ok" for r in tel)
+    trial, end = results
+    assert trial["trial_id"] == 17 and trial["success"] is True
+    assert trial["final_error_deg"] < 3.0 and trial["completion_s"] < 10.0
+    assert float(tel[-1]["error_deg"]) == pytest.approx(trial["final_error_deg"], abs=1e-6)
+    assert [tel[-1][f"pwm{i}"] for i in range(4)] == ["0"] * 4   # ended: motors off
+    assert end["event"] == "end" and end["exit_code"] == 0 and end["sent"] == len(poses)
+    # the trial ended before the source did (10 s at 240 Hz)
+    assert len(poses) < 2401
+
+
+def test_source_ending_first_stops_and_exits_0(tmp_path):
+    csv_path = tmp_path / "identity.csv"   # identity: 57 degrees off, never succeeds
+    csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i * 0.01},1,0,0,0\n"
+                                                       for i in range(101)))
+    p = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
+             "--source", f"replay:{csv_path}", "--log", str(tmp_path / "log")])
+    assert p.returncode == 0, p.stderr
+    assert "no trial result: the source ended first (101 poses sent" in p.stdout
+    tmp_path = tmp_path / "log"
+    results = [json.loads(line) for line in open(tmp_path / "results.jsonl")]
+    assert len(results) == 1 and results[0]["event"] == "end"
+
+
+def test_run_stream_then_stop_leaves_device_idle():
+    from graspguide import cli, device as gd, sources, transport as gt
+    from graspguide.protocol import messages as m
+
+    scene = gs.load_scene(SCENE3)
+    src = sources.open_source("synthetic:rate=100,duration=0.5")
+    with gt.SimulatedDevice(virtual_clock=True) as sim:
+        client = gd.DeviceClient(sim, timeout=2.0)
+        client.hello()
+        summary = cli.run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src,
+                                 virtual_clock=True)
+        assert summary["trial_result"] is None and summary["sent"] == 51
+        assert client.status().state is m.DeviceState.TRIAL_RUNNING
+        client.stop()
+        assert client.status().state is m.DeviceState.STOPPED
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["--port", "sim", "--scene", "/nonexistent.toml", "--wrench", WRENCH, "--source",
+      "synthetic"], 2, "cannot read the scene file"),
+    (["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "bogus"], 2,
+     "unknown source"),
+    (["--port", "/dev/graspguide-no-such-port", "--scene", SCENE3, "--wrench", WRENCH,
+      "--source", "synthetic"], 1, "error"),
+    (["--port", "/dev/ttyS0", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
+      "--source", "synthetic"], 2, "--virtual-clock is for --port sim"),
+    (["--port", "sim", "--scene", SCENE3, "--wrench", "1,2", "--source", "synthetic"], 2,
+     "3 or 6"),
+])
+def test_errors_and_exit_codes(args, code, words):
+    p = run(args)
+    assert p.returncode == code, (p.returncode, p.stderr)
+    assert words in p.stderr, p.stderr
