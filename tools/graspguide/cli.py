@@ -713,8 +713,8 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
     """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
     (paced in real time unless ``virtual_clock``), until TRIAL_RESULT or the end of the
     source. Returns a summary dict; raises LinkError. STOP is the caller's job."""
-    from .device import DeviceError, host_time_us
-    from .protocol.messages import ErrorCode
+    from .device import DeviceError, LinkTimeout, host_time_us
+    from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, ErrorCode
 
     client.set_scene(**scene.set_scene_kwargs())
     client.start_trial(trial_id, wrench)
@@ -723,6 +723,7 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
     sent = received = dropped = 0
     last_tel = None
     result = None
+    ended = False
     t_wall0 = time.monotonic()
     status = {"t_s": 0.0, "error_deg": float("nan"), "pwm": [0] * 4, "rate_hz": 0.0,
               "sent": 0, "received": 0, "dropped": 0}
@@ -752,15 +753,20 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
         last_tel = tel
         if log is not None:
             log.telemetry(tel)
-        if not client.trial_results:
-            client.drain(0.0)
+        if not client.trial_results and not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
+            # this pose ended the trial: its TRIAL_RESULT follows the TELEMETRY
+            try:
+                client.trial_results.appendleft(client.wait_trial_result(client.timeout))
+            except LinkTimeout:
+                pass
+            ended = True
         elapsed = max(time.monotonic() - t_wall0, 1e-9)
         status.update(t_s=t_s, error_deg=tel.error_deg, pwm=list(tel.pwm),
                       rate_hz=sent / elapsed, sent=sent, received=received,
                       dropped=dropped + client.device_frames_lost + client.host_bad_frames)
         if view is not None:
             view.update(status)
-        if client.trial_results:
+        if client.trial_results or ended:
             break
     if not client.trial_results:
         client.drain(0.05)
