@@ -108,3 +108,30 @@ def test_errors_and_exit_codes(args, code, words):
     p = run(args)
     assert p.returncode == code, (p.returncode, p.stderr)
     assert words in p.stderr, p.stderr
+
+
+def test_ctrl_c_stops_and_keeps_the_log(tmp_path):
+    import signal
+    import time
+
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    folder = tmp_path / "log"
+    p = subprocess.Popen(CLI + ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH,
+                                "--source", "synthetic:rate=100,duration=30", "--log",
+                                str(folder)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        assert p.stdout.readline().startswith("t=")   # streaming in real time
+        time.sleep(0.3)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and "interrupted" in err, (p.returncode, err)
+    results = [json.loads(line) for line in open(folder / "results.jsonl")]
+    assert results[-1]["event"] == "end" and results[-1]["exit_code"] == 130
+    poses = list(csv.DictReader(open(folder / "poses.csv")))
+    tel = list(csv.DictReader(open(folder / "telemetry.csv")))
+    assert 10 <= len(tel) <= len(poses) <= len(tel) + 1
