@@ -21,25 +21,9 @@ die() { printf 'bootstrap: ERROR: %s\n' "$*" >&2; exit 1; }
 
 # --- 1. Debian packages ------------------------------------------------------
 APT_PACKAGES=(libeigen3-dev libgtest-dev cmake ninja-build g++ python3-venv)
-missing=()
-for pkg in "${APT_PACKAGES[@]}"; do
-    if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
-        missing+=("$pkg")
-    fi
-done
-if ((${#missing[@]})); then
-    say "installing Debian packages: ${missing[*]}"
-    SUDO=()
-    if [[ $(id -u) -ne 0 ]]; then
-        command -v sudo >/dev/null 2>&1 || die "need root (or sudo) to install: ${missing[*]}"
-        SUDO=(sudo)
-    fi
-    export DEBIAN_FRONTEND=noninteractive
-    "${SUDO[@]}" apt-get update -qq
-    "${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-else
-    say "Debian packages present"
-fi
+# shellcheck source=tools/apt-ensure.sh
+. "$ROOT/tools/apt-ensure.sh"
+apt_ensure "${APT_PACKAGES[@]}"
 
 # --- 2. Eigen 3.4.0 exactly ----------------------------------------------------
 EIGEN_MACROS=/usr/include/eigen3/Eigen/src/Core/util/Macros.h

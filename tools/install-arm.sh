@@ -11,24 +11,8 @@ PACKAGES=(gcc-arm-none-eabi libnewlib-arm-none-eabi libstdc++-arm-none-eabi-newl
 say() { printf 'install-arm: %s\n' "$*"; }
 die() { printf 'install-arm: ERROR: %s\n' "$*" >&2; exit 1; }
 
-missing=()
-for pkg in "${PACKAGES[@]}"; do
-    if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
-        missing+=("$pkg")
-    fi
-done
-if ((${#missing[@]})); then
-    say "installing Debian packages: ${missing[*]}"
-    SUDO=()
-    if [[ $(id -u) -ne 0 ]]; then
-        command -v sudo >/dev/null 2>&1 || die "need root (or sudo) to install: ${missing[*]}"
-        SUDO=(sudo)
-    fi
-    export DEBIAN_FRONTEND=noninteractive
-    "${SUDO[@]}" apt-get update -qq
-    "${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-else
-    say "Debian packages present"
-fi
+# shellcheck source=tools/apt-ensure.sh
+. "$(dirname "${BASH_SOURCE[0]}")/apt-ensure.sh"
+apt_ensure "${PACKAGES[@]}"
 command -v arm-none-eabi-g++ >/dev/null 2>&1 || die "arm-none-eabi-g++ still not on PATH"
 say "$(arm-none-eabi-g++ --version | head -n1)"
