@@ -608,9 +608,12 @@ times) while showing the guidance error, the motors' PWM, the rate and dropped f
 Stops at the TRIAL_RESULT or at the end of the source, and always sends STOP on the way
 out (also on Ctrl-C or an error).
 
-sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]),
+sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker the
+         values are a tracker's raw export and are converted),
          synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
-         scene's force with gravity)."""
+         scene's force with gravity),
+         plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.sources.TrackerAdapter
+         subclass that reads the lab's tracker SDK)."""
 
 STREAM_EPILOG = """\
 examples:
@@ -645,7 +648,12 @@ def _add_stream_parser(sub) -> None:
     p.add_argument("--wrench", required=True, type=_wrench, metavar="FX,FY,FZ[,MX,MY,MZ]",
                    help="the virtual object's wrench in the object frame (N, N m)")
     p.add_argument("--source", required=True, metavar="SOURCE",
-                   help="replay:FILE.csv or synthetic[:rate=240,duration=10,seed=0]")
+                   help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0] or "
+                        "plugin:MODULE:CLASS[:ARG]")
+    p.add_argument("--tracker", metavar="NAME", default=None,
+                   help="the replay file is a raw tracker export in this convention: "
+                        "vicon, optitrack, leap, world, or UNITS/UP/HANDEDNESS/ORDER such "
+                        "as mm/y/right/xyzw (default: already in this project's world)")
     p.add_argument("--log", metavar="DIR", default=None,
                    help="write the session folder DIR (scene.json, device.json, "
                         "config.json, poses.csv, telemetry.csv, results.jsonl)")
@@ -796,7 +804,7 @@ def _cmd_stream(args) -> int:
         parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
     try:
         scene = load_scene(args.scene)
-        source = open_source(args.source)
+        source = open_source(args.source, tracker=args.tracker)
         if isinstance(source, SyntheticSource):
             source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints,
                        scene.y_axis)

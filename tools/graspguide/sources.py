@@ -22,11 +22,16 @@ Tracker conventions (:class:`TrackerConvention`, :data:`TRACKER_PRESETS`) conver
 tracker's positions and quaternions to the world here: metres, z up, right-handed,
 quaternion order w, x, y, z. The presets are typical defaults; verify against your
 tracker's settings (units, up axis and quaternion order are configurable in most of them).
+
+A tracker adapter (:class:`TrackerAdapter`) declares its :class:`TrackerConvention` and
+yields raw samples in the tracker's own units, axes and quaternion order; the base class
+converts every sample, so no adapter ever does its own axis arithmetic.
 """
 
 from __future__ import annotations
 
 import csv
+import importlib
 import math
 from dataclasses import dataclass
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
@@ -163,6 +168,10 @@ class TrackerConvention:
         m = self.matrix
         return tuple(matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))  # type: ignore
 
+    def describe(self) -> Dict[str, str]:
+        return {"units": self.units, "up_axis": self.up_axis, "handedness": self.handedness,
+                "quat_order": self.quat_order}
+
     def convert(self, q, positions=None):
         """(quat_wxyz, positions in metres, world axes) from the tracker's values."""
         return (self.quaternion(q),
@@ -201,14 +210,15 @@ class Source:
 class ReplaySource(Source):
     name = "replay"
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, convention: "Optional[TrackerConvention]" = None):
         self.path = path
-        self.samples = self._load(path)
+        self.convention = convention
+        self.samples = self._load(path, convention or WORLD)
         dts = np.diff([s[0] for s in self.samples])
         self.rate_hz = float(1.0 / np.median(dts)) if len(dts) and np.median(dts) > 0 else None
 
     @staticmethod
-    def _load(path: str) -> List[Sample]:
+    def _load(path: str, convention: TrackerConvention) -> List[Sample]:
         try:
             f = open(path, newline="", encoding="utf-8")
         except OSError as e:
@@ -256,6 +266,8 @@ class ReplaySource(Source):
                                       f"unit length (|q| = {n:.6g})")
                 last_t = t
                 contacts = [vals[5 + 3 * i: 8 + 3 * i] for i in range(k)] if k else None
+                if convention is not WORLD:
+                    q, contacts = convention.convert(q, contacts)
                 samples.append((t, tuple(q), contacts))  # type: ignore[arg-type]
         if not samples:
             raise SourceError(f"{path}: no samples after the header")
@@ -267,8 +279,54 @@ class ReplaySource(Source):
             yield (t - t0, q, c)
 
     def describe(self):
-        return {"source": self.name, "path": self.path, "rate_hz": self.rate_hz,
-                "samples": len(self.samples)}
+        d = {"source": self.name, "path": self.path, "rate_hz": self.rate_hz,
+             "samples": len(self.samples)}
+        if self.convention is not None:
+            d["tracker_convention"] = self.convention.describe()
+        return d
+
+
+class TrackerAdapter(Source):
+    """Base of live tracker adapters (Vicon DataStream, OptiTrack NatNet, Leap Motion...).
+
+    A subclass sets ``convention`` (a :class:`TrackerConvention`, e.g.
+    ``TRACKER_PRESETS["vicon"]``), ``name`` and ``rate_hz``, and implements
+    :meth:`raw_samples`, yielding ``(t_s, quat, positions_or_None)`` exactly as the SDK
+    gives them: the tracker's quaternion order, units and axes. Iterating the adapter yields
+    samples in this project's world. Example::
+
+        class ViconHand(TrackerAdapter):
+            name, rate_hz = "vicon", 100.0
+            convention = TRACKER_PRESETS["vicon"]
+            def __init__(self, host): self.client = connect(host)   # the lab's SDK
+            def raw_samples(self):
+                while True:
+                    frame = self.client.get_frame()
+                    yield frame.t_s, frame.hand_quat_xyzw, None
+
+    ``--source plugin:my_lab.vicon:ViconHand:192.168.1.10`` then streams it.
+    """
+
+    name = "tracker"
+    convention: TrackerConvention = WORLD
+
+    def raw_samples(self) -> Iterator[Sample]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def __iter__(self) -> Iterator[Sample]:
+        t0 = None
+        for t, q, positions in self.raw_samples():
+            values = [float(t), *[float(x) for x in q]]
+            if not all(math.isfinite(v) for v in values):
+                raise SourceError(f"{self.name}: the tracker gave a non-finite sample "
+                                  f"t={t} q={list(q)}")
+            t0 = float(t) if t0 is None else t0
+            wxyz, contacts = self.convention.convert(q, positions)
+            yield (float(t) - t0, wxyz, contacts)
+
+    def describe(self):
+        return {"source": self.name, "rate_hz": self.rate_hz,
+                "tracker_convention": self.convention.describe()}
 
 
 def _is_float(text: str) -> bool:
@@ -357,13 +415,50 @@ class SyntheticSource(Source):
                 "seed": self.seed, "target_wxyz": [float(x) for x in self.target]}
 
 
-def open_source(spec: str) -> Source:
-    """A Source from ``replay:FILE.csv`` or ``synthetic[:rate=..,duration=..,seed=..]``."""
+def tracker_convention(name: str) -> TrackerConvention:
+    """A preset by name, or ``units/up_axis/handedness/quat_order`` such as
+    ``mm/y/right/xyzw``."""
+    if name in TRACKER_PRESETS:
+        return TRACKER_PRESETS[name]
+    parts = name.split("/")
+    if len(parts) != 4:
+        raise SourceError(f"unknown tracker {name!r}: use one of "
+                          f"{', '.join(sorted(TRACKER_PRESETS))} or "
+                          "UNITS/UP/HANDEDNESS/ORDER such as mm/y/right/xyzw")
+    return TrackerConvention(*parts)
+
+
+def _open_plugin(rest: str) -> Source:
+    module_name, _, tail = rest.partition(":")
+    class_name, _, arg = tail.partition(":")
+    if not module_name or not class_name:
+        raise SourceError("plugin needs a module and a class: "
+                          "--source plugin:MODULE:CLASS[:ARG]")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise SourceError(f"plugin: cannot import {module_name!r}: {e}") from None
+    cls = getattr(module, class_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, TrackerAdapter)):
+        raise SourceError(f"plugin: {module_name}.{class_name} must be a "
+                          "graspguide.sources.TrackerAdapter subclass")
+    return cls(arg) if arg else cls()
+
+
+def open_source(spec: str, tracker: Optional[str] = None) -> Source:
+    """A Source from ``replay:FILE.csv``, ``synthetic[:rate=..,duration=..,seed=..]`` or
+    ``plugin:MODULE:CLASS[:ARG]``. ``tracker`` (a preset name or UNITS/UP/HANDEDNESS/ORDER)
+    says in which convention a replay file is written."""
     kind, _, rest = spec.partition(":")
+    if tracker is not None and kind != "replay":
+        raise SourceError(f"--tracker only applies to replay sources (a plugin declares its "
+                          f"own convention), not to {kind!r}")
     if kind == "replay":
         if not rest:
             raise SourceError("replay needs a file: --source replay:FILE.csv")
-        return ReplaySource(rest)
+        return ReplaySource(rest, tracker_convention(tracker) if tracker else None)
+    if kind == "plugin":
+        return _open_plugin(rest)
     if kind == "synthetic":
         kw: Dict[str, float] = {}
         conv = {"rate": float, "duration": float, "seed": int, "tremor_deg": float}
@@ -378,10 +473,11 @@ def open_source(spec: str) -> Source:
             except ValueError:
                 raise SourceError(f"synthetic: {key} must be a number, got {value!r}") from None
         return SyntheticSource(**kw)  # type: ignore[arg-type]
-    raise SourceError(f"unknown source {spec!r}: use replay:FILE.csv or "
-                      "synthetic[:rate=240,duration=10,seed=0]")
+    raise SourceError(f"unknown source {spec!r}: use replay:FILE.csv, "
+                      "synthetic[:rate=240,duration=10,seed=0] or plugin:MODULE:CLASS[:ARG]")
 
 
 __all__ = ["Source", "ReplaySource", "SyntheticSource", "SourceError", "TrackerConvention",
+           "TrackerAdapter", "tracker_convention",
            "TRACKER_PRESETS", "WORLD", "open_source", "aligned_quaternion", "quat_mul",
            "quat_from_axis_angle", "quat_to_matrix", "matrix_to_quat", "quat_angle_deg"]

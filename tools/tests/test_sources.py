@@ -150,3 +150,86 @@ def test_synthetic_converges_to_aligned_orientation():
 def test_bad_specs(spec, words):
     with pytest.raises(src.SourceError, match=words):
         src.open_source(spec)
+
+
+# ---- tracker exports and live adapters --------------------------------------------------
+VICON_HEAD = "t_s,qw,qx,qy,qz," + ",".join(f"{n}_{a}" for n in ("thumb", "index", "middle")
+                                            for a in "xyz")
+
+
+def vicon_row(t, q_xyzw):
+    # the columns keep their names; the values are Vicon's: x,y,z,w order and millimetres
+    return f"{t}," + ",".join(str(v) for v in q_xyzw) + "," + ",".join(
+        str(1000 * v) for c in HAND3 for v in c)
+
+
+def test_replay_with_tracker_converts_a_raw_export(tmp_path):
+    path = write(tmp_path, "\n".join([VICON_HEAD, vicon_row(0, CASES["vicon"][0]),
+                                      vicon_row(0.01, CASES["vicon"][1])]) + "\n")
+    got = list(src.open_source("replay:" + path, tracker="vicon"))
+    assert src.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
+    assert src.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
+    assert np.allclose(got[0][2], HAND3)
+    # the same file read as if it were already in world convention is visibly wrong
+    plain = list(src.open_source("replay:" + path))
+    assert src.quat_angle_deg(plain[0][1], world([0, 0, 1])) > 1.0
+    assert not np.allclose(plain[0][2], HAND3)
+
+
+def test_tracker_by_explicit_convention_and_bad_names(tmp_path):
+    assert src.tracker_convention("mm/y/right/xyzw") == src.TRACKER_PRESETS["leap"]
+    with pytest.raises(src.SourceError, match="unknown tracker 'kinect'"):
+        src.tracker_convention("kinect")
+    with pytest.raises(src.SourceError, match="up_axis"):
+        src.tracker_convention("mm/x/right/xyzw")
+    with pytest.raises(src.SourceError, match="only applies to replay"):
+        src.open_source("synthetic", tracker="vicon")
+
+
+class _FakeOptiTrack(src.TrackerAdapter):
+    """Stands in for a lab's NatNet client: yields what the SDK would, in its convention."""
+
+    name, rate_hz = "optitrack-test", 120.0
+    convention = src.TRACKER_PRESETS["optitrack"]
+
+    def __init__(self, arg="about-up"):
+        self.q = CASES["optitrack"][0 if arg == "about-up" else 1]
+
+    def raw_samples(self):
+        for i in range(3):
+            yield 5.0 + i / 120.0, self.q, [[0.0, 1.0, 0.0]] * 3
+
+
+def test_adapter_converts_every_sample():
+    got = list(_FakeOptiTrack())
+    assert [round(t, 9) for t, _, _ in got] == [0.0, round(1 / 120, 9), round(2 / 120, 9)]
+    for _, q, contacts in got:
+        assert src.quat_angle_deg(q, world([0, 0, 1])) < 1e-9
+        assert np.allclose(contacts, [[0, 0, 1.0]] * 3)
+    assert _FakeOptiTrack().describe()["tracker_convention"]["up_axis"] == "y"
+
+
+def test_adapter_rejects_non_finite_samples():
+    class Broken(_FakeOptiTrack):
+        def raw_samples(self):
+            yield 0.0, (float("nan"), 0, 0, 1), None
+
+    with pytest.raises(src.SourceError, match="non-finite"):
+        list(Broken())
+
+
+def test_plugin_source_loads_an_adapter_class(monkeypatch):
+    import sys
+    import types
+    module = types.ModuleType("lab_tracker_for_test")
+    module.Hand = _FakeOptiTrack
+    module.NotAnAdapter = dict
+    monkeypatch.setitem(sys.modules, "lab_tracker_for_test", module)
+    s = src.open_source("plugin:lab_tracker_for_test:Hand:about-x")
+    assert src.quat_angle_deg(next(iter(s))[1], world([1, 0, 0])) < 1e-9
+    with pytest.raises(src.SourceError, match="TrackerAdapter subclass"):
+        src.open_source("plugin:lab_tracker_for_test:NotAnAdapter")
+    with pytest.raises(src.SourceError, match="cannot import 'no_such_tracker_mod'"):
+        src.open_source("plugin:no_such_tracker_mod:X")
+    with pytest.raises(src.SourceError, match="needs a module and a class"):
+        src.open_source("plugin:lab_tracker_for_test")

@@ -75,6 +75,32 @@ def test_source_ending_first_stops_and_exits_0(tmp_path):
     assert len(results) == 1 and results[0]["event"] == "end"
 
 
+def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
+    """The synthetic hand written as an OptiTrack export (y up, x,y,z,w): streamed with
+    --tracker optitrack it succeeds; streamed as if it were world data it cannot."""
+    from graspguide import sources
+    scene = gs.load_scene(SCENE3)
+    hand = sources.open_source("synthetic:rate=100,duration=6,seed=3")
+    hand.aim(scene.contacts, [0.3, -1.2, -0.8, 0, 0, 0], scene.policy, scene.constraints,
+             scene.y_axis)
+    m = sources.TRACKER_PRESETS["optitrack"].matrix
+    rows = []
+    for t, q, _ in hand:
+        w, x, y, z = sources.matrix_to_quat(m.T @ sources.quat_to_matrix(q) @ m)
+        rows.append(f"{t:.6f},{x:.17g},{y:.17g},{z:.17g},{w:.17g}\n")   # OptiTrack: x,y,z,w
+    assert len(rows) == 601
+    csv_path = tmp_path / "optitrack.csv"
+    csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(rows))
+    ok = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
+              "--source", f"replay:{csv_path}", "--tracker", "optitrack"])
+    assert ok.returncode == 0, ok.stderr
+    assert "trial 1: success" in ok.stdout, ok.stdout
+    raw = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
+               "--source", f"replay:{csv_path}"])
+    assert raw.returncode == 0, raw.stderr
+    assert "success" not in raw.stdout, raw.stdout
+
+
 def test_run_stream_then_stop_leaves_device_idle():
     from graspguide import cli, device as gd, sources, transport as gt
     from graspguide.protocol import messages as m
@@ -103,6 +129,8 @@ def test_run_stream_then_stop_leaves_device_idle():
       "--source", "synthetic"], 2, "--virtual-clock is for --port sim"),
     (["--port", "sim", "--scene", SCENE3, "--wrench", "1,2", "--source", "synthetic"], 2,
      "3 or 6"),
+    (["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "synthetic",
+      "--tracker", "vicon"], 2, "only applies to replay"),
 ])
 def test_errors_and_exit_codes(args, code, words):
     p = run(args)
