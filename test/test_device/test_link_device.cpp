@@ -262,3 +262,51 @@ TEST(LinkDevice, ATrialEndsWithATrialResult) {
   EXPECT_TRUE(done);
   EXPECT_TRUE(r.motors.all_off());
 }
+
+// The ESP32 board serves USB and Bluetooth at once: two links, each with its own parser,
+// over one application. A STOP on either link must stop a trial run from the other, and a
+// frame half-received on one link must survive traffic on the other.
+TEST(LinkDevice, TwoLinksShareOneApplication) {
+  LinkRig usb;
+  gd::MemoryStream bt_stream;
+  gd::LinkDevice bt(bt_stream, usb.app, usb.info);
+  gl::FrameParser bt_host{gl::Accept::kDeviceToHost};
+  auto bt_send = [&](const auto& m, uint16_t s) {
+    uint8_t out[gl::kMaxWireFrameSize];
+    size_t n = 0;
+    EXPECT_EQ(gl::write_frame(m, s, out, sizeof out, &n), gl::LinkStatus::kOk);
+    bt_stream.host_send(out, n);
+    bt.poll();
+  };
+  auto bt_receive = [&]() {
+    std::vector<uint8_t> ids;
+    uint8_t buf[1024];
+    const size_t n = bt_stream.host_receive(buf, sizeof buf);
+    for (size_t i = 0; i < n; ++i)
+      if (bt_host.push(buf[i]) == gl::ParseEvent::kFrame) ids.push_back(bt_host.frame().header.msg_id);
+    return ids;
+  };
+
+  usb.send(scene_msg());
+  usb.send(trial_msg());
+  gl::Pose p;
+  usb.send(p);
+  usb.receive();
+  ASSERT_FALSE(usb.motors.all_off());
+
+  // Half of a GET_STATUS arrives on USB, then a whole STOP on Bluetooth, then the rest.
+  uint8_t out[gl::kMaxWireFrameSize];
+  size_t n = 0;
+  ASSERT_EQ(gl::write_frame(gl::GetStatus{}, 77, out, sizeof out, &n), gl::LinkStatus::kOk);
+  usb.stream.host_send(out, n / 2);
+  usb.device->poll();
+  bt_send(gl::Stop{}, 9);
+  EXPECT_TRUE(usb.motors.all_off());
+  EXPECT_EQ(bt_receive(), std::vector<uint8_t>{uint8_t(gl::MsgId::kAck)});
+  EXPECT_TRUE(usb.receive().empty());  // the STOP's answer went to the link that sent it
+  usb.stream.host_send(out + n / 2, n - n / 2);
+  usb.device->poll();
+  const auto status = usb.only<gl::Status>(usb.receive());
+  EXPECT_EQ(status.state, gl::DeviceState::kStopped);
+  EXPECT_EQ(status.bad_frames, 0u);
+}

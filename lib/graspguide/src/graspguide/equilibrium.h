@@ -3,8 +3,6 @@
 // Jacobi SVD (reference route, for accuracy comparisons).
 #pragma once
 
-#include <Eigen/QR>
-#include <Eigen/SVD>
 
 #include "graspguide/grasp_matrix.h"
 #include "graspguide/scene.h"

@@ -6,7 +6,6 @@
 // correct on the degenerate vertices of the paper's constraint model.
 #pragma once
 
-#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>

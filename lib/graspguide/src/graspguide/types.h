@@ -1,8 +1,7 @@
 // Fixed-size Eigen aliases: every size is known at compile time, so nothing allocates.
 #pragma once
 
-#include <Eigen/Core>
-#include <Eigen/Geometry>
+#include "graspguide/eigen.h"
 #include <cstdint>
 
 #include "graspguide/config.h"
