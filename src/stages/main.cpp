@@ -1,0 +1,202 @@
+// Instruction counts of Algorithm 1 per stage on a Cortex-M, under QEMU with
+// -icount shift=0 (one instruction per virtual nanosecond). The SysTick counter runs on
+// mps2's 25 MHz reference clock, so one tick is 40 instructions; a calibration loop of a
+// known length checks that ratio at start-up. For every scene of the generated set
+// (stage_scenes.h: random hands and the extremes) it times, in float:
+//   contact frames | grasp matrix | decomposition (QR) | QP | motor mapping
+// then whole frames through Guidance<float>: cold (fresh solver), warm (contacts moved
+// slightly, previous active set), the SVD route, and a fixed-posture frame. One line per
+// scene goes out through semihosting; tools/scripts/qemu_stages.py reads them.
+#include <cstdint>
+
+#include "graspguide.h"
+#include "line_buffer.h"
+#include "semihosting.h"
+#include "stage_scenes.h"
+
+extern "C" {
+uint32_t m4f_stack_high_water(void);  // startup.c
+// Replaces syscalls.cpp's weak halt: under QEMU, a trap must end the run with a code.
+[[noreturn]] void m4f_halt(int reason, int code) {
+  stages::LineBuffer line;
+  stages::write0(line.str("HALT ").num(reason).sp().num(code).end());
+  stages::exit(100 + reason);
+}
+}
+
+namespace {
+
+namespace gg = graspguide;
+using T = float;
+
+struct SysTickRegs {
+  volatile uint32_t csr, rvr, cvr, calib;
+};
+SysTickRegs& systick() { return *reinterpret_cast<SysTickRegs*>(uintptr_t{0xE000E010u}); }
+constexpr uint32_t kTickMask = 0xFFFFFFu;
+
+void start_counter() {
+  systick().csr = 0;
+  systick().rvr = kTickMask;
+  systick().cvr = 0;
+  systick().csr = 0x5u;  // processor clock, no interrupt, enabled
+}
+
+// The barrier keeps the compiler from moving work across the read.
+inline uint32_t ticks() {
+  __asm__ volatile("" ::: "memory");
+  const uint32_t v = systick().cvr;
+  __asm__ volatile("" ::: "memory");
+  return v;
+}
+inline int32_t elapsed(uint32_t from, uint32_t to) { return int32_t((from - to) & kTickMask); }
+
+// Exactly 2 * n instructions (subs + bne per iteration) plus a constant.
+__attribute__((noinline)) void known_loop(uint32_t n) {
+  __asm__ volatile("1: subs %0, %0, #1\n bne 1b" : "+r"(n) : : "cc");
+}
+
+// Results go through here so the compiler cannot drop the work being timed.
+volatile uint32_t g_sink;
+
+template <int K>
+void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
+  gg::Contacts<T, K> contacts;
+  for (int i = 0; i < K; ++i)
+    for (int j = 0; j < 3; ++j) contacts(j, i) = c.contacts[i][j];
+  const gg::Vec3<T> y_axis(c.y_axis[0], c.y_axis[1], c.y_axis[2]);
+  gg::Vec6<T> wrench;
+  for (int j = 0; j < 6; ++j) wrench(j) = c.wrench[j];
+  const Eigen::Matrix<T, 4, 1> q(c.orientation[0], c.orientation[1], c.orientation[2],
+                                 c.orientation[3]);
+
+  // ---- stages, as solve_grasp and Guidance::update run them; -1 after a failure
+  int32_t stage[5] = {-1, -1, -1, -1, -1};
+  {
+    gg::ContactFrames<T, K> frames;
+    gg::GraspMat<T, K> g;
+    gg::Equilibrium<T, K> eq;
+    gg::ForceSolution<T, K> forces;
+    gg::LevelVec<T, K> levels;
+    uint32_t t0 = ticks();
+    gg::Status s = gg::contact_frames<T, K>(contacts, y_axis, frames);
+    uint32_t t1 = ticks();
+    stage[0] = elapsed(t0, t1);
+    if (s == gg::Status::kOk) {
+      t0 = ticks();
+      const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames.length_scale);
+      gg::grasp_matrix<T, K>(frames, g);
+      t1 = ticks();
+      stage[1] = elapsed(t0, t1);
+      t0 = ticks();
+      s = gg::equilibrium<T, K>(g, w, gg::Decomposition::kQR, eq);
+      t1 = ticks();
+      stage[2] = elapsed(t0, t1);
+    }
+    if (s == gg::Status::kOk) {
+      t0 = ticks();
+      const uint8_t relevant = gg::relevance<T, K>(frames, wrench.template head<3>());
+      const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq.lambda0, relevant);
+      s = gg::solve_forces<T, K>(eq, des, c.constraints, gg::kDefaultMaxIterations,
+                                 gg::ConstraintModel::kNone, 0, forces);
+      t1 = ticks();
+      stage[3] = elapsed(t0, t1);
+    }
+    if (s == gg::Status::kOk) {
+      t0 = ticks();
+      s = gg::motor_levels<T, K>(forces.lambda, c.policy, levels);
+      gg::Quat<T> hand;
+      if (s == gg::Status::kOk) s = gg::unit_quaternion<T>(q, hand);
+      if (s == gg::Status::kOk) {
+        const gg::Vec3<T> f_unit = wrench.template head<3>().normalized();
+        const gg::Alignment<T> a = gg::alignment<T>(hand, f_unit);
+        const T gain = c.mode == gg::Mode::kC ? T(gg::kPwmSpan) : a.alpha;
+        g_sink = gg::pwm_from_levels<T, K>(levels, gain).duty[0];
+      }
+      t1 = ticks();
+      stage[4] = elapsed(t0, t1);
+    }
+  }
+
+  // ---- whole frames
+  gg::Scene<T> scene;
+  scene.k = K;
+  scene.contacts.template leftCols<K>() = contacts;
+  scene.y_axis = y_axis;
+  scene.constraints = c.constraints;
+  scene.policy = c.policy;
+  scene.mode = c.mode;
+  gg::FrameResult<T> cold, warm, fixed, svd;
+  int32_t t_cold = -1, t_warm = -1, t_fixed = -1, t_svd = -1;
+  {
+    gg::Guidance<T> guide;
+    // A scene or wrench the solver refuses is that frame's status (motors off).
+    if ((cold.status = guide.set_scene(scene)) == gg::Status::kOk &&
+        (cold.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
+      uint32_t t0 = ticks();
+      guide.update(q, cold);
+      t_cold = elapsed(t0, ticks());
+      // A 0.5 degree turn about x: the hand moved, the posture did not.
+      const Eigen::Matrix<T, 4, 1> turned(
+          q(0) * T(0.99999048) - q(1) * T(0.00436331), q(0) * T(0.00436331) + q(1) * T(0.99999048),
+          q(2) * T(0.99999048) + q(3) * T(0.00436331), q(3) * T(0.99999048) - q(2) * T(0.00436331));
+      t0 = ticks();
+      guide.update(turned, fixed);
+      t_fixed = elapsed(t0, ticks());
+      // Contacts moved by 0.1 mm: the grasp part runs again, warm-started.
+      Eigen::Matrix<T, 3, gg::kMaxContacts> moved = scene.contacts;
+      moved.template leftCols<K>().array() += T(1e-4);
+      t0 = ticks();
+      guide.set_contacts(moved);
+      guide.update(q, warm);
+      t_warm = elapsed(t0, ticks());
+    }
+  }
+  {
+    scene.solver.decomposition = gg::Decomposition::kSVD;
+    gg::Guidance<T> guide;
+    if ((svd.status = guide.set_scene(scene)) == gg::Status::kOk &&
+        (svd.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
+      const uint32_t t0 = ticks();
+      guide.update(q, svd);
+      t_svd = elapsed(t0, ticks());
+    }
+  }
+  line.str("S ").str(c.name).sp().num(K).sp().str(gg::status_name(cold.status)).sp()
+      .str(c.status);
+  for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(cold.pwm.duty[i]);
+  for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(c.pwm[i]);
+  for (int32_t v : stage) line.sp().num(v);
+  line.sp().num(t_cold).sp().num(t_warm).sp().num(t_svd).sp().num(t_fixed);
+  line.sp().str(gg::status_name(svd.status));
+  for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(svd.pwm.duty[i]);
+  stages::write0(line.end());
+}
+
+}  // namespace
+
+int main() {
+  start_counter();
+  stages::LineBuffer line;
+  // Calibration: an empty region and two loops of known length.
+  uint32_t t0 = ticks();
+  const int32_t empty = elapsed(t0, ticks());
+  t0 = ticks();
+  known_loop(100000);
+  const int32_t loop_a = elapsed(t0, ticks());
+  t0 = ticks();
+  known_loop(300000);
+  const int32_t loop_b = elapsed(t0, ticks());
+  stages::write0(line.str("CAL ").num(empty).sp().num(loop_a).sp().num(loop_b).end());
+  stages::write0(line.str("COLUMNS name k status ref_status pwm0 pwm1 pwm2 pwm3 ref0 ref1 ref2 "
+                          "ref3 frames grasp decomposition qp mapping full_cold full_warm "
+                          "full_svd fixed svd_status svd0 svd1 svd2 svd3").end());
+  for (int i = 0; i < stages::kStageSceneCount; ++i) {
+    const stages::StageScene& c = stages::kStageScenes[i];
+    if (c.k == 3) one_scene<3>(c, line);
+    else one_scene<4>(c, line);
+  }
+  stages::write0(line.str("STACK ").num(m4f_stack_high_water()).end());
+  stages::write0(line.str("END ").num(stages::kStageSceneCount).end());
+  stages::exit(0);
+}
