@@ -15,6 +15,10 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -280,6 +284,436 @@ constexpr const char* kResultDoc =
     "changes), rank_ratio (float), recomputed (bool: the grasp part ran). levels, lambda, "
     "relevant, error_deg and alpha are None unless status is 'ok'.";
 
+// ---------------------------------------------------------------------------------------
+// Timing entries for `graspguide bench` (tools/graspguide/bench.py). The loops run here,
+// in C++, so that Python's per-call overhead (~1 us, larger than a whole frame) is not
+// in the figures. Every sample is the mean of `reps` consecutive calls on one instance,
+// timed with steady_clock around the whole batch (one clock read per batch, not per call,
+// so the clock's own ~20 ns stay out of the per-call figure).
+// ---------------------------------------------------------------------------------------
+
+// Written after every batch so the optimiser cannot drop the work it depends on.
+volatile std::uint32_t g_bench_sink = 0;
+
+template <typename F>
+std::vector<double> time_batches(F&& call, int reps, int batches, int warmup) {
+  for (int i = 0; i < warmup; ++i) g_bench_sink = g_bench_sink + call(i);
+  std::vector<double> out;
+  out.reserve(static_cast<std::size_t>(batches));
+  for (int b = 0; b < batches; ++b) {
+    std::uint32_t acc = 0;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int r = 0; r < reps; ++r) acc += call(r);
+    const auto t1 = std::chrono::steady_clock::now();
+    g_bench_sink = g_bench_sink + acc;
+    out.push_back(double(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) /
+                  reps);
+  }
+  return out;
+}
+
+void check_timing_args(int reps, int batches, int warmup) {
+  if (reps < 1 || batches < 1 || warmup < 0)
+    throw nb::value_error("reps and batches must be >= 1 and warmup >= 0");
+}
+
+template <typename V>
+void check_count(const V& v, std::size_t n, const char* what) {
+  if (v.size() != n)
+    throw nb::value_error((std::string(what) + " has " + std::to_string(v.size()) +
+                           " entries; expected one per instance (" + std::to_string(n) + ")")
+                              .c_str());
+}
+
+// The contacts moved by one unit in the last place: enough for Guidance to see new
+// contacts and run the grasp part again (it compares them exactly), too little to change
+// the answer. This is the tracking case: a new posture every frame, close to the last.
+template <typename T>
+Eigen::Matrix<T, 3, gg::kMaxContacts> nudged(const Eigen::Matrix<T, 3, gg::kMaxContacts>& c) {
+  Eigen::Matrix<T, 3, gg::kMaxContacts> out = c;
+  for (int i = 0; i < out.size(); ++i)
+    out.data()[i] = std::nextafter(out.data()[i], std::numeric_limits<T>::infinity());
+  return out;
+}
+
+template <typename T>
+void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr,
+                   const gg::GraspSolution<T>& g, nb::list& status, nb::list& pwm,
+                   nb::list& lambda, nb::list& used, nb::list& iterations) {
+  const bool ok = s == gg::Status::kOk;
+  status.append(gg::status_name(s));
+  nb::list p, l;
+  for (int i = 0; i < k && i < gg::kMaxContacts; ++i) {
+    p.append(ok ? int(fr.pwm.duty[i]) : 0);
+    for (int j = 0; j < 3; ++j) l.append(double(g.lambda(3 * i + j)));
+  }
+  pwm.append(p);
+  lambda.append(ok ? nb::object(l) : nb::none());
+  used.append(ok ? gg::constraint_model_name(g.used) : "");
+  iterations.append(g.iterations);
+}
+
+// One Guidance<T> per instance. Moving posture: every frame sets new contacts (alternately
+// the instance's own and their nudged copy) and runs update(), i.e. contact frames, grasp
+// matrix, decomposition, QP, levels and PWM; the warm start, when enabled, comes from the
+// previous frame as on the device. Fixed posture: only the orientation changes, so a frame
+// is the orientation error, alpha and the PWM mapping.
+template <typename T>
+nb::dict time_frames_t(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
+                       const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
+                       const std::vector<SceneOptions>& options, bool warm_start,
+                       bool fixed_posture, int reps, int batches, int warmup) {
+  nb::list ns, status, pwm, lambda, used, iterations, recomputed;
+  auto g = std::make_unique<gg::Guidance<T>>();
+  for (std::size_t n = 0; n < contacts.size(); ++n) {
+    gg::Scene<T> scene = make_scene<T>(contacts[n], y_axes[n], options[n]);
+    scene.solver.warm_start = warm_start;
+    const int k = contact_count(contacts[n]);
+    gg::FrameResult<T> fr;
+    gg::Status s = g->set_scene(scene);
+    if (s == gg::Status::kOk) s = g->set_wrench(make_wrench<T>(wrenches[n]));
+    if (s != gg::Status::kOk) {  // nothing to time: reported as this instance's status
+      ns.append(nb::list());
+      frame_outputs<T>(s, k, fr, g->grasp(), status, pwm, lambda, used, iterations);
+      recomputed.append(0);
+      continue;
+    }
+    const auto base = scene.contacts;
+    const auto moved = nudged<T>(base);
+    const auto q0 = make_quat<T>(orientations[n]);
+    // Four orientations of the same rotation (sign and scale): real work for
+    // unit_quaternion and alignment, the same answer.
+    const Eigen::Matrix<T, 4, 1> quats[4] = {q0, -q0, q0 * T(1.0009765625), -q0 * T(0.5)};
+    int recomputations = 0;
+    std::vector<double> samples;
+    if (fixed_posture) {
+      g->update(q0, fr);  // the grasp part once, outside the timing
+      samples = time_batches(
+          [&](int r) {
+            g->update(quats[r & 3], fr);
+            recomputations += fr.recomputed;
+            return std::uint32_t(fr.pwm.duty[0]);
+          },
+          reps, batches, warmup);
+    } else {
+      samples = time_batches(
+          [&](int r) {
+            g->set_contacts((r & 1) ? moved : base);
+            g->update(q0, fr);
+            recomputations += fr.recomputed;
+            return std::uint32_t(fr.pwm.duty[0]);
+          },
+          reps, batches, warmup);
+      // The reported answer is the instance's own contacts, after a previous frame (the
+      // nudged ones): the warm start is in the state the timed frames had.
+      g->set_contacts(moved);
+      g->update(q0, fr);
+      g->set_contacts(base);
+    }
+    s = g->update(q0, fr);
+    nb::list sample_list;
+    for (double v : samples) sample_list.append(v);
+    ns.append(sample_list);
+    frame_outputs<T>(s, k, fr, g->grasp(), status, pwm, lambda, used, iterations);
+    recomputed.append(recomputations);
+  }
+  nb::dict d;
+  d["ns"] = ns;
+  d["status"] = status;
+  d["pwm"] = pwm;
+  d["lambda"] = lambda;
+  d["constraints_used"] = used;
+  d["iterations"] = iterations;
+  d["recomputed"] = recomputed;
+  d["frames_per_instance"] = (reps * batches) + warmup;
+  return d;
+}
+
+nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
+                     const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
+                     const std::vector<std::string>& policies,
+                     const std::vector<std::string>& modes,
+                     const std::vector<std::string>& constraints, const std::string& scalar,
+                     const std::string& decomposition, bool warm_start, int max_iterations,
+                     bool fixed_posture, int reps, int batches, int warmup) {
+  const std::size_t n = contacts.size();
+  check_count(wrenches, n, "wrenches");
+  check_count(orientations, n, "orientations");
+  check_count(y_axes, n, "y_axes");
+  check_count(policies, n, "policies");
+  check_count(modes, n, "modes");
+  check_count(constraints, n, "constraints");
+  check_timing_args(reps, batches, warmup);
+  std::vector<SceneOptions> options;
+  for (std::size_t i = 0; i < n; ++i)
+    options.push_back(
+        parse_options(policies[i], modes[i], constraints[i], decomposition, max_iterations));
+  if (scalar == "double")
+    return time_frames_t<double>(contacts, wrenches, orientations, y_axes, options, warm_start,
+                                 fixed_posture, reps, batches, warmup);
+  if (scalar == "float")
+    return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, warm_start,
+                                fixed_posture, reps, batches, warmup);
+  throw nb::value_error(
+      ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+}
+
+// solve_forces with another feasibility tolerance: the same fallback chain, written out
+// because the core takes its tolerance from Tolerances<T> at compile time. With
+// violation_rel == Tolerances<T>::kFeasRel it must give solve_forces' answer exactly (the
+// bench's tests check that).
+template <typename T, int K>
+gg::Status solve_forces_tol(const gg::Equilibrium<T, K>& eq, const gg::ForceVec<T, K>& lambda_des,
+                            gg::ConstraintModel requested, int max_iterations,
+                            gg::ConstraintModel warm_model, std::uint16_t warm_active,
+                            T violation_rel, gg::ForceSolution<T, K>& out) {
+  constexpr int kVars = 3 * K - 6;
+  gg::ProjectionQp<T, kVars, 3 * K> qp;
+  qp.x_unconstrained.noalias() = eq.null_basis.transpose() * (lambda_des - eq.lambda0);
+  qp.violation_tol = violation_rel * eq.lambda0.norm();
+  qp.dependent_tol = gg::Tolerances<T>::kDependentRel;
+  out.iterations = 0;
+  for (int model = static_cast<int>(requested);
+       model <= static_cast<int>(gg::ConstraintModel::kNone); ++model) {
+    const auto m = static_cast<gg::ConstraintModel>(model);
+    gg::constraint_rows<T, K>(eq, m, qp);
+    Eigen::Matrix<T, kVars, 1> xi;
+    gg::QpInfo info;
+    const std::uint16_t warm = (m == warm_model) ? warm_active : 0;
+    const gg::Status s =
+        gg::solve_projection<T, kVars, 3 * K>(qp, max_iterations, warm, xi, info);
+    out.iterations += info.iterations;
+    if (s == gg::Status::kQpInfeasible) continue;
+    if (s != gg::Status::kOk) return s;
+    out.lambda.noalias() = eq.lambda0 + eq.null_basis * xi;
+    out.used = m;
+    out.active = info.active;
+    return gg::Status::kOk;
+  }
+  return gg::Status::kQpInfeasible;
+}
+
+// The QP alone (step 5 with its fallback chain), on data computed elsewhere (the bench
+// hands every solver the same float64 lambda0, null basis and lambda_des). Cold: no warm
+// start. Warm: the active set of this instance's own previous solution, the best case a
+// tracker frame can give it.
+template <typename T, int K>
+void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& null_basis,
+               const std::vector<double>& lambda_des, gg::ConstraintModel model,
+               int max_iterations, bool warm_start, double violation_rel, int reps, int batches,
+               int warmup, nb::list& ns, nb::list& status, nb::list& lambda, nb::list& used,
+               nb::list& iterations) {
+  constexpr int kVars = 3 * K - 6;
+  auto eq = std::make_unique<gg::Equilibrium<T, K>>();
+  gg::ForceVec<T, K> des;
+  for (int i = 0; i < 3 * K; ++i) {
+    eq->lambda0(i) = static_cast<T>(lambda0[i]);
+    des(i) = static_cast<T>(lambda_des[i]);
+    for (int j = 0; j < kVars; ++j)
+      eq->null_basis(i, j) = static_cast<T>(null_basis[std::size_t(i) * kVars + j]);
+  }
+  const bool custom_tol = violation_rel > 0;
+  const T tol = static_cast<T>(violation_rel);
+  auto solve = [&](gg::ConstraintModel wm, std::uint16_t wa, gg::ForceSolution<T, K>& out) {
+    return custom_tol ? solve_forces_tol<T, K>(*eq, des, model, max_iterations, wm, wa, tol, out)
+                      : gg::solve_forces<T, K>(*eq, des, model, max_iterations, wm, wa, out);
+  };
+  gg::ForceSolution<T, K> first;
+  const gg::Status s0 = solve(gg::ConstraintModel::kNone, 0, first);
+  const gg::ConstraintModel warm_model =
+      warm_start && s0 == gg::Status::kOk ? first.used : gg::ConstraintModel::kNone;
+  const std::uint16_t warm_active = warm_start && s0 == gg::Status::kOk ? first.active : 0;
+  gg::ForceSolution<T, K> out;
+  const std::vector<double> samples = time_batches(
+      [&](int) {
+        const gg::Status s = solve(warm_model, warm_active, out);
+        return std::uint32_t(s) + std::uint32_t(out.iterations);
+      },
+      reps, batches, warmup);
+  const gg::Status s = solve(warm_model, warm_active, out);
+  nb::list sample_list, l;
+  for (double v : samples) sample_list.append(v);
+  ns.append(sample_list);
+  status.append(gg::status_name(s));
+  for (int i = 0; i < 3 * K; ++i) l.append(double(out.lambda(i)));
+  lambda.append(s == gg::Status::kOk ? nb::object(l) : nb::none());
+  used.append(s == gg::Status::kOk ? gg::constraint_model_name(out.used) : "");
+  iterations.append(out.iterations);
+}
+
+nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
+                 const std::vector<std::vector<double>>& null_basis,
+                 const std::vector<std::vector<double>>& lambda_des,
+                 const std::vector<std::string>& models, const std::string& scalar,
+                 int max_iterations, bool warm_start, double violation_rel, int reps,
+                 int batches, int warmup) {
+  const std::size_t n = lambda0.size();
+  check_count(null_basis, n, "null_basis");
+  check_count(lambda_des, n, "lambda_des");
+  check_count(models, n, "models");
+  check_timing_args(reps, batches, warmup);
+  if (max_iterations < 1) throw nb::value_error("max_iterations must be >= 1");
+  if (!(violation_rel >= 0) || !std::isfinite(violation_rel))
+    throw nb::value_error("violation_rel must be finite and >= 0 (0: the core's kFeasRel)");
+  const bool is_float = scalar == "float";
+  if (!is_float && scalar != "double")
+    throw nb::value_error(
+        ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  nb::list ns, status, lambda, used, iterations;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t m = lambda0[i].size();
+    if (m != 9 && m != 12)
+      throw nb::value_error(("instance " + std::to_string(i) + ": lambda0 has " +
+                             std::to_string(m) + " entries; expected 9 (k=3) or 12 (k=4)")
+                                .c_str());
+    const std::size_t vars = m - 6;
+    if (lambda_des[i].size() != m || null_basis[i].size() != m * vars)
+      throw nb::value_error(("instance " + std::to_string(i) +
+                             ": lambda_des needs 3k entries and null_basis 3k*(3k-6) "
+                             "(row-major)").c_str());
+    const gg::ConstraintModel model =
+        parse_name(models[i], kModels, model_name_fn, "constraint model");
+    const bool k4 = m == 12;
+    if (is_float && k4)
+      time_qp_k<float, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
+                          warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                          used, iterations);
+    else if (is_float)
+      time_qp_k<float, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
+                          warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                          used, iterations);
+    else if (k4)
+      time_qp_k<double, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
+                           warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                           used, iterations);
+    else
+      time_qp_k<double, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
+                           warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                           used, iterations);
+  }
+  nb::dict d;
+  d["ns"] = ns;
+  d["status"] = status;
+  d["lambda"] = lambda;
+  d["constraints_used"] = used;
+  d["iterations"] = iterations;
+  return d;
+}
+
+// The stages of one frame, each in its own loop on the previous stage's output, so the
+// bench can say what dominates a frame (the sum is close to, not exactly, a frame: a
+// frame also copies the scene and runs the checks between stages).
+template <typename T, int K>
+nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
+                       const Quat4& orientation, const Axis3& y_axis, const SceneOptions& o,
+                       int reps, int batches, int warmup) {
+  const gg::Scene<T> scene = make_scene<T>(contacts_in, y_axis, o);
+  const gg::Contacts<T, K> c = scene.contacts.template leftCols<K>();
+  const gg::Vec6<T> wrench = make_wrench<T>(wrench_in);
+  auto frames = std::make_unique<gg::ContactFrames<T, K>>();
+  auto eq = std::make_unique<gg::Equilibrium<T, K>>();
+  gg::GraspMat<T, K> g;
+  nb::dict d;
+  if (gg::contact_frames<T, K>(c, scene.y_axis, *frames) != gg::Status::kOk) return d;
+  const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames->length_scale);
+  const gg::Vec3<T> force = wrench.template head<3>();
+  gg::grasp_matrix<T, K>(*frames, g);
+  if (gg::equilibrium<T, K>(g, w, o.decomposition, *eq) != gg::Status::kOk) return d;
+  const std::uint8_t relevant = gg::relevance<T, K>(*frames, force);
+  const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq->lambda0, relevant);
+  gg::ForceSolution<T, K> forces;
+  if (gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations,
+                             gg::ConstraintModel::kNone, 0, forces) != gg::Status::kOk)
+    return d;
+  gg::Quat<T> q;
+  gg::unit_quaternion<T>(make_quat<T>(orientation), q);
+  const gg::Vec3<T> f_unit = force / force.stableNorm();
+
+  auto to_list = [](const std::vector<double>& v) {
+    nb::list l;
+    for (double x : v) l.append(x);
+    return l;
+  };
+  gg::ContactFrames<T, K>& fr = *frames;
+  d["contact_frames"] = to_list(time_batches(
+      [&](int) { return std::uint32_t(gg::contact_frames<T, K>(c, scene.y_axis, fr)); },
+      reps, batches, warmup));
+  d["grasp_matrix"] = to_list(time_batches(
+      [&](int) {
+        gg::grasp_matrix<T, K>(fr, g);
+        return std::uint32_t(g(0, 0) > T(0));
+      },
+      reps, batches, warmup));
+  d["decomposition"] = to_list(time_batches(
+      [&](int) { return std::uint32_t(gg::equilibrium<T, K>(g, w, o.decomposition, *eq)); },
+      reps, batches, warmup));
+  d["relevance"] = to_list(time_batches(
+      [&](int) {
+        const std::uint8_t m = gg::relevance<T, K>(fr, force);
+        const gg::ForceVec<T, K> x = gg::desired_forces<T, K>(eq->lambda0, m);
+        return std::uint32_t(m) + std::uint32_t(x(0) > T(0));
+      },
+      reps, batches, warmup));
+  d["qp"] = to_list(time_batches(
+      [&](int) {
+        return std::uint32_t(gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations,
+                                                    gg::ConstraintModel::kNone, 0, forces));
+      },
+      reps, batches, warmup));
+  d["levels_pwm"] = to_list(time_batches(
+      [&](int) {
+        gg::LevelVec<T, K> m;
+        gg::motor_levels<T, K>(forces.lambda, o.policy, m);
+        const gg::Alignment<T> a = gg::alignment<T>(q, f_unit);
+        const gg::Pwm p =
+            gg::pwm_from_levels<T, K>(m, o.mode == gg::Mode::kC ? T(gg::kPwmSpan) : a.alpha);
+        return std::uint32_t(p.duty[0]);
+      },
+      reps, batches, warmup));
+  return d;
+}
+
+nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
+                     const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
+                     const std::vector<std::string>& policies,
+                     const std::vector<std::string>& modes,
+                     const std::vector<std::string>& constraints, const std::string& scalar,
+                     const std::string& decomposition, int reps, int batches, int warmup) {
+  const std::size_t n = contacts.size();
+  check_count(wrenches, n, "wrenches");
+  check_count(orientations, n, "orientations");
+  check_count(y_axes, n, "y_axes");
+  check_count(policies, n, "policies");
+  check_count(modes, n, "modes");
+  check_count(constraints, n, "constraints");
+  check_timing_args(reps, batches, warmup);
+  const bool is_float = scalar == "float";
+  if (!is_float && scalar != "double")
+    throw nb::value_error(
+        ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  nb::list out;
+  for (std::size_t i = 0; i < n; ++i) {
+    const SceneOptions o = parse_options(policies[i], modes[i], constraints[i], decomposition,
+                                         gg::kDefaultMaxIterations);
+    const int k = contact_count(contacts[i]);
+    if (k == 3 && is_float)
+      out.append(time_stages_k<float, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i],
+                                         o, reps, batches, warmup));
+    else if (k == 3)
+      out.append(time_stages_k<double, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i],
+                                          o, reps, batches, warmup));
+    else if (k == 4 && is_float)
+      out.append(time_stages_k<float, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i],
+                                         o, reps, batches, warmup));
+    else if (k == 4)
+      out.append(time_stages_k<double, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i],
+                                          o, reps, batches, warmup));
+    else
+      out.append(nb::dict());
+  }
+  return out;
+}
+
 }  // namespace
 
 NB_MODULE(_core, m) {
@@ -358,4 +792,38 @@ NB_MODULE(_core, m) {
             kResultDoc)
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
+
+  m.def("time_frames", &time_frames, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
+        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double",
+        "decomposition"_a = "qr", "warm_start"_a = true,
+        "max_iterations"_a = gg::kDefaultMaxIterations, "fixed_posture"_a = false,
+        "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
+        "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. One list "
+        "entry per instance for every argument. Moving posture (default): each frame sets "
+        "new contacts (the instance's own and a copy moved by one ulp, alternately) and "
+        "runs update(), so the whole grasp part runs every frame; fixed_posture=True: only "
+        "the orientation changes. Returns a dict: ns (per instance, `batches` samples, each "
+        "the mean ns per frame over `reps` frames), status, pwm, lambda, constraints_used, "
+        "iterations (of the instance's own contacts after a timed-like previous frame), "
+        "recomputed (grasp recomputations among the timed and warm-up frames), "
+        "frames_per_instance.");
+  m.def("time_stages", &time_stages, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
+        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double",
+        "decomposition"_a = "qr", "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
+        "Benchmark (graspguide bench): time each stage of a frame (contact_frames, "
+        "grasp_matrix, decomposition, relevance (with desired forces), qp (solve_forces, "
+        "cold), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns one "
+        "dict per instance, stage -> `batches` samples of mean ns per call; empty for an "
+        "instance whose grasp is not ok.");
+  m.def("time_qp", &time_qp, "lambda0"_a, "null_basis"_a, "lambda_des"_a, "models"_a,
+        "scalar"_a = "double", "max_iterations"_a = gg::kDefaultMaxIterations,
+        "warm_start"_a = false, "violation_rel"_a = 0.0, "reps"_a = 64, "batches"_a = 5,
+        "warmup"_a = 4,
+        "Benchmark (graspguide bench): time the core's QP alone (solve_forces: step 5 with "
+        "the fallback paper -> normal -> none) in a C++ loop, on given float64 data: per "
+        "instance lambda0 (3k), null_basis (3k x (3k-6), row-major, orthonormal columns), "
+        "lambda_des (3k) and the requested model. warm_start: start from this instance's "
+        "own previous active set. violation_rel > 0 replaces kFeasRel (feasibility "
+        "tolerance relative to |lambda0|). Returns a dict: ns, status, lambda, "
+        "constraints_used, iterations.");
 }
