@@ -388,6 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.set_defaults(handler=_cmd_info, command_parser=info)
     _add_stream_parser(sub)
+    _add_bench_parser(sub)
     return parser
 
 
@@ -663,6 +664,18 @@ def _add_stream_parser(sub) -> None:
                    help="with --port sim: the device's clock follows the poses' times, so "
                         "the trial runs as fast as possible")
     p.set_defaults(handler=_cmd_stream, command_parser=p)
+
+
+def _add_bench_parser(sub) -> None:
+    from . import bench
+
+    p = sub.add_parser(
+        "bench", help="host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
+                      "scipy, with accuracy against the float64 reference",
+        description=bench.__doc__.split("\n\n")[0] + " Prints a table; --json FILE writes "
+                    "every figure. Columns: tools/README.md, 'graspguide bench'.")
+    bench.add_arguments(p)
+    p.set_defaults(handler=bench.main_args, command_parser=p)
 
 
 class _StatusView:
