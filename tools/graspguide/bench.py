@@ -48,7 +48,6 @@ passes, both spreads and whether the series ended stable are reported.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import gc
 import json
@@ -1068,52 +1067,25 @@ def write_json(report: Dict[str, Any], path: str) -> None:
     os.replace(tmp, path)
 
 
-def _k_choice(text: str) -> Tuple[int, ...]:
-    choices = {"3": (3,), "4": (4,), "both": (3, 4)}
-    if text not in choices:
-        raise argparse.ArgumentTypeError(f"--k must be 3, 4 or both, got {text!r}")
-    return choices[text]
-
-
-def _count(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 0 <= v <= 100_000:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 100000, got {v}")
-    return v
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--instances", type=_count, default=None, metavar="N",
-                   help="random hands per k (default 200, --quick 20); each runs with the "
-                        "paper and the normal model, next to the paper's hand scenes")
-    p.add_argument("--seed", type=_count, default=1, metavar="S",
-                   help="seed of the random hands (default 1)")
-    p.add_argument("--k", type=_k_choice, default=(3, 4), metavar="3|4|both",
-                   help="contact counts (default both)")
-    p.add_argument("--quick", action="store_true",
-                   help="fewer instances, repetitions and passes (a smoke run, ~1 min)")
-    p.add_argument("--json", metavar="FILE", default=None,
-                   help="also write the full report (every figure, every failure) as JSON")
-    p.add_argument("--solvers", default="daqp,quadprog,osqp,scipy-slsqp", metavar="LIST",
-                   help="peer solvers, comma-separated (default all: "
-                        "daqp,quadprog,osqp,scipy-slsqp)")
-    p.add_argument("--max-passes", type=_count, default=None, metavar="N",
-                   help="cap on the passes of a noisy series (default 8, --quick 4)")
-
-
 def options_from_args(args) -> Options:
+    """Options from `graspguide bench`'s arguments (parsed in cli.py); BenchError says
+    which value is wrong."""
     quick = bool(args.quick)
-    solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())
+    ks = {"3": (3,), "4": (4,), "both": (3, 4)}.get(str(args.k))
+    if ks is None:
+        raise BenchError(f"--k must be 3, 4 or both, got {args.k!r}")
+    instances = args.instances if args.instances is not None else (20 if quick else 200)
+    if not 0 <= instances <= 100_000:
+        raise BenchError(f"--instances must be between 0 and 100000, got {instances}")
+    if args.seed < 0:
+        raise BenchError(f"--seed must be >= 0, got {args.seed}")
     max_passes = args.max_passes if args.max_passes is not None else (4 if quick else 8)
-    min_passes = min(2 if quick else 3, max(max_passes, 1))
     if max_passes < 1:
-        raise BenchError("--max-passes must be >= 1")
-    return Options(instances=args.instances if args.instances is not None else
-                   (20 if quick else 200), seed=args.seed, ks=tuple(args.k), quick=quick,
-                   min_passes=min_passes, max_passes=max_passes, solvers=solvers)
+        raise BenchError(f"--max-passes must be >= 1, got {max_passes}")
+    solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())
+    return Options(instances=instances, seed=args.seed, ks=ks, quick=quick,
+                   min_passes=min(2 if quick else 3, max_passes), max_passes=max_passes,
+                   solvers=solvers)
 
 
 def main_args(args) -> int:

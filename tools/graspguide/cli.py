@@ -667,15 +667,38 @@ def _add_stream_parser(sub) -> None:
 
 
 def _add_bench_parser(sub) -> None:
-    from . import bench
-
+    # Arguments only: graspguide.bench (numpy, the peer solvers) is imported when the
+    # command runs, so the other commands do not pay for it at start-up.
     p = sub.add_parser(
         "bench", help="host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
                       "scipy, with accuracy against the float64 reference",
-        description=bench.__doc__.split("\n\n")[0] + " Prints a table; --json FILE writes "
-                    "every figure. Columns: tools/README.md, 'graspguide bench'.")
-    bench.add_arguments(p)
-    p.set_defaults(handler=bench.main_args, command_parser=p)
+        description="Time this project's full frame (in C++ and per Python call) and its QP "
+                    "alone next to DAQP, quadprog, OSQP and scipy on the same instances, "
+                    "judge every answer against the float64 reference, print a table. "
+                    "Columns: tools/README.md, 'graspguide bench'.")
+    p.add_argument("--instances", type=int, default=None, metavar="N",
+                   help="random hands per k, 0..100000 (default 200, --quick 20); each runs "
+                        "with the paper and the normal model, next to the paper's hand scenes")
+    p.add_argument("--seed", type=int, default=1, metavar="S",
+                   help="seed of the random hands, >= 0 (default 1)")
+    p.add_argument("--k", choices=("3", "4", "both"), default="both",
+                   help="contact counts (default both)")
+    p.add_argument("--quick", action="store_true",
+                   help="fewer instances, repetitions and passes (a smoke run)")
+    p.add_argument("--json", metavar="FILE", default=None,
+                   help="also write the full report (every figure, every failure) as JSON")
+    p.add_argument("--solvers", default="daqp,quadprog,osqp,scipy-slsqp", metavar="LIST",
+                   help="peer solvers, comma-separated (default: daqp,quadprog,osqp,"
+                        "scipy-slsqp)")
+    p.add_argument("--max-passes", type=int, default=None, metavar="N",
+                   help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)")
+
+    def handler(args) -> int:
+        from . import bench
+
+        return bench.main_args(args)
+
+    p.set_defaults(handler=handler, command_parser=p)
 
 
 class _StatusView:

@@ -220,9 +220,11 @@ def test_noise_rule_repeats_noisy_series_and_keeps_every_pass():
 
 def test_bad_options_are_clear_errors(core):
     env = subprocess_env()
-    for argv, words in ((["--k", "5"], "--k must be 3, 4 or both"),
+    for argv, words in ((["--k", "5"], "invalid choice"),
                         (["--solvers", "daqp,cplex"], "unknown solver 'cplex'"),
-                        (["--instances", "-1"], "between 0 and 100000")):
+                        (["--instances", "-1"], "between 0 and 100000"),
+                        (["--seed", "-3"], "--seed must be >= 0"),
+                        (["--max-passes", "0"], "--max-passes must be >= 1")):
         p = subprocess.run([sys.executable, "-m", "graspguide", "bench", *argv],
                            capture_output=True, text=True, env=env, timeout=60)
         assert p.returncode == 2, (argv, p.stderr)
