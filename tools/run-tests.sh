@@ -2,9 +2,10 @@
 # GraspGuide full test run (what .ci/run executes):
 #   1. tools/bootstrap.sh        (Debian packages, Eigen check, .venv, ./tools)
 #   2. pio test -e native        (GoogleTest suites in test/test_*/, offline)
-#   3. pytest tools/tests        (if that directory exists)
-#   4. pio run -e cortex_m4f     (only if arm-none-eabi-g++ is on PATH, see
-#                                 tools/install-arm.sh; the build counts as 1 case)
+#   3. pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages and the QEMU
+#      stage counts vs tools/perf/stage_baseline.json (only if arm-none-eabi-g++ and
+#      qemu-system-arm are on PATH, see tools/install-arm.sh; each is 1 case)
+#   4. pytest tools/tests        (if that directory exists)
 # Output of every stage goes to the console. Test cases are counted from
 # machine-readable reports (PlatformIO's JSON report, pytest's JUnit XML), and
 # the run ends with exactly one line "N passed, N failed".
@@ -111,7 +112,50 @@ else
     FAILED=$((FAILED + f))
 fi
 
-# --- 3. pytest -----------------------------------------------------------------
+# --- 3. Bare-metal ARM builds and QEMU runs -----------------------------------------
+# Optional: the ARM toolchain and QEMU are large and bootstrap.sh does not install them
+# (tools/install-arm.sh does). Before pytest, because its QEMU firmware test needs the
+# m4f_firmware image. Each build is one test case; the stage counts under QEMU (and their
+# check against tools/perf/stage_baseline.json) are one more.
+ARM_ENVS=(cortex_m4f m4f_firmware m4f_stages m7_stages)
+if command -v arm-none-eabi-g++ >/dev/null 2>&1; then
+    for env in "${ARM_ENVS[@]}"; do
+        banner "pio run -e $env"
+        set +e
+        "$ROOT/.venv/bin/pio" run -e "$env" 2>&1 | tee "$REPORT_DIR/$env.log"
+        rc=${PIPESTATUS[0]}
+        set -e
+        if ((rc == 0)); then
+            echo "run-tests: $env build: 1 passed, 0 failed"
+            PASSED=$((PASSED + 1))
+        else
+            echo "run-tests: $env build: 0 passed, 1 failed (exit code $rc)"
+            FAILED=$((FAILED + 1))
+        fi
+    done
+    if command -v qemu-system-arm >/dev/null 2>&1; then
+        banner "instruction counts per stage under QEMU (tools/scripts/qemu_stages.py)"
+        set +e
+        "$PY" tools/scripts/qemu_stages.py --json "$REPORT_DIR/qemu_stages.json" 2>&1 \
+            | tee "$REPORT_DIR/qemu_stages.log"
+        rc=${PIPESTATUS[0]}
+        set -e
+        if ((rc == 0)); then
+            echo "run-tests: QEMU stage counts within baseline: 1 passed, 0 failed"
+            PASSED=$((PASSED + 1))
+        else
+            echo "run-tests: QEMU stage counts: 0 passed, 1 failed (exit code $rc)"
+            FAILED=$((FAILED + 1))
+        fi
+    else
+        echo "run-tests: qemu-system-arm not on PATH, skipping the QEMU runs (tools/install-arm.sh installs it)"
+    fi
+else
+    echo
+    echo "run-tests: arm-none-eabi-g++ not on PATH, skipping the ARM builds and QEMU runs (tools/install-arm.sh installs them)"
+fi
+
+# --- 4. pytest -----------------------------------------------------------------
 if [[ -d $ROOT/tools/tests ]]; then
     banner "pytest tools/tests"
     junit="$REPORT_DIR/pytest-junit.xml"
@@ -139,26 +183,6 @@ if [[ -d $ROOT/tools/tests ]]; then
 else
     echo
     echo "run-tests: no tools/tests directory, skipping pytest"
-fi
-
-# --- 4. Cortex-M4F firmware build ------------------------------------------------
-# Optional: the ARM toolchain is large and bootstrap.sh does not install it.
-if command -v arm-none-eabi-g++ >/dev/null 2>&1; then
-    banner "pio run -e cortex_m4f"
-    set +e
-    "$ROOT/.venv/bin/pio" run -e cortex_m4f 2>&1 | tee "$REPORT_DIR/m4f.log"
-    m4f_rc=${PIPESTATUS[0]}
-    set -e
-    if ((m4f_rc == 0)); then
-        echo "run-tests: cortex_m4f build: 1 passed, 0 failed"
-        PASSED=$((PASSED + 1))
-    else
-        echo "run-tests: cortex_m4f build: 0 passed, 1 failed (exit code $m4f_rc)"
-        FAILED=$((FAILED + 1))
-    fi
-else
-    echo
-    echo "run-tests: arm-none-eabi-g++ not on PATH, skipping the cortex_m4f build (tools/install-arm.sh installs it)"
 fi
 
 finish
