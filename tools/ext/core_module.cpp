@@ -325,6 +325,21 @@ void check_count(const V& v, std::size_t n, const char* what) {
                               .c_str());
 }
 
+// Every per-instance list of time_frames / time_stages has one entry per instance.
+void check_instance_lists(std::size_t n, const std::vector<Wrench>& wrenches,
+                          const std::vector<Quat4>& orientations,
+                          const std::vector<Axis3>& y_axes,
+                          const std::vector<std::string>& policies,
+                          const std::vector<std::string>& modes,
+                          const std::vector<std::string>& constraints) {
+  check_count(wrenches, n, "wrenches");
+  check_count(orientations, n, "orientations");
+  check_count(y_axes, n, "y_axes");
+  check_count(policies, n, "policies");
+  check_count(modes, n, "modes");
+  check_count(constraints, n, "constraints");
+}
+
 // The contacts moved by one unit in the last place: enough for Guidance to see new
 // contacts and run the grasp part again (it compares them exactly), too little to change
 // the answer. This is the tracking case: a new posture every frame, close to the last.
@@ -437,12 +452,7 @@ nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector
                      const std::string& decomposition, bool warm_start, int max_iterations,
                      bool fixed_posture, int reps, int batches, int warmup) {
   const std::size_t n = contacts.size();
-  check_count(wrenches, n, "wrenches");
-  check_count(orientations, n, "orientations");
-  check_count(y_axes, n, "y_axes");
-  check_count(policies, n, "policies");
-  check_count(modes, n, "modes");
-  check_count(constraints, n, "constraints");
+  check_instance_lists(n, wrenches, orientations, y_axes, policies, modes, constraints);
   check_timing_args(reps, batches, warmup);
   std::vector<SceneOptions> options;
   for (std::size_t i = 0; i < n; ++i)
@@ -456,41 +466,6 @@ nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector
                                 fixed_posture, reps, batches, warmup);
   throw nb::value_error(
       ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
-}
-
-// solve_forces with another feasibility tolerance: the same fallback chain, written out
-// because the core takes its tolerance from Tolerances<T> at compile time. With
-// violation_rel == Tolerances<T>::kFeasRel it must give solve_forces' answer exactly (the
-// bench's tests check that).
-template <typename T, int K>
-gg::Status solve_forces_tol(const gg::Equilibrium<T, K>& eq, const gg::ForceVec<T, K>& lambda_des,
-                            gg::ConstraintModel requested, int max_iterations,
-                            gg::ConstraintModel warm_model, std::uint16_t warm_active,
-                            T violation_rel, gg::ForceSolution<T, K>& out) {
-  constexpr int kVars = 3 * K - 6;
-  gg::ProjectionQp<T, kVars, 3 * K> qp;
-  qp.x_unconstrained.noalias() = eq.null_basis.transpose() * (lambda_des - eq.lambda0);
-  qp.violation_tol = violation_rel * eq.lambda0.norm();
-  qp.dependent_tol = gg::Tolerances<T>::kDependentRel;
-  out.iterations = 0;
-  for (int model = static_cast<int>(requested);
-       model <= static_cast<int>(gg::ConstraintModel::kNone); ++model) {
-    const auto m = static_cast<gg::ConstraintModel>(model);
-    gg::constraint_rows<T, K>(eq, m, qp);
-    Eigen::Matrix<T, kVars, 1> xi;
-    gg::QpInfo info;
-    const std::uint16_t warm = (m == warm_model) ? warm_active : 0;
-    const gg::Status s =
-        gg::solve_projection<T, kVars, 3 * K>(qp, max_iterations, warm, xi, info);
-    out.iterations += info.iterations;
-    if (s == gg::Status::kQpInfeasible) continue;
-    if (s != gg::Status::kOk) return s;
-    out.lambda.noalias() = eq.lambda0 + eq.null_basis * xi;
-    out.used = m;
-    out.active = info.active;
-    return gg::Status::kOk;
-  }
-  return gg::Status::kQpInfeasible;
 }
 
 // The QP alone (step 5 with its fallback chain), on data computed elsewhere (the bench
@@ -512,11 +487,9 @@ void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& nu
     for (int j = 0; j < kVars; ++j)
       eq->null_basis(i, j) = static_cast<T>(null_basis[std::size_t(i) * kVars + j]);
   }
-  const bool custom_tol = violation_rel > 0;
-  const T tol = static_cast<T>(violation_rel);
+  const T tol = violation_rel > 0 ? static_cast<T>(violation_rel) : gg::Tolerances<T>::kFeasRel;
   auto solve = [&](gg::ConstraintModel wm, std::uint16_t wa, gg::ForceSolution<T, K>& out) {
-    return custom_tol ? solve_forces_tol<T, K>(*eq, des, model, max_iterations, wm, wa, tol, out)
-                      : gg::solve_forces<T, K>(*eq, des, model, max_iterations, wm, wa, out);
+    return gg::solve_forces<T, K>(*eq, des, model, max_iterations, wm, wa, out, tol);
   };
   gg::ForceSolution<T, K> first;
   const gg::Status s0 = solve(gg::ConstraintModel::kNone, 0, first);
@@ -680,12 +653,7 @@ nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector
                      const std::vector<std::string>& constraints, const std::string& scalar,
                      const std::string& decomposition, int reps, int batches, int warmup) {
   const std::size_t n = contacts.size();
-  check_count(wrenches, n, "wrenches");
-  check_count(orientations, n, "orientations");
-  check_count(y_axes, n, "y_axes");
-  check_count(policies, n, "policies");
-  check_count(modes, n, "modes");
-  check_count(constraints, n, "constraints");
+  check_instance_lists(n, wrenches, orientations, y_axes, policies, modes, constraints);
   check_timing_args(reps, batches, warmup);
   const bool is_float = scalar == "float";
   if (!is_float && scalar != "double")

@@ -30,15 +30,17 @@ void constraint_rows(const Equilibrium<T, K>& eq, ConstraintModel model,
 }
 
 // warm_model / warm_active: the model and active set of the previous frame; the warm
-// start is used only when the same model is tried again.
+// start is used only when the same model is tried again. feasibility_rel (relative to
+// |lambda0|) is a parameter so that the benchmark can measure the tolerance trade.
 template <typename T, int K>
 Status solve_forces(const Equilibrium<T, K>& eq, const ForceVec<T, K>& lambda_des,
                     ConstraintModel requested, int max_iterations, ConstraintModel warm_model,
-                    uint16_t warm_active, ForceSolution<T, K>& out) {
+                    uint16_t warm_active, ForceSolution<T, K>& out,
+                    T feasibility_rel = Tolerances<T>::kFeasRel) {
   constexpr int kVars = 3 * K - 6;
   ProjectionQp<T, kVars, 3 * K> qp;
   qp.x_unconstrained.noalias() = eq.null_basis.transpose() * (lambda_des - eq.lambda0);
-  qp.violation_tol = Tolerances<T>::kFeasRel * eq.lambda0.norm();
+  qp.violation_tol = feasibility_rel * eq.lambda0.norm();
   qp.dependent_tol = Tolerances<T>::kDependentRel;
   out.iterations = 0;
 

@@ -83,7 +83,7 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
                                            GraspSolution<T>&);                                \
   EXTERN template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,  \
                                             ConstraintModel, int, ConstraintModel, uint16_t,  \
-                                            ForceSolution<T, K>&);
+                                            ForceSolution<T, K>&, T);
 #define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN) \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 4)
