@@ -7,20 +7,15 @@
 #include <cstdint>
 
 #include "graspguide.h"
+#include "board_hal.h"
 #include "graspguide_device/application.h"
 
-#ifndef M4F_CORE_HZ
-#define M4F_CORE_HZ 25000000u  // SysTick source clock (25 MHz on QEMU's mps2-an386)
-#endif
 
 using graspguide::Real;
 namespace gg = graspguide;
 namespace dev = graspguide::device;
 
 extern "C" {
-// Stand-in for a timer's four capture/compare registers, one per motor.
-volatile uint32_t m4f_pwm_ccr[gg::kMaxContacts];
-volatile uint32_t m4f_ms;  // SysTick interrupts since start
 // What the harness saw, for a debugger or a QEMU test.
 volatile uint32_t m4f_trials_ok;      // trials that succeeded (4 expected)
 volatile uint32_t m4f_poses_ok;       // poses the application accepted
@@ -31,58 +26,12 @@ volatile uint32_t m4f_stack_peak;      // bytes of stack ever used (painted by s
 // Inputs read through volatile, so the compiler cannot fold the scenes into constants.
 volatile float m4f_scale = 1.0f;
 uint32_t m4f_stack_high_water(void);  // startup.c
-void SysTick_Handler(void) { m4f_ms = m4f_ms + 1; }
 }
 
 namespace {
 
-// Architectural registers (ARMv7-M), present on every Cortex-M4.
-struct SysTickRegs {
-  volatile uint32_t csr, rvr, cvr, calib;
-};
-SysTickRegs& systick() { return *reinterpret_cast<SysTickRegs*>(uintptr_t{0xE000E010u}); }
-volatile uint32_t& scb_icsr() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED04u}); }
-constexpr uint32_t kPendStSet = 1u << 26;
-
-constexpr uint32_t kTicksPerMs = M4F_CORE_HZ / 1000u;
-constexpr uint32_t kTicksPerUs = M4F_CORE_HZ / 1000000u;
-static_assert(kTicksPerUs >= 1 && kTicksPerMs - 1 <= 0xFFFFFFu, "SysTick reload is 24-bit");
-
-// 1 kHz SysTick interrupt plus the down-counter for the microseconds within the tick.
-class SysTickClock final : public dev::Clock {
- public:
-  void start() {
-    systick().csr = 0;
-    systick().rvr = kTicksPerMs - 1;
-    systick().cvr = 0;
-    systick().csr = 0x7u;  // processor clock, interrupt, enable
-  }
-  uint32_t now_us() override {
-    // With interrupts masked, a reload not yet counted by the interrupt shows as a
-    // pending SysTick: count that millisecond and re-read the counter.
-    uint32_t primask;
-    __asm volatile("mrs %0, primask\n cpsid i" : "=r"(primask)::"memory");
-    uint32_t ms = m4f_ms;
-    uint32_t cvr = systick().cvr;
-    if (scb_icsr() & kPendStSet) {
-      cvr = systick().cvr;
-      ++ms;
-    }
-    __asm volatile("msr primask, %0" ::"r"(primask) : "memory");
-    return ms * 1000u + (kTicksPerMs - 1 - cvr) / kTicksPerUs;
-  }
-};
-
-// All motors written together, like a timer's CCR1..CCR4.
-class RegisterMotors final : public dev::MotorOutputs {
- public:
-  void write(const gg::Pwm& pwm) override {
-    for (int i = 0; i < gg::kMaxContacts; ++i) m4f_pwm_ccr[i] = pwm.duty[i];
-  }
-};
-
-SysTickClock g_clock;
-RegisterMotors g_motors;
+gg::m4f::SysTickClock g_clock;
+gg::m4f::RegisterMotors g_motors;
 // Dynamic initialisation (its constructor writes the motors off): runs from .init_array.
 dev::Application g_app(g_motors, g_clock);
 

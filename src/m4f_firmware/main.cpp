@@ -6,12 +6,10 @@
 // script are src/m4f/'s.
 #include <cstdint>
 
+#include "board_hal.h"
 #include "cmsdk_uart.h"
 #include "graspguide_device/link_device.h"
 
-#ifndef M4F_CORE_HZ
-#define M4F_CORE_HZ 25000000u  // CPU and APB clock of QEMU's mps2-an386 (SysTick source, UART PCLK)
-#endif
 // Only sets the divisor: QEMU moves the bytes as fast as the pty takes them.
 #ifndef M4F_UART_BAUD
 #define M4F_UART_BAUD 115200u
@@ -24,10 +22,6 @@ namespace gg = graspguide;
 namespace dev = graspguide::device;
 
 extern "C" {
-// Stand-in for a timer's four capture/compare registers, one per motor; a debugger (or
-// QEMU's monitor) can watch them.
-volatile uint32_t m4f_pwm_ccr[gg::kMaxContacts];
-volatile uint32_t m4f_ms;  // SysTick interrupts since start
 // The UART's losses (CmsdkUart::rx_dropped, tx_frames_dropped), published for a debugger
 // or the QEMU test: the link has no message for them.
 volatile uint32_t m4f_uart_rx_dropped;
@@ -40,7 +34,6 @@ typedef void (*m4f_vector_t)(void);
 extern const m4f_vector_t m4f_vectors[];
 void Default_Handler(void);
 
-void SysTick_Handler(void) { m4f_ms = m4f_ms + 1; }
 void m4f_uart0_rx_handler(void);
 void m4f_uart0_tx_handler(void);
 }
@@ -54,54 +47,8 @@ constexpr int kUart0RxIrq = 0;
 constexpr int kUart0TxIrq = 1;
 constexpr int kIrqCount = 32;
 
-// Architectural registers (ARMv7-M), present on every Cortex-M4.
-struct SysTickRegs {
-  volatile uint32_t csr, rvr, cvr, calib;
-};
-SysTickRegs& systick() { return *reinterpret_cast<SysTickRegs*>(uintptr_t{0xE000E010u}); }
-volatile uint32_t& scb_icsr() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED04u}); }
 volatile uint32_t& scb_vtor() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED08u}); }
 volatile uint32_t& nvic_iser0() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000E100u}); }
-constexpr uint32_t kPendStSet = 1u << 26;
-
-constexpr uint32_t kTicksPerMs = M4F_CORE_HZ / 1000u;
-constexpr uint32_t kTicksPerUs = M4F_CORE_HZ / 1000000u;
-static_assert(kTicksPerUs >= 1 && kTicksPerMs - 1 <= 0xFFFFFFu, "SysTick reload is 24-bit");
-
-// 1 kHz SysTick interrupt plus the down-counter for the microseconds within the tick.
-// The interrupt also wakes the idle loop once a millisecond, so the POSE watchdog runs
-// even when the line is silent.
-class SysTickClock final : public dev::Clock {
- public:
-  void start() {
-    systick().csr = 0;
-    systick().rvr = kTicksPerMs - 1;
-    systick().cvr = 0;
-    systick().csr = 0x7u;  // processor clock, interrupt, enable
-  }
-  uint32_t now_us() override {
-    // With interrupts masked, a reload not yet counted by the interrupt shows as a
-    // pending SysTick: count that millisecond and re-read the counter.
-    uint32_t primask;
-    __asm volatile("mrs %0, primask\n cpsid i" : "=r"(primask)::"memory");
-    uint32_t ms = m4f_ms;
-    uint32_t cvr = systick().cvr;
-    if (scb_icsr() & kPendStSet) {
-      cvr = systick().cvr;
-      ++ms;
-    }
-    __asm volatile("msr primask, %0" ::"r"(primask) : "memory");
-    return ms * 1000u + (kTicksPerMs - 1 - cvr) / kTicksPerUs;
-  }
-};
-
-// All motors written together, like a timer's CCR1..CCR4.
-class RegisterMotors final : public dev::MotorOutputs {
- public:
-  void write(const gg::Pwm& pwm) override {
-    for (int i = 0; i < gg::kMaxContacts; ++i) m4f_pwm_ccr[i] = pwm.duty[i];
-  }
-};
 
 dev::DeviceInfo board_info() {
   dev::DeviceInfo info;
@@ -114,8 +61,8 @@ dev::DeviceInfo board_info() {
 // and dynamic initialisation runs in definition order (Application's constructor writes
 // the motors off before main).
 gg::m4f::CmsdkUart g_uart(kUart0Base, M4F_CORE_HZ);
-SysTickClock g_clock;
-RegisterMotors g_motors;
+gg::m4f::SysTickClock g_clock;
+gg::m4f::RegisterMotors g_motors;
 dev::Application g_app(g_motors, g_clock);
 dev::LinkDevice g_link(g_uart, g_app, board_info());
 
