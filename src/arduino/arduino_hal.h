@@ -41,18 +41,23 @@ class SerialByteStream final : public device::ByteStream {
   bool check_space_;
 };
 
+// Copies the motor pins and drives them low as outputs: called from constructors, so the
+// motors are off before setup() runs.
+template <int K>
+void drive_low(const uint8_t (&pins)[K], uint8_t (&kept)[K]) {
+  for (int i = 0; i < K; ++i) {
+    kept[i] = pins[i];
+    digitalWrite(kept[i], LOW);
+    pinMode(kept[i], OUTPUT);
+  }
+}
+
 // analogWrite() outputs (Teensy, AVR, SAMD, RP2040...). Pins are driven low before
 // anything else runs, so the motors are off from the first microsecond of setup().
 template <int K>
 class AnalogWriteMotors final : public device::MotorOutputs {
  public:
-  explicit AnalogWriteMotors(const uint8_t (&pins)[K]) {
-    for (int i = 0; i < K; ++i) {
-      pins_[i] = pins[i];
-      digitalWrite(pins_[i], LOW);
-      pinMode(pins_[i], OUTPUT);
-    }
-  }
+  explicit AnalogWriteMotors(const uint8_t (&pins)[K]) { drive_low(pins, pins_); }
 
   void begin(uint32_t frequency_hz) {
 #if defined(TEENSYDUINO)

@@ -6,20 +6,14 @@
 
 #include <Arduino.h>
 
-#include "graspguide_device/hal.h"
+#include "arduino_hal.h"
 
 namespace graspguide::board {
 
 template <int K>
 class Esp32LedcMotors final : public device::MotorOutputs {
  public:
-  explicit Esp32LedcMotors(const uint8_t (&pins)[K]) {
-    for (int i = 0; i < K; ++i) {
-      pins_[i] = pins[i];
-      digitalWrite(pins_[i], LOW);
-      pinMode(pins_[i], OUTPUT);
-    }
-  }
+  explicit Esp32LedcMotors(const uint8_t (&pins)[K]) { drive_low(pins, pins_); }
 
   void begin(uint32_t frequency_hz, uint8_t resolution_bits) {
     for (int i = 0; i < K; ++i) {
