@@ -3,7 +3,7 @@
 // Jacobi SVD (reference route, for accuracy comparisons).
 #pragma once
 
-
+#include "graspguide/eigen_decompositions.h"
 #include "graspguide/grasp_matrix.h"
 #include "graspguide/scene.h"
 

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 
+#include "graspguide/eigen_decompositions.h"
 #include "graspguide/status.h"
 #include "graspguide/types.h"
 
