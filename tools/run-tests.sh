@@ -38,6 +38,25 @@ finish() {
     exit 0
 }
 
+# One command as one test case: its output on the console and in $REPORT_DIR/LOG.log,
+# passed when it exits 0.   run_case TITLE LOG COMMAND...
+run_case() {
+    local title=$1 log=$2 rc
+    shift 2
+    banner "$title: $*"
+    set +e
+    "$@" 2>&1 | tee "$REPORT_DIR/$log.log"
+    rc=${PIPESTATUS[0]}
+    set -e
+    if ((rc == 0)); then
+        echo "run-tests: $title: 1 passed, 0 failed"
+        PASSED=$((PASSED + 1))
+    else
+        echo "run-tests: $title: 0 passed, 1 failed (exit code $rc)"
+        FAILED=$((FAILED + 1))
+    fi
+}
+
 # --- 1. bootstrap --------------------------------------------------------------
 banner "bootstrap"
 if ! bash "$ROOT/tools/bootstrap.sh"; then
@@ -120,33 +139,11 @@ fi
 ARM_ENVS=(cortex_m4f m4f_firmware m4f_stages m7_stages)
 if command -v arm-none-eabi-g++ >/dev/null 2>&1; then
     for env in "${ARM_ENVS[@]}"; do
-        banner "pio run -e $env"
-        set +e
-        "$ROOT/.venv/bin/pio" run -e "$env" 2>&1 | tee "$REPORT_DIR/$env.log"
-        rc=${PIPESTATUS[0]}
-        set -e
-        if ((rc == 0)); then
-            echo "run-tests: $env build: 1 passed, 0 failed"
-            PASSED=$((PASSED + 1))
-        else
-            echo "run-tests: $env build: 0 passed, 1 failed (exit code $rc)"
-            FAILED=$((FAILED + 1))
-        fi
+        run_case "$env build" "$env" "$ROOT/.venv/bin/pio" run -e "$env"
     done
     if command -v qemu-system-arm >/dev/null 2>&1; then
-        banner "instruction counts per stage under QEMU (tools/scripts/qemu_stages.py)"
-        set +e
-        "$PY" tools/scripts/qemu_stages.py --json "$REPORT_DIR/qemu_stages.json" 2>&1 \
-            | tee "$REPORT_DIR/qemu_stages.log"
-        rc=${PIPESTATUS[0]}
-        set -e
-        if ((rc == 0)); then
-            echo "run-tests: QEMU stage counts within baseline: 1 passed, 0 failed"
-            PASSED=$((PASSED + 1))
-        else
-            echo "run-tests: QEMU stage counts: 0 passed, 1 failed (exit code $rc)"
-            FAILED=$((FAILED + 1))
-        fi
+        run_case "QEMU stage counts within baseline" qemu_stages \
+            "$PY" tools/scripts/qemu_stages.py --json "$REPORT_DIR/qemu_stages.json"
     else
         echo "run-tests: qemu-system-arm not on PATH, skipping the QEMU runs (tools/install-arm.sh installs it)"
     fi

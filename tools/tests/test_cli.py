@@ -16,10 +16,14 @@ import numpy as np
 import pytest
 
 from graspguide import solver
+from known_answer_requests import decode_numbers as _decode_numbers
+from known_answer_requests import load_cases as _load_known_answers
+from known_answer_requests import KNOWN_ANSWERS
+from known_answer_requests import request_lines as _known_answer_lines
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
-KNOWN_ANSWERS = os.path.join(_ROOT, "test", "data", "known_answers.json")
+
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 
 CLI = [sys.executable, "-m", "graspguide.cli"]
@@ -374,36 +378,6 @@ def test_closed_output_pipe_is_not_a_traceback():
 # --------------------------------------------------------------------------------------
 # Agreement with the float64 reference (test/data/known_answers.json)
 # --------------------------------------------------------------------------------------
-_NON_FINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
-
-
-def _decode_numbers(x):
-    if isinstance(x, str):
-        return _NON_FINITE[x]
-    if isinstance(x, list):
-        return [_decode_numbers(v) for v in x]
-    return x
-
-
-def _load_known_answers():
-    if not os.path.exists(KNOWN_ANSWERS):
-        pytest.fail(f"{KNOWN_ANSWERS} is missing: run `python tools/scripts/gen_known_answers.py`")
-    with open(KNOWN_ANSWERS, encoding="utf-8") as f:
-        cases = json.load(f)["cases"]
-    assert cases, "no known-answer cases"
-    return cases
-
-
-def _known_answer_lines(cases):
-    lines = []
-    for case in cases:
-        req = {key: _decode_numbers(case[key])
-               for key in ("contacts", "wrench", "y_axis", "orientation")}
-        req.update(policy=case["policy"], mode=case["mode"], constraints=case["constraints"])
-        lines.append(json.dumps(req, allow_nan=True))
-    return lines
-
-
 def _case_names():
     try:
         with open(KNOWN_ANSWERS, encoding="utf-8") as f:

@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 import pytest
+from known_answer_requests import load_cases, request_lines
 
 from graspguide import scenes, solver
 from graspguide import device as gd
@@ -35,7 +36,6 @@ from graspguide.protocol import framing, messages as m
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
-KNOWN_ANSWERS = os.path.join(_ROOT, "test", "data", "known_answers.json")
 CLI = [sys.executable, "-m", "graspguide.cli"]
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
@@ -506,14 +506,8 @@ def test_cli_device_engine_agrees_on_the_examples():
 
 
 def test_cli_device_engine_agrees_on_the_known_answers(report_figure):
-    with open(KNOWN_ANSWERS, encoding="utf-8") as f:
-        cases = json.load(f)["cases"]
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    try:
-        from test_cli import _known_answer_lines
-    finally:
-        sys.path.pop(0)
-    lines = _known_answer_lines(cases)
+    cases = load_cases()
+    lines = request_lines(cases)
     core = _solve(lines, "--scalar", "float")
     dev = _solve(lines, "--engine", "device", "--port", "sim")
     ok_cases = agree_ok = both_refused = 0

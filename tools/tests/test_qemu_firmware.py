@@ -33,6 +33,7 @@ import time
 
 import numpy as np
 import pytest
+from known_answer_requests import load_cases, request_lines
 
 from graspguide import scenes, solver
 from graspguide import device as gd
@@ -42,7 +43,6 @@ from graspguide.protocol import messages as m
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
-KNOWN_ANSWERS = os.path.join(_ROOT, "test", "data", "known_answers.json")
 ELF = os.environ.get("GRASPGUIDE_M4F_FIRMWARE") or os.path.join(
     _ROOT, ".pio", "build", "m4f_firmware", "firmware.elf")
 QEMU = shutil.which("qemu-system-arm")
@@ -389,16 +389,10 @@ def test_cli_solve_engine_device_agrees_with_core_float(tmp_path, report_figure)
     board holds its pty open) and `--scalar float` on the same requests: the examples and
     every case of known_answers.json, so the cross-compiled float code meets the host's
     on far more than one scene."""
-    with open(KNOWN_ANSWERS, encoding="utf-8") as f:
-        cases = json.load(f)["cases"]
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    try:
-        from test_cli import _known_answer_lines
-    finally:
-        sys.path.pop(0)
+    cases = load_cases()
     with open(EXAMPLES, encoding="utf-8") as f:
         examples = [ln.rstrip("\n") for ln in f if ln.strip()]
-    lines = examples + _known_answer_lines(cases)
+    lines = examples + request_lines(cases)
     data = ("\n".join(lines) + "\n").encode()
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
