@@ -74,7 +74,7 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   int32_t stage[5] = {-1, -1, -1, -1, -1};
   {
     gg::ContactFrames<T, K> frames;
-    gg::GraspMat<T, K> g;
+    gg::ReducedGraspT<T, K> mt;
     gg::Equilibrium<T, K> eq;
     gg::ForceSolution<T, K> forces;
     gg::LevelVec<T, K> levels;
@@ -85,11 +85,11 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
     if (s == gg::Status::kOk) {
       t0 = ticks();
       const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames.length_scale);
-      gg::grasp_matrix<T, K>(frames, g);
+      gg::reduced_grasp_matrix<T, K>(frames, mt);
       t1 = ticks();
       stage[1] = elapsed(t0, t1);
       t0 = ticks();
-      s = gg::equilibrium<T, K>(g, w, gg::Decomposition::kQR, eq);
+      s = gg::equilibrium_qr<T, K>(frames, mt, w, eq);
       t1 = ticks();
       stage[2] = elapsed(t0, t1);
     }
@@ -126,6 +126,7 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   scene.constraints = c.constraints;
   scene.policy = c.policy;
   scene.mode = c.mode;
+  scene.solver.warm_start = true;  // only the "warm" frame has a previous active set
   gg::FrameResult<T> cold, warm, fixed, svd;
   int32_t t_cold = -1, t_warm = -1, t_fixed = -1, t_svd = -1;
   {

@@ -36,7 +36,7 @@ void check_qp_optimality(const RandomScene& s, gg::ConstraintModel requested) {
   gg::grasp_matrix<double, K>(f, g);
   const gg::Vec6<double> w = gg::scaled_wrench<double>(s.wrench, f.length_scale);
   gg::Equilibrium<double, K> eq;
-  ASSERT_EQ((gg::equilibrium<double, K>(g, w, gg::Decomposition::kQR, eq)), gg::Status::kOk);
+  ASSERT_EQ((gg::equilibrium<double, K>(f, w, gg::Decomposition::kQR, eq)), gg::Status::kOk);
   const auto des = gg::desired_forces<double, K>(eq.lambda0, gg::relevance<double, K>(f, s.wrench.head<3>()));
   gg::ForceSolution<double, K> sol;
   ASSERT_EQ((gg::solve_forces<double, K>(eq, des, requested, 64, gg::ConstraintModel::kNone, 0, sol)),
@@ -138,6 +138,7 @@ TEST(Properties, WarmStartGivesTheSameAnswerAsColdStart) {
     auto s = random_scene(rng, 3 + seq % 2);
     const Combo c = combo(seq);
     auto scene = graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode);
+    scene.solver.warm_start = true;
     gg::Guidance<double> warm;
     ASSERT_EQ(warm.set_scene(scene), gg::Status::kOk);
     ASSERT_EQ(warm.set_wrench(s.wrench), gg::Status::kOk);

@@ -134,7 +134,7 @@ void check_equilibrium(gg::Decomposition d) {
     gg::grasp_matrix<T, K>(f, g);
     const gg::Vec6<T> w = gg::scaled_wrench<T>(s.wrench.cast<T>(), f.length_scale);
     gg::Equilibrium<T, K> eq;
-    ASSERT_EQ((gg::equilibrium<T, K>(g, w, d, eq)), gg::Status::kOk);
+    ASSERT_EQ((gg::equilibrium<T, K>(f, w, d, eq)), gg::Status::kOk);
     const T scale = w.norm();
     EXPECT_LT((w + g * eq.lambda0).norm(), T(100) * tol<T>() * scale);
     const auto ntn = (eq.null_basis.transpose() * eq.null_basis).eval();
@@ -169,14 +169,51 @@ TYPED_TEST(Steps, QrAgreesWithSvd) {
     gg::grasp_matrix<T, 4>(f, g);
     const gg::Vec6<T> w = gg::scaled_wrench<T>(s.wrench.cast<T>(), f.length_scale);
     gg::Equilibrium<T, 4> qr, svd;
-    ASSERT_EQ((gg::equilibrium<T, 4>(g, w, gg::Decomposition::kQR, qr)), gg::Status::kOk);
-    ASSERT_EQ((gg::equilibrium<T, 4>(g, w, gg::Decomposition::kSVD, svd)), gg::Status::kOk);
+    ASSERT_EQ((gg::equilibrium<T, 4>(f, w, gg::Decomposition::kQR, qr)), gg::Status::kOk);
+    ASSERT_EQ((gg::equilibrium<T, 4>(f, w, gg::Decomposition::kSVD, svd)), gg::Status::kOk);
     worst = std::max(worst, (qr.lambda0 - svd.lambda0).norm() / svd.lambda0.norm());
     const auto proj_qr = (qr.null_basis * qr.null_basis.transpose()).eval();
     const auto proj_svd = (svd.null_basis * svd.null_basis.transpose()).eval();
     EXPECT_LT((proj_qr - proj_svd).norm(), T(100) * tol<T>());
   }
   EXPECT_LT(worst, T(50) * tol<T>());
+}
+
+// The QR route rests on G G^T = diag(k I, M M^T) (offsets from the centroid): G's
+// singular values are sqrt(k) three times and those of the reduced matrix M. Checked
+// against a full SVD of G, with the QR route's estimate of the rank ratio alongside.
+template <typename T, int K>
+void check_reduced_grasp_matrix() {
+  std::mt19937_64 rng(11 + K);
+  for (int n = 0; n < 200; ++n) {
+    const auto s = graspguide_test::random_scene(rng, K);
+    gg::ContactFrames<T, K> f;
+    ASSERT_EQ((gg::contact_frames<T, K>(s.contacts.template leftCols<K>().template cast<T>(),
+                                        gg::Vec3<T>::UnitY(), f)),
+              gg::Status::kOk);
+    gg::GraspMat<T, K> g;
+    gg::grasp_matrix<T, K>(f, g);
+    gg::ReducedGraspT<T, K> mt;
+    gg::reduced_grasp_matrix<T, K>(f, mt);
+    Eigen::Matrix<T, 6, 6> expected = Eigen::Matrix<T, 6, 6>::Zero();
+    expected.template topLeftCorner<3, 3>() = T(K) * gg::Mat3<T>::Identity();
+    expected.template bottomRightCorner<3, 3>() = mt.transpose() * mt;
+    EXPECT_LT((g * g.transpose() - expected).norm(), T(20) * tol<T>() * T(K));
+
+    const Eigen::JacobiSVD<gg::GraspMatT<T, K>> svd(g.transpose());
+    const T exact = svd.singularValues()(5) / svd.singularValues()(0);
+    gg::Equilibrium<T, K> eq;
+    ASSERT_EQ((gg::equilibrium<T, K>(f, gg::Vec6<T>::Unit(2), gg::Decomposition::kQR, eq)),
+              gg::Status::kOk);
+    // Column pivoting brackets each singular value within a factor sqrt(3) for 3 columns.
+    EXPECT_GE(eq.rank_ratio, exact / T(3) * (T(1) - T(10) * tol<T>()));
+    EXPECT_LE(eq.rank_ratio, exact * T(3) * (T(1) + T(10) * tol<T>()));
+  }
+}
+
+TYPED_TEST(Steps, ReducedGraspMatrixCarriesTheMomentSingularValuesOfG) {
+  check_reduced_grasp_matrix<TypeParam, 3>();
+  check_reduced_grasp_matrix<TypeParam, 4>();
 }
 
 TYPED_TEST(Steps, CollinearContactsAreRankDeficientOnBothRoutes) {
@@ -188,14 +225,13 @@ TYPED_TEST(Steps, CollinearContactsAreRankDeficientOnBothRoutes) {
        T(0), T(0.006), T(0.02);
   gg::ContactFrames<T, 3> f;
   ASSERT_EQ((gg::contact_frames<T, 3>(c, gg::Vec3<T>::UnitY(), f)), gg::Status::kOk);
-  gg::GraspMat<T, 3> g;
-  gg::grasp_matrix<T, 3>(f, g);
   gg::Vec6<T> w;
   w << T(0), T(0), T(-1), T(0), T(0), T(0);
   gg::Equilibrium<T, 3> eq;
-  EXPECT_EQ((gg::equilibrium<T, 3>(g, w, gg::Decomposition::kQR, eq)), gg::Status::kRankDeficient);
+  EXPECT_EQ((gg::equilibrium<T, 3>(f, w, gg::Decomposition::kQR, eq)), gg::Status::kRankDeficient);
   EXPECT_LT(eq.rank_ratio, T(gg::kRankRelTol));
-  EXPECT_EQ((gg::equilibrium<T, 3>(g, w, gg::Decomposition::kSVD, eq)), gg::Status::kRankDeficient);
+  EXPECT_EQ((gg::equilibrium<T, 3>(f, w, gg::Decomposition::kSVD, eq)), gg::Status::kRankDeficient);
+  EXPECT_LT(eq.rank_ratio, T(gg::kRankRelTol));
 }
 
 // ---------------------------------------------------------------- relevance

@@ -590,8 +590,8 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   if (gg::contact_frames<T, K>(c, scene.y_axis, *frames) != gg::Status::kOk) return d;
   const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames->length_scale);
   const gg::Vec3<T> force = wrench.template head<3>();
-  gg::grasp_matrix<T, K>(*frames, g);
-  if (gg::equilibrium<T, K>(g, w, o.decomposition, *eq) != gg::Status::kOk) return d;
+  gg::ReducedGraspT<T, K> mt;
+  if (gg::equilibrium<T, K>(*frames, w, o.decomposition, *eq) != gg::Status::kOk) return d;
   const std::uint8_t relevant = gg::relevance<T, K>(*frames, force);
   const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq->lambda0, relevant);
   gg::ForceSolution<T, K> forces;
@@ -611,14 +611,23 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   d["contact_frames"] = to_list(time_batches(
       [&](int) { return std::uint32_t(gg::contact_frames<T, K>(c, scene.y_axis, fr)); },
       reps, batches, warmup));
+  // Each route builds only the matrix it decomposes: the reduced M^T (QR) or G (SVD).
+  const bool svd = o.decomposition == gg::Decomposition::kSVD;
   d["grasp_matrix"] = to_list(time_batches(
       [&](int) {
-        gg::grasp_matrix<T, K>(fr, g);
-        return std::uint32_t(g(0, 0) > T(0));
+        if (svd) {
+          gg::grasp_matrix<T, K>(fr, g);
+          return std::uint32_t(g(0, 0) > T(0));
+        }
+        gg::reduced_grasp_matrix<T, K>(fr, mt);
+        return std::uint32_t(mt(0, 1) > T(0));
       },
       reps, batches, warmup));
   d["decomposition"] = to_list(time_batches(
-      [&](int) { return std::uint32_t(gg::equilibrium<T, K>(g, w, o.decomposition, *eq)); },
+      [&](int) {
+        return std::uint32_t(svd ? gg::equilibrium_svd<T, K>(g, w, *eq)
+                                 : gg::equilibrium_qr<T, K>(fr, mt, w, *eq));
+      },
       reps, batches, warmup));
   d["relevance"] = to_list(time_batches(
       [&](int) {

@@ -3,5 +3,5 @@
 #include "graspguide/equilibrium.h"
 
 namespace graspguide {
-GRASPGUIDE_EQUILIBRIA(, equilibrium_qr)
+GRASPGUIDE_EQUILIBRIA(, GRASPGUIDE_EQUILIBRIUM_QR)
 }  // namespace graspguide

@@ -43,10 +43,8 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   const T f_norm = force.stableNorm();
   if (!(f_norm > T(kZeroForceRelTol) * w_norm)) return Status::kZeroForce;
 
-  GraspMat<T, K> g;
-  grasp_matrix<T, K>(frames, g);
   Equilibrium<T, K> eq;
-  s = equilibrium<T, K>(g, w, settings.decomposition, eq);
+  s = equilibrium<T, K>(frames, w, settings.decomposition, eq);
   out.rank_ratio = eq.rank_ratio;
   if (s != Status::kOk) return s;
 

@@ -24,10 +24,8 @@ Status geometry_status_k(const Scene<T>& scene) {
   ContactFrames<T, K> frames;
   const Status s = contact_frames<T, K>(scene.contacts.template leftCols<K>(), scene.y_axis, frames);
   if (s != Status::kOk) return s;
-  GraspMat<T, K> g;
-  grasp_matrix<T, K>(frames, g);
   Equilibrium<T, K> eq;
-  return equilibrium<T, K>(g, Vec6<T>::Unit(2), scene.solver.decomposition, eq);
+  return equilibrium<T, K>(frames, Vec6<T>::Unit(2), scene.solver.decomposition, eq);
 }
 
 template <typename T>

@@ -18,6 +18,8 @@ template <typename T, int K> using Contacts = Eigen::Matrix<T, 3, K>;
 // Grasp matrix G (6 x 3k) and its transpose.
 template <typename T, int K> using GraspMat = Eigen::Matrix<T, 6, 3 * K>;
 template <typename T, int K> using GraspMatT = Eigen::Matrix<T, 3 * K, 6>;
+// The reduced grasp matrix M^T of the QR route, 3(k-1) x 3 (grasp_matrix.h).
+template <typename T, int K> using ReducedGraspT = Eigen::Matrix<T, 3 * (K - 1), 3>;
 // Contact forces, [x y z] of each contact in its own frame.
 template <typename T, int K> using ForceVec = Eigen::Matrix<T, 3 * K, 1>;
 // Orthonormal basis of null(G): 3k x (3k - 6).
