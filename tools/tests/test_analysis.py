@@ -1,0 +1,475 @@
+"""graspguide.analysis: Tables I-III, the paper's statistics, Figure 4, the report, errors.
+
+Synthetic study folders are written in tmp_path by a seeded generator: 8 participants,
+4 modalities x 2 contact counts x 12 wrenches, plus familiarization trials (which the
+analysis must leave out) and one NASA-TLX record per session. Failures follow a fixed
+pattern so the Table I counts are known by hand.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from graspguide import analysis as A
+
+PIDS = [f"U{i}" for i in range(1, 9)]
+ORDER = ["F+C", "Fperp+C", "F+V", "Fperp+V"]
+SCALES = ["MD", "TD", "PD", "PE", "EF", "FR"]
+
+
+def _fails(p_idx: int, k: int, modality: str, w: int) -> bool:
+    """Constant-intensity trials fail for 2 of the 12 wrenches per participant and
+    condition (w + p + k + policy = 0 mod 6); varying-intensity trials never fail."""
+    policy, mode = modality.split("+")
+    return mode == "C" and (w + p_idx + k + (policy == "Fperp")) % 6 == 0
+
+
+def make_participant(root: Path, p_idx: int, rng, simulated=True, slow=None,
+                     modalities=ORDER, familiarization=3):
+    """Write STUDY/<PID>/trials.jsonl and tlx.jsonl; returns (trial records, tlx records).
+
+    slow: {modality: factor} multiplies that participant's times (to make an outlier)."""
+    pid = PIDS[p_idx] if p_idx < len(PIDS) else f"U{p_idx + 1}"
+    folder = root / pid
+    folder.mkdir(parents=True)
+    trials, tlx = [], []
+    index = 0
+    session = 0
+    for k in (3, 4):
+        for modality in modalities:
+            session += 1
+            policy, mode = modality.split("+")
+            for f in range(familiarization if session == 1 else 0):
+                index += 1
+                trials.append(dict(participant=pid, simulated=simulated, trial_index=index,
+                                   session=session, k=k, policy=policy, mode=mode,
+                                   modality=modality, wrench_id=100 + f,
+                                   wrench=[0, 0, -1, 0, 0, 0], single_motor=False,
+                                   success=False, completion_s=90.0, familiarization=True))
+            for w in range(12):
+                index += 1
+                fail = _fails(p_idx, k, modality, w)
+                base = 30.0 if mode == "C" else 8.0
+                t = 90.0 if fail else float(base * rng.lognormal(0.0, 0.35))
+                if slow and modality in slow and not fail:
+                    t = min(89.0, t * slow[modality])
+                trials.append(dict(participant=pid, simulated=simulated, trial_index=index,
+                                   session=session, k=k, policy=policy, mode=mode,
+                                   modality=modality, wrench_id=w,
+                                   wrench=[float(x) for x in rng.normal(size=6)],
+                                   single_motor=w < 5, success=not fail, completion_s=t,
+                                   familiarization=False))
+            scales = {s: int(rng.integers(1, 22)) for s in SCALES}
+            tlx.append(dict(participant=pid, simulated=simulated, session=session, k=k,
+                            modality=modality, mode=mode, scales=scales))
+    (folder / "trials.jsonl").write_text("".join(json.dumps(t) + "\n" for t in trials))
+    (folder / "tlx.jsonl").write_text("".join(json.dumps(t) + "\n" for t in tlx))
+    return trials, tlx
+
+
+def make_study(root: Path, seed=7, n=8, simulated=True, slow=None):
+    rng = np.random.default_rng(seed)
+    root.mkdir(parents=True, exist_ok=True)
+    all_trials, all_tlx = [], []
+    for i in range(n):
+        t, q = make_participant(root, i, rng, simulated=simulated,
+                                slow=(slow or {}).get(PIDS[i]))
+        all_trials += t
+        all_tlx += q
+    return all_trials, all_tlx
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study") / "STUDY"
+    # U3 is far slower than everyone in F+V: an outlier of that modality's box.
+    trials, tlx = make_study(root, slow={"U3": {"F+V": 6.0}})
+    return root, trials, tlx
+
+
+@pytest.fixture(scope="module")
+def result(study):
+    root, _, _ = study
+    return A.analyze([root])
+
+
+@pytest.fixture(scope="module")
+def written(study, result, tmp_path_factory):
+    out = tmp_path_factory.mktemp("out")
+    A.write_outputs(result, out)
+    return out
+
+
+# ---------------------------------------------------------------------------- loading
+def test_load_reads_every_record_and_flags_familiarization(study):
+    root, trials, tlx = study
+    t, q = A.load([root])
+    assert len(t) == len(trials) == 8 * (4 * 2 * 12 + 3)
+    assert int(t["familiarization"].sum()) == 8 * 3
+    assert len(q) == len(tlx) == 8 * 8
+    assert set(t["participant"]) == set(PIDS)
+    assert t["source"].iloc[0].endswith("trials.jsonl:1")
+    # A participant folder and its study folder name the same data once.
+    t2, _ = A.load([root, root / "U1"])
+    assert len(t2) == len(t)
+
+
+# ---------------------------------------------------------------------------- tables
+def test_table1_counts_equal_hand_counts(study, result):
+    _, trials, _ = study
+    t1 = result.table1
+    # the paper's layout: k = 3 then 4, F+V, Fperp+V, F+C, Fperp+C
+    assert list(zip(t1["k"], t1["modality"])) == [
+        (k, m) for k in (3, 4) for m in ["F+V", "Fperp+V", "F+C", "Fperp+C"]]
+    for r in t1.itertuples(index=False):
+        hand_s = sum(1 for t in trials if not t["familiarization"] and t["k"] == r.k
+                     and t["modality"] == r.modality and t["success"])
+        hand_f = sum(1 for t in trials if not t["familiarization"] and t["k"] == r.k
+                     and t["modality"] == r.modality and not t["success"])
+        assert (r.successes, r.failures, r.trials) == (hand_s, hand_f, 96)
+        # by construction: 2 failures of 12 per participant in C, none in V
+        if r.modality.endswith("+C"):
+            assert (r.successes, r.failures) == (80, 16)
+            assert r.success_rate == pytest.approx(80 / 96)
+        else:
+            assert (r.successes, r.failures, r.success_rate) == (96, 0, 1.0)
+
+
+def test_table2_mean_and_sd_per_condition(study, result):
+    _, trials, _ = study
+    for r in result.table2.itertuples(index=False):
+        times = [t["completion_s"] for t in trials if not t["familiarization"]
+                 and t["k"] == r.k and t["modality"] == r.modality]
+        assert r.trials == len(times) == 96
+        assert r.mean_s == pytest.approx(statistics.fmean(times), rel=1e-12)
+        assert r.sd_s == pytest.approx(statistics.stdev(times), rel=1e-12)
+
+
+def test_table3_tlx_by_mode(study, result):
+    _, _, tlx = study
+    t3 = result.table3.set_index("mode")
+    assert list(t3.index) == ["C", "V"]
+    for mode in ("C", "V"):
+        rows = [q for q in tlx if q["mode"] == mode]
+        assert t3.loc[mode, "sessions"] == len(rows) == 32
+        for s in SCALES:
+            vals = [q["scales"][s] for q in rows]
+            assert t3.loc[mode, f"{s}_mean"] == pytest.approx(statistics.fmean(vals))
+            assert t3.loc[mode, f"{s}_sd"] == pytest.approx(statistics.stdev(vals))
+
+
+# ---------------------------------------------------------------------------- statistics
+def test_participant_means_pool_contact_counts(study, result):
+    _, trials, _ = study
+    means = result.stats.means
+    assert list(means.columns) == ORDER and sorted(means.index) == PIDS
+    for pid in ("U1", "U5"):
+        for m in ORDER:
+            vals = [t["completion_s"] for t in trials if t["participant"] == pid
+                    and t["modality"] == m and not t["familiarization"]]
+            assert len(vals) == 24
+            assert means.loc[pid, m] == pytest.approx(statistics.fmean(vals), rel=1e-12)
+
+
+def test_outlier_removed_with_its_paired_values(result):
+    st = result.stats
+    assert ("U3", "F+V") in [(p, m) for p, m, _ in st.outliers]
+    assert "U3" in st.removed
+    assert st.removed == sorted({p for p, _, _ in st.outliers})
+    # the fences are the boxplot's: Q1 - 1.5 IQR, Q3 + 1.5 IQR of each modality's means
+    for m in ORDER:
+        col = st.means[m].to_numpy()
+        q1, q3 = np.percentile(col, [25, 75])
+        assert st.fences[m] == pytest.approx((q1 - 1.5 * (q3 - q1), q3 + 1.5 * (q3 - q1)))
+    assert st.means.loc["U3", "F+V"] > st.fences["F+V"][1]
+    # every flagged participant's whole row is gone (all four modalities), the rest intact
+    kept = [p for p in PIDS if p not in st.removed]
+    assert sorted(st.retained.index) == sorted(st.transformed.index) == kept
+    assert st.n == len(kept) < 8 and st.anova["df2"] == 3 * (len(kept) - 1)
+    np.testing.assert_allclose(st.transformed.loc[kept].to_numpy(),
+                               np.sqrt(st.means.loc[kept].to_numpy()))
+
+
+def test_keep_outliers_keeps_every_participant(study):
+    root, _, _ = study
+    res = A.analyze([root], remove_outliers=False)
+    assert res.stats.removed == [] and res.stats.n == 8 and res.stats.anova["df2"] == 21
+
+
+def test_boxplot_outliers_match_matplotlib(result):
+    """The fences are those of the boxplot matplotlib would draw (whis=1.5)."""
+    import matplotlib.cbook
+
+    st = result.stats
+    for m in ORDER:
+        b = matplotlib.cbook.boxplot_stats(st.means[m].to_numpy(), whis=1.5)[0]
+        flagged = sorted(float(v) for p, mm, v in st.outliers if mm == m)
+        assert flagged == sorted(float(v) for v in b["fliers"])
+
+
+def test_anova_pingouin_agrees_with_statsmodels(result):
+    a, sm = result.stats.anova, result.stats.anova_statsmodels
+    assert (a["df1"], a["df2"]) == (sm["df1"], sm["df2"]) == (3, 3 * (result.stats.n - 1))
+    assert abs(a["F"] - sm["F"]) < 1e-6
+    assert abs(a["p"] - sm["p"]) < 1e-6
+    # C is much slower than V here: the effect must be strong
+    assert a["F"] > 10 and a["p"] < 1e-4
+
+
+def test_bonferroni_pairs_against_scipy_ttest_rel(result):
+    st = result.stats
+    pw = st.pairwise
+    assert len(pw) == 6
+    assert {frozenset((r.A, r.B)) for r in pw.itertuples()} == {
+        frozenset((ORDER[i], ORDER[j])) for i in range(4) for j in range(i + 1, 4)}
+    for r in pw.itertuples():
+        t, p = scipy.stats.ttest_rel(st.transformed[r.A], st.transformed[r.B])
+        assert r.T == pytest.approx(t, rel=1e-9)
+        assert r.p_unc == pytest.approx(p, rel=1e-9)
+        assert r.p_bonf == pytest.approx(min(1.0, 6 * p), rel=1e-9)
+        assert r.diff_s == pytest.approx(st.retained[r.A].mean() - st.retained[r.B].mean())
+
+
+def test_shapiro_and_mauchly_against_scipy_and_numpy(result):
+    st = result.stats
+    for m in ORDER:
+        w, p = scipy.stats.shapiro(st.transformed[m])
+        assert st.normality.loc[m, "W"] == pytest.approx(w, rel=1e-9)
+        assert st.normality.loc[m, "pval"] == pytest.approx(p, rel=1e-9)
+    # Mauchly's W from orthonormal contrasts: W = det(S) / (tr(S)/(k-1))^(k-1)
+    y = st.transformed[ORDER].to_numpy()
+    n, k = y.shape
+    c = np.linalg.qr(np.vstack([np.ones(k), np.eye(k)[:-1]]).T)[0][:, 1:]
+    s = np.cov(y @ c, rowvar=False)
+    w = np.linalg.det(s) / (np.trace(s) / (k - 1)) ** (k - 1)
+    d = 1 - (2 * (k - 1) ** 2 + (k - 1) + 2) / (6 * (k - 1) * (n - 1))
+    chi2 = -(n - 1) * d * math.log(w)
+    dof = k * (k - 1) // 2 - 1
+    assert st.sphericity["W"] == pytest.approx(w, rel=1e-9)
+    assert st.sphericity["chi2"] == pytest.approx(chi2, rel=1e-9)
+    assert st.sphericity["dof"] == dof == 5
+    # p as the paper (and SPSS) reports it: the chi-square approximation
+    assert st.sphericity["pval"] == pytest.approx(scipy.stats.chi2.sf(chi2, dof), rel=1e-9)
+    assert st.sphericity["spher"] == (st.sphericity["pval"] > 0.05)
+    assert 0 < st.sphericity["pval_second_order"] < 1
+
+
+def test_known_answer_anova_from_sums_of_squares():
+    """A hand-made 5 x 4 table (values are squares: sqrt gives the integers below);
+    F from numpy sums of squares, p from the F distribution."""
+    import pandas as pd
+
+    root = np.array([[2, 3, 5, 6],
+                     [3, 3, 4, 7],
+                     [1, 2, 4, 4],
+                     [2, 4, 6, 5],
+                     [3, 4, 5, 7]], dtype=float)
+    wide = pd.DataFrame(root ** 2, index=[f"P{i}" for i in range(5)], columns=ORDER)
+    wide.index.name = "participant"
+    st = A.paper_statistics(wide, remove_outliers=True)
+    assert st.removed == []
+    n, k = root.shape
+    grand = root.mean()
+    ss_cond = n * ((root.mean(axis=0) - grand) ** 2).sum()
+    ss_subj = k * ((root.mean(axis=1) - grand) ** 2).sum()
+    ss_err = ((root - grand) ** 2).sum() - ss_cond - ss_subj
+    df1, df2 = k - 1, (k - 1) * (n - 1)
+    f = (ss_cond / df1) / (ss_err / df2)
+    # by hand: column means 2.2, 3.2, 4.8, 5.8; grand 4; SS_cond = 5 * 7.76 = 38.8
+    assert ss_cond == pytest.approx(38.8)
+    assert st.anova["SS"] == pytest.approx(ss_cond, rel=1e-12)
+    assert st.anova["SS_error"] == pytest.approx(ss_err, rel=1e-12)
+    assert (st.anova["df1"], st.anova["df2"]) == (df1, df2)
+    assert st.anova["F"] == pytest.approx(f, rel=1e-12)
+    assert st.anova["p"] == pytest.approx(scipy.stats.f.sf(f, df1, df2), rel=1e-9)
+    assert st.anova_statsmodels["F"] == pytest.approx(f, rel=1e-12)
+
+
+# ---------------------------------------------------------------------------- outputs
+def test_figure_files_are_valid_png_and_svg(written):
+    png = (written / "figure4.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+    root = ET.parse(written / "figure4.svg").getroot()
+    assert root.tag.endswith("svg")
+    svg = (written / "figure4.svg").read_text()
+    assert "p = " in svg or "p&#160;=" in svg or "p =" in svg.replace("&#160;", " ")
+
+
+def test_report_has_tables_statistics_and_simulated_banner(written, result):
+    text = (written / "report.md").read_text(encoding="utf-8")
+    head = text[:400]
+    assert "SIMULATED DATA — not human results" in head
+    for needle in ("Table I", "Table II", "Table III", "Shapiro", "Mauchly",
+                   "repeated-measures ANOVA", "Bonferroni", "figure4.png", "U3, F+V",
+                   "statsmodels AnovaRM"):
+        assert needle in text, needle
+    assert f"{result.stats.anova['F']:.3f}" in text
+    for name in ("table1.csv", "table2.csv", "table3.csv", "pairwise.csv",
+                 "participant_means.csv"):
+        assert (written / name).stat().st_size > 0
+
+
+def test_real_data_report_has_no_banner(tmp_path):
+    make_study(tmp_path / "S", seed=3, simulated=False)
+    res = A.analyze([tmp_path / "S"])
+    assert not res.simulated
+    assert "SIMULATED" not in A.report_markdown(res)
+    assert "SIMULATED" not in A.summary_text(res)
+
+
+def test_cli_main_prints_tables_and_writes_default_out(study, capsys):
+    root, _, _ = study
+    assert A.main([str(root)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("*** SIMULATED DATA — not human results")
+    assert "Table I" in out and "Table II" in out and "Fperp+C" in out
+    assert "One-way repeated-measures ANOVA" in out and "F(3, " in out
+    assert "removed as boxplot outliers (U3" in out
+    for name in ("report.md", "figure4.png", "figure4.svg"):
+        assert (root / "analysis" / name).is_file()
+    # the analysis/ folder is not mistaken for a participant on the next run
+    assert A.main([str(root)]) == 0
+
+
+def test_register_adds_analyze_subcommand(study, tmp_path, capsys):
+    import argparse
+
+    root, _, _ = study
+    parser = argparse.ArgumentParser(prog="graspguide")
+    sub = parser.add_subparsers(dest="command")
+    A.register(sub)
+    args = parser.parse_args(["analyze", str(root / "U1"), str(root / "U2"),
+                              "--out", str(tmp_path / "o"), "--keep-outliers"])
+    assert args.handler(args) == 0
+    assert "n = 2 participants" in capsys.readouterr().out
+    assert (tmp_path / "o" / "report.md").is_file()
+
+
+# ---------------------------------------------------------------------------- errors
+def _error(paths, capsys=None, **kw):
+    with pytest.raises(A.AnalysisError) as e:
+        A.analyze(paths, **kw)
+    return str(e.value)
+
+
+def test_error_missing_folder(tmp_path):
+    assert "no such file or folder" in _error([tmp_path / "nope"])
+
+
+def test_error_study_without_participants(tmp_path):
+    (tmp_path / "empty").mkdir()
+    msg = _error([tmp_path / "empty"])
+    assert "no participant data" in msg and "trials.jsonl" in msg
+
+
+def test_error_missing_tlx_file(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    (tmp_path / "S" / "U2" / "tlx.jsonl").unlink()
+    msg = _error([tmp_path / "S"])
+    assert "U2" in msg and "missing tlx.jsonl" in msg
+
+
+def test_error_malformed_json_line_names_file_and_line(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    f = tmp_path / "S" / "U2" / "trials.jsonl"
+    lines = f.read_text().splitlines()
+    lines[4] = lines[4][:-3]
+    f.write_text("\n".join(lines) + "\n")
+    msg = _error([tmp_path / "S"])
+    assert f"{f}:5: malformed JSON" in msg
+
+
+def test_error_bad_field_names_file_line_and_field(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    f = tmp_path / "S" / "U1" / "trials.jsonl"
+    lines = f.read_text().splitlines()
+    rec = json.loads(lines[6])
+    del rec["completion_s"]
+    lines[6] = json.dumps(rec)
+    rec = json.loads(lines[7])
+    f.write_text("\n".join(lines) + "\n")
+    assert f"{f}:7: missing field 'completion_s'" in _error([tmp_path / "S"])
+    rec["k"] = 5
+    lines[6] = json.dumps(rec)
+    f.write_text("\n".join(lines) + "\n")
+    assert f"{f}:7: field 'k' must be 3 or 4, got 5" in _error([tmp_path / "S"])
+
+
+def test_error_bad_tlx_scale(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    f = tmp_path / "S" / "U3" / "tlx.jsonl"
+    lines = f.read_text().splitlines()
+    rec = json.loads(lines[1])
+    rec["scales"]["FR"] = 22
+    lines[1] = json.dumps(rec)
+    f.write_text("\n".join(lines) + "\n")
+    assert f"{f}:2: scales.FR must be an integer 1..21, got 22" in _error([tmp_path / "S"])
+
+
+def test_error_duplicate_trial(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    f = tmp_path / "S" / "U1" / "trials.jsonl"
+    lines = f.read_text().splitlines()
+    f.write_text("\n".join(lines + [lines[10]]) + "\n")
+    msg = _error([tmp_path / "S"])
+    assert "logged twice" in msg and f"{f}:11" in msg
+
+
+def test_error_participant_missing_a_modality_says_which(tmp_path):
+    rng = np.random.default_rng(1)
+    root = tmp_path / "S"
+    for i in range(3):
+        make_participant(root, i, rng)
+    make_participant(root, 3, rng, modalities=["F+C", "Fperp+C", "F+V"])
+    msg = _error([root])
+    assert "U4 has no trials of modality Fperp+V" in msg
+    assert "all four modalities" in msg
+
+
+def test_error_fewer_than_two_participants(tmp_path):
+    make_study(tmp_path / "S", n=1)
+    msg = _error([tmp_path / "S"])
+    assert "needs at least 2 participants" in msg and "got 1" in msg
+
+
+def test_error_outlier_removal_leaves_too_few():
+    """Participant j is the outlier of modality j (j = 0..2): three rows go, one stays."""
+    import pandas as pd
+
+    vals = np.array([[10.0, 11.0, 12.0, 10.0],
+                     [11.0, 10.0, 11.0, 11.0],
+                     [12.0, 12.0, 10.0, 12.0],
+                     [13.0, 13.0, 13.0, 13.0]])
+    for j in range(3):
+        vals[j, j] = 100.0
+    wide = pd.DataFrame(vals, index=["P0", "P1", "P2", "P3"], columns=ORDER)
+    with pytest.raises(A.AnalysisError) as e:
+        A.paper_statistics(wide)
+    msg = str(e.value)
+    assert "needs at least 2 participants" in msg and "P0, P1, P2" in msg
+    assert "--keep-outliers" in msg
+    assert A.paper_statistics(wide, remove_outliers=False).n == 4
+
+
+def test_small_study_says_what_was_not_computed(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    res = A.analyze([tmp_path / "S"])
+    assert res.stats.n == 3
+    assert any("Shapiro-Wilk not computed" in n for n in res.stats.notes)
+    assert any("Mauchly's test not computed" in n for n in res.stats.notes)
+    assert "Mauchly's test of sphericity**: not computed" in A.report_markdown(res)
+
+
+def test_cli_error_goes_to_stderr_with_exit_1(tmp_path, capsys):
+    assert A.main([str(tmp_path / "missing")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("graspguide analyze: error:") and "no such file" in err
+    assert A.main([]) == 2
