@@ -9,7 +9,7 @@ or participant folders, each with
 * ``tlx.jsonl`` -- one JSON object per session (participant, simulated, session, k,
   modality, mode, scales {MD, TD, PD, PE, EF, FR}, each 1..21).
 
-What it computes (Section IV of the paper, docs in tools/README.md):
+What it computes (Section IV of the paper):
 
 * Table I   successes, failures and success rate per condition (modality x k);
 * Table II  mean and SD of the completion time per condition (a failed trial counts as

@@ -468,6 +468,42 @@ def test_small_study_says_what_was_not_computed(tmp_path):
     assert "Mauchly's test of sphericity**: not computed" in A.report_markdown(res)
 
 
+def test_error_not_a_folder_and_non_object_line_and_contradiction(tmp_path):
+    f = tmp_path / "file.txt"
+    f.write_text("x")
+    assert "not a folder" in _error([f])
+    make_study(tmp_path / "S", n=3)
+    t = tmp_path / "S" / "U2" / "trials.jsonl"
+    lines = t.read_text().splitlines()
+    t.write_text("\n".join(["[1, 2]"] + lines[1:]) + "\n")
+    assert f"{t}:1: expected a JSON object, got list" in _error([tmp_path / "S"])
+    rec = json.loads(lines[5])
+    rec["policy"] = "Fperp" if rec["policy"] == "F" else "F"
+    t.write_text("\n".join(lines[:5] + [json.dumps(rec)] + lines[6:]) + "\n")
+    assert f"{t}:6: modality" in _error([tmp_path / "S"])
+
+
+def test_empty_tlx_file_gives_an_empty_table3(tmp_path):
+    make_study(tmp_path / "S", n=4)
+    for pid in PIDS[:4]:
+        (tmp_path / "S" / pid / "tlx.jsonl").write_text("")
+    res = A.analyze([tmp_path / "S"])
+    assert res.table3.empty
+    assert "No NASA-TLX questionnaires were logged." in A.report_markdown(res)
+
+
+def test_default_out_dir_is_the_study_folders_analysis(tmp_path):
+    make_study(tmp_path / "S", n=2)
+    assert A.default_out_dir([tmp_path / "S"]) == tmp_path / "S" / "analysis"
+    assert A.default_out_dir([tmp_path / "S" / "U2"]) == (tmp_path / "S").resolve() / "analysis"
+
+
+def test_mauchly_p_is_the_papers_chi_square_approximation():
+    """The paper reports chi2(5) = 10.56, p = 0.061: the plain chi-square tail, which
+    is what `sphericity["pval"]` holds (pingouin's own p adds R's second-order term)."""
+    assert round(float(scipy.stats.chi2.sf(10.56, 5)), 3) == 0.061
+
+
 def test_cli_error_goes_to_stderr_with_exit_1(tmp_path, capsys):
     assert A.main([str(tmp_path / "missing")]) == 1
     err = capsys.readouterr().err
