@@ -115,8 +115,13 @@ def _read_jsonl(path: Path) -> List[Tuple[str, Dict[str, Any]]]:
         try:
             obj = json.loads(line)
         except json.JSONDecodeError as e:
-            raise AnalysisError(f"{where}: malformed JSON ({e.msg} at column {e.colno})") \
-                from None
+            hint = ""
+            if number == len(text.splitlines()) and not text.endswith("\n"):
+                hint = ("; the last line has no newline: a write cut short, e.g. by a crash "
+                        "(running the study's participant again with graspguide trial moves "
+                        "it aside and redoes that trial)")
+            raise AnalysisError(f"{where}: malformed JSON ({e.msg} at column {e.colno})"
+                                f"{hint}") from None
         if not isinstance(obj, dict):
             raise AnalysisError(f"{where}: expected a JSON object, got {type(obj).__name__}")
         out.append((where, obj))
@@ -176,8 +181,15 @@ def _tlx_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
     if row["modality"] is not None and row["modality"].split("+")[1] != row["mode"]:
         raise AnalysisError(f"{where}: modality {row['modality']!r} contradicts mode "
                             f"{row['mode']!r}")
-    scales = _need(rec, "scales", where, lambda v: isinstance(v, dict),
-                   "an object {MD, TD, PD, PE, EF, FR}")
+    scales = _need(rec, "scales", where, lambda v: v is None or isinstance(v, dict),
+                   "an object {MD, TD, PD, PE, EF, FR} (or null: no questionnaire)")
+    if scales is None:
+        # The runner logs a session of a simulated source without a --tlx file with
+        # scales null: no answers were invented. Table III leaves it out and says so.
+        for s in TLX_SCALES:
+            row[s] = None
+        row["source"] = where
+        return row
     for s in TLX_SCALES:
         if s not in scales:
             raise AnalysisError(f"{where}: scales has no '{s}' ({TLX_NAMES[s]}); all six of "
@@ -329,12 +341,15 @@ def table2(trials):
 
 
 def table3(tlx):
-    """Table III: NASA-TLX mean and SD (n-1) per scale, rows C and V (sessions pooled)."""
+    """Table III: NASA-TLX mean and SD (n-1) per scale, rows C and V (sessions pooled).
+
+    Sessions logged without a questionnaire (``scales`` null) are left out."""
     import pandas as pd
 
     rows = []
+    answered = tlx.dropna(subset=list(TLX_SCALES))
     for mode in ("C", "V"):
-        sel = tlx[tlx["mode"] == mode]
+        sel = answered[answered["mode"] == mode]
         if sel.empty:
             continue
         row: Dict[str, Any] = {"mode": mode, "sessions": int(len(sel))}
@@ -696,7 +711,8 @@ def report_markdown(res: Result, figure_names: Sequence[str] = ("figure4.png",
     out += [f"Sources: {', '.join(str(s) for s in res.sources)}  ",
             f"Participants: {len(res.participants)} ({', '.join(res.participants)}); "
             f"{n_trials} trials analysed, {res.familiarization_excluded} familiarization "
-            f"trials excluded; {len(res.tlx)} NASA-TLX questionnaires.", ""]
+            f"trials excluded; {len(res.tlx)} sessions with a NASA-TLX record, "
+            f"{int(res.tlx[list(TLX_SCALES)].notna().all(axis=1).sum())} answered.", ""]
 
     out += ["## Table I — successfully accomplished tasks", "",
             "A target orientation not reached within the trial's time limit (90 s in the "
@@ -707,6 +723,11 @@ def report_markdown(res: Result, figure_names: Sequence[str] = ("figure4.png",
             "its logged time (90 s).", "",
             _md_table(T2_HEADER, _t2_rows(res.table2)), ""]
     out += ["## Table III — NASA-TLX workload (1–21, lower is better)", ""]
+    unanswered = int(res.tlx[list(TLX_SCALES)].isna().any(axis=1).sum())
+    if unanswered:
+        out += [f"{unanswered} of {len(res.tlx)} sessions were logged without a questionnaire "
+                "(scales null: a simulated source without a --tlx file); they are left out.",
+                ""]
     if res.table3.empty:
         out += ["No NASA-TLX questionnaires were logged.", ""]
     else:

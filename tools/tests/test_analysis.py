@@ -492,6 +492,36 @@ def test_empty_tlx_file_gives_an_empty_table3(tmp_path):
     assert "No NASA-TLX questionnaires were logged." in A.report_markdown(res)
 
 
+def test_tlx_scales_null_are_left_out_of_table3(tmp_path):
+    """The runner logs a simulated session without a --tlx file with scales null."""
+    _, tlx = make_study(tmp_path / "S", n=4)
+    for pid in PIDS[:4]:
+        f = tmp_path / "S" / pid / "tlx.jsonl"
+        recs = [json.loads(x) for x in f.read_text().splitlines()]
+        for r in recs:
+            if r["session"] % 2:
+                r["scales"] = None
+        f.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    res = A.analyze([tmp_path / "S"])
+    kept = [q for q in tlx if q["session"] % 2 == 0]
+    t3 = res.table3.set_index("mode")
+    for mode in ("C", "V"):
+        vals = [q["scales"]["FR"] for q in kept if q["mode"] == mode]
+        assert t3.loc[mode, "sessions"] == len(vals) == 8
+        assert t3.loc[mode, "FR_mean"] == pytest.approx(statistics.fmean(vals))
+    assert "16 of 32 sessions were logged without a questionnaire" in A.report_markdown(res)
+
+
+def test_error_cut_last_line_says_so(tmp_path):
+    make_study(tmp_path / "S", n=3)
+    f = tmp_path / "S" / "U3" / "trials.jsonl"
+    text = f.read_text()
+    f.write_text(text[:-20])
+    msg = _error([tmp_path / "S"])
+    n = len(text.splitlines())
+    assert f"{f}:{n}: malformed JSON" in msg and "write cut short" in msg
+
+
 def test_default_out_dir_is_the_study_folders_analysis(tmp_path):
     make_study(tmp_path / "S", n=2)
     assert A.default_out_dir([tmp_path / "S"]) == tmp_path / "S" / "analysis"
