@@ -155,7 +155,10 @@ def _trial_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
         raise AnalysisError(f"{where}: modality {row['modality']!r} contradicts policy "
                             f"{got_policy!r} and mode {got_mode!r}")
     row["policy"], row["mode"] = policy, mode
-    row["wrench_id"] = _maybe(rec, "wrench_id", where, _is_int, "an integer")
+    # An integer, or the protocol's name of the wrench ("W01"; "F01" in familiarization).
+    row["wrench_id"] = _maybe(rec, "wrench_id", where,
+                              lambda v: _is_int(v) or (isinstance(v, str) and v != ""),
+                              "an integer or a wrench name")
     _maybe(rec, "wrench", where,
            lambda v: isinstance(v, list) and len(v) == 6 and all(_is_number(x) for x in v),
            "a list of 6 finite numbers")

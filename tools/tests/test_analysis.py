@@ -492,6 +492,35 @@ def test_empty_tlx_file_gives_an_empty_table3(tmp_path):
     assert "No NASA-TLX questionnaires were logged." in A.report_markdown(res)
 
 
+def test_runner_records_with_named_wrenches_and_extra_fields(tmp_path):
+    """What graspguide trial writes: wrench_id names ("W01", familiarization "F01"),
+    session 0 for familiarization, and fields the analysis does not use."""
+    make_study(tmp_path / "S", n=4)
+    for pid in PIDS[:4]:
+        f = tmp_path / "S" / pid / "trials.jsonl"
+        recs = [json.loads(x) for x in f.read_text().splitlines()]
+        for r in recs:
+            fam = r["familiarization"]
+            r["wrench_id"] = f"{'F' if fam else 'W'}{r['wrench_id'] % 100 + 1:02d}"
+            r["session"] = 0 if fam else r["session"]
+            r.update(session_trial=1, wrench_class="multi", first_entry_s=1.0,
+                     final_error_deg=2.0, poses=100, wall_s=0.1, config_hash="abc",
+                     source="participant", recorded_at="2026-11-22T07:00:00Z")
+        f.write_text("".join(json.dumps(r) + "\n" for r in recs))
+        q = tmp_path / "S" / pid / "tlx.jsonl"
+        recs = [json.loads(x) for x in q.read_text().splitlines()]
+        for r in recs:
+            r.update(policy=r["modality"].split("+")[0], origin="file", config_hash="abc")
+        q.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    (tmp_path / "S" / "study.json").write_text("{}")
+    (tmp_path / "S" / "U1" / "frames").mkdir()
+    res = A.analyze([tmp_path / "S"])
+    assert res.familiarization_excluded == 4 * 3
+    assert list(res.table1["trials"]) == [48] * 8
+    assert res.trials["wrench_id"].iloc[-1].startswith("W")
+    assert res.trials["source"].iloc[0].endswith("trials.jsonl:1")
+
+
 def test_tlx_scales_null_are_left_out_of_table3(tmp_path):
     """The runner logs a simulated session without a --tlx file with scales null."""
     _, tlx = make_study(tmp_path / "S", n=4)
