@@ -1,0 +1,580 @@
+"""A virtual participant: a seeded model of a person following the vibrotactile cues.
+
+SIMULATED. Everything this module produces is the output of a model; it is never human
+data and must be labelled as simulated wherever it is stored or shown
+(:attr:`VirtualParticipant.SIMULATED` is True for that purpose).
+
+The model (docs/participant.md explains it with every parameter and its source):
+
+1. **Motors (ERM lag).** The PWM of each motor (0..255, the latest telemetry) drives a
+   first-order lag with time constant ``erm_tau_s``: the motor speed (in PWM units)
+   approaches the commanded PWM as ``1 - exp(-t / tau)``. A motor is *felt* when its
+   speed reaches half of the lowest "on" level (PWM 70, the paper's 0.9 V minimum).
+2. **Delay.** Every decision uses what the motors did ``reaction_time_s`` earlier (a
+   delay line on the motor states). The first movement starts ``3 erm_tau_s +
+   reaction_time_s`` after the first felt cue (relative strengths can be judged once the
+   motors are near their steady speed, 95 % at 3 tau), so nothing moves before the cue
+   plus the reaction time; after every submovement the participant again waits
+   ``3 erm_tau_s + reaction_time_s`` to feel its result (mode V).
+3. **Where does the weight pull (the grasping metaphor).** Motor ``i`` vibrates with the
+   contact force at contact ``i``. The thimbles that vibrate are the ones that *hold*
+   the virtual object, so the weight hangs on the opposite side. The participant
+   estimates the weight direction in its hand frame as
+
+       d = -sum_i p_i * y_i / |...|,    y_i = unit(C_i - centroid)
+
+   with ``p_i`` the perceived strength of motor ``i`` above the weakest vibration
+   (``speed_i - 70``), relative to the strongest motor (so only *relative* strengths
+   matter), and ``C_i`` its own contact positions. Perceived strengths carry
+   multiplicative noise from the vibrotactile Weber fraction.
+4. **How far (mode V only).** In mode V the overall strength above the weakest
+   vibration, ``L = |speed - 70| / 185``, is ``sin(error / 2)`` on the device; the
+   participant reads its distance as ``2 asin(L)`` with the noise of the Weber fraction
+   applied to the whole vibration (a faint vibration cannot be told from the weakest
+   one). In mode C it never uses magnitude: its decisions depend only on which motors
+   vibrate and their relative strengths, so scaling every PWM above 70 by a common
+   factor changes nothing.
+5. **Moving.** The hand moves in discrete submovements, each a minimum-jerk rotation
+   (Flash & Hogan 1985) whose duration makes its peak angular speed at most
+   ``peak_speed_deg_s``; its amplitude and axis carry signal-dependent noise
+   (``motor_noise_frac`` of the amplitude). Physiological tremor
+   (``tremor_amplitude_deg`` at ``tremor_frequency_hz``) is added on top.
+6. **Strategy.**
+   * First submovement (both modes): rotate so that the estimated weight direction,
+     mapped to the world through the current orientation (proprioception), points down.
+     Its amplitude is the angle this implies; in mode V it is the felt distance instead.
+   * Mode V, while the cue persists: a compass ("warmer/colder") search. From the best
+     pose known (the base) tilt by the felt distance about a horizontal axis; if the
+     vibration got weaker that pose is the new base and it tilts on the same way,
+     otherwise it goes back to the base, feels it again (readings there are averaged)
+     and tries the next direction (+90, -90, 180 degrees); after four failures in a row
+     the step halves. At a base as faint as can be told from the weakest vibration
+     (one Weber step of the motor speed at PWM 70) it holds still for ``probe_dwell_s``.
+   * Mode C, while the cue persists: without magnitude information, random probes
+     around the pose it believed aligned, uniform over a disc of tilts of radius
+     ``search_radius_deg``, each held ``probe_dwell_s`` (the first pose too).
+
+What it does NOT use: the device's error angle, ``alpha`` or the wrench. The wrench
+passed to :meth:`VirtualParticipant.begin_trial` is validated (so a broken caller is
+caught) and then discarded: the decisions depend only on the PWM felt, the participant's
+own contact geometry and its own orientation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields
+from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+PWM_FLOOR = 70      # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
+PWM_RANGE = 185     # PWM span above the floor, docs/algorithm.md step 6
+PWM_MAX = 255
+GRAVITY = np.array([0.0, 0.0, -1.0])
+_POLICIES = ("F", "Fperp")
+_MODES = ("C", "V")
+
+
+@dataclass(frozen=True)
+class ParticipantParams:
+    """Parameters of the virtual participant. Sources: docs/participant.md.
+
+    Every field carries its unit in its name (``_s``, ``_deg``, ``_deg_s``, ``_hz``;
+    ``_frac`` is a dimensionless fraction).
+    """
+
+    #: Pose rate the participant runs at [Hz]: the tracking rate of a Vicon-class
+    #: motion-capture system as used in the paper's experiments (100 Hz is a standard
+    #: Vicon capture rate); the study runner calls step() every 1 / rate_hz s.
+    rate_hz: float = 100.0
+    #: ERM motor time constant [s]. Precision Microdrives' step-response test of an ERM
+    #: (305-000 at rated voltage) reaches its maximum amplitude ~180 ms after turn-on;
+    #: for a first-order lag that is ~3 tau, so tau ~ 60 ms (PMD, "New testing for the
+    #: Precision Haptic ERMs"; the 310-103's own datasheet figure is to be checked).
+    erm_tau_s: float = 0.06
+    #: Simple reaction time to a vibrotactile cue on the hand [s]: of the order of
+    #: 0.25 s in young adults; Bao et al. 2019 (PLOS ONE 14(8):e0219737) show stimulus
+    #: factors shift it by 20-300 ms (location 20-120 ms, a secondary task > 130 ms).
+    reaction_time_s: float = 0.25
+    #: Peak angular speed of a hand reorientation [deg/s]: a deliberate, comfortable
+    #: wrist/forearm speed. Wrist/forearm movement in daily living is mostly slow, the
+    #: likelihood of a speed falling exponentially with it (Anderton et al. 2023, J Hand
+    #: Ther 36(3):580-592); maximal voluntary wrist speeds are several hundred deg/s.
+    #: 90 deg/s is a moderate value inside that range, not fitted to the paper.
+    peak_speed_deg_s: float = 90.0
+    #: Physiological tremor amplitude [deg]: the modal postural hand tremor is 0.01 g
+    #: peak at ~7 Hz (Wade, Gresty & Findley 1982, Arch Neurol 39:358-362), i.e.
+    #: 0.01 * 9.81 / (2 pi 7)^2 = 0.05 mm; over a 0.1 m wrist-to-fingertip lever that
+    #: is 0.03 deg.
+    tremor_amplitude_deg: float = 0.03
+    #: Physiological tremor frequency [Hz]: modal ~7 Hz (Wade et al. 1982), inside the
+    #: 6-12 Hz peak of physiological hand tremor (Lakie et al. 2015, J Physiol
+    #: 593:4411-4422).
+    tremor_frequency_hz: float = 7.0
+    #: Signal-dependent motor noise [fraction of the submovement amplitude, SD]: motor
+    #: output noise grows in proportion to the command (Harris & Wolpert 1998, Nature
+    #: 394:780-784); endpoint SDs of aimed movements are of the order of 10 % of their
+    #: amplitude (van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063).
+    motor_noise_frac: float = 0.10
+    #: Weber fraction of vibrotactile amplitude discrimination [fraction]: difference
+    #: limens of ~1.5 dB, i.e. ~0.2 (Gescheider et al. 1990, J Acoust Soc Am
+    #: 87:330-338). An ERM's vibration amplitude grows with the square of its speed, so
+    #: the noise on the perceived motor speed is half of it (SD).
+    weber_frac: float = 0.20
+    #: Mode C search: radius of the random probes around the pose believed aligned
+    #: [deg]. Model convention (no literature figure), fixed before any simulated
+    #: study and not tuned toward the paper's tables.
+    search_radius_deg: float = 30.0
+    #: How long the participant holds a probe (mode C) or a faint-vibration pose
+    #: (mode V) waiting for the cue to stop [s]. Model convention, as above.
+    probe_dwell_s: float = 1.0
+
+
+_NONNEG_FIELDS = ("tremor_amplitude_deg", "motor_noise_frac", "weber_frac")
+_FRAC_FIELDS = ("motor_noise_frac", "weber_frac")
+
+
+def _validate_params(p: ParticipantParams) -> None:
+    for f in fields(p):
+        v = getattr(p, f.name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"participant parameter {f.name} must be a finite number, got {v!r}")
+        if f.name in _NONNEG_FIELDS:
+            if v < 0:
+                raise ValueError(f"participant parameter {f.name} must be >= 0, got {v!r}")
+        elif not v > 0:
+            raise ValueError(f"participant parameter {f.name} must be > 0, got {v!r}")
+        if f.name in _FRAC_FIELDS and v >= 1:
+            raise ValueError(f"participant parameter {f.name} is a fraction and must be < 1, "
+                             f"got {v!r}")
+
+
+# --------------------------------------------------------------------------------------
+# Rotations (quaternions [w, x, y, z], hand -> world, like POSE)
+# --------------------------------------------------------------------------------------
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw])
+
+
+def _quat_from_rotvec(v: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(v))
+    if angle < 1e-15:
+        return np.array([1.0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]) / math.sqrt(
+            1.0 + 0.25 * angle * angle)
+    s = math.sin(0.5 * angle) / angle
+    return np.array([math.cos(0.5 * angle), v[0] * s, v[1] * s, v[2] * s])
+
+
+def _rotvec_from_quat(q: np.ndarray) -> np.ndarray:
+    q = q / np.linalg.norm(q)
+    if q[0] < 0:
+        q = -q
+    s = float(np.linalg.norm(q[1:]))
+    if s < 1e-15:
+        return 2.0 * q[1:]
+    angle = 2.0 * math.atan2(s, q[0])
+    return q[1:] * (angle / s)
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """q (hand -> world) applied to the hand-frame vector v."""
+    w, x, y, z = q
+    u = np.array([x, y, z])
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quaternion_angle_deg(a: Sequence[float], b: Sequence[float]) -> float:
+    """Angle of the rotation between two orientations [deg] (for tests and analysis)."""
+    qa = np.asarray(a, float) / np.linalg.norm(a)
+    qb = np.asarray(b, float) / np.linalg.norm(b)
+    d = min(1.0, abs(float(qa @ qb)))
+    return math.degrees(2.0 * math.acos(d))
+
+
+def _finite_vector(x: Any, n: Optional[int], what: str) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be numbers, got {x!r}") from None
+    if a.ndim != 1 or (n is not None and a.shape[0] != n):
+        raise ValueError(f"{what} must be {n} numbers, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} must be finite, got {x!r}")
+    return a
+
+
+class VirtualParticipant:
+    """A seeded virtual participant (see the module docstring). SIMULATED, never human data.
+
+    Use: ``begin_trial(...)`` once per trial, then ``step(t_s, pwm)`` every
+    ``1 / rate_hz`` s of virtual time with the PWM of the latest telemetry; each call
+    returns the next hand orientation ``(w, x, y, z)`` (hand -> world).
+    """
+
+    SIMULATED = True
+
+    def __init__(self, params: ParticipantParams, seed: int):
+        if not isinstance(params, ParticipantParams):
+            raise TypeError(f"params must be a ParticipantParams, got {type(params).__name__}")
+        _validate_params(params)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"seed must be an integer, got {seed!r}")
+        self.params = params
+        self.seed = int(seed)
+        self.rate_hz = float(params.rate_hz)
+        self._rng = np.random.default_rng(self.seed)
+        self._trial = False
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_spec(cls, spec: str, seed: int) -> "VirtualParticipant":
+        """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams fields)."""
+        return cls(parse_spec(spec), seed)
+
+    # ------------------------------------------------------------------ trial
+    def begin_trial(self, *, contacts, y_axis, wrench, policy: str, mode: str,
+                    start_quat) -> None:
+        """Start a trial. ``wrench`` is validated and then discarded (see module doc)."""
+        try:
+            c = np.asarray(contacts, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"contacts must be k x 3 numbers, got {contacts!r}") from None
+        if c.ndim != 2 or c.shape[1] != 3 or c.shape[0] not in (3, 4):
+            raise ValueError(f"contacts must be 3 or 4 points [x, y, z], got shape {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError("contacts must be finite")
+        y = _finite_vector(y_axis, 3, "y_axis")
+        if not np.linalg.norm(y) > 0:
+            raise ValueError("y_axis must be non-zero")
+        _finite_vector(wrench, 6, "wrench")  # checked only: never used for a decision
+        if policy not in _POLICIES:
+            raise ValueError(f"policy must be one of {_POLICIES}, got {policy!r}")
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+        q = _finite_vector(start_quat, 4, "start_quat (w, x, y, z)")
+        if not np.linalg.norm(q) > 1e-6:
+            raise ValueError("start_quat must be a non-zero quaternion")
+
+        r = c - c.mean(axis=0)
+        norms = np.linalg.norm(r, axis=1)
+        if not np.all(norms > 1e-9 * max(1.0, float(norms.max()))):
+            raise ValueError("contacts must not coincide with their centroid")
+        self._radial = r / norms[:, None]      # own hand geometry: y_i (hand frame)
+        self._k = c.shape[0]
+        self.policy = policy
+        self.mode = mode
+        self._q = q / np.linalg.norm(q)        # commanded (proprioceptive) orientation
+        self._motor = np.zeros(self._k)        # ERM speeds, PWM units
+        self._history: Deque[Tuple[float, np.ndarray]] = deque()
+        self._t_prev: Optional[float] = None
+        self._cue_onset: Optional[float] = None
+        self._move: Optional[Dict[str, Any]] = None
+        self._next_decision: Optional[float] = None
+        self._plans = 0
+        self._search: Dict[str, Any] = {}
+        p = self.params
+        # Tremor: two independent horizontal components with random phases.
+        self._tremor_phase = self._rng.uniform(0.0, 2.0 * math.pi, size=2)
+        self._tremor_amp = math.radians(p.tremor_amplitude_deg)
+        self._trial = True
+
+    # ------------------------------------------------------------------ perception
+    def motor_speeds(self) -> List[float]:
+        """Current ERM speeds in PWM units (the first-order lag of the PWM)."""
+        self._need_trial()
+        return [float(v) for v in self._motor]
+
+    def felt_direction(self, speeds: Optional[Sequence[float]] = None,
+                       noise: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """Weight direction the participant infers in its hand frame (unit), or None
+        when no motor is felt. ``speeds``: motor speeds (default: the current ones);
+        ``noise``: k standard normal draws for the Weber noise (default: none)."""
+        self._need_trial()
+        s = np.asarray(self._motor if speeds is None else speeds, dtype=np.float64)
+        felt = s >= 0.5 * PWM_FLOOR
+        if not np.any(felt):
+            return None
+        above = np.where(felt, np.maximum(s - PWM_FLOOR, 0.0), 0.0)
+        if noise is not None:
+            above = np.maximum(above * (1.0 + 0.5 * self.params.weber_frac * noise), 0.0)
+        top = float(above.max())
+        # Relative strength of each felt motor; all felt motors equal if none is above
+        # the weakest vibration.
+        w = above / top if top > 0 else felt.astype(np.float64)
+        d = -(w[:, None] * self._radial).sum(axis=0)
+        n = float(np.linalg.norm(d))
+        if n < 1e-9:
+            return None
+        return d / n
+
+    def felt_distance_deg(self, speeds: Optional[Sequence[float]] = None,
+                          noise: Optional[np.ndarray] = None) -> Optional[float]:
+        """Distance to the target the participant reads from the intensity [deg]; None in
+        mode C (no magnitude information) or when no motor is felt."""
+        self._need_trial()
+        if self.mode != "V":
+            return None
+        s = np.asarray(self._motor if speeds is None else speeds, dtype=np.float64)
+        felt = s >= 0.5 * PWM_FLOOR
+        if not np.any(felt):
+            return None
+        if noise is not None:
+            s = s * (1.0 + 0.5 * self.params.weber_frac * noise)
+        above = np.where(felt, np.maximum(s - PWM_FLOOR, 0.0), 0.0)
+        level = min(1.0, float(np.linalg.norm(above)) / PWM_RANGE)
+        return math.degrees(2.0 * math.asin(level))
+
+    def resolution_deg(self) -> float:
+        """The smallest distance a V participant can tell from the weakest vibration
+        [deg]: one Weber step of the motor speed at the floor."""
+        step = 0.5 * self.params.weber_frac * PWM_FLOOR
+        return math.degrees(2.0 * math.asin(min(1.0, step / PWM_RANGE)))
+
+    # ------------------------------------------------------------------ the loop
+    def step(self, t_s: float, pwm: Sequence[int]) -> Tuple[float, float, float, float]:
+        """Advance to virtual time ``t_s`` having felt ``pwm``; return the next (w, x, y, z)."""
+        self._need_trial()
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.floating, np.integer)) \
+                or not math.isfinite(float(t_s)):
+            raise ValueError(f"t_s must be a finite number of seconds, got {t_s!r}")
+        t = float(t_s)
+        if isinstance(pwm, (str, bytes)):
+            raise ValueError(f"pwm must be {self._k} numbers 0..255, got {pwm!r}")
+        try:
+            u = np.asarray(list(pwm), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"pwm must be {self._k} numbers 0..255, got {pwm!r}") from None
+        if u.ndim != 1 or u.shape[0] != self._k:
+            raise ValueError(f"pwm must have {self._k} values (one per contact), "
+                             f"got {u.shape[0] if u.ndim == 1 else u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"pwm must be finite, got {list(pwm)!r}")
+        if np.any(u < 0) or np.any(u > PWM_MAX):
+            raise ValueError(f"pwm values must be in 0..255, got {list(pwm)!r}")
+        if self._t_prev is not None and t < self._t_prev:
+            raise ValueError(f"time went backwards: {t} after {self._t_prev}")
+        dt = 1.0 / self.rate_hz if self._t_prev is None else t - self._t_prev
+        self._t_prev = t
+
+        # 1. ERM lag (exact discretisation of the first-order lag over dt).
+        self._motor += (u - self._motor) * (1.0 - math.exp(-dt / self.params.erm_tau_s))
+        self._history.append((t, self._motor.copy()))
+        if self._cue_onset is None and np.any(self._motor >= 0.5 * PWM_FLOOR):
+            # First felt cue. Relative strengths can be judged once the motors have
+            # (nearly) reached their steady speed (3 tau: 95 %); the first movement starts
+            # a reaction time after that percept.
+            self._cue_onset = t
+            self._next_decision = t + 3.0 * self.params.erm_tau_s + self.params.reaction_time_s
+
+        # 2. Decide (with the percept of reaction_time_s ago) when the last movement and
+        #    its pause are over.
+        if self._next_decision is not None and t >= self._next_decision and self._move is None:
+            self._plan(t)
+
+        # 3. Execute the current submovement (minimum jerk).
+        if self._move is not None:
+            m = self._move
+            tau = min(1.0, (t - m["t0"]) / m["T"]) if m["T"] > 0 else 1.0
+            s = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+            self._q = _quat_mul(_quat_from_rotvec(m["rotvec"] * s), m["q0"])
+            if tau >= 1.0:
+                self._move = None
+                self._next_decision = t + m["pause"]
+
+        # 4. Tremor on top of the commanded orientation.
+        q = self._q
+        if self._tremor_amp > 0:
+            ph = 2.0 * math.pi * self.params.tremor_frequency_hz * t + self._tremor_phase
+            tv = np.array([self._tremor_amp * math.sin(ph[0]),
+                           self._tremor_amp * math.sin(ph[1]), 0.0])
+            q = _quat_mul(_quat_from_rotvec(tv), q)
+        q = q / np.linalg.norm(q)
+        return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+    # ------------------------------------------------------------------ internals
+    def _need_trial(self) -> None:
+        if not self._trial:
+            raise RuntimeError("call begin_trial() first")
+
+    def _delayed_speeds(self, t: float) -> np.ndarray:
+        """Motor speeds as they were reaction_time_s before t (the delay line)."""
+        horizon = t - self.params.reaction_time_s
+        while len(self._history) > 1 and self._history[1][0] <= horizon:
+            self._history.popleft()
+        return self._history[0][1]
+
+    def _noise(self) -> np.ndarray:
+        return self._rng.standard_normal(self._k)
+
+    def _start_move(self, t: float, rotvec: np.ndarray, pause: float) -> None:
+        p = self.params
+        amp = float(np.linalg.norm(rotvec))
+        if amp > 0 and p.motor_noise_frac > 0:
+            rotvec = rotvec + p.motor_noise_frac * amp * self._rng.standard_normal(3)
+            amp = float(np.linalg.norm(rotvec))
+        # Minimum jerk: peak speed 1.875 * amp / T <= peak_speed.
+        T = 1.875 * amp / math.radians(p.peak_speed_deg_s)
+        self._move = {"t0": t, "T": T, "rotvec": rotvec, "q0": self._q.copy(), "pause": pause}
+
+    def _hold(self, t: float, duration: float) -> None:
+        self._next_decision = t + duration
+
+    def _tilt_to_align(self, d_hand: np.ndarray) -> Tuple[np.ndarray, float]:
+        """World rotation vector bringing the hand direction d_hand to gravity, and its angle."""
+        u = _rotate(self._q, d_hand)
+        axis = np.cross(u, GRAVITY)
+        s = float(np.linalg.norm(axis))
+        angle = math.atan2(s, float(u @ GRAVITY))
+        if s < 1e-12:
+            if angle < 1e-6:
+                return np.zeros(3), 0.0
+            axis = np.array([1.0, 0.0, 0.0])   # antiparallel: any horizontal axis
+            s = 1.0
+        return axis / s * angle, angle
+
+    def _plan(self, t: float) -> None:
+        p = self.params
+        speeds = self._delayed_speeds(t)
+        direction = self.felt_direction(speeds, self._noise())
+        if direction is None:          # nothing felt (cue over): stay
+            self._hold(t, p.reaction_time_s)
+            return
+        distance = self.felt_distance_deg(speeds, self._noise())  # None in mode C
+        first = self._plans == 0
+        self._plans += 1
+        if first:
+            rotvec, angle = self._tilt_to_align(direction)
+            if distance is not None and angle > 0:
+                rotvec = rotvec / angle * math.radians(distance)
+            if self.mode == "C":
+                # The pose believed aligned (the plan, not its noisy execution): the
+                # centre of the later search. Wait there for the cue to stop.
+                self._search = {"home": _quat_mul(_quat_from_rotvec(rotvec), self._q)}
+                self._start_move(t, rotvec, p.probe_dwell_s)
+            else:
+                self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
+            return
+        if self.mode == "C":
+            self._plan_probe(t)
+        else:
+            self._plan_compass(t, float(distance))
+
+    def _random_horizontal(self) -> np.ndarray:
+        phi = self._rng.uniform(0.0, 2.0 * math.pi)
+        return np.array([math.cos(phi), math.sin(phi), 0.0])
+
+    def _plan_probe(self, t: float) -> None:
+        """Mode C: move to a random pose within search_radius_deg of the pose believed
+        aligned (uniform over the disc of tilts); the search does not widen."""
+        p = self.params
+        home = self._search["home"]
+        radius = math.radians(p.search_radius_deg) * math.sqrt(self._rng.uniform())
+        target = _quat_mul(_quat_from_rotvec(self._random_horizontal() * radius), home)
+        delta = _rotvec_from_quat(_quat_mul(target, _conj(self._q)))
+        self._start_move(t, delta, p.probe_dwell_s)
+
+    def _plan_compass(self, t: float, distance: float) -> None:
+        """Mode V: warmer/colder compass search with the felt distance.
+
+        From the best pose known (the base) the participant tilts by ``step`` about a
+        horizontal axis. Warmer (the vibration is weaker than at the base): that pose
+        becomes the base and it tilts on the same way. Colder: it goes back to the base,
+        feels it again (readings at the base are averaged) and tries the next direction
+        (+90, -90, 180 degrees from the last good one); after four failures in a row
+        the step halves. At a base as faint as can be told from the weakest vibration
+        it holds still for probe_dwell_s, waiting for the cue to stop.
+        """
+        p = self.params
+        st = self._search
+        res = self.resolution_deg()
+        pause = p.reaction_time_s + 3.0 * p.erm_tau_s
+        if "base_q" not in st:
+            # Right after the first (metaphor) move: this pose is the first base.
+            st.update(base_q=self._q.copy(), base_sum=distance, base_n=1,
+                      axis=self._random_horizontal(), tries=0, step=max(distance, res),
+                      at_base=True, held=False)
+        elif st["at_base"]:
+            st["base_sum"] += distance             # felt the base again
+            st["base_n"] += 1
+        else:
+            base_val = st["base_sum"] / st["base_n"]
+            if distance < base_val:                # warmer: new base, same direction
+                st.update(base_q=self._q.copy(), base_sum=distance, base_n=1, tries=0,
+                          step=max(distance, res), held=False)
+            else:                                  # colder: back to the base
+                st["tries"] += 1
+                turn = (0.5 * math.pi, math.pi, -0.5 * math.pi, math.pi)[(st["tries"] - 1) % 4]
+                a = st["axis"]
+                c, s = math.cos(turn), math.sin(turn)
+                st["axis"] = np.array([c * a[0] - s * a[1], s * a[0] + c * a[1], 0.0])
+                if st["tries"] % 4 == 0:
+                    st["step"] = max(0.5 * st["step"], 0.5 * res)
+                st["at_base"] = True
+                delta = _rotvec_from_quat(_quat_mul(st["base_q"], _conj(self._q)))
+                self._start_move(t, delta, pause)
+                return
+        base_val = st["base_sum"] / st["base_n"]
+        if st["at_base"] and base_val <= res and not st["held"]:
+            # As faint as can be told from the weakest vibration: wait for it to stop.
+            st["held"] = True
+            self._hold(t, p.probe_dwell_s)
+            return
+        target = _quat_mul(_quat_from_rotvec(st["axis"] * math.radians(st["step"])),
+                           st["base_q"])
+        delta = _rotvec_from_quat(_quat_mul(target, _conj(self._q)))
+        st["at_base"] = False
+        self._start_move(t, delta, pause)
+
+
+def _conj(q: np.ndarray) -> np.ndarray:
+    return np.array([q[0], -q[1], -q[2], -q[3]])
+
+
+# --------------------------------------------------------------------------------------
+# --source participant[:key=val,...]
+# --------------------------------------------------------------------------------------
+def parse_spec(spec: str) -> ParticipantParams:
+    """ParticipantParams from ``participant`` or ``participant:key=val,key=val``."""
+    names = [f.name for f in fields(ParticipantParams)]
+    usage = ("expected 'participant' or 'participant:key=value,...' with keys "
+             + ", ".join(names))
+    if not isinstance(spec, str):
+        raise ValueError(f"participant spec must be a string; {usage}")
+    head, sep, rest = spec.partition(":")
+    if head.strip() != "participant":
+        raise ValueError(f"participant spec {spec!r} must start with 'participant'; {usage}")
+    values: Dict[str, float] = {}
+    if sep:
+        if not rest.strip():
+            raise ValueError(f"participant spec {spec!r} has ':' but no key=value; {usage}")
+        for item in rest.split(","):
+            key, eq, val = item.partition("=")
+            key = key.strip()
+            if not eq:
+                raise ValueError(f"participant spec item {item!r} is not key=value; {usage}")
+            if key not in names:
+                raise ValueError(f"unknown participant parameter {key!r}; known: "
+                                 + ", ".join(names))
+            if key in values:
+                raise ValueError(f"participant parameter {key!r} given twice")
+            try:
+                x = float(val)
+            except ValueError:
+                raise ValueError(f"participant parameter {key}={val.strip()!r} is not a number") \
+                    from None
+            values[key] = x
+    params = ParticipantParams(**values)
+    _validate_params(params)
+    return params
+
+
+__all__ = ["ParticipantParams", "VirtualParticipant", "parse_spec", "quaternion_angle_deg",
+           "PWM_FLOOR", "PWM_RANGE"]

@@ -1,0 +1,325 @@
+"""The virtual participant (graspguide.participant): determinism, ERM lag, reaction delay,
+speed bound, mode C vs V, input errors, and the closed loop against the C++ core.
+
+Everything the participant produces is SIMULATED (never human data).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from graspguide import _core
+from graspguide import scene as gs
+from graspguide.participant import (PWM_FLOOR, ParticipantParams, VirtualParticipant,
+                                    parse_spec, quaternion_angle_deg)
+
+EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "examples")
+SCENE4 = gs.load_scene(os.path.join(EXAMPLES, "scene_paper_4.toml"))
+CONTACTS4 = [list(c) for c in SCENE4.contacts]
+Y_AXIS = list(SCENE4.y_axis)
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
+THRESHOLD_DEG, HOLD_S, TIMEOUT_S = 3.0, 0.5, 90.0
+
+
+def _wrenches(n: int, seed: int):
+    """Seeded unit forces (N), some with a moment (N m) about the centroid."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        f = rng.normal(size=3)
+        f /= np.linalg.norm(f)
+        m = rng.normal(size=3) * 0.01 if i % 3 == 2 else np.zeros(3)
+        out.append([float(v) for v in f] + [float(v) for v in m])
+    return out
+
+
+def closed_loop(wrench, mode="V", policy="F", seed=0, spec="participant",
+                contacts=CONTACTS4, start=IDENTITY, timeout_s=TIMEOUT_S, record=False):
+    """The core as the device: PWM from the current orientation, fed to the next step.
+
+    Returns (success, time_s, poses) with the trial rule of docs/algorithm.md step 7
+    (error <= 3 deg held 0.5 s, 90 s timeout)."""
+    vp = VirtualParticipant.from_spec(spec, seed)
+    vp.begin_trial(contacts=contacts, y_axis=Y_AXIS, wrench=wrench, policy=policy,
+                   mode=mode, start_quat=start)
+    q = start
+    entry = None
+    poses = []
+    n = int(round(timeout_s * vp.rate_hz))
+    for i in range(n + 1):
+        t = i / vp.rate_hz
+        res = _core.solve(contacts=contacts, wrench=wrench, policy=policy, mode=mode,
+                          constraints="paper", orientation=list(q), y_axis=Y_AXIS)
+        assert res["status"] == "ok", res["status"]
+        if res["error_deg"] <= THRESHOLD_DEG:
+            entry = t if entry is None else entry
+            if t - entry >= HOLD_S:
+                return True, t, poses
+        else:
+            entry = None
+        q = vp.step(t, res["pwm"])
+        if record:
+            poses.append((t, q, list(res["pwm"])))
+    return False, timeout_s, poses
+
+
+def open_loop(vp, pwm, seconds, t0=0.0):
+    """Feed a constant PWM for `seconds`; return [(t, quat)]."""
+    out = []
+    n = int(round(seconds * vp.rate_hz))
+    for i in range(n):
+        t = t0 + i / vp.rate_hz
+        out.append((t, vp.step(t, pwm)))
+    return out
+
+
+def new_participant(spec="participant", seed=1, mode="V", policy="F", wrench=None):
+    vp = VirtualParticipant.from_spec(spec, seed)
+    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=wrench or [0, 0, -1, 0, 0, 0],
+                   policy=policy, mode=mode, start_quat=IDENTITY)
+    return vp
+
+
+# --------------------------------------------------------------------------------------
+def test_labelled_simulated_and_defaults():
+    vp = VirtualParticipant.from_spec("participant", 3)
+    assert VirtualParticipant.SIMULATED is True and vp.SIMULATED is True
+    assert vp.params == ParticipantParams()
+    assert vp.rate_hz == 100.0
+    p = parse_spec("participant:reaction_time_s=0.4, rate_hz=50")
+    assert p.reaction_time_s == 0.4 and p.rate_hz == 50.0
+    assert VirtualParticipant.from_spec("participant:rate_hz=50", 0).rate_hz == 50.0
+
+
+def test_seeded_determinism():
+    w = _wrenches(1, 7)[0]
+    a = closed_loop(w, seed=11, timeout_s=8.0, record=True)[2]
+    b = closed_loop(w, seed=11, timeout_s=8.0, record=True)[2]
+    c = closed_loop(w, seed=12, timeout_s=8.0, record=True)[2]
+    assert len(a) > 100
+    assert [q for _, q, _ in a] == [q for _, q, _ in b]
+    n = min(len(a), len(c))
+    assert max(quaternion_angle_deg(a[i][1], c[i][1]) for i in range(n)) > 0.5
+
+
+def test_wrench_is_not_used_for_decisions():
+    """Same PWM stream, different wrench argument: the same trajectory."""
+    pwm = [150, 0, 120, 90]
+    a = open_loop(new_participant(wrench=[0, 0, -1, 0, 0, 0]), pwm, 3.0)
+    b = open_loop(new_participant(wrench=[1, 0, 0, 0, 0.1, 0]), pwm, 3.0)
+    assert a == b
+
+
+@pytest.mark.parametrize("tau", [0.06, 0.1])
+def test_erm_lag_reaches_63_percent_after_tau(tau):
+    vp = new_participant(spec=f"participant:erm_tau_s={tau}")
+    dt = 1.0 / vp.rate_hz
+    target = 200.0
+    crossed = None
+    for i in range(100):
+        t = i * dt
+        vp.step(t, [int(target), 0, 0, 0])
+        speed = vp.motor_speeds()[0]
+        assert vp.motor_speeds()[1:] == [0.0, 0.0, 0.0]
+        if crossed is None and speed >= (1 - math.exp(-1)) * target - 1e-9:
+            crossed = t + dt          # the first sample's PWM acts over the preceding dt
+    assert crossed == pytest.approx(tau, abs=dt)
+    assert vp.motor_speeds()[0] == pytest.approx(target, rel=1e-3)
+    # And back down (stop) with the same lag.
+    t0 = 100 * dt
+    vp.step(t0, [0, 0, 0, 0])
+    for i in range(1, 200):
+        vp.step(t0 + i * dt, [0, 0, 0, 0])
+        if vp.motor_speeds()[0] <= math.exp(-1) * target:
+            assert (i + 1) * dt == pytest.approx(tau, abs=dt)
+            break
+    else:
+        pytest.fail("the motor never spun down")
+
+
+@pytest.mark.parametrize("mode", ["C", "V"])
+@pytest.mark.parametrize("spec,tremor", [("participant:tremor_amplitude_deg=0", False),
+                                         ("participant", True)])
+def test_no_rotation_before_reaction_time(spec, tremor, mode):
+    vp = new_participant(spec=spec, mode=mode)
+    rt = vp.params.reaction_time_s
+    silent = open_loop(vp, [0, 0, 0, 0], 1.0)                 # no cue for 1 s
+    cue_t = 1.0
+    cued = open_loop(vp, [200, 0, 150, 100], 4.0, t0=cue_t)
+    allowance = 2 * vp.params.tremor_amplitude_deg + 1e-9
+    for t, q in silent + [p for p in cued if p[0] < cue_t + rt]:
+        angle = quaternion_angle_deg(q, IDENTITY)
+        if tremor:
+            assert angle <= allowance
+        else:
+            assert angle == 0.0
+    if tremor:   # the tremor is there, and of the right size
+        assert max(quaternion_angle_deg(q, IDENTITY) for _, q in silent) > 0.2 * allowance
+    # ... and the hand does turn afterwards.
+    assert max(quaternion_angle_deg(q, IDENTITY) for _, q in cued) > 10.0
+
+
+def test_angular_speed_is_bounded():
+    p = ParticipantParams()
+    tremor_speed = 2 * math.pi * p.tremor_frequency_hz * p.tremor_amplitude_deg * math.sqrt(2)
+    bound = p.peak_speed_deg_s + tremor_speed
+    peak = 0.0
+    for w in _wrenches(4, 3):
+        for mode in ("V", "C"):
+            _, _, poses = closed_loop(w, mode=mode, seed=5, timeout_s=20.0, record=True)
+            for (t0, q0, _), (t1, q1, _) in zip(poses, poses[1:]):
+                peak = max(peak, quaternion_angle_deg(q0, q1) / (t1 - t0))
+    assert peak <= bound * (1 + 1e-9)
+    assert peak > 0.5 * p.peak_speed_deg_s      # the bound is actually approached
+
+
+def test_speed_bound_follows_the_parameter():
+    _, _, poses = closed_loop(_wrenches(1, 3)[0], seed=5, timeout_s=10.0, record=True,
+                              spec="participant:peak_speed_deg_s=30,tremor_amplitude_deg=0")
+    speeds = [quaternion_angle_deg(a[1], b[1]) / (b[0] - a[0]) for a, b in zip(poses, poses[1:])]
+    assert max(speeds) <= 30.0 * (1 + 1e-9)
+    assert max(speeds) > 15.0
+
+
+def _steady(vp, pwm):
+    open_loop(vp, pwm, 1.5)            # 25 tau: the ERM state equals the PWM to ~1e-11
+    return vp.motor_speeds()
+
+
+def _scaled(pwm, c):
+    return [0 if v == 0 else int(round(PWM_FLOOR + c * (v - PWM_FLOOR))) for v in pwm]
+
+
+def test_mode_c_ignores_magnitude_mode_v_uses_it():
+    base = [170, 0, 130, 90]               # above-floor strengths 100, 0, 60, 20
+    half = _scaled(base, 0.5)              # 120, 0, 100, 80: same relative strengths
+    assert half == [120, 0, 100, 80]
+    noise = np.array([0.3, -1.2, 0.8, 0.1])
+    for mode in ("C", "V"):
+        s_base = _steady(new_participant(mode=mode), base)
+        s_half = _steady(new_participant(mode=mode), half)
+        vp = new_participant(mode=mode)
+        d_base = vp.felt_direction(s_base, noise)
+        d_half = vp.felt_direction(s_half, noise)
+        assert np.allclose(d_base, d_half, atol=1e-9)     # direction: relative strengths only
+        if mode == "C":
+            assert vp.felt_distance_deg(s_base) is None   # no magnitude at all in C
+        else:
+            far, near = vp.felt_distance_deg(s_base), vp.felt_distance_deg(s_half)
+            assert far == pytest.approx(2 * math.degrees(math.asin(
+                math.sqrt(100 ** 2 + 60 ** 2 + 20 ** 2) / 185)), rel=1e-6)
+            assert near < 0.6 * far                        # V: weaker means closer
+    # Which motors vibrate matters in both modes.
+    vp = new_participant(mode="C")
+    other = vp.felt_direction(_steady(new_participant(mode="C"), [0, 170, 130, 90]))
+    assert math.degrees(math.acos(float(np.clip(other @ vp.felt_direction(
+        _steady(new_participant(mode="C"), base)), -1, 1)))) > 20.0
+
+
+def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
+    """Whole behaviour, open loop: the first movement of a C participant barely depends on
+    the PWM scale (only through the ERM rise before its first percept); a V participant
+    moves much less when the vibration is weaker (it feels closer)."""
+    base, half = [170, 0, 130, 90], _scaled([170, 0, 130, 90], 0.5)
+    spec = "participant:tremor_amplitude_deg=0,motor_noise_frac=0"
+    ends = {}
+    for mode in ("C", "V"):
+        for name, pwm in (("base", base), ("half", half)):
+            vp = new_participant(spec=spec, mode=mode, seed=4)
+            ends[mode, name] = open_loop(vp, pwm, 1.6)[-1][1]
+    assert quaternion_angle_deg(ends["C", "base"], ends["C", "half"]) < 1.0
+    v_base = quaternion_angle_deg(ends["V", "base"], IDENTITY)
+    v_half = quaternion_angle_deg(ends["V", "half"], IDENTITY)
+    assert v_half < 0.7 * v_base
+
+
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("spec,words", [
+    ("participant:bogus=1", ["unknown participant parameter", "reaction_time_s"]),
+    ("participant:reaction_time_s=abc", ["not a number"]),
+    ("participant:reaction_time_s=-0.1", ["reaction_time_s", "> 0"]),
+    ("participant:erm_tau_s=nan", ["erm_tau_s", "finite"]),
+    ("participant:weber_frac=1.5", ["weber_frac", "< 1"]),
+    ("participant:rate_hz", ["not key=value"]),
+    ("participant:", ["no key=value"]),
+    ("human", ["must start with 'participant'"]),
+    ("participant:rate_hz=100,rate_hz=50", ["given twice"]),
+])
+def test_bad_spec_says_what_to_fix(spec, words):
+    with pytest.raises(ValueError) as e:
+        VirtualParticipant.from_spec(spec, 0)
+    for w in words:
+        assert w in str(e.value)
+
+
+@pytest.mark.parametrize("pwm,words", [
+    ([float("nan"), 0, 0, 0], ["finite"]),
+    ([0, 0, 0], ["4 values"]),
+    ([0, 0, 0, 0, 0], ["4 values"]),
+    ([0, 0, 300, 0], ["0..255"]),
+    ([0, -1, 0, 0], ["0..255"]),
+    (["a", 0, 0, 0], ["numbers"]),
+    ("1234", ["numbers"]),
+])
+def test_bad_pwm_is_a_clear_error(pwm, words):
+    vp = new_participant()
+    with pytest.raises(ValueError) as e:
+        vp.step(0.0, pwm)
+    for w in words:
+        assert w in str(e.value)
+
+
+def test_bad_trial_inputs():
+    vp = VirtualParticipant.from_spec("participant", 0)
+    with pytest.raises(RuntimeError):
+        vp.step(0.0, [0, 0, 0, 0])
+    good = dict(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0], policy="F",
+                mode="V", start_quat=IDENTITY)
+    for key, bad in (("policy", "G"), ("mode", "X"), ("contacts", [[0, 0, 0]] * 2),
+                     ("wrench", [0, 0, 1]), ("wrench", [0, 0, float("inf"), 0, 0, 0]),
+                     ("start_quat", [0, 0, 0, 0]), ("y_axis", [0, 0, 0])):
+        with pytest.raises(ValueError):
+            vp.begin_trial(**{**good, key: bad})
+    vp.begin_trial(**good)
+    vp.step(1.0, [0, 0, 0, 0])
+    with pytest.raises(ValueError, match="backwards"):
+        vp.step(0.5, [0, 0, 0, 0])
+    with pytest.raises(ValueError):
+        VirtualParticipant(ParticipantParams(rate_hz=0.0), 0)
+
+
+# --------------------------------------------------------------------------------------
+def test_closed_loop_with_the_core_reaches_threshold_in_mode_v(report_figure):
+    """The paper's 4-contact scene, 8 seeded wrenches, mode V, both policies: most trials
+    reach 3 deg (held 0.5 s) within 90 s of virtual time."""
+    results = {}
+    for policy in ("F", "Fperp"):
+        for i, w in enumerate(_wrenches(8, 2026)):
+            results[policy, i] = closed_loop(w, mode="V", policy=policy, seed=100 + i)[:2]
+    for policy in ("F", "Fperp"):
+        rows = [results[policy, i] for i in range(8)]
+        ok = [t for s, t in rows if s]
+        report_figure(f"participant closed loop V {policy} (4 contacts, 8 wrenches)",
+                      f"{len(ok)}/8 reached 3 deg; mean time of successes "
+                      f"{np.mean(ok):.1f} s, max {max(ok):.1f} s")
+        assert len(ok) >= 6, rows
+
+
+def test_closed_loop_mode_c_runs_and_is_slower_than_v(report_figure):
+    """Mode C with the same wrenches: reported, and on average not faster than V."""
+    times = {"C": [], "V": []}
+    succ = {"C": 0, "V": 0}
+    for i, w in enumerate(_wrenches(4, 2026)):
+        for mode in ("C", "V"):
+            s, t = closed_loop(w, mode=mode, policy="F", seed=200 + i)[:2]
+            times[mode].append(t)
+            succ[mode] += s
+    report_figure("participant closed loop C vs V F (4 contacts, 4 wrenches)",
+                  f"C {succ['C']}/4 mean {np.mean(times['C']):.1f} s; "
+                  f"V {succ['V']}/4 mean {np.mean(times['V']):.1f} s (90 s = timeout)")
+    assert np.mean(times["V"]) <= np.mean(times["C"])
