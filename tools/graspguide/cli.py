@@ -4,7 +4,9 @@
 line per request, in order, flushed after each line, so it can be driven through a pipe
 one request at a time; with ``--engine device --port PORT|sim`` a device answers instead
 of the core. ``graspguide ports`` lists serial ports (and ``sim``), ``graspguide info``
-identifies a device. See ``graspguide COMMAND --help``.
+identifies a device, ``graspguide stream`` runs one trial, ``graspguide trial`` runs a
+participant's trials of a study protocol (graspguide.runner, docs/study.md). See
+``graspguide COMMAND --help``.
 """
 
 from __future__ import annotations
@@ -389,6 +391,10 @@ def build_parser() -> argparse.ArgumentParser:
     info.set_defaults(handler=_cmd_info, command_parser=info)
     _add_stream_parser(sub)
     _add_bench_parser(sub)
+    _add_trial_parser(sub)
+    # ---- `graspguide demo` (issue 5, item 6) will be registered HERE: ---------------------
+    # _add_demo_parser(sub)   # a simulated study of the paper's protocol, end to end
+    # -----------------------------------------------------------------------------------------
     return parser
 
 
@@ -906,6 +912,153 @@ def _cmd_stream(args) -> int:
                   f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
                   f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
                   f"{summary['dropped']} dropped)")
+    return code
+
+
+# --------------------------------------------------------------------------------------
+# graspguide trial (the study runner, graspguide.runner)
+# --------------------------------------------------------------------------------------
+TRIAL_DESCRIPTION = """\
+Run one participant's trials of a study protocol (docs/study.md) on a device: the plan
+(familiarization, then one session per contact count x modality, in the participant's
+counterbalanced order) is derived from --protocol and --participant; each trial is
+SET_SCENE (when the condition changes), START_TRIAL, poses streamed from --source until
+the TRIAL_RESULT. Progress: trial n of N, the condition and the live error (plain lines
+when stdout is not a terminal). After each session the six NASA-TLX scales (MD, TD, PD,
+PE, EF, FR; integers 1-21) are asked on stdin, or read from --tlx, or -- for a simulated
+source without --tlx -- recorded as absent (null), never invented.
+
+Writes OUT/study.json, OUT/PID/trials.jsonl (one fsync'ed line per completed trial),
+OUT/PID/tlx.jsonl, OUT/PID/frames/trial-NNNN.csv, OUT/PID/plan.json, OUT/PID/runs.jsonl.
+Run the same command again after a crash or Ctrl-C: completed trials are skipped, none
+is lost or repeated. STOP is sent on every way out.
+
+sources: participant[:PARAMS] (the virtual participant, closed loop), synthetic[:...] and
+         replay:FILE.csv (open loop; the last pose is held until the device ends the
+         trial), plugin:MODULE:CLASS[:ARG] (a sources.TrackerAdapter -- a live tracker, a
+         person -- or a closed-loop class with begin_trial/step).
+With --port sim the simulated device runs on its virtual clock for simulated sources (a
+90 s trial takes about a second).
+
+--tlx FILE: JSON Lines, one object per session, e.g.
+  {"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}
+  (optional "participant", "modality", "k" are checked against the plan)."""
+
+TRIAL_EPILOG = """\
+examples:
+  graspguide trial --protocol protocols/paper.toml --participant U1 --port sim \\
+      --source participant --out runs/pilot
+  graspguide trial --protocol protocols/paper.toml --participant U3 --port /dev/ttyACM0 \\
+      --source plugin:my_lab.vicon:ViconHand --out runs/study --tlx u3_tlx.jsonl
+
+exit status: 0 when every trial and questionnaire is done, 1 on a link or run error, 2 on
+a usage error (bad protocol, participant, source or TLX file), 130 on Ctrl-C (run the
+same command again to resume)."""
+
+
+def _add_trial_parser(sub) -> None:
+    p = sub.add_parser("trial", help="run a participant's trials of a study protocol "
+                                     "(resumable; NASA-TLX after each session)",
+                       description=TRIAL_DESCRIPTION, epilog=TRIAL_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--protocol", required=True, metavar="FILE",
+                   help="study protocol (protocols/paper.toml; format in docs/study.md)")
+    p.add_argument("--participant", required=True, metavar="PID",
+                   help="participant id ending in a number (U1, U2, ...): picks the "
+                        "counterbalanced order")
+    _add_port_arguments(p, required=True)
+    p.add_argument("--source", required=True, metavar="SOURCE",
+                   help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or "
+                        "plugin:MODULE:CLASS[:ARG]")
+    p.add_argument("--out", default="study", metavar="DIR",
+                   help="study folder (default ./study); the participant's files go to "
+                        "DIR/PID/")
+    p.add_argument("--tlx", metavar="FILE", default=None,
+                   help="NASA-TLX answers, JSON Lines, one object per session (see above)")
+    p.set_defaults(handler=_cmd_trial, command_parser=p)
+
+
+def _cmd_trial(args) -> int:
+    import signal
+
+    from .protocol_file import ProtocolFileError, load_protocol, participant_number
+    from .runner import (Progress, RunnerError, StudyRunner, load_tlx_file,
+                         open_runner_source, summary_lines)
+    from .transport import SIM_PORT as _SIM, open_port
+
+    def usage(message: str) -> int:
+        print(f"graspguide trial: error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+    try:
+        protocol = load_protocol(args.protocol)
+        participant_number(args.participant)
+        source = open_runner_source(args.source, protocol, args.participant)
+        runner_tlx = None
+        if args.tlx is not None:
+            from .protocol_file import session_order
+
+            runner_tlx = load_tlx_file(args.tlx, args.participant,
+                                       session_order(protocol, args.participant))
+    except ProtocolFileError as e:
+        return usage(str(e))
+    except RunnerError as e:
+        return usage(str(e))
+    virtual_clock = args.port == _SIM and source.simulated and not source.live
+    kwargs = {"virtual_clock": True} if virtual_clock else {}
+
+    # SIGTERM (and SIGHUP) end the run like Ctrl-C: STOP, then exit; trials are kept.
+    def _interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    transport = None
+    code = EXIT_OK
+    runner = None
+    try:
+        try:
+            transport = open_port(args.port, baudrate=args.baud, **kwargs)
+        except LinkError as e:
+            return _fail("trial", e)
+        from .device import DeviceClient
+
+        client = DeviceClient(transport, timeout=args.timeout)
+        try:
+            runner = StudyRunner(protocol, args.participant, args.out, source, client,
+                                 virtual_clock, tlx=runner_tlx, progress=Progress(),
+                                 protocol_file=args.protocol, port=args.port)
+            result = runner.run()
+            print(f"{args.participant}: all {result['planned']} trials done ({result['ran']} "
+                  f"run now, {result['skipped']} from earlier runs); "
+                  f"{os.path.join(args.out, args.participant)}")
+            for line in summary_lines(args.out, args.participant):
+                print(line)
+        except ProtocolFileError as e:
+            code = usage(str(e))
+        except RunnerError as e:
+            print(f"graspguide trial: error: {e}", file=sys.stderr)
+            code = EXIT_USAGE if e.usage else EXIT_FAILURE
+        except LinkError as e:
+            print(f"graspguide trial: error: {e}", file=sys.stderr)
+            code = EXIT_FAILURE
+        except KeyboardInterrupt:
+            code = EXIT_INTERRUPTED
+            done = "" if runner is None else f" after {runner.ran} trials"
+            print(f"\ngraspguide trial: interrupted{done}; completed trials are saved: run "
+                  "the same command again to resume", file=sys.stderr)
+        finally:
+            try:
+                client.stop()
+            except (LinkError, OSError) as e:
+                print(f"graspguide trial: STOP failed: {e}", file=sys.stderr)
+                code = code or EXIT_FAILURE
+            except KeyboardInterrupt:
+                pass
+    finally:
+        if transport is not None:
+            transport.close()
+        for s, h in old.items():
+            signal.signal(s, h)
     return code
 
 

@@ -1,0 +1,534 @@
+"""`graspguide trial` (graspguide.runner): a small protocol run against the simulated device
+with a closed-loop test source, the output layout the analysis reads, resume after
+SIGTERM and SIGKILL (every trial exactly once), a half-written last line, NASA-TLX from a
+file, interactively and absent for simulated sources, and STOP on every way out."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import subprocess_env
+
+from graspguide import cli
+from graspguide import protocol_file as pf
+from graspguide import runner as rn
+from graspguide.sources import aligned_quaternion, quat_angle_deg, slerp
+
+TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+# --------------------------------------------------------------------------------------
+# A closed-loop test double of the participant model (not the virtual participant): while
+# any motor runs it turns the hand towards the orientation that the core says aligns the
+# force with gravity, at a bounded angular speed.
+# --------------------------------------------------------------------------------------
+class AligningHand:
+    SIMULATED = True
+
+    def __init__(self, rate_hz: float = 100.0, speed_deg_s: float = 120.0,
+                 delay_s: float = 0.0, fail_at: int = 0, fail_with: str = ""):
+        self.rate_hz = rate_hz
+        self.speed = speed_deg_s
+        self.delay = delay_s
+        self.fail_at = fail_at          # raise at this many steps (over all trials)
+        self.fail_with = fail_with
+        self.steps = 0
+        self.trials = 0
+
+    @classmethod
+    def from_spec(cls, spec: str, seed: int) -> "AligningHand":
+        kw = {}
+        names = {"rate": "rate_hz", "speed": "speed_deg_s", "delay": "delay_s"}
+        for item in filter(None, spec.split(",")):
+            key, _, value = item.partition("=")
+            if key not in names:
+                raise ValueError(f"AligningHand: unknown option {key!r}")
+            kw[names[key]] = float(value)
+        return cls(**kw)
+
+    def begin_trial(self, *, contacts, y_axis, wrench, policy, mode, start_quat):
+        self.target = aligned_quaternion(contacts, wrench, policy, "paper", y_axis)
+        self.q = np.asarray(start_quat, dtype=float)
+        self.t = 0.0
+        self.trials += 1
+
+    def step(self, t_s, pwm):
+        self.steps += 1
+        if self.fail_at and self.steps >= self.fail_at:
+            if self.fail_with == "interrupt":
+                raise KeyboardInterrupt
+            raise RuntimeError("source failed")
+        if self.delay:
+            time.sleep(self.delay)
+        dt, self.t = t_s - self.t, t_s
+        if any(pwm):
+            angle = quat_angle_deg(self.q, self.target)
+            if angle > 1e-9:
+                self.q = slerp(self.q, self.target, min(1.0, self.speed * dt / angle))
+        return tuple(float(x) for x in self.q)
+
+
+class HumanLike(AligningHand):
+    SIMULATED = False
+
+
+SMALL = """
+[study]
+name = "small"
+seed = 11
+pose_rate_hz = 100.0
+
+[trial]
+threshold_deg = 3.0
+hold_s = 0.5
+timeout_s = {timeout}
+
+[hand]
+units = "m"
+
+[hand.k3]
+thumb  = [0.045, 0.045, 0.035]
+index  = [0.015, 0.095, 0.040]
+middle = [-0.010, 0.100, 0.040]
+
+[conditions]
+contact_counts = [3]
+
+[wrenches]
+count = 2
+single_motor = 1
+
+[familiarization]
+trials = {fam}
+"""
+
+
+def small_protocol(tmp_path, timeout=20.0, fam=1, count=2):
+    path = tmp_path / "small.toml"
+    text = SMALL.format(timeout=timeout, fam=fam).replace("count = 2", f"count = {count}")
+    path.write_text(text)
+    return str(path), pf.load_protocol(str(path))
+
+
+class RecordingClient:
+    """A DeviceClient whose requests are recorded (names, in order)."""
+
+    def __init__(self, client):
+        self._c = client
+        self.calls = []
+
+    def __getattr__(self, name):
+        attr = getattr(self._c, name)
+        if name in ("hello", "set_scene", "start_trial", "stop"):
+            def wrapped(*a, **kw):
+                self.calls.append(name)
+                return attr(*a, **kw)
+            return wrapped
+        return attr
+
+
+@pytest.fixture
+def sim():
+    from graspguide.transport import SimulatedDevice
+
+    with SimulatedDevice(virtual_clock=True, start=True) as dev:
+        yield dev
+
+
+def make_runner(protocol, out, source_model, client, participant="U1", tlx=None, ask=None,
+                path="small.toml"):
+    out_text = io.StringIO()
+    err = io.StringIO()
+    runner = rn.StudyRunner(protocol, participant, str(out), rn.ClosedLoopSource(
+        source_model, "plugin:test_runner:AligningHand"), client, virtual_clock=True, tlx=tlx,
+        ask=ask, progress=rn.Progress(out=out_text, tty=False), protocol_file=path, err=err)
+    return runner, out_text, err
+
+
+def lines(path):
+    with open(path, encoding="utf-8") as f:
+        return [json.loads(line) for line in f]
+
+
+# --------------------------------------------------------------------------------------
+# A full run
+# --------------------------------------------------------------------------------------
+def test_full_small_run_and_output_layout(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path)
+    client = RecordingClient(DeviceClient(sim))
+    out = tmp_path / "out"
+    runner, text, err = make_runner(protocol, out, AligningHand(), client, path=path)
+    t0 = time.monotonic()
+    result = runner.run()
+    elapsed = time.monotonic() - t0
+    plan = pf.plan(protocol, "U1")
+    assert len(plan) == 1 + 4 * 2
+    assert result == {"participant": "U1", "planned": 9, "ran": 9, "skipped": 0,
+                      "completed": 9}
+    recs = lines(out / "U1" / "trials.jsonl")
+    assert [r["trial_index"] for r in recs] == list(range(1, 10))
+    for r, t in zip(recs, plan):
+        for key in rn.TRIAL_FIELDS:
+            assert key in r, key
+        assert r["participant"] == "U1" and r["simulated"] is True
+        assert (r["session"], r["k"], r["policy"], r["mode"], r["modality"], r["wrench_id"],
+                r["single_motor"], r["familiarization"]) == (
+            t.session, t.k, t.policy, t.mode, t.modality, t.wrench_id, t.single_motor,
+            t.familiarization)
+        assert r["modality"] == f"{r['policy']}+{r['mode']}"
+        assert r["wrench"] == list(t.wrench) and len(r["wrench"]) == 6
+        assert r["success"] is True and 0.5 <= r["completion_s"] < 20.0
+        assert isinstance(r["completion_s"], float)
+        assert r["config_hash"] == protocol.config_hash
+        frames = out / "U1" / "frames" / f"trial-{r['trial_index']:04d}.csv"
+        with open(frames) as f:
+            rows = f.read().splitlines()
+        assert rows[0] == ",".join(rn.FRAME_COLUMNS)
+        assert len(rows) - 1 == r["poses"]
+        last = rows[-1].split(",")
+        assert float(last[rn.FRAME_COLUMNS.index("error_deg")]) < 3.0
+    assert not [n for n in os.listdir(out / "U1" / "frames") if n.endswith(".tmp")]
+    # one SET_SCENE per condition change (the familiarization trial has session 1's)
+    assert client.calls.count("set_scene") == 4
+    assert client.calls.count("start_trial") == 9
+    assert client.calls[-1] == "stop"
+    tlx = lines(out / "U1" / "tlx.jsonl")
+    assert [t["session"] for t in tlx] == [1, 2, 3, 4]
+    for t in tlx:
+        assert t["scales"] is None and t["simulated"] is True
+        assert set(t) >= {"participant", "simulated", "session", "k", "modality", "mode",
+                          "scales"}
+    study = json.load(open(out / "study.json"))
+    assert study["config_hash"] == protocol.config_hash
+    assert study["protocol"] == protocol.to_dict()
+    assert len(study["wrenches"]) == 2
+    assert sum(w["class"] == "single" for w in study["wrenches"]) == 1
+    printed = text.getvalue().splitlines()
+    assert printed[0].startswith("[1/9] familiarization ")
+    assert any(p.startswith("[9/9] session 4/4 ") for p in printed)
+    runs = lines(out / "U1" / "runs.jsonl")
+    assert [r["event"] for r in runs] == ["start", "end"]
+    assert runs[-1]["outcome"] == "complete"
+    assert elapsed < 15.0
+    # running again does nothing and repeats nothing
+    client2 = RecordingClient(DeviceClient(sim))
+    runner2, text2, _ = make_runner(protocol, out, AligningHand(), client2, path=path)
+    assert runner2.run()["ran"] == 0
+    assert "start_trial" not in client2.calls and client2.calls[-1] == "stop"
+    assert len(lines(out / "U1" / "trials.jsonl")) == 9
+    assert "resuming U1: 9 of 9" in text2.getvalue()
+
+
+def test_open_loop_source_held_until_timeout(tmp_path, sim):
+    """A replay of 0.2 s at the start pose (every wrench starts >= 20 degrees off): its
+    last pose is held until the device ends the trial; a failure is recorded with
+    completion_s = timeout_s."""
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, timeout=3.0, fam=0)
+    replay = tmp_path / "still.csv"
+    replay.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i / 100},1,0,0,0\n" for i in range(21)))
+    source = rn.open_runner_source(f"replay:{replay}", protocol, "U1")
+    assert source.simulated and not source.closed_loop
+    out = tmp_path / "out"
+    runner = rn.StudyRunner(protocol, "U1", str(out), source, DeviceClient(sim), True,
+                            progress=rn.Progress(out=io.StringIO(), tty=False))
+    runner.run()
+    recs = lines(out / "U1" / "trials.jsonl")
+    assert len(recs) == 8
+    assert all(r["success"] is False and r["completion_s"] == 3.0 for r in recs)
+    assert all(r["poses"] >= 300 for r in recs)
+
+
+# --------------------------------------------------------------------------------------
+# Resume: SIGTERM, SIGKILL, damaged last line
+# --------------------------------------------------------------------------------------
+def _trial_cmd(path, out, extra=()):
+    return [sys.executable, "-m", "graspguide", "trial", "--protocol", path, "--participant",
+            "U2", "--port", "sim", "--source",
+            "plugin:test_runner:AligningHand:delay=0.002", "--out", str(out), *extra]
+
+
+def _env():
+    env = subprocess_env()
+    env["PYTHONPATH"] = TESTS_DIR      # the test source; graspguide stays the installed one
+    return env
+
+
+def _wait_lines(path, n, proc, limit=30.0):
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline:
+        if os.path.exists(path):
+            with open(path, "rb") as f:
+                if f.read().count(b"\n") >= n:
+                    return
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.02)
+    raise AssertionError(f"{path}: fewer than {n} lines after {limit} s")
+
+
+def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
+    path, protocol = small_protocol(tmp_path, count=3)
+    out = tmp_path / "out"
+    trials = out / "U2" / "trials.jsonl"
+    planned = len(pf.plan(protocol, "U2"))
+    assert planned == 13
+    # 1) SIGTERM: handled like Ctrl-C (STOP, exit 130, the run's end logged)
+    p = subprocess.Popen(_trial_cmd(path, out), env=_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _wait_lines(trials, 2, p)
+        p.send_signal(signal.SIGTERM)
+        _, stderr = p.communicate(timeout=20)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 130, stderr
+    assert "interrupted" in stderr and "run the same command again" in stderr
+    assert lines(out / "U2" / "runs.jsonl")[-1]["outcome"] == "interrupted"
+    # 2) SIGKILL the runner and its simulated device (its process group) mid-trial
+    p = subprocess.Popen(_trial_cmd(path, out), env=_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        before = trials.read_bytes().count(b"\n")
+        _wait_lines(trials, before + 3, p)
+        time.sleep(0.05)                           # into the next trial
+        os.killpg(p.pid, signal.SIGKILL)
+        p.wait(timeout=10)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == -signal.SIGKILL
+    killed_bytes = trials.read_bytes()
+    n_killed = killed_bytes.count(b"\n")
+    assert 5 <= n_killed < planned
+    # 3) the same command again completes the study
+    p = subprocess.run(_trial_cmd(path, out), env=_env(), capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert f"resuming U2: {n_killed} of {planned}" in p.stdout
+    final = trials.read_bytes()
+    assert final.startswith(killed_bytes)          # append-only: nothing rewritten
+    recs = lines(trials)
+    assert sorted(r["trial_index"] for r in recs) == list(range(1, planned + 1))
+    assert [r["trial_index"] for r in recs] == list(range(1, planned + 1))
+    tlx = lines(out / "U2" / "tlx.jsonl")
+    assert sorted(t["session"] for t in tlx) == [1, 2, 3, 4]
+    frames = os.listdir(out / "U2" / "frames")
+    assert sorted(frames) == [f"trial-{i:04d}.csv" for i in range(1, planned + 1)]
+    runs = lines(out / "U2" / "runs.jsonl")
+    starts = [r for r in runs if r["event"] == "start"]
+    assert len(starts) == 3 and starts[-1]["completed_before"] == n_killed
+    assert runs[-1]["outcome"] == "complete"
+
+
+def test_half_written_last_line_is_reported_and_rerun(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0)
+    out = tmp_path / "out"
+    runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
+    runner.run()
+    trials = out / "U1" / "trials.jsonl"
+    data = trials.read_bytes()
+    cut = data[:-40]                               # the last line loses its end
+    trials.write_bytes(cut)
+    good = cut[:cut.rindex(b"\n") + 1]
+    runner, text, err = make_runner(protocol, out, AligningHand(), DeviceClient(sim),
+                                    path=path)
+    assert runner.run()["ran"] == 1
+    assert "half-written" in err.getvalue() and "trials.jsonl.damaged-" in err.getvalue()
+    aside = [n for n in os.listdir(out / "U1") if n.startswith("trials.jsonl.damaged-")]
+    assert len(aside) == 1
+    assert (out / "U1" / aside[0]).read_bytes() == cut[len(good):]
+    recs = lines(trials)
+    assert sorted(r["trial_index"] for r in recs) == list(range(1, 9))
+    assert trials.read_bytes().startswith(good)
+    start = [r for r in lines(out / "U1" / "runs.jsonl") if r["event"] == "start"][-1]
+    assert start["damaged"] and "half-written" in start["damaged"][0]
+
+
+def test_damaged_line_before_the_last_stops_the_run(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0)
+    out = tmp_path / "out"
+    (out / "U1").mkdir(parents=True)
+    (out / "U1" / "trials.jsonl").write_text('{"trial_index": 1\n{"trial_index": 2}\n')
+    runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
+    with pytest.raises(rn.RunnerError, match="line 1 is damaged"):
+        runner.run()
+
+
+def test_other_protocol_or_mixed_data_refused(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    out = tmp_path / "out"
+    runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
+    runner.run()
+    other = pf.loads_protocol(open(path).read().replace("seed = 11", "seed = 12"))
+    with pytest.raises(rn.RunnerError, match="another protocol"):
+        make_runner(other, out, AligningHand(), DeviceClient(sim))[0].run()
+    with pytest.raises(rn.RunnerError, match="simulated trials"):
+        make_runner(protocol, out, HumanLike(), DeviceClient(sim))[0].run()
+
+
+# --------------------------------------------------------------------------------------
+# NASA-TLX
+# --------------------------------------------------------------------------------------
+def _tlx_file(tmp_path, rows):
+    p = tmp_path / "tlx.jsonl"
+    p.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    return str(p)
+
+
+def _good_tlx(session, **over):
+    row = {"session": session, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": session}
+    row.update(over)
+    return row
+
+
+def test_tlx_from_file(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    sessions = pf.session_order(protocol, "U1")
+    rows = [_good_tlx(s.session, modality=s.modality, k=3, participant="U1") for s in sessions]
+    given = rn.load_tlx_file(_tlx_file(tmp_path, rows), "U1", sessions)
+    out = tmp_path / "out"
+    runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), tlx=given)
+    runner.run()
+    tlx = lines(out / "U1" / "tlx.jsonl")
+    assert [t["session"] for t in tlx] == [1, 2, 3, 4]
+    for t, s in zip(tlx, sessions):
+        assert t["origin"] == "file" and t["simulated"] is False
+        assert t["modality"] == s.modality and t["mode"] == s.mode and t["k"] == 3
+        assert t["scales"] == {"MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": s.session}
+
+
+@pytest.mark.parametrize("row,needle", [
+    (_good_tlx(1, MD=0), "MD (Mental Demand) must be in 1..21, got 0"),
+    (_good_tlx(1, FR=22), "FR (Frustration) must be in 1..21, got 22"),
+    (_good_tlx(1, EF=5.5), "EF (Effort) must be an integer 1..21, got 5.5"),
+    (_good_tlx(1, PE="4"), "PE (Performance) must be an integer"),
+    (_good_tlx(1, TD=True), "TD (Temporal Demand) must be an integer"),
+    ({"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6}, "missing FR"),
+    (_good_tlx(1, XX=3), "unknown key 'XX'"),
+    (_good_tlx(9), "session must be one of this participant's sessions 1..4"),
+    (_good_tlx(1, participant="U7"), "participant 'U7' is not 'U1'"),
+    (_good_tlx(1, modality="Fperp+V"), "the file says 'Fperp+V'"),
+])
+def test_bad_tlx_values_rejected_with_a_message(tmp_path, capsys, row, needle):
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    tlx = _tlx_file(tmp_path, [row])
+    code = cli.main(["trial", "--protocol", path, "--participant", "U1", "--port", "sim",
+                     "--source", "synthetic", "--out", str(tmp_path / "out"), "--tlx", tlx])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_USAGE
+    assert f"--tlx {tlx}:1: " in err and needle in err, err
+    assert not (tmp_path / "out").exists()        # refused before any trial
+
+
+def test_tlx_asked_interactively_with_retries(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    answers = iter(["abc", "0", "7"] + ["3"] * 5 + ["4", "5", "6", "7", "8", "9"] * 3)
+    prompts = []
+
+    def ask(prompt):
+        prompts.append(prompt)
+        return next(answers)
+
+    out = tmp_path / "out"
+    runner, text, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), ask=ask)
+    runner.run()
+    tlx = lines(out / "U1" / "tlx.jsonl")
+    assert tlx[0]["scales"] == {"MD": 7, "TD": 3, "PD": 3, "PE": 3, "EF": 3, "FR": 3}
+    assert tlx[1]["scales"] == {"MD": 4, "TD": 5, "PD": 6, "PE": 7, "EF": 8, "FR": 9}
+    assert all(t["origin"] == "interactive" and t["simulated"] is False for t in tlx)
+    assert prompts[0].strip().startswith("MD (Mental Demand) [1-21]")
+    shown = text.getvalue()
+    assert "'abc' is not an integer 1..21" in shown and "must be in 1..21, got 0" in shown
+
+
+def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
+    from graspguide.device import DeviceClient
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+
+    def eof(prompt):
+        raise EOFError
+
+    out = tmp_path / "out"
+    runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), ask=eof)
+    with pytest.raises(rn.RunnerError, match="--tlx FILE"):
+        runner.run()
+    assert len(lines(out / "U1" / "trials.jsonl")) == 1
+    assert not (out / "U1" / "tlx.jsonl").exists()
+    runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim),
+                               ask=lambda p: "10")
+    assert runner.run()["ran"] == 3
+    assert [t["session"] for t in lines(out / "U1" / "tlx.jsonl")] == [1, 2, 3, 4]
+
+
+# --------------------------------------------------------------------------------------
+# STOP on the way out
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("how,exc", [("interrupt", KeyboardInterrupt),
+                                     ("error", RuntimeError)])
+def test_stop_sent_on_exit(tmp_path, sim, how, exc):
+    from graspguide.device import DeviceClient
+    from graspguide.protocol.messages import DeviceState
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    client = RecordingClient(DeviceClient(sim))
+    # fail in the second trial, mid-stream
+    model = AligningHand(fail_at=10**9, fail_with=how)
+    out = tmp_path / "out"
+    runner, _, _ = make_runner(protocol, out, model, client)
+    orig = model.begin_trial
+
+    def begin(**kw):
+        orig(**kw)
+        if model.trials == 2:
+            model.fail_at = model.steps + 20
+    model.begin_trial = begin
+    with pytest.raises(exc):
+        runner.run()
+    assert client.calls[-1] == "stop"
+    assert client.calls.count("start_trial") == 2
+    assert client._c.status().state == DeviceState.STOPPED   # the trial is not running
+    assert len(lines(out / "U1" / "trials.jsonl")) == 1
+    assert lines(out / "U1" / "runs.jsonl")[-1]["outcome"] == (
+        "interrupted" if how == "interrupt" else "error")
+    assert not (out / "U1" / "frames" / "trial-0002.csv").exists()
+
+
+def test_cli_usage_errors(tmp_path, capsys):
+    path, _ = small_protocol(tmp_path)
+    base = ["trial", "--protocol", path, "--port", "sim", "--out", str(tmp_path / "o")]
+    assert cli.main(base + ["--participant", "Ux", "--source", "synthetic"]) == 2
+    assert "participant id 'Ux'" in capsys.readouterr().err
+    assert cli.main(base + ["--participant", "U1", "--source", "bogus"]) == 2
+    assert "unknown --source 'bogus'" in capsys.readouterr().err
+    assert cli.main(["trial", "--protocol", str(tmp_path / "no.toml"), "--participant", "U1",
+                     "--port", "sim", "--source", "synthetic"]) == 2
+    assert "cannot read the protocol file" in capsys.readouterr().err
+    assert cli.main(base + ["--participant", "U1", "--source",
+                            "plugin:test_runner:AligningHand:warp=9"]) == 2
+    assert "unknown option 'warp'" in capsys.readouterr().err
