@@ -62,6 +62,7 @@ own contact geometry and its own orientation.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections import deque
 from dataclasses import dataclass, fields
@@ -236,13 +237,21 @@ class VirtualParticipant:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_spec(cls, spec: str, seed: int) -> "VirtualParticipant":
-        """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams fields)."""
+        """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams
+        fields); also just the part after ``participant:`` (``""`` for the defaults)."""
         return cls(parse_spec(spec), seed)
 
     # ------------------------------------------------------------------ trial
     def begin_trial(self, *, contacts, y_axis, wrench, policy: str, mode: str,
-                    start_quat) -> None:
-        """Start a trial. ``wrench`` is validated and then discarded (see module doc)."""
+                    start_quat, noise_seed: Optional[int] = None) -> None:
+        """Start a trial. ``wrench`` never enters a decision (see the module doc).
+
+        The trial's random stream (perception and motor noise, tremor phases, search
+        directions) is seeded from the participant's seed and, unless ``noise_seed`` is
+        given, a hash of this call's arguments: the same trial gives the same trajectory
+        whatever ran before it (a resumed study reproduces an uninterrupted one). This
+        seeding is the wrench's only use.
+        """
         try:
             c = np.asarray(contacts, dtype=np.float64)
         except (TypeError, ValueError):
@@ -254,7 +263,7 @@ class VirtualParticipant:
         y = _finite_vector(y_axis, 3, "y_axis")
         if not np.linalg.norm(y) > 0:
             raise ValueError("y_axis must be non-zero")
-        _finite_vector(wrench, 6, "wrench")  # checked only: never used for a decision
+        w = _finite_vector(wrench, 6, "wrench")  # never used for a decision (seed only)
         if policy not in _POLICIES:
             raise ValueError(f"policy must be one of {_POLICIES}, got {policy!r}")
         if mode not in _MODES:
@@ -262,6 +271,17 @@ class VirtualParticipant:
         q = _finite_vector(start_quat, 4, "start_quat (w, x, y, z)")
         if not np.linalg.norm(q) > 1e-6:
             raise ValueError("start_quat must be a non-zero quaternion")
+
+        if noise_seed is None:
+            digest = hashlib.sha256(b"|".join([
+                c.tobytes(), y.tobytes(), w.tobytes(), policy.encode(), mode.encode(),
+                q.tobytes()])).digest()
+            trial_key = int.from_bytes(digest[:8], "little")
+        else:
+            if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)):
+                raise ValueError(f"noise_seed must be an integer, got {noise_seed!r}")
+            trial_key = int(noise_seed)
+        self._rng = np.random.default_rng([self.seed & (2**64 - 1), trial_key & (2**64 - 1)])
 
         r = c - c.mean(axis=0)
         norms = np.linalg.norm(r, axis=1)
@@ -542,7 +562,8 @@ def _conj(q: np.ndarray) -> np.ndarray:
 # --source participant[:key=val,...]
 # --------------------------------------------------------------------------------------
 def parse_spec(spec: str) -> ParticipantParams:
-    """ParticipantParams from ``participant`` or ``participant:key=val,key=val``."""
+    """ParticipantParams from ``participant``, ``participant:key=val,key=val`` or the part
+    after ``participant:`` alone (``""``: the defaults)."""
     names = [f.name for f in fields(ParticipantParams)]
     usage = ("expected 'participant' or 'participant:key=value,...' with keys "
              + ", ".join(names))
@@ -550,7 +571,8 @@ def parse_spec(spec: str) -> ParticipantParams:
         raise ValueError(f"participant spec must be a string; {usage}")
     head, sep, rest = spec.partition(":")
     if head.strip() != "participant":
-        raise ValueError(f"participant spec {spec!r} must start with 'participant'; {usage}")
+        # Also accepted: what follows 'participant:' alone ('' = the defaults).
+        head, sep, rest = "participant", (":" if spec.strip() else ""), spec
     values: Dict[str, float] = {}
     if sep:
         if not rest.strip():

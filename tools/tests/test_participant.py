@@ -94,6 +94,9 @@ def test_labelled_simulated_and_defaults():
     p = parse_spec("participant:reaction_time_s=0.4, rate_hz=50")
     assert p.reaction_time_s == 0.4 and p.rate_hz == 50.0
     assert VirtualParticipant.from_spec("participant:rate_hz=50", 0).rate_hz == 50.0
+    # The runner may pass only what follows 'participant:'.
+    assert VirtualParticipant.from_spec("", 0).params == ParticipantParams()
+    assert VirtualParticipant.from_spec("rate_hz=50", 0).rate_hz == 50.0
 
 
 def test_seeded_determinism():
@@ -108,11 +111,34 @@ def test_seeded_determinism():
 
 
 def test_wrench_is_not_used_for_decisions():
-    """Same PWM stream, different wrench argument: the same trajectory."""
+    """Same PWM stream and noise stream, different wrench argument: the same trajectory."""
     pwm = [150, 0, 120, 90]
-    a = open_loop(new_participant(wrench=[0, 0, -1, 0, 0, 0]), pwm, 3.0)
-    b = open_loop(new_participant(wrench=[1, 0, 0, 0, 0.1, 0]), pwm, 3.0)
-    assert a == b
+    for mode in ("C", "V"):
+        runs = []
+        for wrench in ([0, 0, -1, 0, 0, 0], [1, 0, 0, 0, 0.1, 0]):
+            vp = VirtualParticipant.from_spec("participant", 1)
+            vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=wrench, policy="F",
+                           mode=mode, start_quat=IDENTITY, noise_seed=9)
+            runs.append(open_loop(vp, pwm, 6.0))
+        assert runs[0] == runs[1]
+        assert quaternion_angle_deg(runs[0][-1][1], IDENTITY) > 5.0
+
+
+def test_trial_reproducible_whatever_ran_before():
+    """A trial's trajectory depends on the participant seed and the trial, not on the
+    trials before it (a resumed study reproduces an uninterrupted one)."""
+    w1, w2 = _wrenches(2, 5)
+
+    def run(vp, w):
+        vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=w, policy="F", mode="V",
+                       start_quat=IDENTITY)
+        return open_loop(vp, [150, 0, 120, 90], 3.0)
+
+    fresh = run(VirtualParticipant.from_spec("participant", 3), w2)
+    vp = VirtualParticipant.from_spec("participant", 3)
+    run(vp, w1)
+    assert run(vp, w2) == fresh
+    assert run(VirtualParticipant.from_spec("participant", 4), w2) != fresh
 
 
 @pytest.mark.parametrize("tau", [0.06, 0.1])
@@ -222,20 +248,23 @@ def test_mode_c_ignores_magnitude_mode_v_uses_it():
 
 
 def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
-    """Whole behaviour, open loop: the first movement of a C participant barely depends on
-    the PWM scale (only through the ERM rise before its first percept); a V participant
-    moves much less when the vibration is weaker (it feels closer)."""
+    """Whole behaviour, open loop, without noise: the first movement of a C participant
+    depends on the PWM scale only through the ERM rise (it reads the pattern at 95 % of the
+    steady speed), by a degree or so; a V participant moves much less when the vibration
+    is weaker (it feels closer)."""
     base, half = [170, 0, 130, 90], _scaled([170, 0, 130, 90], 0.5)
-    spec = "participant:tremor_amplitude_deg=0,motor_noise_frac=0"
+    spec = "participant:tremor_amplitude_deg=0,motor_noise_frac=0,weber_frac=0"
     ends = {}
     for mode in ("C", "V"):
         for name, pwm in (("base", base), ("half", half)):
             vp = new_participant(spec=spec, mode=mode, seed=4)
             ends[mode, name] = open_loop(vp, pwm, 1.6)[-1][1]
-    assert quaternion_angle_deg(ends["C", "base"], ends["C", "half"]) < 1.0
+    c_diff = quaternion_angle_deg(ends["C", "base"], ends["C", "half"])
+    assert c_diff < 2.0
     v_base = quaternion_angle_deg(ends["V", "base"], IDENTITY)
     v_half = quaternion_angle_deg(ends["V", "half"], IDENTITY)
     assert v_half < 0.7 * v_base
+    assert quaternion_angle_deg(ends["V", "base"], ends["V", "half"]) > 10 * c_diff
 
 
 # --------------------------------------------------------------------------------------
@@ -247,7 +276,8 @@ def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
     ("participant:weber_frac=1.5", ["weber_frac", "< 1"]),
     ("participant:rate_hz", ["not key=value"]),
     ("participant:", ["no key=value"]),
-    ("human", ["must start with 'participant'"]),
+    ("human", ["'human' is not key=value", "participant:key=value"]),
+    ("rate_hz=abc", ["not a number"]),
     ("participant:rate_hz=100,rate_hz=50", ["given twice"]),
 ])
 def test_bad_spec_says_what_to_fix(spec, words):
