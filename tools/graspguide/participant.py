@@ -155,6 +155,31 @@ def _validate_params(p: ParticipantParams) -> None:
 # --------------------------------------------------------------------------------------
 # Rotations (quaternions [w, x, y, z], hand -> world, like POSE)
 # --------------------------------------------------------------------------------------
+def _qmul(a: Tuple[float, ...], b: Tuple[float, ...]) -> Tuple[float, float, float, float]:
+    """Quaternion product on plain floats (the per-step path)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+def _qexp(x: float, y: float, z: float) -> Tuple[float, float, float, float]:
+    """Unit quaternion of the rotation vector (x, y, z) [rad], plain floats."""
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle < 1e-12:
+        n = math.sqrt(1.0 + 0.25 * angle * angle)
+        return (1.0 / n, 0.5 * x / n, 0.5 * y / n, 0.5 * z / n)
+    s = math.sin(0.5 * angle) / angle
+    return (math.cos(0.5 * angle), x * s, y * s, z * s)
+
+
+def _qnormalize(q: Tuple[float, ...]) -> Tuple[float, float, float, float]:
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     aw, ax, ay, az = a
     bw, bx, by, bz = b
@@ -292,8 +317,9 @@ class VirtualParticipant:
         self.policy = policy
         self.mode = mode
         self._q = q / np.linalg.norm(q)        # commanded (proprioceptive) orientation
-        self._motor = np.zeros(self._k)        # ERM speeds, PWM units
-        self._history: Deque[Tuple[float, np.ndarray]] = deque()
+        self._qt = tuple(float(v) for v in self._q)
+        self._motor = [0.0] * self._k          # ERM speeds, PWM units
+        self._history: Deque[Tuple[float, List[float]]] = deque()
         self._t_prev: Optional[float] = None
         self._cue_onset: Optional[float] = None
         self._move: Optional[Dict[str, Any]] = None
@@ -366,33 +392,28 @@ class VirtualParticipant:
                 or not math.isfinite(float(t_s)):
             raise ValueError(f"t_s must be a finite number of seconds, got {t_s!r}")
         t = float(t_s)
-        if isinstance(pwm, (str, bytes)):
-            raise ValueError(f"pwm must be {self._k} numbers 0..255, got {pwm!r}")
-        try:
-            u = np.asarray(list(pwm), dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"pwm must be {self._k} numbers 0..255, got {pwm!r}") from None
-        if u.ndim != 1 or u.shape[0] != self._k:
-            raise ValueError(f"pwm must have {self._k} values (one per contact), "
-                             f"got {u.shape[0] if u.ndim == 1 else u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise ValueError(f"pwm must be finite, got {list(pwm)!r}")
-        if np.any(u < 0) or np.any(u > PWM_MAX):
-            raise ValueError(f"pwm values must be in 0..255, got {list(pwm)!r}")
+        u = self._check_pwm(pwm)
         if self._t_prev is not None and t < self._t_prev:
             raise ValueError(f"time went backwards: {t} after {self._t_prev}")
         dt = 1.0 / self.rate_hz if self._t_prev is None else t - self._t_prev
         self._t_prev = t
 
         # 1. ERM lag (exact discretisation of the first-order lag over dt).
-        self._motor += (u - self._motor) * (1.0 - math.exp(-dt / self.params.erm_tau_s))
-        self._history.append((t, self._motor.copy()))
-        if self._cue_onset is None and np.any(self._motor >= 0.5 * PWM_FLOOR):
-            # First felt cue. Relative strengths can be judged once the motors have
-            # (nearly) reached their steady speed (3 tau: 95 %); the first movement starts
-            # a reaction time after that percept.
-            self._cue_onset = t
-            self._next_decision = t + 3.0 * self.params.erm_tau_s + self.params.reaction_time_s
+        gain = 1.0 - math.exp(-dt / self.params.erm_tau_s)
+        motor = [x + (v - x) * gain for x, v in zip(self._motor, u)]
+        self._motor = motor
+        self._history.append((t, motor))
+        if self._cue_onset is None:
+            while len(self._history) > 1 and \
+                    self._history[1][0] <= t - self.params.reaction_time_s:
+                self._history.popleft()
+            if max(motor) >= 0.5 * PWM_FLOOR:
+                # First felt cue. Relative strengths can be judged once the motors have
+                # (nearly) reached their steady speed (3 tau: 95 %); the first movement
+                # starts a reaction time after that percept.
+                self._cue_onset = t
+                self._next_decision = (t + 3.0 * self.params.erm_tau_s
+                                       + self.params.reaction_time_s)
 
         # 2. Decide (with the percept of reaction_time_s ago) when the last movement and
         #    its pause are over.
@@ -404,20 +425,41 @@ class VirtualParticipant:
             m = self._move
             tau = min(1.0, (t - m["t0"]) / m["T"]) if m["T"] > 0 else 1.0
             s = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
-            self._q = _quat_mul(_quat_from_rotvec(m["rotvec"] * s), m["q0"])
+            rx, ry, rz = m["rotvec_t"]
+            self._qt = _qmul(_qexp(rx * s, ry * s, rz * s), m["q0_t"])
             if tau >= 1.0:
                 self._move = None
                 self._next_decision = t + m["pause"]
+                self._qt = _qnormalize(self._qt)
+            self._q = np.array(self._qt)
 
         # 4. Tremor on top of the commanded orientation.
-        q = self._q
+        q = self._qt
         if self._tremor_amp > 0:
-            ph = 2.0 * math.pi * self.params.tremor_frequency_hz * t + self._tremor_phase
-            tv = np.array([self._tremor_amp * math.sin(ph[0]),
-                           self._tremor_amp * math.sin(ph[1]), 0.0])
-            q = _quat_mul(_quat_from_rotvec(tv), q)
-        q = q / np.linalg.norm(q)
-        return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+            w = 2.0 * math.pi * self.params.tremor_frequency_hz * t
+            q = _qmul(_qexp(self._tremor_amp * math.sin(w + self._tremor_phase[0]),
+                            self._tremor_amp * math.sin(w + self._tremor_phase[1]), 0.0), q)
+        return _qnormalize(q)
+
+    def _check_pwm(self, pwm: Any) -> List[float]:
+        what = f"pwm must be {self._k} numbers 0..255"
+        if isinstance(pwm, (str, bytes)) or not hasattr(pwm, "__iter__"):
+            raise ValueError(f"{what}, got {pwm!r}")
+        u = list(pwm)
+        if len(u) != self._k:
+            raise ValueError(f"pwm must have {self._k} values (one per contact), got {len(u)}")
+        out = []
+        for v in u:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(
+                    v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"{what}, got {u!r}")
+            x = float(v)
+            if not math.isfinite(x):
+                raise ValueError(f"pwm must be finite, got {u!r}")
+            if not 0.0 <= x <= PWM_MAX:
+                raise ValueError(f"pwm values must be in 0..255, got {u!r}")
+            out.append(x)
+        return out
 
     # ------------------------------------------------------------------ internals
     def _need_trial(self) -> None:
@@ -429,7 +471,7 @@ class VirtualParticipant:
         horizon = t - self.params.reaction_time_s
         while len(self._history) > 1 and self._history[1][0] <= horizon:
             self._history.popleft()
-        return self._history[0][1]
+        return np.asarray(self._history[0][1], dtype=np.float64)
 
     def _noise(self) -> np.ndarray:
         return self._rng.standard_normal(self._k)
@@ -442,7 +484,8 @@ class VirtualParticipant:
             amp = float(np.linalg.norm(rotvec))
         # Minimum jerk: peak speed 1.875 * amp / T <= peak_speed.
         T = 1.875 * amp / math.radians(p.peak_speed_deg_s)
-        self._move = {"t0": t, "T": T, "rotvec": rotvec, "q0": self._q.copy(), "pause": pause}
+        self._move = {"t0": t, "T": T, "rotvec_t": tuple(float(v) for v in rotvec),
+                      "q0_t": self._qt, "pause": pause}
 
     def _hold(self, t: float, duration: float) -> None:
         self._next_decision = t + duration
