@@ -86,18 +86,20 @@ class ParticipantParams:
     ``_frac`` is a dimensionless fraction).
     """
 
-    #: Pose rate the participant runs at [Hz]: the tracking rate of a Vicon-class
-    #: motion-capture system as used in the paper's experiments (100 Hz is a standard
-    #: Vicon capture rate); the study runner calls step() every 1 / rate_hz s.
+    #: Pose rate the participant runs at [Hz]: a motion-capture tracking rate (the paper
+    #: tracked the hand with a Vicon system; 100 Hz is a usual Vicon rate). Convention.
+    #: The study runner calls step() every 1 / rate_hz s.
     rate_hz: float = 100.0
     #: ERM motor time constant [s]. Precision Microdrives' step-response test of an ERM
     #: (305-000 at rated voltage) reaches its maximum amplitude ~180 ms after turn-on;
     #: for a first-order lag that is ~3 tau, so tau ~ 60 ms (PMD, "New testing for the
-    #: Precision Haptic ERMs"; the 310-103's own datasheet figure is to be checked).
+    #: Precision Haptic ERMs"). The thimbles' 310-103 datasheet rise/stop times were not
+    #: retrieved: replace this when read.
     erm_tau_s: float = 0.06
     #: Simple reaction time to a vibrotactile cue on the hand [s]: of the order of
-    #: 0.25 s in young adults; Bao et al. 2019 (PLOS ONE 14(8):e0219737) show stimulus
-    #: factors shift it by 20-300 ms (location 20-120 ms, a secondary task > 130 ms).
+    #: 0.25 s in young adults (baseline quoted from memory, to check); Bao et al. 2019
+    #: (PLOS ONE 14(8):e0219737) show stimulus factors shift it by 20-300 ms (location
+    #: 20-120 ms, a secondary task > 130 ms).
     reaction_time_s: float = 0.25
     #: Peak angular speed of a hand reorientation [deg/s]: a deliberate, comfortable
     #: wrist/forearm speed. Wrist/forearm movement in daily living is mostly slow, the
@@ -106,11 +108,12 @@ class ParticipantParams:
     #: 90 deg/s is a moderate value inside that range, not fitted to the paper.
     peak_speed_deg_s: float = 90.0
     #: Physiological tremor amplitude [deg]: the modal postural hand tremor is 0.01 g
-    #: peak at ~7 Hz (Wade, Gresty & Findley 1982, Arch Neurol 39:358-362), i.e.
+    #: peak at ~7 Hz ("A normative study of postural tremor of the hand", Arch Neurol
+    #: 1982;39:358-362, doi:10.1001/archneur.1982.00510180036009), i.e.
     #: 0.01 * 9.81 / (2 pi 7)^2 = 0.05 mm; over a 0.1 m wrist-to-fingertip lever that
     #: is 0.03 deg.
     tremor_amplitude_deg: float = 0.03
-    #: Physiological tremor frequency [Hz]: modal ~7 Hz (Wade et al. 1982), inside the
+    #: Physiological tremor frequency [Hz]: modal ~7 Hz (Arch Neurol 1982, above), inside the
     #: 6-12 Hz peak of physiological hand tremor (Lakie et al. 2015, J Physiol
     #: 593:4411-4422).
     tremor_frequency_hz: float = 7.0
@@ -118,11 +121,12 @@ class ParticipantParams:
     #: output noise grows in proportion to the command (Harris & Wolpert 1998, Nature
     #: 394:780-784); endpoint SDs of aimed movements are of the order of 10 % of their
     #: amplitude (van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063).
+    #: Figures quoted from memory, to check.
     motor_noise_frac: float = 0.10
     #: Weber fraction of vibrotactile amplitude discrimination [fraction]: difference
     #: limens of ~1.5 dB, i.e. ~0.2 (Gescheider et al. 1990, J Acoust Soc Am
-    #: 87:330-338). An ERM's vibration amplitude grows with the square of its speed, so
-    #: the noise on the perceived motor speed is half of it (SD).
+    #: 87:330-338; quoted from memory, to check). An ERM's vibration amplitude grows with
+    #: the square of its speed, so the noise on the perceived motor speed is half of it.
     weber_frac: float = 0.20
     #: Mode C search: radius of the random probes around the pose believed aligned
     #: [deg]. Model convention (no literature figure), fixed before any simulated
