@@ -123,10 +123,13 @@ class ParticipantParams:
     #: amplitude (van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063).
     #: Figures quoted from memory, to check.
     motor_noise_frac: float = 0.10
-    #: Weber fraction of vibrotactile amplitude discrimination [fraction]: difference
-    #: limens of ~1.5 dB, i.e. ~0.2 (Gescheider et al. 1990, J Acoust Soc Am
-    #: 87:330-338; quoted from memory, to check). An ERM's vibration amplitude grows with
-    #: the square of its speed, so the noise on the perceived motor speed is half of it.
+    #: Weber fraction of vibrotactile amplitude discrimination [fraction]: median
+    #: difference thresholds of 0.20 (thenar eminence, 125 Hz, 10 dB above threshold) to
+    #: 0.58 across conditions ("Vibrotactile difference thresholds: effects of vibration
+    #: frequency, vibration magnitude, contact area, and body location", Forta, Griffin &
+    #: Morioka 2012, Somatosens Mot Res); 0.20 is the Pacinian, ERM-like (125 Hz) case
+    #: and the most favourable one. An ERM's vibration amplitude grows with the square
+    #: of its speed, so the noise (SD) on the perceived motor speed is half of it.
     weber_frac: float = 0.20
     #: Mode C search: radius of the random probes around the pose believed aligned
     #: [deg]. Model convention (no literature figure), fixed before any simulated
