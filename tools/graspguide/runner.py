@@ -29,8 +29,10 @@ ends the trial), ``participant[:PARAMS]`` (the virtual participant,
 tracker, a person: real time, TLX asked) or a closed-loop class. A closed-loop source has
 ``rate_hz``, ``SIMULATED``, ``begin_trial(*, contacts, y_axis, wrench, policy, mode,
 start_quat)`` and ``step(t_s, pwm) -> quat (w, x, y, z)``; it runs in lockstep with the
-device: ``step`` is called once per pose at ``t_s = i / rate_hz`` (i = 0, 1, ...) with the
-PWM of the previous pose's TELEMETRY (zeros for i = 0) and returns the pose to send.
+device: ``step`` is called once per pose at ``t_s = i / pose_rate_hz`` (the protocol's
+``[study] pose_rate_hz``; i = 0, 1, ...) with the PWM of the previous pose's TELEMETRY
+(zeros for i = 0) and returns the pose to send. Open-loop sources also run at the
+protocol's pose rate, except a replay (its own timestamps) and ``synthetic:rate=..``.
 """
 
 from __future__ import annotations
@@ -303,7 +305,7 @@ class ClosedLoopSource(RunnerSource):
 
     def describe(self) -> Dict[str, Any]:
         d = {"source": self.spec, "kind": "closed_loop", "class": type(self.model).__name__,
-             "rate_hz": self.rate_hz, "simulated": self.simulated}
+             "source_rate_hz": self.rate_hz, "simulated": self.simulated}
         extra = getattr(self.model, "describe", None)
         if callable(extra):
             try:
@@ -631,7 +633,7 @@ class StudyRunner:
             model.begin_trial(contacts=contacts, y_axis=list(p.y_axis),
                               wrench=list(trial.wrench), policy=trial.policy, mode=trial.mode,
                               start_quat=list(p.start_quat))
-            rate = self.source.rate_hz
+            rate = p.pose_rate_hz       # the study's pose rate (the tracker's)
             it = None
         else:
             it = self._poses(trial)

@@ -168,7 +168,9 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
     path, protocol = small_protocol(tmp_path)
     client = RecordingClient(DeviceClient(sim))
     out = tmp_path / "out"
-    runner, text, err = make_runner(protocol, out, AligningHand(), client, path=path)
+    # the source's own rate (50 Hz) gives way to the protocol's pose rate (100 Hz)
+    runner, text, err = make_runner(protocol, out, AligningHand(rate_hz=50.0), client,
+                                    path=path)
     t0 = time.monotonic()
     result = runner.run()
     elapsed = time.monotonic() - t0
@@ -196,6 +198,7 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
             rows = f.read().splitlines()
         assert rows[0] == ",".join(rn.FRAME_COLUMNS)
         assert len(rows) - 1 == r["poses"]
+        assert [float(row.split(",")[0]) for row in rows[1:4]] == [0.0, 0.01, 0.02]
         last = rows[-1].split(",")
         assert float(last[rn.FRAME_COLUMNS.index("error_deg")]) < 3.0
     assert not [n for n in os.listdir(out / "U1" / "frames") if n.endswith(".tmp")]
