@@ -306,6 +306,10 @@ class VirtualParticipant:
         if not np.linalg.norm(q) > 1e-6:
             raise ValueError("start_quat must be a non-zero quaternion")
 
+        r = c - c.mean(axis=0)
+        norms = np.linalg.norm(r, axis=1)
+        if not np.all(norms > 1e-9 * max(1.0, float(norms.max()))):
+            raise ValueError("contacts must not coincide with their centroid")
         if noise_seed is None:
             digest = hashlib.sha256(b"|".join([
                 c.tobytes(), y.tobytes(), w.tobytes(), policy.encode(), mode.encode(),
@@ -317,10 +321,6 @@ class VirtualParticipant:
             trial_key = int(noise_seed)
         self._rng = np.random.default_rng([self.seed & (2**64 - 1), trial_key & (2**64 - 1)])
 
-        r = c - c.mean(axis=0)
-        norms = np.linalg.norm(r, axis=1)
-        if not np.all(norms > 1e-9 * max(1.0, float(norms.max()))):
-            raise ValueError("contacts must not coincide with their centroid")
         self._radial = r / norms[:, None]      # own hand geometry: y_i (hand frame)
         self._k = c.shape[0]
         self.policy = policy
