@@ -429,7 +429,7 @@ class Progress:
             self.out.write(f"\r\x1b[K{self._head} ...")
             self.out.flush()
 
-    def frame(self, t_s: float, error_deg: float, pwm: Sequence[int], live: bool) -> None:
+    def frame(self, t_s: float, error_deg: float, pwm: Sequence[int], real_time: bool) -> None:
         if self.tty:
             now = time.monotonic()
             if now - self._last >= 0.1:
@@ -437,7 +437,7 @@ class Progress:
                 self.out.write(f"\r\x1b[K{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg "
                                f"pwm={list(pwm)}")
                 self.out.flush()
-        elif live and t_s >= self._next_t:
+        elif real_time and t_s >= self._next_t:
             self._next_t = t_s + self.period_s
             print(f"{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg", file=self.out,
                   flush=True)
@@ -672,7 +672,7 @@ class StudyRunner:
                                 + [repr(float(tel.error_deg)), repr(float(tel.alpha))]
                                 + [int(x) for x in tel.pwm]
                                 + [int(tel.solver_status), int(tel.flags)])
-                self.progress.frame(t_s, float(tel.error_deg), pwm, self.source.live)
+                self.progress.frame(t_s, float(tel.error_deg), pwm, not self.virtual_clock)
                 if self.client.trial_results:
                     result = self.client.trial_results.popleft()
                     break

@@ -535,3 +535,49 @@ def test_cli_usage_errors(tmp_path, capsys):
     assert cli.main(base + ["--participant", "U1", "--source",
                             "plugin:test_runner:AligningHand:warp=9"]) == 2
     assert "unknown option 'warp'" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------
+# Real time and the terminal view
+# --------------------------------------------------------------------------------------
+def test_real_time_run_on_the_device_clock(tmp_path):
+    """Without the virtual clock (a board, or a person): poses paced by the host clock,
+    host_time_us from it, a progress line every period."""
+    from graspguide.device import DeviceClient
+    from graspguide.transport import SimulatedDevice
+
+    path = tmp_path / "rt.toml"
+    path.write_text(SMALL.format(timeout=5.0, fam=0).replace(
+        "contact_counts = [3]", 'contact_counts = [3]\nmodalities = ["F+V"]').replace(
+        "single_motor = 1", "single_motor = 0").replace("count = 2", "count = 1"))
+    protocol = pf.load_protocol(str(path))
+    out = tmp_path / "out"
+    text = io.StringIO()
+    with SimulatedDevice(virtual_clock=False, start=True) as dev:
+        runner = rn.StudyRunner(protocol, "U1", str(out), rn.ClosedLoopSource(
+            AligningHand(speed_deg_s=240.0), "test"), DeviceClient(dev), virtual_clock=False,
+            progress=rn.Progress(out=text, tty=False, period_s=0.2))
+        runner.run()
+    (rec,) = lines(out / "U1" / "trials.jsonl")
+    assert rec["success"] is True
+    assert rec["wall_s"] >= 0.9 * rec["completion_s"]            # paced in real time
+    with open(out / "U1" / "frames" / "trial-0001.csv") as f:
+        rows = [r.split(",") for r in f.read().splitlines()[1:]]
+    times = [int(r[1]) for r in rows]
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert (times[-1] - times[0]) / 1e6 >= 0.9 * float(rows[-1][0])
+    assert sum(" t=" in line for line in text.getvalue().splitlines()) >= 2
+
+
+def test_terminal_progress_line():
+    buf = io.StringIO()
+    view = rn.Progress(out=buf, tty=True)
+    trial = pf.PlannedTrial(3, "U1", 1, 2, 4, "Fperp", "V", "Fperp+V", "W05",
+                            (0.0, 0.0, -1.0, 0, 0, 0), False, "multi", False)
+    view.trial_start(trial, 100, 8)
+    view.frame(1.25, 12.5, [0, 120, 80, 70], real_time=False)
+    view.trial_end({"success": True, "completion_s": 4.5, "final_error_deg": 1.25})
+    shown = buf.getvalue()
+    assert "\r\x1b[K[3/100] session 1/8 Fperp+V k=4 W05" in shown
+    assert "t=  1.25s error= 12.50deg pwm=[0, 120, 80, 70]" in shown
+    assert shown.endswith("W05 success 4.50 s, final error 1.25 deg\n")
