@@ -781,6 +781,11 @@ class StudyRunner:
         finally:
             try:
                 self.client.stop()
+            except Exception as e:
+                if outcome == "complete":
+                    raise                 # the run's only error: report it
+                # keep the error that ended the run; this one is secondary
+                print(f"graspguide trial: STOP failed: {e}", file=self.err, flush=True)
             finally:
                 self._log_run("end", outcome=outcome, ran=self.ran,
                               completed=len(done), planned=total)

@@ -581,3 +581,30 @@ def test_terminal_progress_line():
     assert "\r\x1b[K[3/100] session 1/8 Fperp+V k=4 W05" in shown
     assert "t=  1.25s error= 12.50deg pwm=[0, 120, 80, 70]" in shown
     assert shown.endswith("W05 success 4.50 s, final error 1.25 deg\n")
+
+
+def test_device_lost_mid_trial_keeps_the_link_error(tmp_path):
+    """The simulated device dies in trial 2: the run ends with the link error (not the
+    failed STOP's), trial 1 is kept, the end of the run is logged."""
+    from graspguide.device import DeviceClient
+    from graspguide.transport import LinkError, SimulatedDevice
+
+    path, protocol = small_protocol(tmp_path, fam=0, count=1)
+    out = tmp_path / "out"
+    with SimulatedDevice(virtual_clock=True, start=True) as dev:
+        model = AligningHand()
+        orig = model.step
+
+        def step(t_s, pwm):
+            if model.trials == 2 and t_s > 0.1 and dev.process.poll() is None:
+                dev.process.kill()
+                dev.process.wait()
+            return orig(t_s, pwm)
+        model.step = step
+        client = DeviceClient(dev, timeout=0.3)
+        runner, _, err = make_runner(protocol, out, model, client)
+        with pytest.raises(LinkError):
+            runner.run()
+    assert "STOP failed" in err.getvalue()
+    assert len(lines(out / "U1" / "trials.jsonl")) == 1
+    assert lines(out / "U1" / "runs.jsonl")[-1]["outcome"] == "error"
