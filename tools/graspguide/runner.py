@@ -695,6 +695,10 @@ class StudyRunner:
             os.fsync(f.fileno())
         finally:
             f.close()
+        if int(result.trial_id) != trial.trial_index & 0xFFFF:
+            raise RunnerError(f"trial {trial.trial_index}: the device answered with the "
+                              f"TRIAL_RESULT of trial id {result.trial_id}; run again (this "
+                              "trial was not recorded)")
         os.replace(frames_tmp, frames_path)
         self._vt_base_us += int(round((t_s + 1.0) * 1e6))
         success = bool(result.success)
