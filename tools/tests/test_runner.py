@@ -257,10 +257,10 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
 # --------------------------------------------------------------------------------------
 # Resume: SIGTERM, SIGKILL, damaged last line
 # --------------------------------------------------------------------------------------
-def _trial_cmd(path, out, extra=()):
+def _trial_cmd(path, out, extra=(), delay=0.002):
     return [sys.executable, "-m", "graspguide", "trial", "--protocol", path, "--participant",
             "U2", "--port", "sim", "--source",
-            "plugin:test_runner:AligningHand:delay=0.002", "--out", str(out), *extra]
+            f"plugin:test_runner:AligningHand:delay={delay}", "--out", str(out), *extra]
 
 
 def _env():
@@ -336,6 +336,14 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     starts = [r for r in runs if r["event"] == "start"]
     assert len(starts) == 3 and starts[-1]["completed_before"] == n_killed
     assert runs[-1]["outcome"] == "complete"
+    # the interrupted study gives what an uninterrupted one gives
+    p = subprocess.run(_trial_cmd(path, tmp_path / "once", delay=0), env=_env(),
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    keys = ("trial_index", "success", "completion_s", "first_entry_s", "final_error_deg",
+            "poses")
+    once = lines(tmp_path / "once" / "U2" / "trials.jsonl")
+    assert [[r[k] for k in keys] for r in recs] == [[r[k] for k in keys] for r in once]
 
 
 def test_half_written_last_line_is_reported_and_rerun(tmp_path, sim):
