@@ -34,48 +34,77 @@ struct QpInfo {
 
 namespace detail {
 
-// Active rows of A as columns, factorised by Householder QR; all sizes bounded by N.
+// The active rows as columns, A_W^T = J [R; 0]: J orthogonal, R upper triangular, both
+// N x N and updated by Givens rotations when a row enters or leaves (Goldfarb-Idnani's
+// own scheme for a unit Hessian), instead of refactorising the active set in every
+// iteration. R holds the identity outside its leading q x q block, so that fixed-size
+// triangular solves act on that block and leave the rest alone: every size is fixed at
+// compile time, and Eigen unrolls them instead of calling its run-time-sized kernels.
 template <typename T, int N>
 struct ActiveFactor {
-  using Cols = Eigen::Matrix<T, N, Eigen::Dynamic, 0, N, N>;
   using Vec = Eigen::Matrix<T, N, 1>;
-  using Small = Eigen::Matrix<T, Eigen::Dynamic, 1, 0, N, 1>;
+  using Mat = Eigen::Matrix<T, N, N>;
 
-  Eigen::HouseholderQR<Cols> qr;
-  Cols cols;
+  Mat j = Mat::Identity();
+  Mat r = Mat::Identity();
   int q = 0;
+  bool rotated = false;  // J is still the identity: most problems need one or two rows
 
-  template <typename RowsA>
-  void build(const RowsA& a, const int* idx, int count) {
-    q = count;
-    cols.resize(N, q);
-    for (int i = 0; i < q; ++i) cols.col(i) = a.row(idx[i]).transpose();
-    if (q > 0) qr.compute(cols);
+  // d = J^T v; z = the part of v orthogonal to the active rows; coeff (first q entries,
+  // zero after) with A_W^T coeff = v - z. Returns |z|.
+  T split(const Vec& v, Vec& d, Vec& z, Vec& coeff) const {
+    if (!rotated) {  // q == 0 as well: nothing is active yet
+      d = v;
+      z = v;
+      coeff.setZero();
+      return v.norm();
+    }
+    d.noalias() = j.transpose() * v;
+    Vec free = d;
+    for (int i = 0; i < q; ++i) free(i) = T(0);
+    z.noalias() = j * free;
+    coeff = d - free;
+    r.template triangularView<Eigen::Upper>().solveInPlace(coeff);
+    return free.norm();
   }
 
-  // z: part of v orthogonal to the active rows; r: coefficients with A_W^T r = v - z.
-  void split(const Vec& v, Vec& z, Small& r) const {
-    r.resize(q);
-    if (q == 0) { z = v; return; }
-    Vec t = v;
-    t.applyOnTheLeft(qr.householderQ().transpose());
-    r = t.head(q);
-    qr.matrixQR().topLeftCorner(q, q).template triangularView<Eigen::Upper>().solveInPlace(r);
-    t.head(q).setZero();
-    t.applyOnTheLeft(qr.householderQ());
-    z = t;
+  // Makes the row whose d = J^T a (from split) active, as column q.
+  void add(Vec d) {
+    for (int i = N - 1; i > q; --i) {
+      Eigen::JacobiRotation<T> g;
+      g.makeGivens(T(d(i - 1)), T(d(i)));
+      d.applyOnTheLeft(i - 1, i, g.adjoint());
+      d(i) = T(0);
+      j.applyOnTheRight(i - 1, i, g);
+    }
+    for (int i = 0; i < N; ++i) r(i, q) = i <= q ? d(i) : T(0);
+    ++q;
+    rotated = true;
   }
 
-  // Solve A_W A_W^T u = rhs, i.e. R^T R u = rhs, and return A_W^T u.
-  void project(const Small& rhs, Small& u, Vec& step) const {
-    u = rhs;
-    const auto r = qr.matrixQR().topLeftCorner(q, q).template triangularView<Eigen::Upper>();
-    r.transpose().solveInPlace(u);
-    Vec t = Vec::Zero();
-    t.head(q) = u;
-    r.solveInPlace(u);
-    t.applyOnTheLeft(qr.householderQ());
-    step = t;
+  // Removes active column l; the columns after it move down by one.
+  void drop(int l) {
+    for (int c = l; c + 1 < q; ++c) r.col(c) = r.col(c + 1);
+    for (int c = l; c + 1 < q; ++c) {
+      Eigen::JacobiRotation<T> g;
+      g.makeGivens(T(r(c, c)), T(r(c + 1, c)));
+      r.applyOnTheLeft(c, c + 1, g.adjoint());
+      r(c + 1, c) = T(0);
+      j.applyOnTheRight(c, c + 1, g);
+    }
+    --q;
+    r.col(q).setZero();
+    r(q, q) = T(1);
+  }
+
+  // Solves A_W A_W^T u = rhs (R^T R u = rhs; first q entries) and returns A_W^T u.
+  void project(const Vec& rhs, Vec& u, Vec& step) const {
+    Vec t = rhs;
+    r.transpose().template triangularView<Eigen::Lower>().solveInPlace(t);
+    for (int i = q; i < N; ++i) t(i) = T(0);
+    step.noalias() = j * t;
+    u = t;
+    r.template triangularView<Eigen::Upper>().solveInPlace(u);
   }
 };
 
@@ -88,13 +117,12 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
                         Eigen::Matrix<T, N, 1>& x, QpInfo& info) {
   static_assert(M <= 16, "active set is a 16-bit mask");
   using Vec = Eigen::Matrix<T, N, 1>;
-  using Small = typename detail::ActiveFactor<T, N>::Small;
   const T inf = std::numeric_limits<T>::infinity();
 
   detail::ActiveFactor<T, N> f;
-  int w[N];        // active constraint indices
+  int w[N];        // active constraint indices, in the factor's column order
   T u[N + 1];      // their multipliers (plus room for a candidate)
-  int q = 0;
+  uint16_t active = 0;  // the same set as a mask
   info = QpInfo{};
   x = p.x_unconstrained;
   // Dependence is judged against the largest row, not the row itself: a row that is
@@ -103,37 +131,36 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
   T row_scale = T(0);
   for (int j = 0; j < p.m; ++j) row_scale = std::max(row_scale, p.a.row(j).norm());
   const T dependent_below = p.dependent_tol * row_scale;
+  Vec d, z, coeff;
 
   // Warm start: project onto the previous active set, keep the independent rows, and drop
   // rows with negative multipliers until the pair (x, u) is dual feasible again.
   if (warm_active != 0) {
-    Vec z;
-    Small r;
-    for (int j = 0; j < p.m && q < N; ++j) {
+    for (int j = 0; j < p.m && f.q < N; ++j) {
       if (!(warm_active & (1u << j))) continue;
-      f.build(p.a, w, q);
-      const Vec aj = p.a.row(j).transpose();
-      f.split(aj, z, r);
-      if (z.norm() > dependent_below) w[q++] = j;
+      if (f.split(p.a.row(j).transpose(), d, z, coeff) > dependent_below) {
+        w[f.q] = j;
+        active = static_cast<uint16_t>(active | (1u << j));
+        f.add(d);
+      }
     }
-    while (q > 0) {
-      f.build(p.a, w, q);
-      Small rhs(q), mult(q);
-      for (int i = 0; i < q; ++i) rhs(i) = p.b(w[i]) - p.a.row(w[i]).dot(p.x_unconstrained);
-      Vec step;
+    while (f.q > 0) {
+      Vec rhs = Vec::Zero(), mult, step;
+      for (int i = 0; i < f.q; ++i) rhs(i) = p.b(w[i]) - p.a.row(w[i]).dot(p.x_unconstrained);
       f.project(rhs, mult, step);
       int worst = -1;
-      for (int i = 0; i < q; ++i)
+      for (int i = 0; i < f.q; ++i)
         if (mult(i) < T(0) && (worst < 0 || mult(i) < mult(worst))) worst = i;
       if (worst < 0) {
         x = p.x_unconstrained + step;
-        for (int i = 0; i < q; ++i) u[i] = mult(i);
+        for (int i = 0; i < f.q; ++i) u[i] = mult(i);
         break;
       }
-      for (int i = worst; i + 1 < q; ++i) w[i] = w[i + 1];
-      --q;
+      active = static_cast<uint16_t>(active & ~(1u << w[worst]));
+      for (int i = worst; i + 1 < f.q; ++i) w[i] = w[i + 1];
+      f.drop(worst);
     }
-    if (q == 0) x = p.x_unconstrained;
+    if (f.q == 0) x = p.x_unconstrained;
   }
 
   for (;;) {
@@ -141,9 +168,7 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
     int cand = -1;
     T worst = -p.violation_tol;
     for (int j = 0; j < p.m; ++j) {
-      bool active = false;
-      for (int i = 0; i < q; ++i) active = active || w[i] == j;
-      if (active) continue;
+      if (active & (1u << j)) continue;
       const T s = p.a.row(j).dot(x) - p.b(j);
       if (s < worst) { worst = s; cand = j; }
     }
@@ -153,19 +178,15 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
     T u_cand = T(0);
     for (;;) {
       if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
-      f.build(p.a, w, q);
-      Vec z;
-      Small r;
-      f.split(ap, z, r);
-      const T z_norm = z.norm();
+      const T z_norm = f.split(ap, d, z, coeff);
       const bool dependent = !(z_norm > dependent_below);
 
       // Dual step limit: the first active multiplier to reach zero.
       T t_dual = inf;
       int drop = -1;
-      for (int i = 0; i < q; ++i) {
-        if (r(i) > T(0)) {
-          const T ratio = u[i] / r(i);
+      for (int i = 0; i < f.q; ++i) {
+        if (coeff(i) > T(0)) {
+          const T ratio = u[i] / coeff(i);
           if (ratio < t_dual) { t_dual = ratio; drop = i; }
         }
       }
@@ -175,20 +196,22 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
 
       const T t = t_primal <= t_dual ? t_primal : t_dual;
       if (!dependent) x.noalias() += t * z;
-      for (int i = 0; i < q; ++i) u[i] -= t * r(i);
+      for (int i = 0; i < f.q; ++i) u[i] -= t * coeff(i);
       u_cand += t;
 
       if (t_primal <= t_dual) {  // full step: the candidate becomes active
-        w[q] = cand;
-        u[q] = u_cand;
-        ++q;
+        w[f.q] = cand;
+        u[f.q] = u_cand;
+        active = static_cast<uint16_t>(active | (1u << cand));
+        f.add(d);
         break;
       }
-      for (int i = drop; i + 1 < q; ++i) { w[i] = w[i + 1]; u[i] = u[i + 1]; }
-      --q;  // a partial step leaves the candidate violated: keep going with it
+      active = static_cast<uint16_t>(active & ~(1u << w[drop]));
+      for (int i = drop; i + 1 < f.q; ++i) { w[i] = w[i + 1]; u[i] = u[i + 1]; }
+      f.drop(drop);  // a partial step leaves the candidate violated: keep going with it
     }
   }
-  for (int i = 0; i < q; ++i) info.active = static_cast<uint16_t>(info.active | (1u << w[i]));
+  info.active = active;
   return x.allFinite() ? Status::kOk : Status::kNonFiniteInput;
 }
 
