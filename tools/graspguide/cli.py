@@ -392,9 +392,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_stream_parser(sub)
     _add_bench_parser(sub)
     _add_trial_parser(sub)
-    # ---- `graspguide demo` (issue 5, item 6) will be registered HERE: ---------------------
-    # _add_demo_parser(sub)   # a simulated study of the paper's protocol, end to end
-    # -----------------------------------------------------------------------------------------
+    from . import analysis as _analysis, demo as _demo
+    _analysis.register(sub)   # `graspguide analyze`: Tables I-III, statistics, Figure 4
+    _demo.add_parser(sub)     # `graspguide demo`: the paper's study end to end, simulated
     return parser
 
 

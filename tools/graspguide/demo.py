@@ -1,0 +1,278 @@
+"""`graspguide demo`: the paper's user study end to end, SIMULATED.
+
+One command runs the simulated device (virtual clock) and N virtual participants (U1..UN,
+:class:`graspguide.participant.VirtualParticipant`) through a study protocol (default
+``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.analysis`): it
+prints Tables I-II and the repeated-measures ANOVA line and writes Figure 4 (PNG, SVG),
+the Markdown report and the CSV tables to ``OUT/analysis/``.
+
+Each participant is one ``graspguide trial --port sim --source participant`` process
+with its own simulated device; ``--jobs`` of them run at a time (default: the CPU
+count). Their output goes to ``OUT/demo-logs/PID.log``.
+
+Resume: the study folder ``OUT`` (default ``logs/demo-study`` in the repository) is the
+runner's (docs/study.md): completed trials are fsync'ed to ``OUT/PID/trials.jsonl`` one
+line each, so killing the demo at any point and running the same command again completes
+the study with every trial exactly once; a completed study run again is only analysed
+again. Everything here is labelled SIMULATED: no human took part.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from typing import Dict, List, Optional, Tuple
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+DEFAULT_SOURCE = "participant"
+
+DESCRIPTION = """\
+The paper's user study end to end, SIMULATED: the simulated device (virtual clock) and
+N virtual participants U1..UN (graspguide.participant; a model, never human data) run
+through a study protocol with `graspguide trial` (--jobs participants at a time, each
+with its own simulated device), then `graspguide analyze`: prints Tables I-II and the
+repeated-measures ANOVA, writes Figure 4 (PNG, SVG), report.md and CSV tables to
+OUT/analysis/.
+
+Killed or interrupted, the same command resumes: completed trials are kept (OUT/PID/
+trials.jsonl, one fsync'ed line per trial) and every trial runs exactly once; a
+completed study is only analysed again. Use another --out (or delete OUT) for a fresh
+study.
+
+Exit status: 0 done, 1 a participant's run or the analysis failed (its log is named),
+2 usage error, 130 interrupted (run the same command again to resume).
+"""
+
+
+def _repo_root() -> Optional[str]:
+    try:
+        from .transport import find_repo_root
+        return find_repo_root()
+    except Exception:  # pragma: no cover - informational default only
+        return None
+
+
+def default_protocol() -> str:
+    root = _repo_root()
+    return os.path.join(root, "protocols", "paper.toml") if root else \
+        os.path.join("protocols", "paper.toml")
+
+
+def default_out() -> str:
+    root = _repo_root()
+    return os.path.join(root, "logs", "demo-study") if root else "demo-study"
+
+
+def _jobs(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 1 <= value <= 256:
+        raise argparse.ArgumentTypeError(f"must be between 1 and 256, got {value}")
+    return value
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("demo", help="the paper's study end to end, simulated: 8 virtual "
+                                    "participants, then Tables I-II, the ANOVA and Figure 4",
+                       description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--participants", type=_jobs, default=8, metavar="N",
+                   help="virtual participants U1..UN (default 8, as in the paper)")
+    p.add_argument("--protocol", default=None, metavar="FILE",
+                   help="study protocol (default: protocols/paper.toml of the repository)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="study folder (default: logs/demo-study in the repository); "
+                        "running again into it resumes or, when complete, re-analyses")
+    p.add_argument("--jobs", "-j", type=_jobs, default=None, metavar="N",
+                   help="participants run at a time, each with its own simulated device "
+                        "(default: the CPU count)")
+    p.add_argument("--source", default=DEFAULT_SOURCE, metavar="SPEC",
+                   help="the virtual participant: participant[:key=value,...] "
+                        "(graspguide.participant parameters; default: the documented "
+                        "defaults)")
+    p.set_defaults(handler=run, command_parser=p)
+    return p
+
+
+def _status(protocol, out: str, pid: str) -> Tuple[int, int, bool]:
+    """(completed trials, planned trials, complete incl. TLX) of a participant."""
+    from .protocol_file import plan, session_order
+    from .runner import read_jsonl
+
+    planned = len(plan(protocol, pid))
+    pdir = os.path.join(out, pid)
+    try:
+        done = {r.get("trial_index") for r in
+                read_jsonl(os.path.join(pdir, "trials.jsonl")).records}
+        tlx = {r.get("session") for r in read_jsonl(os.path.join(pdir, "tlx.jsonl")).records}
+    except Exception:
+        return 0, planned, False      # let the runner report what is wrong
+    sessions = {s.session for s in session_order(protocol, pid)}
+    return len(done), planned, len(done) >= planned and sessions <= tlx
+
+
+def _preexec() -> None:  # pragma: no cover - runs in the child
+    """The child dies with the demo (Linux): SIGTERM when its parent is gone, so a demo
+    killed with SIGKILL leaves no runner holding a participant's folder."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except Exception:
+        pass
+
+
+def _count_lines(path: str) -> int:
+    try:
+        with open(path, "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:
+        return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    from .protocol_file import ProtocolFileError, load_protocol
+
+    t0 = time.monotonic()
+    protocol_path = args.protocol or default_protocol()
+    out = args.out or default_out()
+    jobs = args.jobs or os.cpu_count() or 1
+    try:
+        protocol = load_protocol(protocol_path)
+        from .runner import RunnerError, open_runner_source
+        if not args.source.startswith("participant"):
+            raise RunnerError("--source must be the virtual participant: "
+                              "participant[:key=value,...]", usage=True)
+        open_runner_source(args.source, protocol, "U1")   # checks the spec
+    except (ProtocolFileError, RunnerError) as e:
+        print(f"graspguide demo: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    pids = [f"U{i}" for i in range(1, args.participants + 1)]
+    logs = os.path.join(out, "demo-logs")
+    os.makedirs(logs, exist_ok=True)
+    print(f"SIMULATED study (virtual participants, not human data): protocol {protocol_path}, "
+          f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {args.source}, "
+          f"{min(jobs, len(pids))} at a time; study folder {out}", flush=True)
+
+    status = {pid: _status(protocol, out, pid) for pid in pids}
+    total = sum(s[1] for s in status.values())
+    todo = [pid for pid in pids if not status[pid][2]]
+    before = sum(s[0] for s in status.values())
+    if not todo:
+        print(f"the study in {out} is complete ({total} trials): analysing it again",
+              flush=True)
+    elif before:
+        print(f"resuming: {before} of {total} trials already completed are kept and not run "
+              "again", flush=True)
+
+    code = _run_participants(args, protocol_path, out, logs, todo, jobs, total, status)
+    if code != EXIT_OK:
+        return code
+    run_s = time.monotonic() - t0
+    return _analyse(out, run_s, t0)
+
+
+def _run_participants(args, protocol_path: str, out: str, logs: str, todo: List[str],
+                      jobs: int, total: int, status: Dict[str, Tuple[int, int, bool]]) -> int:
+    if not todo:
+        return EXIT_OK
+    interrupted = []
+
+    def _interrupt(signum, frame):
+        interrupted.append(signum)
+        raise KeyboardInterrupt
+
+    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    running: Dict[str, Tuple[subprocess.Popen, object]] = {}
+    queue = list(todo)
+    failed: List[Tuple[str, int]] = []
+    next_report = time.monotonic() + 5.0
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                pid = queue.pop(0)
+                cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol",
+                       protocol_path, "--participant", pid, "--port", "sim", "--source",
+                       args.source, "--out", out]
+                log = open(os.path.join(logs, f"{pid}.log"), "ab")
+                log.write(f"\n$ {' '.join(cmd)}\n".encode())
+                log.flush()
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
+                                        stderr=subprocess.STDOUT, preexec_fn=_preexec)
+                running[pid] = (proc, log)
+            time.sleep(0.1)
+            for pid, (proc, log) in list(running.items()):
+                rc = proc.poll()
+                if rc is None:
+                    continue
+                log.close()
+                del running[pid]
+                done = _count_lines(os.path.join(out, pid, "trials.jsonl"))
+                if rc == 0:
+                    print(f"{pid}: done, {done}/{status[pid][1]} trials (simulated)",
+                          flush=True)
+                else:
+                    failed.append((pid, rc))
+                    print(f"{pid}: `graspguide trial` exited with {rc}; see "
+                          f"{os.path.join(logs, pid + '.log')}", file=sys.stderr, flush=True)
+            if time.monotonic() >= next_report and running:
+                next_report = time.monotonic() + 10.0
+                done = sum(_count_lines(os.path.join(out, pid, "trials.jsonl"))
+                           for pid in status)
+                print(f"  {done}/{total} trials done; running {', '.join(running)}",
+                      flush=True)
+    except KeyboardInterrupt:
+        for pid, (proc, log) in running.items():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)   # the runner STOPs and exits (130)
+        for pid, (proc, log) in running.items():
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            log.close()
+        done = sum(_count_lines(os.path.join(out, pid, "trials.jsonl")) for pid in status)
+        print(f"\ngraspguide demo: interrupted with {done}/{total} trials done; completed "
+              "trials are saved: run the same command again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if failed:
+        print("graspguide demo: error: " + ", ".join(f"{p} (exit {c})" for p, c in failed)
+              + f" failed; their logs are in {logs}; completed trials are kept: fix the cause "
+              "and run the same command again", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _analyse(out: str, run_s: float, t0: float) -> int:
+    from .analysis import AnalysisError, analyze, summary_text, write_outputs
+
+    target = os.path.join(out, "analysis")
+    try:
+        res = analyze([out])
+        written = write_outputs(res, target)
+    except AnalysisError as e:
+        print(f"graspguide demo: error: the analysis failed: {e}", file=sys.stderr)
+        return EXIT_FAILURE
+    print()
+    print(summary_text(res))
+    print()
+    print(f"Wrote {', '.join(p.name for p in written)} to {target}")
+    print(f"SIMULATED study: {len(res.participants)} virtual participants; trials "
+          f"{run_s:.1f} s, total {time.monotonic() - t0:.1f} s wall time")
+    return EXIT_OK
+
+
+__all__ = ["add_parser", "run", "default_out", "default_protocol"]
