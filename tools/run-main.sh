@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# The main job: set up what is missing (tools/bootstrap.sh, idempotent), then stream a
-# synthetic hand to the simulated device through one guided trial (paper's 4-contact scene,
-# virtual clock) and log the session under logs/. Extra arguments go to `graspguide stream`.
+# The main job: set up what is missing (tools/bootstrap.sh, idempotent), then
+# `graspguide demo`: the paper's user study end to end, SIMULATED (the simulated device on
+# a virtual clock and 8 virtual participants through protocols/paper.toml), then its
+# analysis (Tables I-II, the ANOVA; Figure 4 and report.md in logs/demo-study/analysis/).
+# Killed or interrupted, the same command resumes the study (every trial exactly once).
+# Extra arguments go to `graspguide demo` (--participants, --jobs, --out, --protocol).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/tools/bootstrap.sh" >&2
-LOG="$ROOT/logs/main-$(date -u +%Y%m%dT%H%M%SZ)"
-exec "$ROOT/.venv/bin/graspguide" stream --port sim --virtual-clock \
-    --scene "$ROOT/tools/examples/scene_paper_4.toml" --wrench 0.4,-1,0.3 \
-    --source synthetic --log "$LOG" "$@"
+exec "$ROOT/.venv/bin/graspguide" demo --protocol "$ROOT/protocols/paper.toml" \
+    --out "$ROOT/logs/demo-study" "$@"
