@@ -50,9 +50,19 @@ The model (docs/participant.md explains it with every parameter and its source):
      and tries the next direction (+90, -90, 180 degrees); after four failures in a row
      the step halves. At a base as faint as can be told from the weakest vibration
      (one Weber step of the motor speed at PWM 70) it holds still for ``probe_dwell_s``.
-   * Mode C, while the cue persists: without magnitude information, random probes
-     around the pose it believed aligned, uniform over a disc of tilts of radius
-     ``search_radius_deg``, each held ``probe_dwell_s`` (the first pose too).
+   * Mode C, while the cue persists: the pattern is constant during the whole trial (it
+     depends only on the grasp, not on the orientation; paper Sec. III-A), so the only
+     new information is that the cue has not stopped yet. The participant searches the
+     directions around its estimate systematically, most likely first, over a hexagonal
+     grid of candidate weight directions (hand frame) centred on its first estimate,
+     spacing sqrt(3) * 2/3 * ``task_threshold_deg``. Each time it moves to the candidate
+     not yet ruled out that is nearest to its current estimate (the mean of all its
+     readings of the pattern, so the Weber noise averages out) and holds it for
+     ``task_hold_s + 3 erm_tau_s + reaction_time_s`` (the hold the task needs, then the
+     time to feel that the cue did not stop). A held pose rules out the candidates
+     within a third of the threshold of where the hand actually pointed (their whole
+     cells lie inside the threshold cone just tried); a candidate missed by motor noise
+     is aimed at again. It never uses magnitude.
 
 What it does NOT use: the device's error angle, ``alpha`` or the wrench. The wrench
 passed to :meth:`VirtualParticipant.begin_trial` is validated (so a broken caller is
@@ -133,13 +143,18 @@ class ParticipantParams:
     #: and the most favourable one. An ERM's vibration amplitude grows with the square
     #: of its speed, so the noise (SD) on the perceived motor speed is half of it.
     weber_frac: float = 0.20
-    #: Mode C search: radius of the random probes around the pose believed aligned
-    #: [deg]. Model convention (no literature figure), fixed before any simulated
-    #: study and not tuned toward the paper's tables.
-    search_radius_deg: float = 30.0
-    #: How long the participant holds a probe (mode C) or a faint-vibration pose
-    #: (mode V) waiting for the cue to stop [s]. Model convention, as above.
+    #: How long the participant holds a faint-vibration pose in mode V waiting for the
+    #: cue to stop [s]. Model convention, fixed before any simulated study and not tuned
+    #: toward the paper's tables (unverified, assumption).
     probe_dwell_s: float = 1.0
+    #: What the participant knows of the task from its instructions and familiarization:
+    #: the alignment threshold [deg] (paper Sec. IV: 3 deg) ...
+    task_threshold_deg: float = 3.0
+    #: ... and how long it must be held for the cue to stop [s] (paper Sec. IV: 0.5 s).
+    #: Mode C uses both: candidate spacing sqrt(3) * 2/3 * task_threshold_deg (see
+    #: _C_AIM_TOL) and a hold per candidate of
+    #: task_hold_s + 3 erm_tau_s + reaction_time_s. Set them to the protocol's values.
+    task_hold_s: float = 0.5
 
 
 _NONNEG_FIELDS = ("tremor_amplitude_deg", "motor_noise_frac", "weber_frac")
@@ -527,15 +542,17 @@ class VirtualParticipant:
             if distance is not None and angle > 0:
                 rotvec = rotvec / angle * math.radians(distance)
             if self.mode == "C":
-                # The pose believed aligned (the plan, not its noisy execution): the
-                # centre of the later search. Wait there for the cue to stop.
-                self._search = {"home": _quat_mul(_quat_from_rotvec(rotvec), self._q)}
-                self._start_move(t, rotvec, p.probe_dwell_s)
+                # The first candidate is the first estimate itself (the centre of the
+                # candidate grid); wait there for the cue to stop.
+                grid = _hex_directions(direction, _C_SPACING * p.task_threshold_deg)
+                self._search = {"grid": grid, "readings": direction.copy(), "n_readings": 1,
+                                "tried": np.zeros(len(grid), dtype=bool)}
+                self._start_move(t, rotvec, self.c_dwell_s())
             else:
                 self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
             return
         if self.mode == "C":
-            self._plan_probe(t)
+            self._plan_candidate(t, direction)
         else:
             self._plan_compass(t, float(distance))
 
@@ -543,15 +560,37 @@ class VirtualParticipant:
         phi = self._rng.uniform(0.0, 2.0 * math.pi)
         return np.array([math.cos(phi), math.sin(phi), 0.0])
 
-    def _plan_probe(self, t: float) -> None:
-        """Mode C: move to a random pose within search_radius_deg of the pose believed
-        aligned (uniform over the disc of tilts); the search does not widen."""
+    def c_dwell_s(self) -> float:
+        """Mode C: how long each candidate pose is held [s]: the task's hold, then the
+        time to feel that the cue did not stop (ERM spin-down to 5 %, reaction time)."""
         p = self.params
-        home = self._search["home"]
-        radius = math.radians(p.search_radius_deg) * math.sqrt(self._rng.uniform())
-        target = _quat_mul(_quat_from_rotvec(self._random_horizontal() * radius), home)
-        delta = _rotvec_from_quat(_quat_mul(target, _conj(self._q)))
-        self._start_move(t, delta, p.probe_dwell_s)
+        return p.task_hold_s + 3.0 * p.erm_tau_s + p.reaction_time_s
+
+    def _plan_candidate(self, t: float, direction: np.ndarray) -> None:
+        """Mode C: the cue did not stop, so the pose just held was wrong. Rule out the
+        candidates it covered, average the new reading of the (constant) pattern into the
+        estimate and move to the candidate not yet ruled out that is nearest to it (most
+        likely first); the search widens as the near candidates are used up and never
+        returns to a ruled-out one."""
+        st = self._search
+        st["readings"] = st["readings"] + direction
+        st["n_readings"] += 1
+        centre = st["readings"] / np.linalg.norm(st["readings"])
+        grid, tried = st["grid"], st["tried"]
+        # The pose just held rules out the candidates within the aim tolerance (a third
+        # of the threshold) of where the hand actually pointed (proprioception): with the
+        # grid's spacing their whole cells are then inside the threshold cone just tried.
+        # A candidate missed by more than that (motor noise) stays untried and is aimed
+        # at again, with a small, precise correction.
+        down = _rotate(_conj(self._q), GRAVITY)
+        tol = math.radians(_C_AIM_TOL * self.params.task_threshold_deg)
+        tried |= grid @ down >= math.cos(tol)
+        if tried.all():                    # the whole sphere tried: start over
+            tried[:] = False
+        cosines = np.where(tried, -np.inf, grid @ centre)
+        i = int(np.argmax(cosines))        # the nearest untried candidate (first on ties)
+        rotvec, _ = self._tilt_to_align(grid[i])
+        self._start_move(t, rotvec, self.c_dwell_s())
 
     def _plan_compass(self, t: float, distance: float) -> None:
         """Mode V: warmer/colder compass search with the felt distance.
@@ -608,6 +647,42 @@ class VirtualParticipant:
 
 def _conj(q: np.ndarray) -> np.ndarray:
     return np.array([q[0], -q[1], -q[2], -q[3]])
+
+
+#: Mode C, in units of the task threshold r. A held pose within the aim tolerance e of a
+#: candidate rules the candidate out; a hexagonal lattice of spacing s has cells of
+#: covering radius s / sqrt(3), so a cell lies wholly inside the cone of radius r around
+#: the pose when s / sqrt(3) + e <= r: s = sqrt(3) (r - e). e = r / 3 (1 deg for 3 deg)
+#: is about two SDs of the aiming error of a correction of one spacing with the motor
+#: noise (0.1 x 3.5 deg x sqrt(2) = 0.5 deg), so most candidates are held on the first
+#: aim. Fixed from that geometry, before any simulated study.
+_C_AIM_TOL = 1.0 / 3.0
+_C_SPACING = math.sqrt(3.0) * (1.0 - _C_AIM_TOL)
+
+
+def _hex_directions(centre: np.ndarray, spacing_deg: float) -> np.ndarray:
+    """Unit directions on a hexagonal lattice of the given spacing in the tangent plane at
+    ``centre`` (mapped onto the sphere by the exponential map), sorted by their angle to
+    the centre (the centre first), out to 180 degrees."""
+    c = centre / np.linalg.norm(centre)
+    a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(c, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(c, e1)
+    s = math.radians(spacing_deg)
+    n = int(math.ceil(math.pi / s / 0.8)) + 1
+    i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
+    x = (i + 0.5 * j).ravel() * s
+    y = (j * (math.sqrt(3.0) / 2.0)).ravel() * s
+    r = np.hypot(x, y)
+    keep = r <= math.pi + 1e-12
+    x, y, r = x[keep], y[keep], r[keep]
+    order = np.lexsort((np.arctan2(y, x), r))        # by distance, then by angle
+    x, y, r = x[order], y[order], r[order]
+    safe = np.where(r > 0, r, 1.0)
+    tangent = (x / safe)[:, None] * e1 + (y / safe)[:, None] * e2
+    d = np.cos(r)[:, None] * c + np.sin(r)[:, None] * tangent
+    return d / np.linalg.norm(d, axis=1)[:, None]
 
 
 # --------------------------------------------------------------------------------------

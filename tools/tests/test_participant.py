@@ -267,6 +267,108 @@ def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
     assert quaternion_angle_deg(ends["V", "base"], ends["V", "half"]) > 10 * c_diff
 
 
+def _c_run(pwm, mode="C", spec="participant:erm_tau_s=0.0001", seconds=20.0, seed=4):
+    vp = VirtualParticipant.from_spec(spec, seed)
+    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0],
+                   policy="F", mode=mode, start_quat=IDENTITY, noise_seed=21)
+    return [q for _, q in open_loop(vp, pwm, seconds)]
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.85])
+def test_mode_c_every_decision_ignores_magnitude(scale):
+    """Mode C never uses magnitude: with the same noise stream, scaling every PWM above
+    the motor floor (70) by a common factor leaves the whole trajectory unchanged (every
+    decision of the search, over 20 s). The ERM is made fast here (tau = 0.1 ms) so that
+    the motors are at their steady speed when read; the ERM transient is the only way
+    magnitude enters (test_mode_c_first_move_ignores_magnitude_mode_v_does_not). In V the
+    same scaling changes the trajectory."""
+    base = [170, 0, 130, 90]
+    scaled = _scaled(base, scale)
+    assert [v - PWM_FLOOR for v in scaled if v] == [scale * (v - PWM_FLOOR)
+                                                     for v in base if v]
+    for spec in ("participant:erm_tau_s=0.0001,weber_frac=0",
+                 "participant:erm_tau_s=0.0001"):
+        a = _c_run(base, spec=spec)
+        b = _c_run(scaled, spec=spec)
+        assert len(a) == len(b) == 2000
+        assert max(quaternion_angle_deg(x, y) for x, y in zip(a, b)) < 1e-4
+        assert quaternion_angle_deg(a[-1], IDENTITY) > 5.0       # it did move and search
+        if spec.endswith("weber_frac=0"):
+            assert a == b                                         # exactly, without noise
+    v_a = _c_run(base, mode="V")
+    v_b = _c_run(scaled, mode="V")
+    assert max(quaternion_angle_deg(x, y) for x, y in zip(v_a, v_b)) > 1.0
+
+
+def _down_in_hand(q):
+    """Hand-frame direction that points down (along gravity) at orientation q."""
+    w, x, y, z = q
+    # R^T g with g = (0, 0, -1): minus the third row of R.
+    return -np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+
+
+def test_mode_c_search_is_systematic_and_widens():
+    """With a cue that never stops, the C participant tries distinct candidate directions
+    (never the same one twice), each held at least task_hold_s + 3 tau + RT, spaced by
+    sqrt(3) x 2/3 x the task threshold, and widens its search ring by ring."""
+    spec = "participant:tremor_amplitude_deg=0,motor_noise_frac=0,weber_frac=0"
+    vp = VirtualParticipant.from_spec(spec, 3)
+    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0],
+                   policy="F", mode="C", start_quat=IDENTITY, noise_seed=5)
+    poses = open_loop(vp, [170, 0, 130, 90], 60.0)
+    # Poses where the hand is still for at least 0.3 s: the candidates tried.
+    still, run = [], []
+    for (t0, q0), (t1, q1) in zip(poses, poses[1:]):
+        if quaternion_angle_deg(q0, q1) < 1e-9:
+            run.append(t1)
+        else:
+            if run and run[-1] - run[0] >= 0.3:
+                still.append((run[0], run[-1], q0))
+            run = []
+    still = still[1:]                  # (the start pose, before the first movement)
+    assert len(still) >= 40
+    dwell = vp.c_dwell_s()
+    assert dwell == pytest.approx(0.5 + 3 * 0.06 + 0.21)
+    for start, end, _ in still:
+        assert end - start >= dwell - 2.0 / vp.rate_hz
+    dirs = np.array([_down_in_hand(q) for _, _, q in still[:40]])
+    spacing = math.sqrt(3) * 2.0 / 3.0 * vp.params.task_threshold_deg
+    sep = np.degrees(np.arccos(np.clip(dirs @ dirs.T, -1, 1)))
+    np.fill_diagonal(sep, 180.0)
+    assert sep.min() >= 0.95 * spacing                   # never the same candidate twice
+    assert sep.min(axis=1).max() <= 1.05 * spacing       # ... and neighbours on the grid
+    dist = sep[0].copy()
+    dist[0] = 0.0
+    # Ring by ring: the first candidates are near the first estimate, later ones farther
+    # out (the estimate itself moves a little: the first reading is taken during the
+    # ERM's rise, the later ones at steady speed).
+    assert dist[1:7].max() <= 2.1 * spacing
+    assert dist[30:40].min() >= 2.0 * spacing
+
+
+def test_mode_c_converges_with_the_core_when_the_estimate_is_near(report_figure):
+    """Closed loop with the C++ core, mode C, 4 contacts, seeded wrenches: whenever the
+    participant's noise-free reading of the pattern points within 10 deg of the true
+    weight direction, the systematic search reaches the 3 deg threshold (held 0.5 s)
+    within 90 s; trials are reported with the reading's error."""
+    near, far = [], []
+    for policy in ("F", "Fperp"):
+        for i, w in enumerate(_wrenches(10, 77)):
+            res = _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode="C",
+                              constraints="paper", orientation=list(IDENTITY), y_axis=Y_AXIS)
+            vp = new_participant(mode="C", policy=policy)
+            d = vp.felt_direction([float(v) for v in res["pwm"]])
+            f = np.array(w[:3]) / np.linalg.norm(w[:3])
+            err = math.degrees(math.acos(float(np.clip(d @ f, -1, 1))))
+            ok, t = closed_loop(w, mode="C", policy=policy, seed=300 + i)[:2]
+            (near if err <= 10.0 else far).append((policy, i, round(err, 1), ok, t))
+    report_figure("participant closed loop C (4 contacts, 10 wrenches x F/Fperp)",
+                  f"estimate within 10 deg: {sum(r[3] for r in near)}/{len(near)} reached; "
+                  f"farther: {sum(r[3] for r in far)}/{len(far)}")
+    assert len(near) >= 6, near
+    assert all(r[3] for r in near), near
+
+
 # --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("spec,words", [
     ("participant:bogus=1", ["unknown participant parameter", "reaction_time_s"]),
