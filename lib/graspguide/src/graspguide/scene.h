@@ -41,9 +41,9 @@ inline bool parse_mode(const char* s, Mode* out) {
 struct SolverSettings {
   int max_iterations = kDefaultMaxIterations;
   Decomposition decomposition = Decomposition::kQR;
-  // Off by default: on the M4F a warm-started frame costs more than a cold one (full
-  // frame k=4 median 15,920 vs 13,080 instructions, docs/performance.md) because
-  // re-factorising the previous active set outweighs the iterations it saves.
+  // Off by default: on the M4F a warm-started frame costs no less than a cold one (full
+  // frame k=4 median 12,560 vs 12,200 instructions, docs/performance.md): building the
+  // previous active set back up outweighs the iterations it saves.
   bool warm_start = false;
 };
 
