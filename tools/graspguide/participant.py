@@ -117,7 +117,8 @@ class ParticipantParams:
     #: wrist/forearm speed. Wrist/forearm movement in daily living is mostly slow, the
     #: likelihood of a speed falling exponentially with it (Anderton et al. 2023, J Hand
     #: Ther 36(3):580-592); maximal voluntary wrist speeds are several hundred deg/s.
-    #: 90 deg/s is a moderate value inside that range, not fitted to the paper.
+    #: 90 deg/s is a moderate value chosen by hand (no source with a figure found:
+    #: unverified, assumption), not fitted to the paper.
     peak_speed_deg_s: float = 90.0
     #: Physiological tremor amplitude [deg]: the modal postural hand tremor is 0.01 g
     #: peak at ~7 Hz ("A normative study of postural tremor of the hand", Arch Neurol
@@ -131,15 +132,16 @@ class ParticipantParams:
     tremor_frequency_hz: float = 7.0
     #: Signal-dependent motor noise [fraction of the submovement amplitude, SD]: motor
     #: output noise grows in proportion to the command (Harris & Wolpert 1998, Nature
-    #: 394:780-784); endpoint SDs of aimed movements are of the order of 10 % of their
-    #: amplitude (van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063).
-    #: Figures quoted from memory, to check.
+    #: 394:780-784; van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063):
+    #: that form is verified (abstracts). The size, 10 % of the amplitude, was quoted
+    #: from memory and no source read gives it: unverified, assumption.
     motor_noise_frac: float = 0.10
     #: Weber fraction of vibrotactile amplitude discrimination [fraction]: median
     #: difference thresholds of 0.20 (thenar eminence, 125 Hz, 10 dB above threshold) to
     #: 0.58 across conditions ("Vibrotactile difference thresholds: effects of vibration
-    #: frequency, vibration magnitude, contact area, and body location", Forta, Griffin &
-    #: Morioka 2012, Somatosens Mot Res); 0.20 is the Pacinian, ERM-like (125 Hz) case
+    #: frequency, vibration magnitude, contact area, and body location"; figures and title
+    #: verified, authors/year not: docs/participant.md); 0.20 is the Pacinian, ERM-like
+    #: (125 Hz) case
     #: and the most favourable one. An ERM's vibration amplitude grows with the square
     #: of its speed, so the noise (SD) on the perceived motor speed is half of it.
     weber_frac: float = 0.20
