@@ -31,16 +31,13 @@ import hashlib
 import math
 import random
 import re
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from .scene import canonical_json, config_hash
+from .scene import CONSTRAINTS, FINGERS, UNITS, canonical_json, config_hash
+from .toml_file import load_toml, loads_toml
 
 MODALITIES = ("F+C", "Fperp+C", "F+V", "Fperp+V")
-FINGERS = ("thumb", "index", "middle", "palm")
-UNITS = {"m": 1.0, "mm": 1000.0}
-CONSTRAINTS = ("paper", "normal", "none")
 MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
 CONTACT_ORDERS = ("alternate", "fixed")
 WRENCH_ORDERS = ("shuffle", "fixed")
@@ -370,22 +367,11 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
 def load_protocol(path: str) -> Protocol:
     """Read and check a protocol file; ProtocolFileError (naming the file) on any
     problem."""
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except OSError as e:
-        raise ProtocolFileError(f"{path}: cannot read the protocol file: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ProtocolFileError(f"{path}: not valid TOML: {e}") from None
-    return parse_protocol(data, path)
+    return parse_protocol(load_toml(path, ProtocolFileError, "protocol file"), path)
 
 
 def loads_protocol(text: str, source: str = "<string>") -> Protocol:
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ProtocolFileError(f"{source}: not valid TOML: {e}") from None
-    return parse_protocol(data, source)
+    return parse_protocol(loads_toml(text, source, ProtocolFileError), source)
 
 
 # --------------------------------------------------------------------------------------

@@ -31,9 +31,10 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
+
+from .toml_file import load_toml, loads_toml
 
 FINGERS = ("thumb", "index", "middle", "palm")
 UNITS = {"m": 1.0, "mm": 1000.0}   # divisor to metres (x / 1000 is correctly rounded)
@@ -186,22 +187,11 @@ def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
 
 def load_scene(path: str) -> Scene:
     """Read and check a scene.toml; SceneError (naming the file) on any problem."""
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except OSError as e:
-        raise SceneError(f"{path}: cannot read the scene file: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: not valid TOML: {e}") from None
-    return parse_scene(data, path)
+    return parse_scene(load_toml(path, SceneError, "scene file"), path)
 
 
 def loads_scene(text: str, source: str = "<string>") -> Scene:
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{source}: not valid TOML: {e}") from None
-    return parse_scene(data, source)
+    return parse_scene(loads_toml(text, source, SceneError), source)
 
 
 __all__ = ["Scene", "SceneError", "load_scene", "loads_scene", "parse_scene", "config_hash",

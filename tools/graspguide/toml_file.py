@@ -1,0 +1,25 @@
+"""Reading the project's TOML files (scene.toml, protocol files) with errors that name
+the file: one place for what every loader needs."""
+from __future__ import annotations
+
+import tomllib
+from typing import Any, Dict, Type
+
+
+def load_toml(path: str, error: Type[Exception], what: str) -> Dict[str, Any]:
+    """The parsed file; ``error`` (naming the file and ``what`` it is) if it cannot be
+    read or is not valid TOML."""
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as e:
+        raise error(f"{path}: cannot read the {what}: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise error(f"{path}: not valid TOML: {e}") from None
+
+
+def loads_toml(text: str, source: str, error: Type[Exception]) -> Dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise error(f"{source}: not valid TOML: {e}") from None
