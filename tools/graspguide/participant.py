@@ -80,6 +80,9 @@ from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .sources import quat_angle_deg as quaternion_angle_deg  # re-exported: tests, analysis
+from .sources import quat_mul
+
 PWM_FLOOR = 70      # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
 PWM_RANGE = 185     # PWM span above the floor, docs/algorithm.md step 6
 PWM_MAX = 255
@@ -206,15 +209,6 @@ def _qnormalize(q: Tuple[float, ...]) -> Tuple[float, float, float, float]:
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw])
-
-
 def _quat_from_rotvec(v: np.ndarray) -> np.ndarray:
     angle = float(np.linalg.norm(v))
     if angle < 1e-15:
@@ -241,14 +235,6 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     u = np.array([x, y, z])
     t = 2.0 * np.cross(u, v)
     return v + w * t + np.cross(u, t)
-
-
-def quaternion_angle_deg(a: Sequence[float], b: Sequence[float]) -> float:
-    """Angle of the rotation between two orientations [deg] (for tests and analysis)."""
-    qa = np.asarray(a, float) / np.linalg.norm(a)
-    qb = np.asarray(b, float) / np.linalg.norm(b)
-    d = min(1.0, abs(float(qa @ qb)))
-    return math.degrees(2.0 * math.acos(d))
 
 
 def _finite_vector(x: Any, n: Optional[int], what: str) -> np.ndarray:
@@ -631,7 +617,7 @@ class VirtualParticipant:
                 if st["tries"] % 4 == 0:
                     st["step"] = max(0.5 * st["step"], 0.5 * res)
                 st["at_base"] = True
-                delta = _rotvec_from_quat(_quat_mul(st["base_q"], _conj(self._q)))
+                delta = _rotvec_from_quat(quat_mul(st["base_q"], _conj(self._q)))
                 self._start_move(t, delta, pause)
                 return
         base_val = st["base_sum"] / st["base_n"]
@@ -640,9 +626,9 @@ class VirtualParticipant:
             st["held"] = True
             self._hold(t, p.probe_dwell_s)
             return
-        target = _quat_mul(_quat_from_rotvec(st["axis"] * math.radians(st["step"])),
+        target = quat_mul(_quat_from_rotvec(st["axis"] * math.radians(st["step"])),
                            st["base_q"])
-        delta = _rotvec_from_quat(_quat_mul(target, _conj(self._q)))
+        delta = _rotvec_from_quat(quat_mul(target, _conj(self._q)))
         st["at_base"] = False
         self._start_move(t, delta, pause)
 
