@@ -141,6 +141,7 @@ def _count_lines(path: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from .protocol_file import ProtocolFileError, load_protocol
+    from .runner import RunnerError, open_runner_source
 
     t0 = time.monotonic()
     protocol_path = args.protocol or default_protocol()
@@ -148,7 +149,6 @@ def run(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     try:
         protocol = load_protocol(protocol_path)
-        from .runner import RunnerError, open_runner_source
         if not args.source.startswith("participant"):
             raise RunnerError("--source must be the virtual participant: "
                               "participant[:key=value,...]", usage=True)

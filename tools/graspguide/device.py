@@ -30,6 +30,7 @@ Not thread-safe: one thread talks to one client.
 
 from __future__ import annotations
 
+import binascii
 import math
 import struct
 import time
@@ -38,18 +39,106 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from .protocol.errors import BadEnumValueError, ProtocolError
-from .protocol.framing import (Accept, FrameParser, ParseEvent, SequenceCounter, encode_message,
-                               message_of)
+from .protocol.framing import (CRC16_INIT, FRAME_OVERHEAD, MAX_RAW_FRAME_SIZE, Accept, Frame,
+                               FrameParser, ParseEvent, SequenceCounter, check_frame,
+                               encode_message, message_of)
 from .protocol.messages import (MAX_CONTACTS, MESSAGES, PROTOCOL_VERSION, Ack, ConstraintModel,
                                 DeviceState, Error, ErrorCode, GetStatus, Hello, HelloReply, Mode,
                                 MsgId, Policy, Pose, SetMotors, SetScene, StartTrial, Status, Stop,
-                                Telemetry, TrialResult)
+                                TELEMETRY_FLAG_TRIAL_RUNNING, Telemetry, TrialResult)
 from .transport import (DeviceDisconnected, DeviceNotFound, LinkError, LinkTimeout, SimNotBuilt,
                         Transport)
 
 DEFAULT_TIMEOUT = 1.0      # s, per request: a board answers in a few ms at 115200 baud
 READ_CHUNK = 4096          # bytes per transport read
 POLL_INTERVAL = 0.05       # s, longest single blocking read (keeps deadlines responsive)
+
+# Fast paths of the per-pose traffic (a study streams ~10^6 POSE/TELEMETRY pairs): the
+# POSE frame packed in one struct call, CRC-16/CCITT-FALSE by binascii.crc_hqx (the same
+# polynomial 0x1021, init 0xFFFF, no reflection), COBS by splitting at the zeros (a frame
+# is < 254 bytes, so one block per zero), and TELEMETRY unpacked straight into its
+# dataclass. Anything unusual (a bad CRC, a broken COBS block, an enum value out of its
+# set, another message) goes through the byte-wise FrameParser and the generic codecs,
+# so counters and events are those of the reference path; tests check both agree.
+_POSE_ID = int(MsgId.POSE)
+_POSE_ZEROS = bytes(1 + 4 * 3 * MAX_CONTACTS)
+_TELEMETRY_PAYLOAD = struct.Struct("<Iff4BBBBBI")
+_HEADER = struct.Struct("<BBH")
+_CRC = struct.Struct("<H")
+_TELEMETRY_ID = int(MsgId.TELEMETRY)
+_CONSTRAINT_BY_VALUE = {int(e): e for e in ConstraintModel}
+_ERRORCODE_BY_VALUE = {int(e): e for e in ErrorCode}
+_set = object.__setattr__
+_CODE = [bytes((n + 1,)) for n in range(254)]
+
+
+def _cobs_small(raw: bytes) -> bytes:
+    """COBS of a frame shorter than 254 bytes (delimiter excluded): the same bytes as
+    framing.cobs_encode for such inputs."""
+    if 0 not in raw:
+        return bytes((len(raw) + 1,)) + raw
+    return b"".join([_CODE[len(part)] + part for part in raw.split(b"\0")])
+
+
+def _uncobs_small(enc: bytes) -> Optional[bytes]:
+    """Inverse of _cobs_small for data without zeros, or None when the reference parser
+    must decide (a 0xFF code, a block running past the end)."""
+    out = bytearray()
+    i, n = 0, len(enc)
+    while i < n:
+        code = enc[i]
+        j = i + code
+        if code == 0xFF or j > n:
+            return None
+        out += enc[i + 1:j]
+        i = j
+        if i < n:
+            out.append(0)
+    return bytes(out)
+
+
+_POSE_HEAD = struct.Struct("<BBHI4f")          # header, host_time_us, quat_wxyz
+_POSE_TAIL_ZEROS = 1 + 4 * 3 * MAX_CONTACTS      # has_contacts = 0, contacts all zero
+_POSE_TAIL_COBS = b"\x01" * (_POSE_TAIL_ZEROS - 1)
+
+
+def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> Optional[bytes]:
+    """The wire bytes of a POSE without contacts, or None when a value needs the generic
+    path (a quaternion component beyond the float32 range, not a number).
+
+    The frame is head (24 bytes) + 49 zero bytes + CRC (2): its COBS blocks are the
+    head's blocks (its last one ended by the first zero), one 0x01 block per further
+    zero, then the CRC's blocks."""
+    try:
+        w, x, y, z = quat
+        head = _POSE_HEAD.pack(PROTOCOL_VERSION, _POSE_ID, seq, int(t_us) & 0xFFFFFFFF,
+                               w, x, y, z)
+    except (OverflowError, struct.error, TypeError, ValueError):
+        return None
+    crc = _CRC.pack(binascii.crc_hqx(head + _POSE_ZEROS, CRC16_INIT))
+    return _cobs_small(head) + _POSE_TAIL_COBS + _cobs_small(crc) + b"\0"
+
+
+def _telemetry_fast(payload_view: bytes, offset: int) -> Optional[Telemetry]:
+    """TELEMETRY from its payload without the generic field walk; None if an enum value
+    is not in its set (the generic path then counts it as undecodable)."""
+    (t_us, err, alpha, p0, p1, p2, p3, used, status, iters, flags,
+     compute) = _TELEMETRY_PAYLOAD.unpack_from(payload_view, offset)
+    used_e = _CONSTRAINT_BY_VALUE.get(used)
+    status_e = _ERRORCODE_BY_VALUE.get(status)
+    if used_e is None or status_e is None:
+        return None
+    tel = object.__new__(Telemetry)
+    _set(tel, "host_time_us", t_us)
+    _set(tel, "error_deg", err)
+    _set(tel, "alpha", alpha)
+    _set(tel, "pwm", (p0, p1, p2, p3))
+    _set(tel, "constraints_used", used_e)
+    _set(tel, "solver_status", status_e)
+    _set(tel, "iterations", iters)
+    _set(tel, "flags", flags)
+    _set(tel, "compute_time_us", compute)
+    return tel
 
 # What each ErrorCode means: the schema's text (tools/protocol/messages.toml), checked
 # against it by tools/tests/test_device_client.py so the two cannot drift.
@@ -343,12 +432,75 @@ class DeviceClient:
     # ---- receiving
     def _pump(self, timeout: float) -> int:
         """One read (waiting at most ``timeout`` s); parses it into the inbox. Returns the
-        number of bytes read."""
+        number of bytes read. Complete frames take the fast path (see _fast_frame); a
+        partial frame and anything the fast path declines go byte-wise through the
+        FrameParser."""
         data = self.transport.read(READ_CHUNK, timeout)
         if not data:
             return 0
         self.bytes_received += len(data)
         now = time.monotonic()
+        parser = self._parser
+        pos, n = 0, len(data)
+        if parser._started or parser._dropping:        # finish a frame begun earlier
+            end = data.find(0)
+            if end < 0:
+                self._push_bytes(data, now)
+                return n
+            self._push_bytes(data[:end + 1], now)
+            pos = end + 1
+        while pos < n:
+            end = data.find(0, pos)
+            if end < 0:
+                self._push_bytes(data[pos:], now)       # a partial frame: parser state
+                break
+            if end > pos and not self._fast_frame(data[pos:end], now):
+                self._push_bytes(data[pos:end + 1], now)
+            pos = end + 1
+        return n
+
+    def _fast_frame(self, enc: bytes, now: float) -> bool:
+        """A complete, well-formed frame handled without the byte-wise parser; False when
+        the parser must see it (anything unusual), with nothing changed."""
+        raw = _uncobs_small(enc)
+        if raw is None or not FRAME_OVERHEAD <= len(raw) <= MAX_RAW_FRAME_SIZE:
+            return False
+        body_len = len(raw) - 2
+        if binascii.crc_hqx(raw[:body_len], CRC16_INIT) != _CRC.unpack_from(raw, body_len)[0]:
+            return False
+        version, msg_id, seq = _HEADER.unpack_from(raw)
+        if version != PROTOCOL_VERSION:
+            return False
+        if msg_id == _TELEMETRY_ID and body_len - 4 == _TELEMETRY_PAYLOAD.size:
+            msg = _telemetry_fast(raw, 4)
+            if msg is None:
+                return False
+            self._parser.counts[ParseEvent.FRAME] += 1
+        else:
+            event, frame = check_frame(raw, self._parser.accept)
+            if event is not ParseEvent.FRAME:
+                return False
+            self._parser.counts[ParseEvent.FRAME] += 1
+            self._parser.frame = frame
+            try:
+                msg = message_of(frame)
+            except (BadEnumValueError, ProtocolError):
+                self.undecodable_frames += 1
+                return True
+        self._accept(seq, msg, now)
+        return True
+
+    def _accept(self, seq: int, msg: Any, now: float) -> None:
+        self.frames_received += 1
+        if self._last_device_seq is not None:
+            gap = (seq - self._last_device_seq - 1) & 0xFFFF
+            if gap < 0x8000:
+                self.device_frames_lost += gap
+        self._last_device_seq = seq
+        self._inbox.append(_Received(seq, msg, now))
+
+    def _push_bytes(self, data: bytes, now: float) -> None:
+        """The reference path: every byte through the FrameParser."""
         for byte in data:
             event = self._parser.push(byte)
             if event is ParseEvent.NONE:
@@ -364,14 +516,7 @@ class DeviceClient:
             except (BadEnumValueError, ProtocolError):
                 self.undecodable_frames += 1
                 continue
-            self.frames_received += 1
-            if self._last_device_seq is not None:
-                gap = (frame.seq - self._last_device_seq - 1) & 0xFFFF
-                if gap < 0x8000:
-                    self.device_frames_lost += gap
-            self._last_device_seq = frame.seq
-            self._inbox.append(_Received(frame.seq, msg, now))
-        return len(data)
+            self._accept(frame.seq, msg, now)
 
     def _park(self, item: _Received) -> None:
         """Keep a frame that answers nothing pending."""
@@ -536,6 +681,12 @@ class DeviceClient:
         :attr:`trial_results` (see :meth:`wait_trial_result`)."""
         if t_us is None:
             t_us = host_time_us()
+        if contacts is None:
+            tel = self._pose_fast(int(t_us) & 0xFFFFFFFF, quat, timeout)
+            if tel is not None:
+                if check and tel.solver_status != ErrorCode.OK:
+                    raise DeviceError("POSE", None, tel.solver_status, 0, source="TELEMETRY")
+                return tel
         msg = self._pose_message(t_us, quat, contacts)
         tel = self._request(msg, Telemetry, timeout,
                             match=lambda m: isinstance(m, Telemetry)
@@ -543,6 +694,102 @@ class DeviceClient:
         if check and tel.solver_status != ErrorCode.OK:
             raise DeviceError("POSE", None, tel.solver_status, 0, source="TELEMETRY")
         return tel
+
+    def _pose_fast(self, t_us: int, quat: Sequence[float],
+                   timeout: Optional[float]) -> Optional[Telemetry]:
+        """POSE -> TELEMETRY without the generic codecs (None: use the generic path).
+        Frames already read are parked first, as _request does; what arrives with the
+        TELEMETRY (a TRIAL_RESULT) is parked right after it."""
+        if len(quat) != 4:
+            return None
+        seq = self._seq._next
+        wire = encode_pose_fast(seq, t_us, quat)
+        if wire is None:
+            return None
+        self._settle()
+        self._seq.next()
+        self.transport.write(wire)
+        inbox = self._inbox
+        timeout = self.timeout if timeout is None else float(timeout)
+        deadline = None
+        b0 = f0 = bad0 = 0
+        while True:
+            while inbox:
+                item = inbox.popleft()
+                m = item.message
+                if type(m) is Telemetry and m.host_time_us == t_us:
+                    if not m.flags & TELEMETRY_FLAG_TRIAL_RUNNING:
+                        self._pump(0.0)    # a TRIAL_RESULT right behind it, as _request
+                    self._settle()
+                    return m
+                if isinstance(m, Error) and m.request_seq == seq:
+                    raise DeviceError("POSE", seq, m.code, m.detail)
+                self._park(item)
+            if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
+                raise self._mismatch()
+            now = time.monotonic()
+            if deadline is None:
+                deadline = now + timeout
+                b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+            left = deadline - now
+            if left <= 0:
+                raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
+            self._pump(min(left, POLL_INTERVAL))
+
+    def pose_batch(self, poses: Sequence[Tuple[int, Sequence[float]]],
+                   timeout: Optional[float] = None) -> List[Any]:
+        """Several POSEs (``(t_us, quat)``, no contacts) written at once, then their
+        answers in order: the TELEMETRY of each, or the ERROR that refused it (e.g.
+        not_allowed_in_state for the POSEs that followed the one ending a trial). The
+        device handles them one after the other exactly as if each had been sent after
+        the previous answer; a TRIAL_RESULT lands in :attr:`trial_results`. ``timeout``
+        applies to each answer."""
+        wires = []
+        seqs = []
+        times = []
+        for t_us, quat in poses:
+            t_us = int(t_us) & 0xFFFFFFFF
+            seq = (self._seq._next + len(seqs)) & 0xFFFF
+            wire = encode_pose_fast(seq, t_us, quat) if len(quat) == 4 else None
+            if wire is None:
+                wire = encode_message(self._pose_message(t_us, quat, None), seq)
+            wires.append(wire)
+            seqs.append(seq)
+            times.append(t_us)
+        self._settle()
+        for _ in seqs:
+            self._seq.next()
+        self.transport.write(b"".join(wires))
+        timeout = self.timeout if timeout is None else float(timeout)
+        out: List[Any] = []
+        inbox = self._inbox
+        for seq, t_us in zip(seqs, times):
+            deadline = time.monotonic() + timeout
+            b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+            answer = None
+            while answer is None:
+                while inbox:
+                    item = inbox.popleft()
+                    m = item.message
+                    if type(m) is Telemetry and m.host_time_us == t_us:
+                        answer = m
+                        break
+                    if isinstance(m, Error) and m.request_seq == seq:
+                        answer = m
+                        break
+                    self._park(item)
+                if answer is not None:
+                    break
+                if self.device_version is not None and \
+                        self.device_version != PROTOCOL_VERSION:
+                    raise self._mismatch()
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
+                self._pump(min(left, POLL_INTERVAL))
+            out.append(answer)
+        self._settle()
+        return out
 
     def stop(self, timeout: Optional[float] = None) -> Ack:
         """STOP: motors off now; a running trial ends without TRIAL_RESULT."""

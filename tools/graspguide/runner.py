@@ -42,9 +42,11 @@ import datetime as _dt
 import fcntl
 import importlib
 import json
+import math
 import os
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, TextIO, Tuple
 
@@ -460,8 +462,13 @@ class StudyRunner:
                  tlx: Optional[Dict[int, Dict[str, int]]] = None,
                  ask: Optional[Callable[[str], str]] = None,
                  progress: Optional[Progress] = None, protocol_file: Optional[str] = None,
-                 err: Optional[TextIO] = None, port: str = ""):
+                 err: Optional[TextIO] = None, port: str = "",
+                 pipeline: Optional[int] = None):
         self.protocol = protocol
+        # POSEs sent ahead of their TELEMETRY (closed loop, virtual clock): None = what
+        # the source allows (pipeline_window), 1 = lockstep. See _closed_loop_pipelined.
+        self.pipeline = pipeline
+        self.pipeline_fallbacks = 0
         self.participant = participant
         self.out_dir = out_dir
         self.source = source
@@ -618,6 +625,119 @@ class StudyRunner:
             t += period
             yield (t, q, c)
 
+    # ---- pipelining (closed loop, virtual clock)
+    def _window(self, closed: bool) -> int:
+        """POSEs in flight: 1 (lockstep) unless the source is a closed loop on the virtual
+        clock whose :func:`pipeline_window` allows more (and --pipeline did not say 1)."""
+        if not closed or not self.virtual_clock or self.pipeline == 1:
+            return 1
+        limit = pipeline_window(self.source.model, self.protocol.pose_rate_hz)  # type: ignore
+        if self.pipeline is not None:
+            limit = min(limit, int(self.pipeline))
+        return max(1, limit)
+
+    def _restart_trial(self, trial: PlannedTrial, model: Any, contacts: List[List[float]]
+                       ) -> None:
+        p = self.protocol
+        try:
+            self.client.stop()
+        except Exception:
+            pass
+        self.client.drain(0.05)
+        self.client.trial_results.clear()
+        self.client.unmatched.clear()
+        self._vt_base_us += int(round((p.timeout_s + 2 * RESULT_MARGIN_S) * 1e6))
+        self._scene_key = None
+        self._scene(trial)
+        self.client.start_trial(trial.trial_index & 0xFFFF, list(trial.wrench))
+        model.begin_trial(contacts=contacts, y_axis=list(p.y_axis), wrench=list(trial.wrench),
+                          policy=trial.policy, mode=trial.mode, start_quat=list(p.start_quat))
+
+    def _closed_loop_pipelined(self, trial: PlannedTrial, model: Any, rate: float,
+                               window: int, fh: Any) -> Tuple[Any, int, float]:
+        """The closed loop with up to ``window`` POSEs in flight, giving exactly what
+        lockstep gives.
+
+        Lockstep: ``quat_i = model.step(t_i, pwm of TELEMETRY i-1)``. Here, in batches:
+        pose i comes from the model itself (its TELEMETRY i-1 is known); poses i+1 ..
+        i+window-1 from a copy of the model (:func:`clone_state`) stepped with the last
+        known PWM held; the batch goes out in one write (:meth:`DeviceClient.pose_batch`).
+        As the answers come, the model itself is stepped in order with the real PWM,
+        exactly as lockstep steps it, and each pose it gives must equal, bit for bit, the
+        one the device got; so the device sees the lockstep pose sequence and answers it
+        as in lockstep (it handles POSEs one after the other; the answer to one does not
+        depend on the later ones). POSEs sent after the one that ends the trial are
+        refused (ERROR not_allowed_in_state) and not recorded.
+
+        Why they agree (the virtual participant, see pipeline_window): its pose at step j
+        depends on PWM only through decisions taken with the motor state of a reaction
+        time earlier (the delay line) and on the first-cue time (which moves nothing for
+        3 tau + the reaction time); so with window <= reaction_time * rate - 1 every pose
+        of a batch depends only on TELEMETRY already received. A mismatch raises
+        _Diverged (the caller runs the trial again in lockstep), so a source that
+        breaks this cannot give a wrong record."""
+        from .device import LinkTimeout
+        from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
+
+        p = self.protocol
+        k = trial.k
+        base = self._vt_base_us
+        client = self.client
+        write = fh.write
+        frame = self.progress.frame
+        pwm: List[int] = [0] * k
+        i = 0
+        poses = 0
+        limit = p.timeout_s + RESULT_MARGIN_S
+        while True:
+            t0 = i / rate
+            first = model.step(t0, list(pwm))
+            batch = [(t0, tuple(float(x) for x in first))]
+            if window > 1:
+                shadow = clone_state(model)
+                held = list(pwm)
+                for j in range(1, window):
+                    tj = (i + j) / rate
+                    batch.append((tj, tuple(float(x) for x in shadow.step(tj, list(held)))))
+            answers = client.pose_batch(
+                [((base + int(round(t * 1e6))) & 0xFFFFFFFF, q) for t, q in batch])
+            for j, ((t_s, quat), tel) in enumerate(zip(batch, answers)):
+                if j > 0:
+                    real = tuple(float(x) for x in model.step(t_s, list(pwm)))
+                    if real != quat:
+                        raise _Diverged(f"pose {i + j} sent ahead differs from the lockstep "
+                                        "one")
+                if isinstance(tel, Error):
+                    raise RunnerError(f"trial {trial.trial_index}: the device refused pose "
+                                      f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
+                                      "the trial was running")
+                t_us = (base + int(round(t_s * 1e6))) & 0xFFFFFFFF
+                poses += 1
+                pwm = [int(x) for x in tel.pwm[:k]]
+                write(_FRAME_ROW % ((round(t_s, 6), t_us) + quat
+                                    + (float(tel.error_deg), float(tel.alpha))
+                                    + tuple(tel.pwm)
+                                    + (int(tel.solver_status), int(tel.flags))))
+                frame(t_s, float(tel.error_deg), pwm, False)
+                if not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
+                    # The trial ended with this pose; the rest of the batch was refused.
+                    for rest in answers[j + 1:]:
+                        if not isinstance(rest, Error):
+                            raise RunnerError(f"trial {trial.trial_index}: the device "
+                                              "answered a POSE after the trial ended")
+                    try:
+                        result = client.trial_results.popleft() if client.trial_results \
+                            else client.wait_trial_result(client.timeout)
+                    except LinkTimeout:
+                        raise RunnerError(f"trial {trial.trial_index}: the device ended the "
+                                          "trial but no TRIAL_RESULT arrived") from None
+                    return result, poses, t_s
+                if t_s > limit:
+                    raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s "
+                                      f"into a {p.timeout_s:g} s trial; is the device's "
+                                      "clock following the poses?")
+            i += len(batch)
+
     def run_trial(self, trial: PlannedTrial) -> Dict[str, Any]:
         from .device import LinkTimeout, host_time_us
         from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING
@@ -639,7 +759,7 @@ class StudyRunner:
             it = self._poses(trial)
         frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
         frames_path = frames_tmp[:-4]
-        f = open(frames_tmp, "w", encoding="utf-8", newline="")
+        f = open(frames_tmp, "w", encoding="utf-8", newline="", buffering=1 << 20)
         writer = csv.writer(f, lineterminator="\n")
         writer.writerow(FRAME_COLUMNS)
         result = None
@@ -647,9 +767,26 @@ class StudyRunner:
         pwm: List[int] = [0] * trial.k
         t_s = 0.0
         wall0 = time.monotonic()
+        window = self._window(closed)
         try:
             i = 0
-            while True:
+            while window > 1:
+                try:
+                    result, poses, t_s = self._closed_loop_pipelined(trial, model, rate,
+                                                                     window, f)
+                    break
+                except _Diverged as e:
+                    # Never expected (see _closed_loop_pipelined); the poses the device
+                    # got are not the lockstep ones: run the whole trial again in lockstep.
+                    self.pipeline_fallbacks += 1
+                    print(f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
+                          "running it again in lockstep", file=self.err, flush=True)
+                    f.seek(0)
+                    f.truncate()
+                    writer.writerow(FRAME_COLUMNS)
+                    self._restart_trial(trial, model, contacts)
+                    window = 1
+            while window <= 1:
                 if closed:
                     t_s = i / rate
                     quat = model.step(t_s, list(pwm))
@@ -795,6 +932,103 @@ class StudyRunner:
                               completed=len(done), planned=total)
         return {"participant": self.participant, "planned": total, "ran": self.ran,
                 "skipped": self.skipped, "completed": len(done)}
+
+
+#: One FRAME_COLUMNS row as csv.writer writes it for these fields (floats by repr, none
+#: needs quoting); the pipelined loop formats its rows with it.
+_FRAME_ROW = "%r,%d,%r,%r,%r,%r,%r,%r,%d,%d,%d,%d,%d,%d\n"
+
+
+class _Diverged(Exception):
+    """A pose sent ahead is not the lockstep one (the trial is run again in lockstep)."""
+
+
+#: Most POSEs ever in flight.
+MAX_PIPELINE = 32
+
+
+def pipeline_window(model: Any, pose_rate_hz: float) -> int:
+    """How many POSEs a closed-loop source may have in flight (1 = lockstep).
+
+    Only the virtual participant is pipelined: its pose at step j depends on the PWM of
+    step m only if m <= j - reaction_time_s * rate (decisions use the motor state of a
+    reaction time earlier; the first felt cue starts nothing before 3 erm_tau_s +
+    reaction_time_s), so floor(reaction_time_s * rate) - 1 poses (one of margin for the
+    rounding of t - reaction_time_s) can be sent before their predecessors' TELEMETRY.
+    Any other source runs in lockstep."""
+    try:
+        from .participant import VirtualParticipant
+    except ImportError:  # pragma: no cover
+        return 1
+    if type(model) is not VirtualParticipant:
+        return 1
+    rt = float(getattr(model.params, "reaction_time_s", 0.0))
+    n = int(math.floor(rt * float(pose_rate_hz) + 1e-9)) - 1
+    return max(1, min(MAX_PIPELINE, n))
+
+
+def _plain_object(x: Any) -> bool:
+    """An instance of a plain Python class: its state is its __dict__."""
+    t = type(x)
+    return (hasattr(x, "__dict__") and not hasattr(t, "__slots__")
+            and not hasattr(t, "__deepcopy__") and not hasattr(t, "__setstate__")
+            and t.__reduce_ex__ is object.__reduce_ex__
+            and getattr(t, "__getstate__", object.__getstate__) is getattr(
+                object, "__getstate__", None))
+
+
+def clone_state(obj: Any) -> Any:
+    """A deep copy of a model for speculation, faster than copy.deepcopy for the types a
+    model holds (numbers, strings, tuples, lists, dicts, deques, numpy arrays and
+    Generators, frozen dataclasses of numbers); anything else goes to copy.deepcopy.
+    Nothing mutable is shared with the original."""
+    import copy
+
+    import numpy as np
+
+    memo: Dict[int, Any] = {}
+    immutable = (int, float, str, bool, bytes, type(None), complex)
+    flat_types = frozenset({int, float, str, bool, bytes, type(None), complex}).issuperset
+
+    def c(x: Any) -> Any:
+        if isinstance(x, immutable):
+            return x
+        key = id(x)
+        if key in memo:
+            return memo[key]
+        t = type(x)
+        if t is np.ndarray and x.dtype != object:
+            y = x.copy()
+        elif t is list:
+            y = x[:] if flat_types(map(type, x)) else [c(v) for v in x]
+        elif t is tuple:
+            if flat_types(map(type, x)):
+                return x                          # nothing mutable inside: share it
+            y = tuple([c(v) for v in x])
+        elif t is dict:
+            y = {k: c(v) for k, v in x.items()}
+        elif t is deque:
+            y = deque([c(v) for v in x], x.maxlen)
+        elif isinstance(x, np.generic):
+            y = x
+        elif t is np.random.Generator:
+            bg = type(x.bit_generator)()
+            bg.state = x.bit_generator.state
+            y = np.random.Generator(bg)
+        elif hasattr(x, "__dataclass_params__") and x.__dataclass_params__.frozen and all(
+                isinstance(getattr(x, f), immutable) for f in x.__dataclass_fields__):
+            y = x
+        elif _plain_object(x):
+            y = object.__new__(t)
+            memo[key] = y
+            y.__dict__.update({k: c(v) for k, v in x.__dict__.items()})
+            return y
+        else:
+            y = copy.deepcopy(x)
+        memo[key] = y
+        return y
+
+    return c(obj)
 
 
 def summary_lines(out_dir: str, participant: str) -> List[str]:

@@ -176,7 +176,22 @@ class SerialTransport(Transport):
         if not data:
             return
         try:
-            n = self._ser.write(data)
+            n = None
+            if self._posix_fd is not None:
+                # One os.write: what pyserial's write does first, without its per-call
+                # bookkeeping (a study writes ~10^6 small frames); the rest, if the
+                # kernel took only part, through pyserial (write timeout and all).
+                try:
+                    done = os.write(self._posix_fd, data)
+                except (BlockingIOError, InterruptedError):
+                    done = 0
+                if done < len(data):
+                    rest = self._ser.write(data[done:])
+                    n = done + (len(data) - done if rest is None else rest)
+                else:
+                    n = done
+            else:  # pragma: no cover - Windows and URL handlers
+                n = self._ser.write(data)
         except serial.SerialTimeoutException as e:
             raise LinkTimeout(
                 f"writing {len(data)} bytes to {self.port} timed out: the device is not "
@@ -196,11 +211,19 @@ class SerialTransport(Transport):
         timeout = max(0.0, float(timeout))
         try:
             if self._posix_fd is not None:
-                if timeout > 0 and not self._ser.in_waiting:
-                    ready, _, _ = select.select([self._posix_fd], [], [], timeout)
-                    if not ready:
-                        return b""
-                data = self._ser.read(max_bytes)  # timeout 0: what is there, at once
+                # select, then one os.read of what is there (pyserial's read with
+                # timeout 0 is the same two calls plus bookkeeping).
+                ready, _, _ = select.select([self._posix_fd], [], [], timeout)
+                if not ready:
+                    return b""
+                try:
+                    data = os.read(self._posix_fd, max_bytes)
+                except (BlockingIOError, InterruptedError):
+                    return b""
+                if not data:
+                    raise serial.SerialException(
+                        "device reports readiness to read but returned no data (device "
+                        "disconnected or multiple access on port?)")
             else:  # pragma: no cover - Windows and URL handlers
                 deadline = time.monotonic() + timeout
                 while True:
