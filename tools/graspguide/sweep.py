@@ -1,0 +1,794 @@
+"""`graspguide sweep`: the guidance speed-accuracy trade, SIMULATED.
+
+For every modality of the protocol (F+C, Fperp+C, F+V, Fperp+V by default) it runs the
+study protocol (default ``protocols/paper.toml``) again at other alignment thresholds and
+other pose rates, with the virtual participant (:mod:`graspguide.participant`, a model,
+never human data) on the simulated device (virtual clock), and reports success rate and
+completion time against each.
+
+Points: one factor at a time around the protocol's values (the paper's 3 deg / 100 Hz):
+every ``--thresholds`` value at the protocol's pose rate, every ``--rates`` value at the
+protocol's threshold; with ``--grid`` also every threshold x rate pair.
+
+Each point is a derived protocol, written to ``OUT/points/<point>/protocol.toml``: the
+same geometry, seed, conditions and orders, with ``[trial] threshold_deg`` or
+``[study] pose_rate_hz`` changed, ``[wrenches] count`` = ``--wrenches`` (the first
+wrenches of the paper's seeded draw, the single/multi split scaled), and no
+familiarization trials. Each (point, participant) is one ``graspguide trial --port sim``
+process (the runner's public interface: its pipelining and speed come for free), ``--jobs``
+at a time. The virtual participant is told the point's threshold and hold
+(``task_threshold_deg``, ``task_hold_s``; a person is told them in the instructions and
+feels them in familiarization) and runs at the point's rate (``rate_hz``).
+
+Resume: a point's folder is the runner's study folder (named by the derived protocol's
+config hash); completed trials are kept, so running the same command again only runs
+what is missing, and a larger ``--participants`` only adds participants.
+
+Output: ``OUT/sweep.json`` (every point and modality: trials, successes, success rate,
+completion time median / mean / SD with failures counted as the timeout (90 s) as the
+paper does, and median / mean over successes), ``OUT/sweep.png`` (two rows: against the
+threshold and against the pose rate; columns success rate and completion time; one line
+per modality) and a table on stdout. Everything is labelled SIMULATED.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+SWEEP_FORMAT = "graspguide-sweep/1"
+DEFAULT_THRESHOLDS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0)
+DEFAULT_RATES = (30.0, 60.0, 100.0, 240.0)
+DEFAULT_SOURCE = "participant"
+SIMULATED_NOTE = ("SIMULATED: virtual participants (graspguide.participant, a model of a "
+                  "person) on the simulated device; not human data")
+
+DESCRIPTION = """\
+The guidance speed-accuracy trade, SIMULATED: runs the study protocol with the virtual
+participant on the simulated device at other alignment thresholds (--thresholds, at the
+protocol's pose rate) and other pose rates (--rates, at the protocol's threshold), for
+every modality, and reports success rate and completion time (failures counted as the
+timeout, as the paper does) against each: OUT/sweep.json, OUT/sweep.png and a table.
+
+Each point runs a derived protocol (same geometry, seed, conditions; --wrenches of the
+seeded wrench set; no familiarization) through `graspguide trial --port sim`, one
+process per (point, participant), --jobs at a time. Interrupted, the same command
+resumes (completed trials are kept in OUT/points/).
+
+Exit status: 0 done, 1 a run failed (its log is named), 2 usage error, 130 interrupted.
+"""
+
+
+class SweepError(ValueError):
+    """A bad sweep argument or protocol; the message says what to use instead."""
+
+
+# --------------------------------------------------------------------------------------
+# Arguments
+# --------------------------------------------------------------------------------------
+def parse_values(text: str, what: str, lo: float, hi: float) -> Tuple[float, ...]:
+    """Comma-separated positive numbers in (lo, hi], sorted, without repeats."""
+    items = [s.strip() for s in str(text).split(",")]
+    if not items or any(not s for s in items):
+        raise SweepError(f"--{what}: expected comma-separated numbers such as "
+                         f"{'1,2,3,5' if what == 'thresholds' else '30,60,100'}, got {text!r}")
+    out = []
+    for s in items:
+        try:
+            v = float(s)
+        except ValueError:
+            raise SweepError(f"--{what}: {s!r} is not a number") from None
+        if not math.isfinite(v) or v <= lo or v > hi:
+            unit = "degrees" if what == "thresholds" else "poses per second"
+            raise SweepError(f"--{what}: {s} is out of range: each value must be > {lo:g} "
+                             f"and <= {hi:g} {unit}")
+        out.append(v)
+    return tuple(sorted(set(out)))
+
+
+def parse_modalities(text: str) -> Tuple[str, ...]:
+    from .protocol_file import MODALITIES
+
+    items = [s.strip() for s in str(text).split(",") if s.strip()]
+    if not items:
+        raise SweepError("--modalities: give at least one of " + ", ".join(MODALITIES))
+    out: List[str] = []
+    for s in items:
+        if s in MODALITIES:
+            picked = [s]
+        elif s in ("C", "V"):                         # a mode: both policies
+            picked = [f"F+{s}", f"Fperp+{s}"]
+        else:
+            raise SweepError(f"--modalities: unknown modality or mode {s!r}; use "
+                             + ", ".join(MODALITIES) + " or a mode C, V (both policies)")
+        out += [m for m in picked if m not in out]
+    return tuple(out)
+
+
+def _int_arg(lo: int, hi: int):
+    def conv(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
+        return v
+    return conv
+
+
+def _repo_root() -> Optional[str]:
+    try:
+        from .transport import find_repo_root
+        return find_repo_root()
+    except Exception:  # pragma: no cover - informational default only
+        return None
+
+
+def default_protocol() -> str:
+    root = _repo_root()
+    return os.path.join(root, "protocols", "paper.toml") if root else \
+        os.path.join("protocols", "paper.toml")
+
+
+def default_out() -> str:
+    root = _repo_root()
+    return os.path.join(root, "logs", "guidance-sweep") if root else "guidance-sweep"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--protocol", default=None, metavar="FILE",
+                   help="study protocol (default: protocols/paper.toml of the repository)")
+    p.add_argument("--thresholds", default=",".join(f"{v:g}" for v in DEFAULT_THRESHOLDS),
+                   metavar="LIST", help="alignment thresholds in degrees, each in (0, 90), "
+                   "run at the protocol's pose rate (default 1,2,3,5,7,10)")
+    p.add_argument("--rates", default=",".join(f"{v:g}" for v in DEFAULT_RATES),
+                   metavar="LIST", help="pose rates in Hz, each in (0, 2000], run at the "
+                   "protocol's threshold (default 30,60,100,240)")
+    p.add_argument("--grid", action="store_true",
+                   help="also run every threshold x rate pair (else one factor at a time)")
+    p.add_argument("--modalities", default=None, metavar="LIST",
+                   help="modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both "
+                        "policies); default: the protocol's")
+    p.add_argument("--contacts", default=None, metavar="LIST",
+                   help="contact counts, 3 and/or 4 (default: the protocol's)")
+    p.add_argument("--participants", type=_int_arg(1, 1000), default=2, metavar="N",
+                   help="virtual participants U1..UN per point (default 2)")
+    p.add_argument("--wrenches", type=_int_arg(1, 1000), default=4, metavar="N",
+                   help="target wrenches per session: the first N of the protocol's seeded "
+                        "draw, its single/multi split scaled (default 4)")
+    p.add_argument("--source", default=DEFAULT_SOURCE, metavar="SPEC",
+                   help="participant[:key=value,...] (default; told each point's threshold, "
+                        "hold and rate unless given here) or another simulated source of "
+                        "`graspguide trial` (synthetic[:...]: open loop, the same trajectory "
+                        "at every threshold)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="sweep folder (default logs/guidance-sweep in the repository): "
+                        "points/, sweep.json, sweep.png; running again resumes")
+    p.add_argument("--jobs", "-j", type=_int_arg(1, 256), default=None, metavar="N",
+                   help="runner processes at a time, each with its own simulated device "
+                        "(default: the CPU count)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add `graspguide sweep` to the CLI's subparsers."""
+    p = subparsers.add_parser(
+        "sweep", help="the speed-accuracy trade, simulated: success rate and completion "
+                      "time against the threshold and the pose rate, per modality",
+        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    p.set_defaults(handler=run, command_parser=p)
+    return p
+
+
+# --------------------------------------------------------------------------------------
+# Points and derived protocols
+# --------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Point:
+    threshold_deg: float
+    pose_rate_hz: float
+    axes: Tuple[str, ...]           # "threshold", "rate", "grid": which plots it is on
+
+    @property
+    def key(self) -> Tuple[float, float]:
+        return (self.threshold_deg, self.pose_rate_hz)
+
+
+def sweep_points(thresholds: Sequence[float], rates: Sequence[float], base_threshold: float,
+                 base_rate: float, grid: bool = False) -> List[Point]:
+    """One factor at a time around (base_threshold, base_rate), plus the grid if asked;
+    every (threshold, rate) once, the base point always included."""
+    axes: Dict[Tuple[float, float], List[str]] = {}
+
+    def add(t: float, r: float, axis: str) -> None:
+        lst = axes.setdefault((float(t), float(r)), [])
+        if axis not in lst:
+            lst.append(axis)
+
+    for t in thresholds:
+        add(t, base_rate, "threshold")
+    for r in rates:
+        add(base_threshold, r, "rate")
+    add(base_threshold, base_rate, "threshold")
+    add(base_threshold, base_rate, "rate")
+    if grid:
+        for t in thresholds:
+            for r in rates:
+                add(t, r, "grid")
+    return [Point(t, r, tuple(a)) for (t, r), a in sorted(axes.items())]
+
+
+def derive_protocol(base, threshold_deg: float, pose_rate_hz: float, wrenches: int,
+                    modalities: Optional[Sequence[str]] = None,
+                    contacts: Optional[Sequence[int]] = None):
+    """The protocol of one point: ``base`` with the threshold and pose rate changed,
+    ``wrenches`` wrenches (single-motor share scaled), no familiarization trials."""
+    from .protocol_file import ProtocolFileError
+
+    if threshold_deg >= base.start_error_deg[0]:
+        raise SweepError(f"threshold {threshold_deg:g} deg: must be below the protocol's "
+                         f"smallest start error ({base.start_error_deg[0]:g} deg, [wrenches] "
+                         "start_error_deg), or a trial could start aligned")
+    single = int(math.floor(wrenches * base.single_motor / base.wrench_count + 0.5))
+    single = max(0, min(wrenches, single))
+    changes: Dict[str, Any] = dict(
+        name=f"{base.name}-sweep", threshold_deg=float(threshold_deg),
+        pose_rate_hz=float(pose_rate_hz), wrench_count=int(wrenches), single_motor=single,
+        familiarization_trials=0)
+    if modalities is not None:
+        changes["modalities"] = tuple(modalities)
+    if contacts is not None:
+        missing = [k for k in contacts if k not in base.hands]
+        if missing:
+            raise SweepError(f"--contacts: the protocol has no [hand.k{missing[0]}]")
+        changes["contact_counts"] = tuple(contacts)
+    try:
+        return dataclasses.replace(base, **changes)
+    except (TypeError, ProtocolFileError) as e:  # pragma: no cover - defensive
+        raise SweepError(str(e)) from None
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def protocol_toml(protocol) -> str:
+    """A protocol file (metres) that loads back to ``protocol`` (same config hash)."""
+    from .protocol_file import FINGERS
+
+    d = protocol.to_dict()
+    lines = ["# A point of `graspguide sweep` (SIMULATED): derived from "
+             f"{protocol.source}", ""]
+    for table in ("study", "trial"):
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in d[table].items()]
+        lines.append("")
+    lines += ["[hand]", 'units = "m"', f"y_axis = {_toml_value(d['hand']['y_axis'])}", ""]
+    for k in sorted(protocol.hands):
+        lines.append(f"[hand.k{k}]")
+        for name, c in zip(FINGERS, protocol.hands[k]):
+            lines.append(f"{name} = {_toml_value(list(c))}")
+        lines.append("")
+    for table in ("conditions", "wrenches", "familiarization"):
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in d[table].items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def point_source(spec: str, point: Point, hold_s: float) -> str:
+    """The --source of a point: the virtual participant is told the point's threshold and
+    hold and runs at its rate, unless the spec sets those keys itself."""
+    kind, sep, rest = spec.partition(":")
+    if kind != "participant":
+        return spec
+    given = {item.partition("=")[0].strip() for item in rest.split(",") if item.strip()}
+    extra = []
+    for key, value in (("task_threshold_deg", point.threshold_deg),
+                       ("task_hold_s", hold_s), ("rate_hz", point.pose_rate_hz)):
+        if key not in given:
+            extra.append(f"{key}={value:g}")
+    items = [s for s in rest.split(",") if s.strip()] + extra
+    return "participant" + (":" + ",".join(items) if items else "")
+
+
+def point_dir_name(point: Point, protocol) -> str:
+    return (f"t{point.threshold_deg:g}_r{point.pose_rate_hz:g}_"
+            f"{protocol.config_hash[:10]}")
+
+
+# --------------------------------------------------------------------------------------
+# Statistics
+# --------------------------------------------------------------------------------------
+def _r(x: Optional[float], nd: int = 3) -> Optional[float]:
+    return None if x is None or not math.isfinite(x) else round(float(x), nd)
+
+
+def summarize(records: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
+    """Success rate and completion time of main trials (failures count as the timeout,
+    which the runner records as their completion_s)."""
+    n = len(records)
+    times = [float(r["completion_s"]) for r in records]
+    ok = [float(r["completion_s"]) for r in records if r["success"]]
+    return {
+        "trials": n,
+        "successes": len(ok),
+        "success_rate": _r(len(ok) / n, 4) if n else None,
+        "completion_median_s": _r(statistics.median(times)) if n else None,
+        "completion_mean_s": _r(statistics.fmean(times)) if n else None,
+        "completion_sd_s": _r(statistics.stdev(times)) if n > 1 else None,
+        "success_completion_median_s": _r(statistics.median(ok)) if ok else None,
+        "success_completion_mean_s": _r(statistics.fmean(ok)) if ok else None,
+        "final_error_median_deg": _r(statistics.median(
+            float(r["final_error_deg"]) for r in records)) if n else None,
+        "poses": int(sum(int(r.get("poses", 0)) for r in records)),
+    }
+
+
+def read_point_trials(study_dir: str, participants: Sequence[str]) -> List[Dict[str, Any]]:
+    from .runner import read_jsonl
+
+    out: List[Dict[str, Any]] = []
+    for pid in participants:
+        path = os.path.join(study_dir, pid, "trials.jsonl")
+        if os.path.exists(path):
+            out += [r for r in read_jsonl(path).records if not r.get("familiarization")]
+    return out
+
+
+def threshold_pairs(by_threshold: Dict[float, List[Dict[str, Any]]]) -> Dict[str, Any]:
+    """The same (participant, trial) at neighbouring thresholds (same rate): how often the
+    larger threshold took longer. For an open-loop source (the same trajectory whatever
+    the threshold) never; for the closed-loop participant it can (the cue and its search
+    change with the threshold)."""
+    ts = sorted(by_threshold)
+    pairs = longer = 0
+    worst = 0.0
+    for a, b in zip(ts, ts[1:]):
+        ia = {(r["participant"], r["trial_index"]): r for r in by_threshold[a]}
+        for r in by_threshold[b]:
+            q = ia.get((r["participant"], r["trial_index"]))
+            if q is None:
+                continue
+            pairs += 1
+            d = float(r["completion_s"]) - float(q["completion_s"])
+            if d > 1e-9:
+                longer += 1
+                worst = max(worst, d)
+    return {"pairs": pairs, "larger_threshold_took_longer": longer,
+            "largest_increase_s": _r(worst)}
+
+
+# --------------------------------------------------------------------------------------
+# Running
+# --------------------------------------------------------------------------------------
+def _preexec() -> None:  # pragma: no cover - runs in the child
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except Exception:
+        pass
+
+
+def _count_lines(path: str) -> int:
+    try:
+        with open(path, "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:
+        return 0
+
+
+@dataclasses.dataclass
+class _Task:
+    point: Point
+    protocol_path: str
+    study_dir: str
+    participant: str
+    source: str
+    planned: int
+    log: str
+
+
+def _run_tasks(tasks: List[_Task], jobs: int, quiet: bool, err) -> int:
+    """Run the tasks' `graspguide trial` processes, ``jobs`` at a time."""
+    if not tasks:
+        return EXIT_OK
+    interrupted: List[int] = []
+
+    def _interrupt(signum, frame):
+        interrupted.append(signum)
+        raise KeyboardInterrupt
+
+    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    queue = list(tasks)
+    running: List[Tuple[_Task, subprocess.Popen, Any]] = []
+    failed: List[Tuple[_Task, int]] = []
+    done = 0
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                t = queue.pop(0)
+                cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol",
+                       t.protocol_path, "--participant", t.participant, "--port", "sim",
+                       "--source", t.source, "--out", t.study_dir]
+                os.makedirs(os.path.dirname(t.log), exist_ok=True)
+                log = open(t.log, "ab")
+                log.write(f"\n$ {' '.join(cmd)}\n".encode())
+                log.flush()
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
+                                        stderr=subprocess.STDOUT, preexec_fn=_preexec)
+                running.append((t, proc, log))
+            time.sleep(0.05)
+            for item in list(running):
+                t, proc, log = item
+                rc = proc.poll()
+                if rc is None:
+                    continue
+                log.close()
+                running.remove(item)
+                done += 1
+                if rc != 0:
+                    failed.append((t, rc))
+                    print(f"graspguide sweep: threshold {t.point.threshold_deg:g} deg, rate "
+                          f"{t.point.pose_rate_hz:g} Hz, {t.participant}: `graspguide trial` "
+                          f"exited with {rc}; see {t.log}", file=err, flush=True)
+                elif not quiet:
+                    print(f"  [{done}/{len(tasks)}] threshold {t.point.threshold_deg:g} deg, "
+                          f"rate {t.point.pose_rate_hz:g} Hz, {t.participant}: "
+                          f"{_count_lines(os.path.join(t.study_dir, t.participant, 'trials.jsonl'))}"
+                          f"/{t.planned} trials (simulated)", flush=True)
+    except KeyboardInterrupt:
+        for t, proc, log in running:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for t, proc, log in running:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            log.close()
+        print("\ngraspguide sweep: interrupted; completed trials are kept: run the same "
+              "command again to resume", file=err)
+        return EXIT_INTERRUPTED
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if failed:
+        print(f"graspguide sweep: error: {len(failed)} runner process(es) failed; completed "
+              "trials are kept: fix the cause and run the same command again", file=err)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _fmt(x: Optional[float], spec: str = "5.1f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def table_lines(result: Dict[str, Any]) -> List[str]:
+    head = (f"{'axis':<9} {'thr':>5} {'rate':>5}  {'modality':<8} {'success':>13}  "
+            f"{'median':>6}  {'mean +- SD':>13}  {'med.succ':>8}")
+    lines = ["SIMULATED (virtual participants, not human data); completion time in s, "
+             f"failures counted as {result['timeout_s']:g} s", head, "-" * len(head)]
+    for pt in result["points"]:
+        named = [a for a in pt["axes"] if a != "grid"]
+        axis = "base" if len(named) == 2 else (named[0] if named else "grid")
+        for m, s in pt["modalities"].items():
+            rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f}%"
+            succ = f"{s['successes']}/{s['trials']} {rate:>4}"
+            ms = f"{_fmt(s['completion_mean_s'])} +- {_fmt(s['completion_sd_s'], '4.1f')}"
+            lines.append(f"{axis:<9} {pt['threshold_deg']:>5g} {pt['pose_rate_hz']:>5g}  "
+                         f"{m:<8} {succ:>13}  {_fmt(s['completion_median_s'], '6.1f')}  "
+                         f"{ms:>13}  {_fmt(s['success_completion_median_s'], '8.2f')}")
+    return lines
+
+
+def plot(result: Dict[str, Any], path: str) -> None:
+    """Two rows (against the threshold, against the pose rate), two columns (success rate,
+    completion time: mean +- SD with failures as the timeout, solid; median over
+    successes, dotted); one line per modality."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    mods = result["modalities"]
+    colors = {"F+C": "tab:blue", "Fperp+C": "tab:cyan", "F+V": "tab:red",
+              "Fperp+V": "tab:orange"}
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8.2))
+    rows = (("threshold", "threshold_deg", "alignment threshold [deg] (at "
+             f"{result['base']['pose_rate_hz']:g} Hz)"),
+            ("rate", "pose_rate_hz", "pose rate [Hz] (at "
+             f"{result['base']['threshold_deg']:g} deg)"))
+    for row, (axis, key, label) in enumerate(rows):
+        pts = sorted((p for p in result["points"] if axis in p["axes"]), key=lambda p: p[key])
+        xs_all = [p[key] for p in pts]
+        for j, m in enumerate(mods):
+            c = colors.get(m, None)
+            xs = [p[key] for p in pts]
+            sr = [None if p["modalities"][m]["success_rate"] is None
+                  else 100 * p["modalities"][m]["success_rate"] for p in pts]
+            axes[row][0].plot(xs, [math.nan if v is None else v for v in sr], "o-",
+                              color=c, label=m)
+            # small offsets so the error bars do not hide each other
+            span = (max(xs_all) / min(xs_all)) if row == 1 and min(xs_all) > 0 else None
+            if span:
+                off = [x * (1.0 + 0.02 * (j - (len(mods) - 1) / 2)) for x in xs]
+            else:
+                off = [x + 0.06 * (j - (len(mods) - 1) / 2) for x in xs]
+            mean = [p["modalities"][m]["completion_mean_s"] for p in pts]
+            sd = [p["modalities"][m]["completion_sd_s"] or 0.0 for p in pts]
+            axes[row][1].errorbar(off, [math.nan if v is None else v for v in mean], yerr=sd,
+                                  fmt="o-", color=c, capsize=3, label=f"{m} mean +- SD")
+            med = [p["modalities"][m]["success_completion_median_s"] for p in pts]
+            axes[row][1].plot(xs, [math.nan if v is None else v for v in med], ":",
+                              marker="x", color=c, label=f"{m} median of successes")
+        axes[row][0].set_ylabel("success rate [%]")
+        axes[row][0].set_ylim(-3, 103)
+        axes[row][1].set_ylabel(f"completion time [s] (failure = {result['timeout_s']:g} s)")
+        axes[row][1].set_ylim(bottom=0)
+        for ax in axes[row]:
+            ax.set_xlabel(label)
+            ax.grid(True, alpha=0.3)
+            if row == 1:
+                ax.set_xscale("log")
+                ax.set_xticks(xs_all)
+                ax.set_xticklabels([f"{x:g}" for x in xs_all])
+                ax.minorticks_off()
+            else:
+                ax.set_xticks(xs_all)
+        axes[row][0].legend(fontsize=8, loc="lower right")
+    axes[0][1].legend(fontsize=7, loc="upper right", ncol=2)
+    size = (f"{result['participants']} virtual participants x {result['wrenches']} wrenches x "
+            f"k = {','.join(str(k) for k in result['contact_counts'])} per modality and point")
+    fig.suptitle("SIMULATED guidance speed-accuracy trade (virtual participant model, not "
+                 f"human data)\n{size}", fontsize=11)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _shown_path(path: str) -> str:
+    """A path relative to the repository when inside it (for committed outputs)."""
+    root = _repo_root()
+    full = os.path.abspath(path)
+    if root and os.path.commonpath([full, os.path.abspath(root)]) == os.path.abspath(root):
+        return os.path.relpath(full, root)
+    return path
+
+
+def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequence[float],
+              participants: int, wrenches: int, out: str, jobs: int, source: str,
+              modalities: Optional[Sequence[str]] = None,
+              contacts: Optional[Sequence[int]] = None, grid: bool = False,
+              quiet: bool = False, err=None) -> Tuple[int, Optional[Dict[str, Any]]]:
+    """Run (or resume) the sweep into ``out``; returns (exit status, result dict)."""
+    from .protocol_file import load_protocol, plan
+    from .runner import RunnerError, open_runner_source
+
+    err = err or sys.stderr
+    t0 = time.monotonic()
+    base = load_protocol(protocol_path)
+    pts = sweep_points(thresholds, rates, base.threshold_deg, base.pose_rate_hz, grid)
+    pids = [f"U{i}" for i in range(1, participants + 1)]
+    tasks: List[_Task] = []
+    plan_info: List[Tuple[Point, Any, str, str]] = []
+    # check every point before writing anything
+    derived = []
+    for pt in pts:
+        proto = derive_protocol(base, pt.threshold_deg, pt.pose_rate_hz, wrenches,
+                                modalities, contacts)
+        spec = point_source(source, pt, base.hold_s)
+        try:
+            src = open_runner_source(spec, proto, "U1")
+        except RunnerError as e:
+            raise SweepError(str(e)) from None
+        if not src.simulated or getattr(src, "live", False):
+            raise SweepError(f"--source {source}: the sweep runs simulated sources only "
+                             "(participant[:...], synthetic[:...])")
+        derived.append((pt, proto, spec))
+    for pt, proto, spec in derived:
+        study_dir = os.path.join(out, "points", point_dir_name(pt, proto))
+        os.makedirs(study_dir, exist_ok=True)
+        ppath = os.path.join(study_dir, "protocol.toml")
+        text = protocol_toml(proto)
+        if not os.path.exists(ppath) or open(ppath, encoding="utf-8").read() != text:
+            with open(ppath + ".tmp", "w", encoding="utf-8") as f:
+                f.write(text)
+            os.replace(ppath + ".tmp", ppath)
+        check = load_protocol(ppath)
+        if check.config_hash != proto.config_hash:  # pragma: no cover - writer bug
+            raise SweepError(f"{ppath}: does not load back to the derived protocol")
+        planned = len(plan(check, "U1"))
+        plan_info.append((pt, check, study_dir, spec))
+        for pid in pids:
+            have = _count_lines(os.path.join(study_dir, pid, "trials.jsonl"))
+            if have >= planned:
+                continue
+            tasks.append(_Task(pt, ppath, study_dir, pid, spec, planned,
+                               os.path.join(study_dir, "logs", f"{pid}.log")))
+    n_trials = sum(len(plan(p, "U1")) for _, p, _, _ in plan_info) * len(pids)
+    if not quiet:
+        print(f"{SIMULATED_NOTE}.\nSweep of {protocol_path}: {len(pts)} points x "
+              f"{len(pids)} participants = {n_trials} trials; {len(tasks)} runner processes "
+              f"to run, {jobs} at a time; folder {out}", flush=True)
+    # the slow points (small threshold, high rate) first, so the pool ends together
+    tasks.sort(key=lambda t: (t.point.pose_rate_hz / t.point.threshold_deg), reverse=True)
+    code = _run_tasks(tasks, jobs, quiet, err)
+    if code != EXIT_OK:
+        return code, None
+    run_s = time.monotonic() - t0
+
+    mods = list(plan_info[0][1].modalities)
+    points_out = []
+    by_threshold: Dict[str, Dict[float, List[Dict[str, Any]]]] = {m: {} for m in mods}
+    all_by_threshold: Dict[float, List[Dict[str, Any]]] = {}
+    for pt, proto, study_dir, spec in plan_info:
+        recs = read_point_trials(study_dir, pids)
+        expected = len(plan(proto, "U1")) * len(pids)
+        if len(recs) != expected:
+            raise SweepError(f"{study_dir}: {len(recs)} trials recorded, {expected} planned")
+        if not all(r.get("simulated") for r in recs):
+            raise SweepError(f"{study_dir}: holds trials not marked simulated")
+        per_mod = {m: summarize([r for r in recs if r["modality"] == m]) for m in mods}
+        per_mode = {mode: summarize([r for r in recs if r["mode"] == mode])
+                    for mode in sorted({r["mode"] for r in recs})}
+        points_out.append({
+            "threshold_deg": pt.threshold_deg, "pose_rate_hz": pt.pose_rate_hz,
+            "axes": list(pt.axes), "folder": os.path.relpath(study_dir, out),
+            "config_hash": proto.config_hash, "source": spec,
+            "modalities": per_mod, "modes": per_mode, "all": summarize(recs)})
+        if "threshold" in pt.axes:
+            all_by_threshold[pt.threshold_deg] = recs
+            for m in mods:
+                by_threshold[m][pt.threshold_deg] = [r for r in recs if r["modality"] == m]
+    proto0 = plan_info[0][1]
+    result = {
+        "format": SWEEP_FORMAT,
+        "simulated": True,
+        "note": SIMULATED_NOTE,
+        "protocol_file": _shown_path(protocol_path),
+        "base_config_hash": base.config_hash,
+        "base": {"threshold_deg": base.threshold_deg, "pose_rate_hz": base.pose_rate_hz},
+        "hold_s": base.hold_s, "timeout_s": base.timeout_s,
+        "source": source,
+        "participants": len(pids), "wrenches": wrenches,
+        "wrench_ids": [w for w in sorted({r["wrench_id"] for r in
+                                          read_point_trials(plan_info[0][2], pids)})],
+        "contact_counts": list(proto0.contact_counts),
+        "modalities": mods,
+        "trials_per_point": len(plan(proto0, "U1")) * len(pids),
+        "thresholds_deg": list(thresholds), "rates_hz": list(rates), "grid": grid,
+        "completion_rule": (f"a failure counts as the timeout ({base.timeout_s:g} s), as the "
+                            "paper reports; success_completion_* are over successes only"),
+        "threshold_pairs": {"all": threshold_pairs(all_by_threshold),
+                            **{m: threshold_pairs(v) for m, v in by_threshold.items()}},
+        "points": points_out,
+        "run_wall_s": round(run_s, 1),
+        "jobs": jobs,
+        "command": None,
+    }
+    return EXIT_OK, result
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The command that gives this sweep (every option spelled out)."""
+    parts = ["graspguide", "sweep"]
+    if args.protocol:
+        parts += ["--protocol", args.protocol]
+    parts += ["--thresholds", args.thresholds, "--rates", args.rates]
+    if args.grid:
+        parts.append("--grid")
+    if args.modalities:
+        parts += ["--modalities", args.modalities]
+    if args.contacts:
+        parts += ["--contacts", args.contacts]
+    parts += ["--participants", str(args.participants), "--wrenches", str(args.wrenches)]
+    if args.source != DEFAULT_SOURCE:
+        parts += ["--source", args.source]
+    if args.out:
+        parts += ["--out", args.out]
+    return " ".join(parts)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .protocol_file import ProtocolFileError
+    from .runner import RunnerError
+
+    prog = "graspguide sweep"
+    try:
+        thresholds = parse_values(args.thresholds, "thresholds", 0.0, 90.0)
+        rates = parse_values(args.rates, "rates", 0.0, 2000.0)
+        if any(t >= 90.0 for t in thresholds):
+            raise SweepError("--thresholds: each value must be below 90 degrees")
+        modalities = parse_modalities(args.modalities) if args.modalities else None
+        contacts = None
+        if args.contacts:
+            try:
+                contacts = tuple(int(s) for s in args.contacts.split(","))
+            except ValueError:
+                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}") \
+                    from None
+            if not contacts or any(k not in (3, 4) for k in contacts) or \
+                    len(set(contacts)) != len(contacts):
+                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}")
+        out = args.out or default_out()
+        jobs = args.jobs or os.cpu_count() or 1
+        code, result = run_sweep(
+            protocol_path=args.protocol or default_protocol(), thresholds=thresholds,
+            rates=rates, participants=args.participants, wrenches=args.wrenches, out=out,
+            jobs=jobs, source=args.source, modalities=modalities, contacts=contacts,
+            grid=args.grid, quiet=args.quiet)
+    except (SweepError, ProtocolFileError, RunnerError) as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    if code != EXIT_OK or result is None:
+        return code
+    result["command"] = command_line(args)
+    os.makedirs(out, exist_ok=True)
+    json_path = os.path.join(out, "sweep.json")
+    png_path = os.path.join(out, "sweep.png")
+    with open(json_path + ".tmp", "w", encoding="utf-8") as f:
+        json.dump(result, f, indent=1)
+        f.write("\n")
+    os.replace(json_path + ".tmp", json_path)
+    plot(result, png_path)
+    print()
+    for line in table_lines(result):
+        print(line)
+    tp = result["threshold_pairs"]["all"]
+    print(f"\nSame trial, next larger threshold: took longer in "
+          f"{tp['larger_threshold_took_longer']} of {tp['pairs']} pairs "
+          "(never for an open-loop source; possible for the closed-loop participant, whose "
+          "cue and search change with the threshold)")
+    print(f"\nWrote {json_path} and {png_path}; {result['run_wall_s']:.1f} s wall "
+          f"({result['jobs']} jobs). SIMULATED: no human took part.")
+    return EXIT_OK
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """`graspguide sweep` on its own (``python -m graspguide.sweep ...``)."""
+    parser = argparse.ArgumentParser(prog="graspguide sweep", description=DESCRIPTION,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+
+
+__all__ = ["register", "main", "run", "run_sweep", "sweep_points", "derive_protocol",
+           "protocol_toml", "point_source", "summarize", "threshold_pairs", "table_lines",
+           "plot", "parse_values", "parse_modalities", "SweepError"]
+
+
+if __name__ == "__main__":
+    sys.exit(main())
