@@ -764,8 +764,8 @@ class DeviceClient:
         out: List[Any] = []
         inbox = self._inbox
         for seq, t_us in zip(seqs, times):
-            deadline = time.monotonic() + timeout
-            b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
+            deadline = None
+            b0 = f0 = bad0 = 0
             answer = None
             while answer is None:
                 while inbox:
@@ -783,7 +783,12 @@ class DeviceClient:
                 if self.device_version is not None and \
                         self.device_version != PROTOCOL_VERSION:
                     raise self._mismatch()
-                left = deadline - time.monotonic()
+                now = time.monotonic()
+                if deadline is None:     # the answer's wait starts when it is needed
+                    deadline = now + timeout
+                    b0, f0, bad0 = self.bytes_received, self.frames_received, \
+                        self.host_bad_frames
+                left = deadline - now
                 if left <= 0:
                     raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
                 self._pump(min(left, POLL_INTERVAL))

@@ -692,18 +692,28 @@ class StudyRunner:
         while True:
             t0 = i / rate
             first = model.step(t0, list(pwm))
-            batch = [(t0, tuple(float(x) for x in first))]
+            batch = [(t0, tuple(map(float, first)))]
             if window > 1:
-                shadow = clone_state(model)
+                # The copy shares the model's arrays read-only (no copy of, e.g., a search
+                # grid); a step that writes one in place raises, and the batch is
+                # speculated again on a full copy.
                 held = list(pwm)
-                for j in range(1, window):
-                    tj = (i + j) / rate
-                    batch.append((tj, tuple(float(x) for x in shadow.step(tj, list(held)))))
+                for share in (True, False):
+                    shadow = clone_state(model, share_arrays=share)
+                    del batch[1:]
+                    try:
+                        for j in range(1, window):
+                            tj = (i + j) / rate
+                            batch.append((tj, tuple(map(float, shadow.step(tj, list(held))))))
+                        break
+                    except ValueError:
+                        if not share:
+                            raise
             answers = client.pose_batch(
                 [((base + int(round(t * 1e6))) & 0xFFFFFFFF, q) for t, q in batch])
             for j, ((t_s, quat), tel) in enumerate(zip(batch, answers)):
                 if j > 0:
-                    real = tuple(float(x) for x in model.step(t_s, list(pwm)))
+                    real = tuple(map(float, model.step(t_s, list(pwm))))
                     if real != quat:
                         raise _Diverged(f"pose {i + j} sent ahead differs from the lockstep "
                                         "one")
@@ -977,18 +987,21 @@ def _plain_object(x: Any) -> bool:
                 object, "__getstate__", None))
 
 
-def clone_state(obj: Any) -> Any:
+def clone_state(obj: Any, share_arrays: bool = False) -> Any:
     """A deep copy of a model for speculation, faster than copy.deepcopy for the types a
     model holds (numbers, strings, tuples, lists, dicts, deques, numpy arrays and
     Generators, frozen dataclasses of numbers); anything else goes to copy.deepcopy.
-    Nothing mutable is shared with the original."""
+    Nothing mutable is shared with the original; with ``share_arrays`` numpy arrays are
+    shared as read-only views (no copy): writing one in place raises ValueError, so the
+    original can never be changed through the copy."""
     import copy
 
     import numpy as np
 
     memo: Dict[int, Any] = {}
     immutable = (int, float, str, bool, bytes, type(None), complex)
-    flat_types = frozenset({int, float, str, bool, bytes, type(None), complex}).issuperset
+    flat = frozenset({int, float, str, bool, bytes, type(None), complex})
+    flat_types = flat.issuperset
 
     def c(x: Any) -> Any:
         if isinstance(x, immutable):
@@ -998,17 +1011,21 @@ def clone_state(obj: Any) -> Any:
             return memo[key]
         t = type(x)
         if t is np.ndarray and x.dtype != object:
-            y = x.copy()
+            if share_arrays:
+                y = x.view()
+                y.flags.writeable = False
+            else:
+                y = x.copy()
         elif t is list:
             y = x[:] if flat_types(map(type, x)) else [c(v) for v in x]
         elif t is tuple:
             if flat_types(map(type, x)):
                 return x                          # nothing mutable inside: share it
-            y = tuple([c(v) for v in x])
+            y = tuple([v if type(v) in flat else c(v) for v in x])
         elif t is dict:
-            y = {k: c(v) for k, v in x.items()}
+            y = {k: v if type(v) in flat else c(v) for k, v in x.items()}
         elif t is deque:
-            y = deque([c(v) for v in x], x.maxlen)
+            y = deque([v if type(v) in flat else c(v) for v in x], x.maxlen)
         elif isinstance(x, np.generic):
             y = x
         elif t is np.random.Generator:
