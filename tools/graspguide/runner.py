@@ -33,6 +33,14 @@ device: ``step`` is called once per pose at ``t_s = i / pose_rate_hz`` (the prot
 ``[study] pose_rate_hz``; i = 0, 1, ...) with the PWM of the previous pose's TELEMETRY
 (zeros for i = 0) and returns the pose to send. Open-loop sources also run at the
 protocol's pose rate, except a replay (its own timestamps) and ``synthetic:rate=..``.
+
+Pipelining (the virtual participant on the virtual clock only): the model is still
+stepped exactly as in lockstep, but up to :func:`pipeline_window` POSEs (reaction time x
+pose rate - 1: 20 at 0.21 s and 100 Hz) go out before their predecessors' TELEMETRY,
+speculated on a copy of the model and checked bit for bit against the model itself
+(StudyRunner._closed_loop_pipelined); a mismatch reruns the trial in lockstep. Trials,
+frames and resume are those of lockstep (tools/tests/test_demo.py compares them frame for
+frame); ``StudyRunner(pipeline=1)`` forces lockstep.
 """
 
 from __future__ import annotations
