@@ -544,14 +544,14 @@ def plot(result: Dict[str, Any], path: str) -> None:
             mean = [p["modalities"][m]["completion_mean_s"] for p in pts]
             sd = [p["modalities"][m]["completion_sd_s"] or 0.0 for p in pts]
             axes[row][1].errorbar(off, [math.nan if v is None else v for v in mean], yerr=sd,
-                                  fmt="o-", color=c, capsize=3, label=f"{m} mean +- SD")
+                                  fmt="o-", color=c, capsize=3, label=m)
             med = [p["modalities"][m]["success_completion_median_s"] for p in pts]
             axes[row][1].plot(xs, [math.nan if v is None else v for v in med], ":",
-                              marker="x", color=c, label=f"{m} median of successes")
+                              marker="x", color=c)
         axes[row][0].set_ylabel("success rate [%]")
         axes[row][0].set_ylim(-3, 103)
         axes[row][1].set_ylabel(f"completion time [s] (failure = {result['timeout_s']:g} s)")
-        axes[row][1].set_ylim(bottom=0)
+        axes[row][1].set_ylim(0, result["timeout_s"] * 1.4)   # room for the legend
         for ax in axes[row]:
             ax.set_xlabel(label)
             ax.grid(True, alpha=0.3)
@@ -562,8 +562,14 @@ def plot(result: Dict[str, Any], path: str) -> None:
                 ax.minorticks_off()
             else:
                 ax.set_xticks(xs_all)
-        axes[row][0].legend(fontsize=8, loc="lower right")
-    axes[0][1].legend(fontsize=7, loc="upper right", ncol=2)
+        axes[row][0].legend(fontsize=8, loc="lower right" if row == 0 else "center right")
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color=colors.get(m), marker="o", label=m) for m in mods] + [
+        Line2D([], [], color="gray", marker="o", label="mean +- SD, failure = "
+               f"{result['timeout_s']:g} s"),
+        Line2D([], [], color="gray", marker="x", linestyle=":",
+               label="median of successes")]
+    axes[0][1].legend(handles=handles, fontsize=7, loc="upper right", ncol=3)
     size = (f"{result['participants']} virtual participants x {result['wrenches']} wrenches x "
             f"k = {','.join(str(k) for k in result['contact_counts'])} per modality and point")
     fig.suptitle("SIMULATED guidance speed-accuracy trade (virtual participant model, not "
@@ -663,7 +669,11 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
             "threshold_deg": pt.threshold_deg, "pose_rate_hz": pt.pose_rate_hz,
             "axes": list(pt.axes), "folder": os.path.relpath(study_dir, out),
             "config_hash": proto.config_hash, "source": spec,
-            "modalities": per_mod, "modes": per_mode, "all": summarize(recs)})
+            "modalities": per_mod, "modes": per_mode,
+            "modes_by_contacts": {f"k{k}/{mode}": summarize(
+                [r for r in recs if r["k"] == k and r["mode"] == mode])
+                for k in proto.contact_counts for mode in sorted(per_mode)},
+            "all": summarize(recs)})
         if "threshold" in pt.axes:
             all_by_threshold[pt.threshold_deg] = recs
             for m in mods:
@@ -691,6 +701,7 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
                             **{m: threshold_pairs(v) for m, v in by_threshold.items()}},
         "points": points_out,
         "run_wall_s": round(run_s, 1),
+        "runner_processes_run": len(tasks),
         "jobs": jobs,
         "command": None,
     }
@@ -767,8 +778,9 @@ def run(args: argparse.Namespace) -> int:
           f"{tp['larger_threshold_took_longer']} of {tp['pairs']} pairs "
           "(never for an open-loop source; possible for the closed-loop participant, whose "
           "cue and search change with the threshold)")
-    print(f"\nWrote {json_path} and {png_path}; {result['run_wall_s']:.1f} s wall "
-          f"({result['jobs']} jobs). SIMULATED: no human took part.")
+    print(f"\nWrote {json_path} and {png_path}; {result['run_wall_s']:.1f} s wall, "
+          f"{result['runner_processes_run']} runner processes run now ({result['jobs']} "
+          "at a time). SIMULATED: no human took part.")
     return EXIT_OK
 
 

@@ -62,6 +62,8 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, capsys):
     for p in data["points"]:
         assert set(p["modalities"]) == {"F+C", "F+V"}
         assert set(p["modes"]) == {"C", "V"}
+        assert set(p["modes_by_contacts"]) == {"k3/C", "k3/V"}
+        assert p["modes_by_contacts"]["k3/V"] == p["modalities"]["F+V"]   # k = 3 only
         assert "participant:" in p["source"]
         assert f"task_threshold_deg={p['threshold_deg']:g}" in p["source"]
         assert f"rate_hz={p['pose_rate_hz']:g}" in p["source"]
