@@ -392,9 +392,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_stream_parser(sub)
     _add_bench_parser(sub)
     _add_trial_parser(sub)
-    from . import analysis as _analysis, demo as _demo
+    from . import analysis as _analysis, demo as _demo, sweep as _sweep
     _analysis.register(sub)   # `graspguide analyze`: Tables I-III, statistics, Figure 4
     _demo.add_parser(sub)     # `graspguide demo`: the paper's study end to end, simulated
+    _sweep.register(sub)      # `graspguide sweep`: threshold and pose rate vs time/success
     return parser
 
 

@@ -73,6 +73,21 @@ def test_help_texts():
         assert word in text, word
 
 
+@pytest.mark.parametrize("command, words", [
+    ("trial", ["--protocol", "--participant", "--source"]),
+    ("analyze", ["--out", "--keep-outliers"]),
+    ("demo", ["--participants", "--jobs"]),
+    ("sweep", ["--thresholds", "--rates"]),
+])
+def test_study_commands_are_registered(command, words):
+    top = run_cli(["--help"], b"")
+    assert command.encode() in top.stdout
+    sub = run_cli([command, "--help"], b"")
+    assert sub.returncode == 0, sub.stderr
+    for word in words:
+        assert word in sub.stdout.decode(), word
+
+
 def test_version_and_console_script():
     proc = run_cli(["--version"], b"")
     assert proc.returncode == 0
