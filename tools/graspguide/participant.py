@@ -237,6 +237,18 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
+class FeelLagError(RuntimeError):
+    """act() was called further ahead of feel() than the model's delay allows (its pose
+    could depend on a PWM not felt yet); see :meth:`VirtualParticipant.act`."""
+
+
+def _check_time(t_s: Any) -> float:
+    if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(float(t_s)):
+        raise ValueError(f"t_s must be a finite number of seconds, got {t_s!r}")
+    return float(t_s)
+
+
 def _finite_vector(x: Any, n: Optional[int], what: str) -> np.ndarray:
     try:
         a = np.asarray(x, dtype=np.float64)
@@ -255,6 +267,12 @@ class VirtualParticipant:
     Use: ``begin_trial(...)`` once per trial, then ``step(t_s, pwm)`` every
     ``1 / rate_hz`` s of virtual time with the PWM of the latest telemetry; each call
     returns the next hand orientation ``(w, x, y, z)`` (hand -> world).
+
+    Or, pipelined, feeling apart from acting: ``act(t_s)`` gives the pose at ``t_s``
+    and ``feel(t_s, pwm)`` takes that pose's telemetry PWM when it arrives (late, in
+    order); act() may run up to :meth:`max_lead` poses ahead of feel() and gives
+    exactly what ``step`` gives (see :meth:`act` for the guarantee, checked at run
+    time). ``step(t, pwm)`` is ``feel(t_prev, pwm)`` then ``act(t)``.
     """
 
     SIMULATED = True
@@ -332,7 +350,12 @@ class VirtualParticipant:
         self._qt = tuple(float(v) for v in self._q)
         self._motor = [0.0] * self._k          # ERM speeds, PWM units
         self._history: Deque[Tuple[float, List[float]]] = deque()
-        self._t_prev: Optional[float] = None
+        self._t_prev: Optional[float] = None   # time of the last motor update
+        self._t_last: Optional[float] = None   # time of the last act/step
+        self._unfelt: Deque[float] = deque()   # act times whose telemetry is not felt yet
+        self._keys: Deque[float] = deque()     # act times whose motor update waits for PWM
+        # Felt PWM waiting for its motor update; the first pose's: nothing felt (zeros).
+        self._inputs: Deque[List[float]] = deque([[0.0] * self._k])
         self._cue_onset: Optional[float] = None
         self._move: Optional[Dict[str, Any]] = None
         self._next_decision: Optional[float] = None
@@ -398,34 +421,96 @@ class VirtualParticipant:
 
     # ------------------------------------------------------------------ the loop
     def step(self, t_s: float, pwm: Sequence[int]) -> Tuple[float, float, float, float]:
-        """Advance to virtual time ``t_s`` having felt ``pwm``; return the next (w, x, y, z)."""
-        self._need_trial()
-        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.floating, np.integer)) \
-                or not math.isfinite(float(t_s)):
-            raise ValueError(f"t_s must be a finite number of seconds, got {t_s!r}")
-        t = float(t_s)
-        u = self._check_pwm(pwm)
-        if self._t_prev is not None and t < self._t_prev:
-            raise ValueError(f"time went backwards: {t} after {self._t_prev}")
-        dt = 1.0 / self.rate_hz if self._t_prev is None else t - self._t_prev
-        self._t_prev = t
+        """Lockstep: advance to virtual time ``t_s`` having felt ``pwm`` (the PWM of the
+        previous pose's telemetry; at the first pose of a trial the PWM of the interval
+        before it, normally zeros); return the pose (w, x, y, z) at ``t_s``.
 
-        # 1. ERM lag (exact discretisation of the first-order lag over dt).
-        gain = 1.0 - math.exp(-dt / self.params.erm_tau_s)
-        motor = [x + (v - x) * gain for x, v in zip(self._motor, u)]
-        self._motor = motor
-        self._history.append((t, motor))
-        if self._cue_onset is None:
-            while len(self._history) > 1 and \
-                    self._history[1][0] <= t - self.params.reaction_time_s:
-                self._history.popleft()
-            if max(motor) >= 0.5 * PWM_FLOOR:
-                # First felt cue. Relative strengths can be judged once the motors have
-                # (nearly) reached their steady speed (3 tau: 95 %); the first movement
-                # starts a reaction time after that percept.
-                self._cue_onset = t
-                self._next_decision = (t + 3.0 * self.params.erm_tau_s
-                                       + self.params.reaction_time_s)
+        The same as ``feel(t_prev, pwm)`` followed by ``act(t_s)`` (``t_prev``: the
+        previous pose's time). Mixing is allowed when every earlier act() but the last
+        has been felt."""
+        self._need_trial()
+        t = _check_time(t_s)
+        u = self._check_pwm(pwm)
+        if self._t_last is not None and t < self._t_last:
+            raise ValueError(f"time went backwards: {t} after {self._t_last}")
+        if self._unfelt:
+            if len(self._unfelt) > 1:
+                raise RuntimeError("step() after act() with poses not yet felt: call feel() "
+                                   "for them (or use feel/act throughout)")
+            self._unfelt.popleft()
+            self._inputs.append(u)
+        elif self._t_last is None and len(self._inputs) == 1:
+            self._inputs[0] = u             # the first pose: the input before it
+        else:
+            raise RuntimeError("step() after the last pose was already felt: call act()")
+        return self._act(t)
+
+    def feel(self, t_s: float, pwm: Sequence[int]) -> None:
+        """Feel ``pwm``, the PWM of the telemetry of the pose act() gave at ``t_s``.
+
+        Telemetry arrives late and in order: ``t_s`` must be the oldest act() time not yet
+        felt. The motors see this PWM from ``t_s`` until the next pose's time (what
+        ``step`` does with the PWM it is given). Validated here, once per telemetry
+        (``pwm`` must be k numbers 0..255: NaN, a wrong length or a non-number raise
+        ValueError)."""
+        self._need_trial()
+        t = _check_time(t_s)
+        u = self._check_pwm(pwm)
+        if not self._unfelt or t != self._unfelt[0]:
+            expected = self._unfelt[0] if self._unfelt else None
+            raise ValueError(f"feel({t}) is not for the oldest pose not yet felt "
+                             f"(expected t_s = {expected}); feel the poses act() gave, in "
+                             "order, once each")
+        self._unfelt.popleft()
+        self._inputs.append(u)
+
+    def act(self, t_s: float) -> Tuple[float, float, float, float]:
+        """The pose (w, x, y, z) at virtual time ``t_s`` (after the previous act/step time).
+
+        **Guarantee** (docs/participant.md, "feel and act"): the pose depends on a felt
+        PWM only through the motor state it produced, and a decision at ``t`` reads the
+        motor state of ``t - reaction_time_s`` (the delay line) or the first-cue time
+        (which moves nothing for ``3 erm_tau_s + reaction_time_s``). So act(t) depends
+        only on feel() samples of poses whose *next* pose time ``s`` has
+        ``s <= t - reaction_time_s`` (in particular only on samples with time
+        ``< t - reaction_time_s``), and at a fixed pose rate act() may run
+        :meth:`max_lead` poses ahead of the last felt pose. The result is then bit for
+        bit what lockstep ``step`` gives. This is checked, not assumed: an act() whose
+        result could depend on a PWM not yet felt raises :class:`FeelLagError`."""
+        self._need_trial()
+        t = _check_time(t_s)
+        if self._t_last is not None and t < self._t_last:
+            raise ValueError(f"time went backwards: {t} after {self._t_last}")
+        return self._act(t)
+
+    def max_lead(self, pose_rate_hz: float) -> int:
+        """How many poses act() may run ahead of feel() at ``pose_rate_hz``: act(t_j) may
+        be called once the poses up to j - max_lead have been felt. The exact bound is
+        about reaction_time_s * rate + 1; this keeps two poses of margin for the rounding
+        of ``t - reaction_time_s`` (floor(reaction_time_s * rate) - 1, at least 1:
+        20 at 0.21 s and 100 Hz)."""
+        n = int(math.floor(self.params.reaction_time_s * float(pose_rate_hz) + 1e-9)) - 1
+        return max(1, n)
+
+    def _act(self, t: float) -> Tuple[float, float, float, float]:
+        """act() without the argument checks (t is a float, not before the last one)."""
+        self._t_last = t
+        self._unfelt.append(t)
+        keys, inputs = self._keys, self._inputs
+        keys.append(t)
+        while keys and inputs:
+            self._advance(keys.popleft(), inputs.popleft())
+        if keys:
+            # The oldest motor update still waiting for its PWM: it must not be one this
+            # pose could depend on (see act()).
+            s = keys[0]
+            p = self.params
+            if s <= t - p.reaction_time_s or \
+                    s + 3.0 * p.erm_tau_s + p.reaction_time_s <= t:
+                raise FeelLagError(
+                    f"act({t}) is too far ahead of feel(): the PWM of the pose before "
+                    f"{s} is not felt yet and the pose at {t} could depend on it (act may "
+                    f"run at most reaction_time_s = {p.reaction_time_s} s ahead)")
 
         # 2. Decide (with the percept of reaction_time_s ago) when the last movement and
         #    its pause are over.
@@ -453,7 +538,42 @@ class VirtualParticipant:
                             self._tremor_amp * math.sin(w + self._tremor_phase[1]), 0.0), q)
         return _qnormalize(q)
 
+    def _advance(self, t: float, u: List[float]) -> None:
+        """The motors from the previous motor time to ``t`` with the PWM ``u`` held (the
+        delay line gets the state at ``t``); the first felt cue starts the clock of the
+        first decision."""
+        dt = 1.0 / self.rate_hz if self._t_prev is None else t - self._t_prev
+        self._t_prev = t
+
+        # 1. ERM lag (exact discretisation of the first-order lag over dt).
+        gain = 1.0 - math.exp(-dt / self.params.erm_tau_s)
+        motor = [x + (v - x) * gain for x, v in zip(self._motor, u)]
+        self._motor = motor
+        self._history.append((t, motor))
+        if self._cue_onset is None:
+            while len(self._history) > 1 and \
+                    self._history[1][0] <= t - self.params.reaction_time_s:
+                self._history.popleft()
+            if max(motor) >= 0.5 * PWM_FLOOR:
+                # First felt cue. Relative strengths can be judged once the motors have
+                # (nearly) reached their steady speed (3 tau: 95 %); the first movement
+                # starts a reaction time after that percept.
+                self._cue_onset = t
+                self._next_decision = (t + 3.0 * self.params.erm_tau_s
+                                       + self.params.reaction_time_s)
+
     def _check_pwm(self, pwm: Any) -> List[float]:
+        # Fast path: a list or tuple of k ints/floats in 0..255 (NaN fails the range test).
+        if type(pwm) in (list, tuple) and len(pwm) == self._k:
+            try:
+                u = [float(v) for v in pwm if type(v) is int or type(v) is float]
+            except OverflowError:
+                u = []
+            if len(u) == self._k and all(0.0 <= x <= 255.0 for x in u):
+                return u
+        return self._check_pwm_slow(pwm)
+
+    def _check_pwm_slow(self, pwm: Any) -> List[float]:
         what = f"pwm must be {self._k} numbers 0..255"
         if isinstance(pwm, (str, bytes)) or not hasattr(pwm, "__iter__"):
             raise ValueError(f"{what}, got {pwm!r}")
@@ -713,5 +833,6 @@ def parse_spec(spec: str) -> ParticipantParams:
     return params
 
 
-__all__ = ["ParticipantParams", "VirtualParticipant", "parse_spec", "quaternion_angle_deg",
+__all__ = ["ParticipantParams", "VirtualParticipant", "FeelLagError", "parse_spec",
+           "quaternion_angle_deg",
            "PWM_FLOOR", "PWM_RANGE"]

@@ -34,13 +34,17 @@ device: ``step`` is called once per pose at ``t_s = i / pose_rate_hz`` (the prot
 (zeros for i = 0) and returns the pose to send. Open-loop sources also run at the
 protocol's pose rate, except a replay (its own timestamps) and ``synthetic:rate=..``.
 
-Pipelining (the virtual participant on the virtual clock only): the model is still
-stepped exactly as in lockstep, but up to :func:`pipeline_window` POSEs (reaction time x
-pose rate - 1: 20 at 0.21 s and 100 Hz) go out before their predecessors' TELEMETRY,
-speculated on a copy of the model and checked bit for bit against the model itself
-(StudyRunner._closed_loop_pipelined); a mismatch reruns the trial in lockstep. Trials,
-frames and resume are those of lockstep (tools/tests/test_demo.py compares them frame for
-frame); ``StudyRunner(pipeline=1)`` forces lockstep.
+Pipelining (on the virtual clock, a closed-loop source with ``feel``/``act``/``max_lead``,
+i.e. the virtual participant): up to :func:`pipeline_window` POSEs (reaction time x pose
+rate - 1: 20 at 0.21 s and 100 Hz) go out before their predecessors' TELEMETRY. The poses
+come from ``model.act(t)`` and each TELEMETRY is given to ``model.feel(t, pwm)`` as it
+arrives: one model step per pose, no copy, no speculation. The model guarantees (and
+checks: FeelLagError) that act(t) depends only on PWM felt a reaction time before t, so
+the poses are bit for bit the lockstep ones (StudyRunner._closed_loop_pipelined); a
+FeelLagError reruns the trial in lockstep. Trials, frames and resume are those of
+lockstep (tools/tests/test_demo.py compares them frame for frame);
+``StudyRunner(pipeline=1)`` forces lockstep, and a source without feel/act always runs in
+lockstep.
 """
 
 from __future__ import annotations
@@ -54,7 +58,6 @@ import math
 import os
 import sys
 import time
-from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, TextIO, Tuple
 
@@ -664,26 +667,22 @@ class StudyRunner:
     def _closed_loop_pipelined(self, trial: PlannedTrial, model: Any, rate: float,
                                window: int, fh: Any) -> Tuple[Any, int, float]:
         """The closed loop with up to ``window`` POSEs in flight, giving exactly what
-        lockstep gives.
+        lockstep gives, for a source that separates feeling from acting (``feel``/``act``,
+        the virtual participant: docs/participant.md, "feel and act").
 
-        Lockstep: ``quat_i = model.step(t_i, pwm of TELEMETRY i-1)``. Here, in batches:
-        pose i comes from the model itself (its TELEMETRY i-1 is known); poses i+1 ..
-        i+window-1 from a copy of the model (:func:`clone_state`) stepped with the last
-        known PWM held; the batch goes out in one write (:meth:`DeviceClient.pose_batch`).
-        As the answers come, the model itself is stepped in order with the real PWM,
-        exactly as lockstep steps it, and each pose it gives must equal, bit for bit, the
-        one the device got; so the device sees the lockstep pose sequence and answers it
-        as in lockstep (it handles POSEs one after the other; the answer to one does not
-        depend on the later ones). POSEs sent after the one that ends the trial are
-        refused (ERROR not_allowed_in_state) and not recorded.
-
-        Why they agree (the virtual participant, see pipeline_window): its pose at step j
-        depends on PWM only through decisions taken with the motor state of a reaction
-        time earlier (the delay line) and on the first-cue time (which moves nothing for
-        3 tau + the reaction time); so with window <= reaction_time * rate - 1 every pose
-        of a batch depends only on TELEMETRY already received. A mismatch raises
-        _Diverged (the caller runs the trial again in lockstep), so a source that
-        breaks this cannot give a wrong record."""
+        Lockstep: ``quat_i = model.step(t_i, pwm of TELEMETRY i-1)``, which is
+        ``model.feel(t_{i-1}, pwm of TELEMETRY i-1)`` then ``model.act(t_i)``. Here, in
+        batches: the poses i .. i+window-1 are ``model.act(t)`` with the TELEMETRY up to
+        i-1 felt, the batch goes out in one write (:meth:`DeviceClient.pose_batch`), and
+        each answer is felt (``model.feel``) as it comes, in order. The model guarantees
+        that act(t) depends only on PWM felt a reaction time before t, so with window <=
+        ``model.max_lead(rate)`` every pose equals, bit for bit, the lockstep one, with
+        one model step per pose and no copy; the device handles POSEs one after the
+        other (the answer to one does not depend on the later ones), so it answers as in
+        lockstep. POSEs sent after the one that ends the trial are refused (ERROR
+        not_allowed_in_state) and not recorded. An act() too far ahead raises the
+        model's FeelLagError, turned into _Diverged (the caller runs the trial again in
+        lockstep): a broken source cannot give a wrong record."""
         from .device import LinkTimeout
         from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
 
@@ -693,45 +692,31 @@ class StudyRunner:
         client = self.client
         write = fh.write
         frame = self.progress.frame
-        pwm: List[int] = [0] * k
+        act = model.act
+        feel = model.feel
+        lag_error = _feel_lag_error()
         i = 0
         poses = 0
         limit = p.timeout_s + RESULT_MARGIN_S
         while True:
-            t0 = i / rate
-            first = model.step(t0, list(pwm))
-            batch = [(t0, tuple(map(float, first)))]
-            if window > 1:
-                # The copy shares the model's arrays read-only (no copy of, e.g., a search
-                # grid); a step that writes one in place raises, and the batch is
-                # speculated again on a full copy.
-                held = list(pwm)
-                for share in (True, False):
-                    shadow = clone_state(model, share_arrays=share)
-                    del batch[1:]
-                    try:
-                        for j in range(1, window):
-                            tj = (i + j) / rate
-                            batch.append((tj, tuple(map(float, shadow.step(tj, list(held))))))
-                        break
-                    except ValueError:
-                        if not share:
-                            raise
+            batch = []
+            try:
+                for j in range(i, i + window):
+                    t = j / rate
+                    batch.append((t, tuple(map(float, act(t)))))
+            except lag_error as e:
+                raise _Diverged(f"pose {i + len(batch)} could not be acted ahead: {e}"
+                                ) from None
             answers = client.pose_batch(
                 [((base + int(round(t * 1e6))) & 0xFFFFFFFF, q) for t, q in batch])
             for j, ((t_s, quat), tel) in enumerate(zip(batch, answers)):
-                if j > 0:
-                    real = tuple(map(float, model.step(t_s, list(pwm))))
-                    if real != quat:
-                        raise _Diverged(f"pose {i + j} sent ahead differs from the lockstep "
-                                        "one")
                 if isinstance(tel, Error):
                     raise RunnerError(f"trial {trial.trial_index}: the device refused pose "
                                       f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
                                       "the trial was running")
                 t_us = (base + int(round(t_s * 1e6))) & 0xFFFFFFFF
                 poses += 1
-                pwm = [int(x) for x in tel.pwm[:k]]
+                pwm = tel.pwm[:k]
                 write(_FRAME_ROW % ((round(t_s, 6), t_us) + quat
                                     + (float(tel.error_deg), float(tel.alpha))
                                     + tuple(tel.pwm)
@@ -754,6 +739,11 @@ class StudyRunner:
                     raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s "
                                       f"into a {p.timeout_s:g} s trial; is the device's "
                                       "clock following the poses?")
+                try:
+                    feel(t_s, list(pwm))
+                except ValueError as e:
+                    raise RunnerError(f"trial {trial.trial_index}: pose {i + j}: the model "
+                                      f"refused the TELEMETRY's PWM: {e}") from None
             i += len(batch)
 
     def run_trial(self, trial: PlannedTrial) -> Dict[str, Any]:
@@ -965,95 +955,30 @@ class _Diverged(Exception):
 MAX_PIPELINE = 32
 
 
+def _feel_lag_error() -> Any:
+    try:
+        from .participant import FeelLagError
+    except ImportError:  # pragma: no cover
+        return RuntimeError
+    return FeelLagError
+
+
 def pipeline_window(model: Any, pose_rate_hz: float) -> int:
     """How many POSEs a closed-loop source may have in flight (1 = lockstep).
 
-    Only the virtual participant is pipelined: its pose at step j depends on the PWM of
-    step m only if m <= j - reaction_time_s * rate (decisions use the motor state of a
-    reaction time earlier; the first felt cue starts nothing before 3 erm_tau_s +
-    reaction_time_s), so floor(reaction_time_s * rate) - 1 poses (one of margin for the
-    rounding of t - reaction_time_s) can be sent before their predecessors' TELEMETRY.
-    Any other source runs in lockstep."""
+    A source that separates feeling from acting (callable ``feel``, ``act`` and
+    ``max_lead``, like the virtual participant: docs/participant.md, "feel and act") is
+    pipelined ``model.max_lead(pose_rate_hz)`` poses deep (at most MAX_PIPELINE); for
+    the virtual participant floor(reaction_time_s * rate) - 1, 20 at 0.21 s and 100 Hz
+    (its pose at t depends only on PWM felt a reaction time earlier). Any other source
+    runs in lockstep."""
+    if not all(callable(getattr(model, name, None)) for name in ("feel", "act", "max_lead")):
+        return 1
     try:
-        from .participant import VirtualParticipant
-    except ImportError:  # pragma: no cover
+        n = int(model.max_lead(float(pose_rate_hz)))
+    except Exception:
         return 1
-    if type(model) is not VirtualParticipant:
-        return 1
-    rt = float(getattr(model.params, "reaction_time_s", 0.0))
-    n = int(math.floor(rt * float(pose_rate_hz) + 1e-9)) - 1
     return max(1, min(MAX_PIPELINE, n))
-
-
-def _plain_object(x: Any) -> bool:
-    """An instance of a plain Python class: its state is its __dict__."""
-    t = type(x)
-    return (hasattr(x, "__dict__") and not hasattr(t, "__slots__")
-            and not hasattr(t, "__deepcopy__") and not hasattr(t, "__setstate__")
-            and t.__reduce_ex__ is object.__reduce_ex__
-            and getattr(t, "__getstate__", object.__getstate__) is getattr(
-                object, "__getstate__", None))
-
-
-def clone_state(obj: Any, share_arrays: bool = False) -> Any:
-    """A deep copy of a model for speculation, faster than copy.deepcopy for the types a
-    model holds (numbers, strings, tuples, lists, dicts, deques, numpy arrays and
-    Generators, frozen dataclasses of numbers); anything else goes to copy.deepcopy.
-    Nothing mutable is shared with the original; with ``share_arrays`` numpy arrays are
-    shared as read-only views (no copy): writing one in place raises ValueError, so the
-    original can never be changed through the copy."""
-    import copy
-
-    import numpy as np
-
-    memo: Dict[int, Any] = {}
-    immutable = (int, float, str, bool, bytes, type(None), complex)
-    flat = frozenset({int, float, str, bool, bytes, type(None), complex})
-    flat_types = flat.issuperset
-
-    def c(x: Any) -> Any:
-        if isinstance(x, immutable):
-            return x
-        key = id(x)
-        if key in memo:
-            return memo[key]
-        t = type(x)
-        if t is np.ndarray and x.dtype != object:
-            if share_arrays:
-                y = x.view()
-                y.flags.writeable = False
-            else:
-                y = x.copy()
-        elif t is list:
-            y = x[:] if flat_types(map(type, x)) else [c(v) for v in x]
-        elif t is tuple:
-            if flat_types(map(type, x)):
-                return x                          # nothing mutable inside: share it
-            y = tuple([v if type(v) in flat else c(v) for v in x])
-        elif t is dict:
-            y = {k: v if type(v) in flat else c(v) for k, v in x.items()}
-        elif t is deque:
-            y = deque([v if type(v) in flat else c(v) for v in x], x.maxlen)
-        elif isinstance(x, np.generic):
-            y = x
-        elif t is np.random.Generator:
-            bg = type(x.bit_generator)()
-            bg.state = x.bit_generator.state
-            y = np.random.Generator(bg)
-        elif hasattr(x, "__dataclass_params__") and x.__dataclass_params__.frozen and all(
-                isinstance(getattr(x, f), immutable) for f in x.__dataclass_fields__):
-            y = x
-        elif _plain_object(x):
-            y = object.__new__(t)
-            memo[key] = y
-            y.__dict__.update({k: c(v) for k, v in x.__dict__.items()})
-            return y
-        else:
-            y = copy.deepcopy(x)
-        memo[key] = y
-        return y
-
-    return c(obj)
 
 
 def summary_lines(out_dir: str, participant: str) -> List[str]:

@@ -14,8 +14,8 @@ import pytest
 
 from graspguide import _core
 from graspguide import scene as gs
-from graspguide.participant import (PWM_FLOOR, ParticipantParams, VirtualParticipant,
-                                    parse_spec, quaternion_angle_deg)
+from graspguide.participant import (PWM_FLOOR, FeelLagError, ParticipantParams,
+                                    VirtualParticipant, parse_spec, quaternion_angle_deg)
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                         "examples")
@@ -455,3 +455,151 @@ def test_closed_loop_mode_c_runs_and_is_slower_than_v(report_figure):
                   f"C {succ['C']}/4 mean {np.mean(times['C']):.1f} s; "
                   f"V {succ['V']}/4 mean {np.mean(times['V']):.1f} s (90 s = timeout)")
     assert np.mean(times["V"]) <= np.mean(times["C"])
+
+
+# --------------------------------------------------------------------------------------
+# feel / act (docs/participant.md, "feel and act")
+# --------------------------------------------------------------------------------------
+#: sha256 of every (t, pose, pwm) of seeded closed loops against the core (lockstep step()),
+#: recorded with the code before feel/act existed (the speculating runner, commit 7d0f0cc):
+#: the refactor must not change a single bit.
+GOLDEN = {
+    '0-C-F': '411ec78f558fd9549aa5676527a46831faf2327aead6b329c68a55a5464b6852',
+    '0-C-Fperp': '53d0dbdd33f2e8afac69bc6a8ebb586f81651df23ec589b779da4a0e7caf7270',
+    '0-V-F': '9fb6d053050da5382fc4616e34ffc879f7e5ab93b1e09a860515ba761b85fea5',
+    '0-V-Fperp': '05c810ee8d918d8f29391126c13475a53d506dbdb3979796aea1f7a63f341328',
+    '1-C-F': '0a1e52f5b2981b2b09969bb9c59832e3c929afa0944b750f6e176f963acf7e53',
+    '1-C-Fperp': '9820df18d151367552621a4718cb5651536d2f277a595151cef83dbb7156f003',
+    '1-V-F': 'bf85c2e219d39644b7fef7afe8ee49dcbc685c43c43bf533995fb52b545c5554',
+    '1-V-Fperp': '217979ebc30aab8e06ba8c13b7b04af9b4472867cebb850c8a1587fb167a50e6',
+    '2-C-F': 'c45c50f33e8cd65a086839fda7ce8c8c94abda22e58464953b2a4013bfc93d9e',
+    '2-C-Fperp': 'f54fc69819863cf04f49f9da43d5eead24ec56b0a246ba2a7b9f953de3d68b89',
+    '2-V-F': '97017f5f1cc828176a4b36c40cdcd424bc3fdeec3a80137cf8c37c332a9bd7eb',
+    '2-V-Fperp': '0d1040119d1ca9b7a934edaf3f9cf51188752a1a301d917ad2db74d81ce93ba4',
+    '3-C-F': 'c943703d1add7f749f35ae8f108147679707b5b90cc5e0eb8e72d4c55db535ac',
+    '3-C-Fperp': '3e1599ec2ea93c51b9ba3dca090e48f189c10b3199420db904ed96c42142b2dc',
+    '3-V-F': 'dd3a2b8d8308dba0ca71d758244322fa9acd13dac03588660cc36fd643c8583d',
+    '3-V-Fperp': '7863ec47ca48f56e75320a4be46a748bb4833fea0bec123bdf10eae0b1894474',
+    'slow-rt': '98b3094e55c177157dffbdf5a5b6620eb6306443a93a0dcd7646cbbd8f434174',
+}
+
+
+def _golden_run(w, mode, policy, seed, spec="participant", timeout=30.0):
+    import hashlib
+
+    vp = VirtualParticipant.from_spec(spec, seed)
+    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=w, policy=policy, mode=mode,
+                   start_quat=(1.0, 0, 0, 0))
+    q = (1.0, 0.0, 0.0, 0.0)
+    h = hashlib.sha256()
+    for i in range(int(round(timeout * vp.rate_hz)) + 1):
+        t = i / vp.rate_hz
+        res = _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode=mode,
+                          constraints="paper", orientation=list(q), y_axis=Y_AXIS)
+        q = vp.step(t, res["pwm"])
+        h.update(repr((t, tuple(q), list(res["pwm"]))).encode())
+    return h.hexdigest()
+
+
+def test_closed_loops_bit_identical_to_the_golden_record():
+    got = {}
+    for i, w in enumerate(_wrenches(4, 2026)):
+        for mode in ("C", "V"):
+            for policy in ("F", "Fperp"):
+                got[f"{i}-{mode}-{policy}"] = _golden_run(w, mode, policy, 100 + i)
+    got["slow-rt"] = _golden_run(_wrenches(1, 5)[0], "V", "F", 9,
+                                 "participant:reaction_time_s=0.35,erm_tau_s=0.03")
+    assert got == GOLDEN
+
+
+def _lockstep_vs_pipelined(w, mode, policy, seed, spec, lead, n):
+    """The core as the device; lockstep step() against act() running `lead` poses ahead
+    of feel() (the device's answers arrive `lead` poses late)."""
+    def pwm_of(q):
+        return _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode=mode,
+                           constraints="paper", orientation=list(q), y_axis=Y_AXIS)["pwm"]
+
+    a = new_participant(spec, seed, mode, policy, w)
+    lock = [a.step(0.0, [0, 0, 0, 0])]
+    for j in range(1, n):
+        lock.append(a.step(j / 100.0, pwm_of(lock[-1])))
+    b = new_participant(spec, seed, mode, policy, w)
+    pipe = []
+    felt = 0
+    for j in range(n):
+        while felt <= j - lead:
+            b.feel(felt / 100.0, pwm_of(pipe[felt]))
+            felt += 1
+        pipe.append(b.act(j / 100.0))
+    return lock, pipe
+
+
+@pytest.mark.parametrize("mode", ["C", "V"])
+def test_act_ahead_of_feel_equals_lockstep_bit_for_bit(mode):
+    vp = new_participant()
+    assert vp.max_lead(100.0) == 20
+    for i, w in enumerate(_wrenches(3, 77)):
+        for spec in ("participant", "participant:reaction_time_s=0.05,erm_tau_s=0.01"):
+            lead = VirtualParticipant.from_spec(spec, 0).max_lead(100.0)
+            lock, pipe = _lockstep_vs_pipelined(w, mode, "F", 40 + i, spec, lead, 1500)
+            assert pipe == lock
+            assert len({q for q in lock}) > 100      # it moved
+
+
+def test_act_depends_only_on_pwm_felt_a_reaction_time_earlier():
+    """Change every PWM from pose c on: the poses up to c + reaction_time * rate do not
+    change (pose j sees the PWM of pose m only if t_m < t_j - reaction_time_s)."""
+    rng = np.random.default_rng(5)
+    base = rng.integers(0, 256, size=(600, 4))
+    changed_somewhere = False
+    for mode in ("C", "V"):
+        for c in (0, 10, 37, 150, 333):
+            other = base.copy()
+            other[c:] = rng.integers(0, 256, size=(600 - c, 4))
+            out = []
+            for pwm in (base, other):
+                vp = new_participant(mode=mode, seed=3)
+                q = [vp.step(0.0, [0, 0, 0, 0])]
+                q += [vp.step((m + 1) / 100.0, list(pwm[m])) for m in range(599)]
+                out.append(q)
+            unchanged = c + 21        # t_c < t_j - 0.21 s needs j > c + 21
+            assert out[0][:unchanged + 1] == out[1][:unchanged + 1], (mode, c)
+            changed_somewhere |= out[0] != out[1]
+    assert changed_somewhere
+
+
+def test_act_too_far_ahead_of_feel_is_refused():
+    vp = new_participant()
+    lead = vp.max_lead(100.0)
+    first_refused = None
+    for j in range(40):
+        try:
+            vp.act(j / 100.0)
+        except FeelLagError as e:
+            first_refused = j
+            assert "ahead" in str(e)
+            break
+    assert first_refused is not None and lead < first_refused <= lead + 3
+
+
+def test_feel_checks_its_input_once_with_a_clear_error():
+    vp = new_participant()
+    vp.act(0.0)
+    for pwm, words in (([0, 0, float("nan"), 0], "finite"), ([0, 0, 0], "4 values"),
+                       ([0, 0, 0, 0, 0], "4 values"), ([0, 0, 256, 0], "0..255"),
+                       ([True, 0, 0, 0], "numbers"), ("abcd", "numbers")):
+        with pytest.raises(ValueError, match=words):
+            vp.feel(0.0, pwm)
+    with pytest.raises(ValueError, match="oldest pose"):
+        vp.feel(0.01, [0, 0, 0, 0])                   # no act at 0.01
+    vp.feel(0.0, (10, 20.0, np.int64(3), np.float32(4)))   # any numbers: slow path
+    with pytest.raises(ValueError, match="oldest pose"):
+        vp.feel(0.0, [0, 0, 0, 0])                    # felt twice
+    vp.act(0.01)
+    vp.act(0.02)
+    with pytest.raises(RuntimeError, match="feel"):
+        vp.step(0.03, [0, 0, 0, 0])                   # two poses not felt: ambiguous
+    vp.feel(0.01, [0, 0, 0, 0])
+    vp.step(0.03, [0, 0, 0, 0])                       # feel(0.02, ..) + act(0.03)
+    with pytest.raises(ValueError, match="backwards"):
+        vp.act(0.025)
