@@ -21,16 +21,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
-import subprocess
 import sys
 import time
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Tuple
 
-EXIT_OK = 0
-EXIT_FAILURE = 1
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
+from .trial_jobs import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TrialJob,
+                         count_lines, default_protocol, default_out as _default_out, int_arg,
+                         run_trial_jobs)
 DEFAULT_SOURCE = "participant"
 
 DESCRIPTION = """\
@@ -51,33 +48,11 @@ Exit status: 0 done, 1 a participant's run or the analysis failed (its log is na
 """
 
 
-def _repo_root() -> Optional[str]:
-    try:
-        from .transport import find_repo_root
-        return find_repo_root()
-    except Exception:  # pragma: no cover - informational default only
-        return None
-
-
-def default_protocol() -> str:
-    root = _repo_root()
-    return os.path.join(root, "protocols", "paper.toml") if root else \
-        os.path.join("protocols", "paper.toml")
-
-
 def default_out() -> str:
-    root = _repo_root()
-    return os.path.join(root, "logs", "demo-study") if root else "demo-study"
+    return _default_out("demo-study")
 
 
-def _jobs(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 1 <= value <= 256:
-        raise argparse.ArgumentTypeError(f"must be between 1 and 256, got {value}")
-    return value
+_jobs = int_arg(1, 256)
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -118,25 +93,6 @@ def _status(protocol, out: str, pid: str) -> Tuple[int, int, bool]:
         return 0, planned, False      # let the runner report what is wrong
     sessions = {s.session for s in session_order(protocol, pid)}
     return len(done), planned, len(done) >= planned and sessions <= tlx
-
-
-def _preexec() -> None:  # pragma: no cover - runs in the child
-    """The child dies with the demo (Linux): SIGTERM when its parent is gone, so a demo
-    killed with SIGKILL leaves no runner holding a participant's folder."""
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
-    except Exception:
-        pass
-
-
-def _count_lines(path: str) -> int:
-    try:
-        with open(path, "rb") as f:
-            return f.read().count(b"\n")
-    except OSError:
-        return 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -185,71 +141,36 @@ def _run_participants(args, protocol_path: str, out: str, logs: str, todo: List[
                       jobs: int, total: int, status: Dict[str, Tuple[int, int, bool]]) -> int:
     if not todo:
         return EXIT_OK
-    interrupted = []
+    tasks = [TrialJob(protocol_path, out, pid, args.source, os.path.join(logs, f"{pid}.log"))
+             for pid in todo]
+    next_report = [time.monotonic() + 5.0]
 
-    def _interrupt(signum, frame):
-        interrupted.append(signum)
-        raise KeyboardInterrupt
+    def done_trials() -> int:
+        return sum(count_lines(os.path.join(out, pid, "trials.jsonl")) for pid in status)
 
-    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
-    running: Dict[str, Tuple[subprocess.Popen, object]] = {}
-    queue = list(todo)
-    failed: List[Tuple[str, int]] = []
-    next_report = time.monotonic() + 5.0
-    try:
-        while queue or running:
-            while queue and len(running) < jobs:
-                pid = queue.pop(0)
-                cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol",
-                       protocol_path, "--participant", pid, "--port", "sim", "--source",
-                       args.source, "--out", out]
-                log = open(os.path.join(logs, f"{pid}.log"), "ab")
-                log.write(f"\n$ {' '.join(cmd)}\n".encode())
-                log.flush()
-                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
-                                        stderr=subprocess.STDOUT, preexec_fn=_preexec)
-                running[pid] = (proc, log)
-            time.sleep(0.1)
-            for pid, (proc, log) in list(running.items()):
-                rc = proc.poll()
-                if rc is None:
-                    continue
-                log.close()
-                del running[pid]
-                done = _count_lines(os.path.join(out, pid, "trials.jsonl"))
-                if rc == 0:
-                    print(f"{pid}: done, {done}/{status[pid][1]} trials (simulated)",
-                          flush=True)
-                else:
-                    failed.append((pid, rc))
-                    print(f"{pid}: `graspguide trial` exited with {rc}; see "
-                          f"{os.path.join(logs, pid + '.log')}", file=sys.stderr, flush=True)
-            if time.monotonic() >= next_report and running:
-                next_report = time.monotonic() + 10.0
-                done = sum(_count_lines(os.path.join(out, pid, "trials.jsonl"))
-                           for pid in status)
-                print(f"  {done}/{total} trials done; running {', '.join(running)}",
-                      flush=True)
-    except KeyboardInterrupt:
-        for pid, (proc, log) in running.items():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)   # the runner STOPs and exits (130)
-        for pid, (proc, log) in running.items():
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            log.close()
-        done = sum(_count_lines(os.path.join(out, pid, "trials.jsonl")) for pid in status)
-        print(f"\ngraspguide demo: interrupted with {done}/{total} trials done; completed "
-              "trials are saved: run the same command again to resume", file=sys.stderr)
+    def on_exit(job: TrialJob, rc: int) -> None:
+        if rc == 0:
+            print(f"{job.participant}: done, {job.completed_trials()}/"
+                  f"{status[job.participant][1]} trials (simulated)", flush=True)
+        else:
+            print(f"{job.participant}: `graspguide trial` exited with {rc}; see {job.log}",
+                  file=sys.stderr, flush=True)
+
+    def on_tick(running: List[TrialJob]) -> None:
+        if time.monotonic() >= next_report[0]:
+            next_report[0] = time.monotonic() + 10.0
+            print(f"  {done_trials()}/{total} trials done; running "
+                  f"{', '.join(j.participant for j in running)}", flush=True)
+
+    interrupted, failed = run_trial_jobs(tasks, jobs, on_exit, on_tick, poll_s=0.1)
+    if interrupted:
+        print(f"\ngraspguide demo: interrupted with {done_trials()}/{total} trials done; "
+              "completed trials are saved: run the same command again to resume",
+              file=sys.stderr)
         return EXIT_INTERRUPTED
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
     if failed:
-        print("graspguide demo: error: " + ", ".join(f"{p} (exit {c})" for p, c in failed)
+        print("graspguide demo: error: " + ", ".join(f"{j.participant} (exit {c})"
+                                                     for j, c in failed)
               + f" failed; their logs are in {logs}; completed trials are kept: fix the cause "
               "and run the same command again", file=sys.stderr)
         return EXIT_FAILURE

@@ -38,17 +38,14 @@ import dataclasses
 import json
 import math
 import os
-import signal
 import statistics
-import subprocess
 import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-EXIT_OK = 0
-EXIT_FAILURE = 1
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
+from .trial_jobs import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TrialJob,
+                         count_lines, default_protocol, default_out as _default_out,
+                         int_arg as _int_arg, repo_root as _repo_root, run_trial_jobs)
 
 SWEEP_FORMAT = "graspguide-sweep/1"
 DEFAULT_THRESHOLDS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0)
@@ -119,35 +116,8 @@ def parse_modalities(text: str) -> Tuple[str, ...]:
     return tuple(out)
 
 
-def _int_arg(lo: int, hi: int):
-    def conv(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
-        return v
-    return conv
-
-
-def _repo_root() -> Optional[str]:
-    try:
-        from .transport import find_repo_root
-        return find_repo_root()
-    except Exception:  # pragma: no cover - informational default only
-        return None
-
-
-def default_protocol() -> str:
-    root = _repo_root()
-    return os.path.join(root, "protocols", "paper.toml") if root else \
-        os.path.join("protocols", "paper.toml")
-
-
 def default_out() -> str:
-    root = _repo_root()
-    return os.path.join(root, "logs", "guidance-sweep") if root else "guidance-sweep"
+    return _default_out("guidance-sweep")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -388,98 +358,28 @@ def threshold_pairs(by_threshold: Dict[float, List[Dict[str, Any]]]) -> Dict[str
 # --------------------------------------------------------------------------------------
 # Running
 # --------------------------------------------------------------------------------------
-def _preexec() -> None:  # pragma: no cover - runs in the child
-    try:
-        import ctypes
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
-    except Exception:
-        pass
-
-
-def _count_lines(path: str) -> int:
-    try:
-        with open(path, "rb") as f:
-            return f.read().count(b"\n")
-    except OSError:
-        return 0
-
-
-@dataclasses.dataclass
-class _Task:
-    point: Point
-    protocol_path: str
-    study_dir: str
-    participant: str
-    source: str
-    planned: int
-    log: str
-
-
-def _run_tasks(tasks: List[_Task], jobs: int, quiet: bool, err) -> int:
-    """Run the tasks' `graspguide trial` processes, ``jobs`` at a time."""
+def _run_tasks(tasks: List[TrialJob], jobs: int, quiet: bool, err) -> int:
+    """Run the tasks' `graspguide trial` processes, ``jobs`` at a time (tag: the point)."""
     if not tasks:
         return EXIT_OK
-    interrupted: List[int] = []
+    done = [0]
 
-    def _interrupt(signum, frame):
-        interrupted.append(signum)
-        raise KeyboardInterrupt
+    def on_exit(t: TrialJob, rc: int) -> None:
+        done[0] += 1
+        pt, planned = t.tag
+        where = f"threshold {pt.threshold_deg:g} deg, rate {pt.pose_rate_hz:g} Hz, {t.participant}"
+        if rc != 0:
+            print(f"graspguide sweep: {where}: `graspguide trial` exited with {rc}; see "
+                  f"{t.log}", file=err, flush=True)
+        elif not quiet:
+            print(f"  [{done[0]}/{len(tasks)}] {where}: {t.completed_trials()}/{planned} "
+                  "trials (simulated)", flush=True)
 
-    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
-    queue = list(tasks)
-    running: List[Tuple[_Task, subprocess.Popen, Any]] = []
-    failed: List[Tuple[_Task, int]] = []
-    done = 0
-    try:
-        while queue or running:
-            while queue and len(running) < jobs:
-                t = queue.pop(0)
-                cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol",
-                       t.protocol_path, "--participant", t.participant, "--port", "sim",
-                       "--source", t.source, "--out", t.study_dir]
-                os.makedirs(os.path.dirname(t.log), exist_ok=True)
-                log = open(t.log, "ab")
-                log.write(f"\n$ {' '.join(cmd)}\n".encode())
-                log.flush()
-                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
-                                        stderr=subprocess.STDOUT, preexec_fn=_preexec)
-                running.append((t, proc, log))
-            time.sleep(0.05)
-            for item in list(running):
-                t, proc, log = item
-                rc = proc.poll()
-                if rc is None:
-                    continue
-                log.close()
-                running.remove(item)
-                done += 1
-                if rc != 0:
-                    failed.append((t, rc))
-                    print(f"graspguide sweep: threshold {t.point.threshold_deg:g} deg, rate "
-                          f"{t.point.pose_rate_hz:g} Hz, {t.participant}: `graspguide trial` "
-                          f"exited with {rc}; see {t.log}", file=err, flush=True)
-                elif not quiet:
-                    print(f"  [{done}/{len(tasks)}] threshold {t.point.threshold_deg:g} deg, "
-                          f"rate {t.point.pose_rate_hz:g} Hz, {t.participant}: "
-                          f"{_count_lines(os.path.join(t.study_dir, t.participant, 'trials.jsonl'))}"
-                          f"/{t.planned} trials (simulated)", flush=True)
-    except KeyboardInterrupt:
-        for t, proc, log in running:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-        for t, proc, log in running:
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            log.close()
+    interrupted, failed = run_trial_jobs(tasks, jobs, on_exit)
+    if interrupted:
         print("\ngraspguide sweep: interrupted; completed trials are kept: run the same "
               "command again to resume", file=err)
         return EXIT_INTERRUPTED
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
     if failed:
         print(f"graspguide sweep: error: {len(failed)} runner process(es) failed; completed "
               "trials are kept: fix the cause and run the same command again", file=err)
@@ -603,7 +503,7 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
     base = load_protocol(protocol_path)
     pts = sweep_points(thresholds, rates, base.threshold_deg, base.pose_rate_hz, grid)
     pids = [f"U{i}" for i in range(1, participants + 1)]
-    tasks: List[_Task] = []
+    tasks: List[TrialJob] = []
     plan_info: List[Tuple[Point, Any, str, str]] = []
     # check every point before writing anything
     derived = []
@@ -634,18 +534,18 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
         planned = len(plan(check, "U1"))
         plan_info.append((pt, check, study_dir, spec))
         for pid in pids:
-            have = _count_lines(os.path.join(study_dir, pid, "trials.jsonl"))
-            if have >= planned:
+            if count_lines(os.path.join(study_dir, pid, "trials.jsonl")) >= planned:
                 continue
-            tasks.append(_Task(pt, ppath, study_dir, pid, spec, planned,
-                               os.path.join(study_dir, "logs", f"{pid}.log")))
+            tasks.append(TrialJob(ppath, study_dir, pid, spec,
+                                  os.path.join(study_dir, "logs", f"{pid}.log"),
+                                  tag=(pt, planned)))
     n_trials = sum(len(plan(p, "U1")) for _, p, _, _ in plan_info) * len(pids)
     if not quiet:
         print(f"{SIMULATED_NOTE}.\nSweep of {protocol_path}: {len(pts)} points x "
               f"{len(pids)} participants = {n_trials} trials; {len(tasks)} runner processes "
               f"to run, {jobs} at a time; folder {out}", flush=True)
     # the slow points (small threshold, high rate) first, so the pool ends together
-    tasks.sort(key=lambda t: (t.point.pose_rate_hz / t.point.threshold_deg), reverse=True)
+    tasks.sort(key=lambda t: (t.tag[0].pose_rate_hz / t.tag[0].threshold_deg), reverse=True)
     code = _run_tasks(tasks, jobs, quiet, err)
     if code != EXIT_OK:
         return code, None
