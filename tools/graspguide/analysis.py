@@ -128,15 +128,22 @@ def _read_jsonl(path: Path) -> List[Tuple[str, Dict[str, Any]]]:
     return out
 
 
-def _trial_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
-    row = {
+def _record_identity(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
+    """The fields every trial and TLX record carries."""
+    return {
         "participant": _need(rec, "participant", where,
                              lambda v: isinstance(v, str) and v.strip() != "",
                              "a non-empty string"),
         "simulated": _need(rec, "simulated", where, lambda v: isinstance(v, bool),
                            "true or false"),
-        "trial_index": _need(rec, "trial_index", where, _is_int, "an integer"),
         "session": _need(rec, "session", where, _is_int, "an integer"),
+    }
+
+
+def _trial_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
+    row = {
+        **_record_identity(where, rec),
+        "trial_index": _need(rec, "trial_index", where, _is_int, "an integer"),
         "k": _need(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
         "modality": _need(rec, "modality", where, lambda v: v in MODALITIES,
                           "one of " + ", ".join(MODALITIES)),
@@ -170,12 +177,7 @@ def _trial_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
 
 def _tlx_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
     row = {
-        "participant": _need(rec, "participant", where,
-                             lambda v: isinstance(v, str) and v.strip() != "",
-                             "a non-empty string"),
-        "simulated": _need(rec, "simulated", where, lambda v: isinstance(v, bool),
-                           "true or false"),
-        "session": _need(rec, "session", where, _is_int, "an integer"),
+        **_record_identity(where, rec),
         "mode": _need(rec, "mode", where, lambda v: v in ("C", "V"), "'C' or 'V'"),
         "k": _maybe(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
         "modality": _maybe(rec, "modality", where, lambda v: v in MODALITIES,
