@@ -120,8 +120,10 @@ class ParticipantParams:
     #: wrist/forearm speed. Wrist/forearm movement in daily living is mostly slow, the
     #: likelihood of a speed falling exponentially with it (Anderton et al. 2023, J Hand
     #: Ther 36(3):580-592); maximal voluntary wrist speeds are several hundred deg/s.
-    #: 90 deg/s is a moderate value chosen by hand (no source with a figure found:
-    #: unverified, assumption), not fitted to the paper.
+    #: 90 deg/s is the standard isokinetic test speed of forearm pronation/supination
+    #: (30 deg/s slow, up to ~190 deg/s achievable but hard to maintain; isokinetics.net,
+    #: "Pronation and Supination"): a comfortable voluntary rotation, fixed before any
+    #: study, not fitted to the paper.
     peak_speed_deg_s: float = 90.0
     #: Physiological tremor amplitude [deg]: the modal postural hand tremor is 0.01 g
     #: peak at ~7 Hz ("A normative study of postural tremor of the hand", Arch Neurol
