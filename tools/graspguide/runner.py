@@ -49,12 +49,10 @@ lockstep.
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
 import fcntl
 import importlib
 import json
-import math
 import os
 import sys
 import time
@@ -664,6 +662,24 @@ class StudyRunner:
         model.begin_trial(contacts=contacts, y_axis=list(p.y_axis), wrench=list(trial.wrench),
                           policy=trial.policy, mode=trial.mode, start_quat=list(p.start_quat))
 
+    def _trial_result(self, trial: PlannedTrial) -> Any:
+        """The TRIAL_RESULT of a trial the device has ended (already queued, or awaited)."""
+        from .device import LinkTimeout
+
+        client = self.client
+        if client.trial_results:
+            return client.trial_results.popleft()
+        try:
+            return client.wait_trial_result(client.timeout)
+        except LinkTimeout:
+            raise RunnerError(f"trial {trial.trial_index}: the device ended the trial but no "
+                              "TRIAL_RESULT arrived") from None
+
+    def _no_result_error(self, trial: PlannedTrial, t_s: float) -> RunnerError:
+        return RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s into a "
+                           f"{self.protocol.timeout_s:g} s trial; is the device's clock "
+                           "following the poses?")
+
     def _closed_loop_pipelined(self, trial: PlannedTrial, model: Any, rate: float,
                                window: int, fh: Any) -> Tuple[Any, int, float]:
         """The closed loop with up to ``window`` POSEs in flight, giving exactly what
@@ -683,7 +699,6 @@ class StudyRunner:
         not_allowed_in_state) and not recorded. An act() too far ahead raises the
         model's FeelLagError, turned into _Diverged (the caller runs the trial again in
         lockstep): a broken source cannot give a wrong record."""
-        from .device import LinkTimeout
         from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
 
         p = self.protocol
@@ -707,20 +722,16 @@ class StudyRunner:
             except lag_error as e:
                 raise _Diverged(f"pose {i + len(batch)} could not be acted ahead: {e}"
                                 ) from None
-            answers = client.pose_batch(
-                [((base + int(round(t * 1e6))) & 0xFFFFFFFF, q) for t, q in batch])
-            for j, ((t_s, quat), tel) in enumerate(zip(batch, answers)):
+            stamped = [(t, _virtual_us(base, t), q) for t, q in batch]
+            answers = client.pose_batch([(t_us, q) for _, t_us, q in stamped])
+            for j, ((t_s, t_us, quat), tel) in enumerate(zip(stamped, answers)):
                 if isinstance(tel, Error):
                     raise RunnerError(f"trial {trial.trial_index}: the device refused pose "
                                       f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
                                       "the trial was running")
-                t_us = (base + int(round(t_s * 1e6))) & 0xFFFFFFFF
                 poses += 1
                 pwm = tel.pwm[:k]
-                write(_FRAME_ROW % ((round(t_s, 6), t_us) + quat
-                                    + (float(tel.error_deg), float(tel.alpha))
-                                    + tuple(tel.pwm)
-                                    + (int(tel.solver_status), int(tel.flags))))
+                write(_frame_row(t_s, t_us, quat, tel))
                 frame(t_s, float(tel.error_deg), pwm, False)
                 if not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
                     # The trial ended with this pose; the rest of the batch was refused.
@@ -728,17 +739,9 @@ class StudyRunner:
                         if not isinstance(rest, Error):
                             raise RunnerError(f"trial {trial.trial_index}: the device "
                                               "answered a POSE after the trial ended")
-                    try:
-                        result = client.trial_results.popleft() if client.trial_results \
-                            else client.wait_trial_result(client.timeout)
-                    except LinkTimeout:
-                        raise RunnerError(f"trial {trial.trial_index}: the device ended the "
-                                          "trial but no TRIAL_RESULT arrived") from None
-                    return result, poses, t_s
+                    return self._trial_result(trial), poses, t_s
                 if t_s > limit:
-                    raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s "
-                                      f"into a {p.timeout_s:g} s trial; is the device's "
-                                      "clock following the poses?")
+                    raise self._no_result_error(trial, t_s)
                 try:
                     feel(t_s, list(pwm))
                 except ValueError as e:
@@ -747,7 +750,7 @@ class StudyRunner:
             i += len(batch)
 
     def run_trial(self, trial: PlannedTrial) -> Dict[str, Any]:
-        from .device import LinkTimeout, host_time_us
+        from .device import host_time_us
         from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING
 
         p = self.protocol
@@ -768,8 +771,7 @@ class StudyRunner:
         frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
         frames_path = frames_tmp[:-4]
         f = open(frames_tmp, "w", encoding="utf-8", newline="", buffering=1 << 20)
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(FRAME_COLUMNS)
+        f.write(_FRAME_HEADER)
         result = None
         poses = 0
         pwm: List[int] = [0] * trial.k
@@ -791,7 +793,7 @@ class StudyRunner:
                           "running it again in lockstep", file=self.err, flush=True)
                     f.seek(0)
                     f.truncate()
-                    writer.writerow(FRAME_COLUMNS)
+                    f.write(_FRAME_HEADER)
                     self._restart_trial(trial, model, contacts)
                     window = 1
             while window <= 1:
@@ -803,7 +805,7 @@ class StudyRunner:
                     t_s, quat, pose_contacts = next(it)  # type: ignore[arg-type]
                 quat = [float(x) for x in quat]
                 if self.virtual_clock:
-                    t_us = (self._vt_base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
+                    t_us = _virtual_us(self._vt_base_us, t_s)
                 else:
                     wait = wall0 + t_s - time.monotonic()
                     if wait > 0:
@@ -813,25 +815,14 @@ class StudyRunner:
                 poses += 1
                 i += 1
                 pwm = [int(x) for x in tel.pwm[:trial.k]]
-                writer.writerow([repr(round(t_s, 6)), t_us] + [repr(x) for x in quat]
-                                + [repr(float(tel.error_deg)), repr(float(tel.alpha))]
-                                + [int(x) for x in tel.pwm]
-                                + [int(tel.solver_status), int(tel.flags)])
+                f.write(_frame_row(t_s, t_us, quat, tel))
                 self.progress.frame(t_s, float(tel.error_deg), pwm, not self.virtual_clock)
-                if self.client.trial_results:
-                    result = self.client.trial_results.popleft()
-                    break
-                if not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
-                    try:
-                        result = self.client.wait_trial_result(self.client.timeout)
-                    except LinkTimeout:
-                        raise RunnerError(f"trial {trial.trial_index}: the device ended the "
-                                          "trial but no TRIAL_RESULT arrived") from None
+                if self.client.trial_results or \
+                        not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
+                    result = self._trial_result(trial)
                     break
                 if t_s > p.timeout_s + RESULT_MARGIN_S and self.virtual_clock:
-                    raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s "
-                                      f"into a {p.timeout_s:g} s trial; is the device's "
-                                      "clock following the poses?")
+                    raise self._no_result_error(trial, t_s)
                 if not self.virtual_clock and time.monotonic() - wall0 > \
                         p.timeout_s + 10 * RESULT_MARGIN_S:
                     raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT after "
@@ -945,6 +936,19 @@ class StudyRunner:
 #: One FRAME_COLUMNS row as csv.writer writes it for these fields (floats by repr, none
 #: needs quoting); the pipelined loop formats its rows with it.
 _FRAME_ROW = "%r,%d,%r,%r,%r,%r,%r,%r,%d,%d,%d,%d,%d,%d\n"
+_FRAME_HEADER = ",".join(FRAME_COLUMNS) + "\n"
+
+
+def _frame_row(t_s: float, t_us: int, quat: Sequence[float], tel: Any) -> str:
+    """One FRAME_COLUMNS row: the POSE sent and its TELEMETRY."""
+    return _FRAME_ROW % ((round(t_s, 6), t_us) + tuple(quat)
+                         + (float(tel.error_deg), float(tel.alpha)) + tuple(tel.pwm)
+                         + (int(tel.solver_status), int(tel.flags)))
+
+
+def _virtual_us(base_us: int, t_s: float) -> int:
+    """The POSE timestamp of trial time t_s on the virtual clock (32-bit, wrapping)."""
+    return (base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
 
 
 class _Diverged(Exception):
