@@ -266,26 +266,22 @@ def load(paths: Iterable[os.PathLike]):
                 raise AnalysisError(f"{folder}: missing {name} (a participant folder needs "
                                     f"both {TRIALS_FILE} and {TLX_FILE})")
         here = set()
-        for where, rec in _read_jsonl(folder / TRIALS_FILE):
-            row = _trial_row(where, rec)
-            key = (row["participant"], row["session"], row["trial_index"])
-            if key in trial_keys:
-                raise AnalysisError(f"{where}: trial {row['trial_index']} of session "
-                                    f"{row['session']} of {row['participant']} is logged twice "
-                                    f"(first at {trial_keys[key]})")
-            trial_keys[key] = where
-            here.add(row["participant"])
-            trial_rows.append(row)
-        for where, rec in _read_jsonl(folder / TLX_FILE):
-            row = _tlx_row(where, rec)
-            key = (row["participant"], row["session"])
-            if key in tlx_keys:
-                raise AnalysisError(f"{where}: NASA-TLX of session {row['session']} of "
-                                    f"{row['participant']} is logged twice (first at "
-                                    f"{tlx_keys[key]})")
-            tlx_keys[key] = where
-            here.add(row["participant"])
-            tlx_rows.append(row)
+        for path, parse, key_of, what, rows, keys in (
+                (TRIALS_FILE, _trial_row, lambda r: (r["participant"], r["session"],
+                                                     r["trial_index"]),
+                 lambda r: f"trial {r['trial_index']} of session {r['session']}",
+                 trial_rows, trial_keys),
+                (TLX_FILE, _tlx_row, lambda r: (r["participant"], r["session"]),
+                 lambda r: f"NASA-TLX of session {r['session']}", tlx_rows, tlx_keys)):
+            for where, rec in _read_jsonl(folder / path):
+                row = parse(where, rec)
+                key = key_of(row)
+                if key in keys:
+                    raise AnalysisError(f"{where}: {what(row)} of {row['participant']} is "
+                                        f"logged twice (first at {keys[key]})")
+                keys[key] = where
+                here.add(row["participant"])
+                rows.append(row)
         for pid in here:
             if pid in owner and owner[pid] != folder:
                 raise AnalysisError(f"participant {pid} appears in two folders: "
