@@ -208,15 +208,21 @@ nb::dict solve_t(const ContactList& contacts, const Wrench& wrench, const SceneO
   return result_dict<T>(s, contact_count(contacts), fr, guidance.grasp());
 }
 
+// "float" or "double" (the scalar every binding takes); anything else is a ValueError.
+bool is_float_scalar(const std::string& scalar) {
+  if (scalar == "float") return true;
+  if (scalar == "double") return false;
+  throw nb::value_error(
+      ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+}
+
 nb::dict solve(const ContactList& contacts, const Wrench& wrench, const std::string& policy,
                const std::string& mode, const std::string& constraints,
                const Quat4& orientation, const Axis3& y_axis, const std::string& scalar,
                const std::string& decomposition, int max_iterations) {
   const SceneOptions o = parse_options(policy, mode, constraints, decomposition, max_iterations);
-  if (scalar == "double") return solve_t<double>(contacts, wrench, o, orientation, y_axis);
-  if (scalar == "float") return solve_t<float>(contacts, wrench, o, orientation, y_axis);
-  throw nb::value_error(
-      ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  return is_float_scalar(scalar) ? solve_t<float>(contacts, wrench, o, orientation, y_axis)
+                                 : solve_t<double>(contacts, wrench, o, orientation, y_axis);
 }
 
 // Stateful guidance in double, as the firmware runs it frame by frame.
@@ -458,14 +464,11 @@ nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector
   for (std::size_t i = 0; i < n; ++i)
     options.push_back(
         parse_options(policies[i], modes[i], constraints[i], decomposition, max_iterations));
-  if (scalar == "double")
-    return time_frames_t<double>(contacts, wrenches, orientations, y_axes, options, warm_start,
-                                 fixed_posture, reps, batches, warmup);
-  if (scalar == "float")
+  if (is_float_scalar(scalar))
     return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, warm_start,
                                 fixed_posture, reps, batches, warmup);
-  throw nb::value_error(
-      ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  return time_frames_t<double>(contacts, wrenches, orientations, y_axes, options, warm_start,
+                               fixed_posture, reps, batches, warmup);
 }
 
 // The QP alone (step 5 with its fallback chain), on data computed elsewhere (the bench
@@ -528,10 +531,7 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
   if (max_iterations < 1) throw nb::value_error("max_iterations must be >= 1");
   if (!(violation_rel >= 0) || !std::isfinite(violation_rel))
     throw nb::value_error("violation_rel must be finite and >= 0 (0: the core's kFeasRel)");
-  const bool is_float = scalar == "float";
-  if (!is_float && scalar != "double")
-    throw nb::value_error(
-        ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  const bool is_float = is_float_scalar(scalar);
   nb::list ns, status, lambda, used, iterations;
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t m = lambda0[i].size();
@@ -664,10 +664,7 @@ nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector
   const std::size_t n = contacts.size();
   check_instance_lists(n, wrenches, orientations, y_axes, policies, modes, constraints);
   check_timing_args(reps, batches, warmup);
-  const bool is_float = scalar == "float";
-  if (!is_float && scalar != "double")
-    throw nb::value_error(
-        ("unknown scalar '" + shown(scalar) + "'; accepted: 'double', 'float'").c_str());
+  const bool is_float = is_float_scalar(scalar);
   nb::list out;
   for (std::size_t i = 0; i < n; ++i) {
     const SceneOptions o = parse_options(policies[i], modes[i], constraints[i], decomposition,
