@@ -233,6 +233,10 @@ def test_bad_options_are_clear_errors(core):
         core.time_qp([[0.0] * 5], [[0.0] * 5], [[0.0] * 5], ["paper"])
     with pytest.raises(ValueError, match="one per instance"):
         core.time_frames([[[0, 0, 0]] * 3], [], [], [], [], [], [])
+    for timer, lists in ((core.time_frames, [[]] * 7), (core.time_stages, [[]] * 7),
+                         (core.time_qp, [[]] * 4)):
+        with pytest.raises(ValueError, match="unknown scalar 'half'; accepted"):
+            timer(*lists, scalar="half")
 
 
 def test_cli_writes_json_and_prints_the_table(tmp_path):
