@@ -88,6 +88,49 @@ TEST(Trial, ConfigurationIsValidated) {
   EXPECT_EQ(t.state(), gg::TrialState::kIdle);
 }
 
+// Values that once passed (the limit was 1e30) and overflowed the int64 microseconds.
+TEST(Trial, EveryFieldHasARangeAndTheOffenderIsNamed) {
+  struct Case {
+    double threshold_deg, hold_s, timeout_s;
+    gg::TrialField bad;
+  } cases[] = {
+      {3, 0.5, 9.3e12, gg::TrialField::kTimeoutS},
+      {3, 9.3e12, 90, gg::TrialField::kHoldS},
+      {3, 0.5, 1800.001, gg::TrialField::kTimeoutS},
+      {3, 600.001, 1800, gg::TrialField::kHoldS},
+      {3, 91, 90, gg::TrialField::kHoldS},  // could never be held before the timeout
+      {180.001, 0.5, 90, gg::TrialField::kThresholdDeg},
+      {-0.001, 0.5, 90, gg::TrialField::kThresholdDeg},
+      {3, -0.001, 90, gg::TrialField::kHoldS},
+      {3, 0.5, 0, gg::TrialField::kTimeoutS},
+      {std::numeric_limits<double>::quiet_NaN(), 0.5, 90, gg::TrialField::kThresholdDeg},
+      {3, std::numeric_limits<double>::quiet_NaN(), 90, gg::TrialField::kHoldS},
+      {3, 0.5, std::numeric_limits<double>::infinity(), gg::TrialField::kTimeoutS},
+  };
+  for (const Case& c : cases) {
+    gg::TrialConfig cfg{c.threshold_deg, c.hold_s, c.timeout_s};
+    gg::TrialField bad = gg::TrialField::kNone;
+    EXPECT_EQ(gg::validate_trial_config(cfg, &bad), gg::Status::kBadConfig) << c.timeout_s;
+    EXPECT_EQ(int(bad), int(c.bad)) << gg::trial_field_range(c.bad).key;
+    gg::Trial t;
+    EXPECT_EQ(t.start(cfg, 0), gg::Status::kBadConfig);
+    EXPECT_FALSE(t.running());
+  }
+  // The edges themselves are accepted, and the longest trial still ends at its timeout.
+  gg::TrialConfig edge{180, 600, 1800};
+  gg::TrialField bad = gg::TrialField::kThresholdDeg;
+  EXPECT_EQ(gg::validate_trial_config(edge, &bad), gg::Status::kOk);
+  EXPECT_EQ(int(bad), int(gg::TrialField::kNone));
+  gg::Trial t;
+  ASSERT_EQ(t.start(gg::TrialConfig{0, 0, 1800}, 0), gg::Status::kOk);
+  EXPECT_EQ(t.update(1799999999, 1.0), gg::Status::kOk);
+  EXPECT_TRUE(t.running());
+  EXPECT_EQ(t.update(1800000000, 1.0), gg::Status::kOk);
+  EXPECT_EQ(t.state(), gg::TrialState::kFailed);
+  EXPECT_DOUBLE_EQ(t.result().completion_s, 1800.0);
+  EXPECT_EQ(t.state(), gg::TrialState::kIdle);
+}
+
 TEST(Trial, CustomThresholdHoldAndTimeoutAndAbort) {
   gg::Trial t;
   gg::TrialConfig c;

@@ -718,6 +718,18 @@ NB_MODULE(_core, m) {
   tol["double"] = tolerances(false);
   tol["float"] = tolerances(true);
   m.attr("TOLERANCES") = tol;
+  // The trial fields' accepted ranges (scene.h), for the host's scene and protocol readers.
+  nb::dict limits;
+  for (gg::TrialField f : {gg::TrialField::kThresholdDeg, gg::TrialField::kHoldS,
+                           gg::TrialField::kTimeoutS}) {
+    const gg::TrialFieldRange r = gg::trial_field_range(f);
+    nb::dict d;
+    d["min"] = r.min;
+    d["max"] = r.max;
+    d["min_exclusive"] = r.min_exclusive;
+    limits[r.key] = d;
+  }
+  m.attr("TRIAL_LIMITS") = limits;
 
   m.def(
       "status_message",

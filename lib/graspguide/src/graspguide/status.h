@@ -80,8 +80,9 @@ constexpr const char* status_message(Status s) {
     case Status::kTimeWentBackwards:
       return "timestamps must not decrease within a trial";
     case Status::kBadConfig:
-      return "a scene parameter is out of range (threshold, hold and timeout must be "
-             "finite and non-negative, timeout > 0)";
+      return "a trial parameter is out of range: 0 <= threshold_deg <= 180, "
+             "0 <= hold_s <= 600 and hold_s <= timeout_s, 0 < timeout_s <= 1800 "
+             "(max_iterations >= 1)";
   }
   return "unknown status";
 }
