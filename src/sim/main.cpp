@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include <unistd.h>
+
 #include "graspguide_device/link_device.h"
 #include "pty_stream.h"
 #include "sim_clock.h"
@@ -33,9 +35,12 @@ void usage(FILE* out) {
                "  Opens a pseudo-terminal and prints 'GRASPGUIDE_SIM_PTY <path>' on stdout;\n"
                "  connect to <path> as to a board's serial port (any baud rate).\n"
                "  --virtual-clock  device time = the host's POSE timestamps (default: real time);\n"
-               "                   a silent link still advances it, so the watchdog fires\n"
+               "                   after stale-ms of real time without a POSE it runs with\n"
+               "                   real time, so the watchdog fires whatever else arrives\n"
                "  --trace FILE     append every motor change as device_time_us,pwm0..pwm3\n"
-               "  --stale-ms N     POSE watchdog in ms (default %d)\n",
+               "  --stale-ms N     POSE watchdog in ms (default %d)\n"
+               "  Exits (motors off) on SIGINT, SIGTERM, SIGHUP and when its parent process\n"
+               "  exits, so a host that dies leaves no simulator behind.\n",
                GRASPGUIDE_STALE_TIMEOUT_MS);
 }
 
@@ -64,13 +69,34 @@ bool parse(int argc, char** argv, Options& o) {
   return true;
 }
 
+// Device time on --virtual-clock: the last POSE's timestamp, and once no POSE has come for
+// stale_us of real time, that timestamp plus the real time since. A host that stops
+// sending POSEs (dead, or only sending GET_STATUS or idle bytes) would otherwise freeze the
+// clock with the motors on; this way "stale" means no POSE for stale_us of virtual time or
+// of real time, whichever comes first, and a trial left running times out in real time.
 class VirtualTime final : public graspguide::device::PoseTimeListener {
  public:
-  explicit VirtualTime(graspguide::sim::VirtualClock& clock) : clock_(clock) {}
-  void on_pose_time(uint32_t t) override { clock_.set_us(t); }
+  VirtualTime(graspguide::sim::VirtualClock& clock, graspguide::sim::MonotonicClock& wall,
+              uint32_t stale_us)
+      : clock_(clock), wall_(wall), stale_us_(stale_us), last_pose_wall_us_(wall.now_us()) {}
+
+  void on_pose_time(uint32_t t) override {
+    clock_.set_us(t);
+    last_pose_t_us_ = t;
+    last_pose_wall_us_ = wall_.now_us();
+  }
+
+  void follow_silence() {
+    const uint32_t silent_us = wall_.now_us() - last_pose_wall_us_;
+    if (silent_us >= stale_us_) clock_.set_us(last_pose_t_us_ + silent_us);
+  }
 
  private:
   graspguide::sim::VirtualClock& clock_;
+  graspguide::sim::MonotonicClock& wall_;
+  uint32_t stale_us_;
+  uint32_t last_pose_t_us_ = 0;
+  uint32_t last_pose_wall_us_;
 };
 
 }  // namespace
@@ -78,6 +104,8 @@ class VirtualTime final : public graspguide::device::PoseTimeListener {
 int main(int argc, char** argv) {
   namespace gd = graspguide::device;
   namespace gs = graspguide::sim;
+  // Recorded first: if the parent is gone before the loop starts, getppid() differs.
+  const pid_t parent = ::getppid();
   Options opt;
   if (!parse(argc, argv, opt)) return 2;
 
@@ -102,7 +130,8 @@ int main(int argc, char** argv) {
   gs::VirtualClock virtual_clock;
   gd::Clock& clock = opt.virtual_clock ? static_cast<gd::Clock&>(virtual_clock)
                                        : static_cast<gd::Clock&>(real_clock);
-  VirtualTime virtual_time(virtual_clock);
+  const uint32_t stale_us = uint32_t(opt.stale_ms) * 1000u;
+  VirtualTime virtual_time(virtual_clock, real_clock, stale_us);
   gs::TraceMotors motors(clock, trace);
   gd::Application app(motors, clock, uint32_t(opt.stale_ms) * 1000u);
   gd::DeviceInfo info;
@@ -113,21 +142,12 @@ int main(int argc, char** argv) {
   std::printf("GRASPGUIDE_SIM_PTY %s\n", stream.slave_path().c_str());
   std::fflush(stdout);
 
-  // In virtual time a host that dies sends no more timestamps, so the clock would freeze
-  // with the motors on. A real-time silence as long as the watchdog therefore moves the
-  // virtual clock on by the same amount, and the watchdog fires as on a board.
-  const uint32_t stale_us = uint32_t(opt.stale_ms) * 1000u;
-  uint32_t last_activity_us = real_clock.now_us();
-  while (!g_stop) {
+  // The parent is checked every loop (1 ms), not by PR_SET_PDEATHSIG, so this also works
+  // where that does not exist and whichever thread of the parent started us.
+  while (!g_stop && ::getppid() == parent) {
     stream.wait_readable(1);  // 1 ms: the watchdog's resolution in real time
-    const uint32_t now = real_clock.now_us();
-    if (device.poll() > 0) {
-      last_activity_us = now;
-    } else if (opt.virtual_clock && now - last_activity_us >= stale_us) {
-      virtual_clock.set_us(virtual_clock.now_us() + stale_us);
-      device.poll();
-      last_activity_us = now;
-    }
+    if (opt.virtual_clock) virtual_time.follow_silence();
+    device.poll();
   }
   app.stop();  // motors off on the way out, and in the trace
   if (trace) std::fclose(trace);

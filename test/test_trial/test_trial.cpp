@@ -128,7 +128,18 @@ TEST(Trial, EveryFieldHasARangeAndTheOffenderIsNamed) {
   EXPECT_EQ(t.update(1800000000, 1.0), gg::Status::kOk);
   EXPECT_EQ(t.state(), gg::TrialState::kFailed);
   EXPECT_DOUBLE_EQ(t.result().completion_s, 1800.0);
+}
+
+TEST(Trial, ExpireEndsARunningTrialAsTimedOut) {
+  gg::Trial t;
+  t.expire();  // nothing running: nothing happens
   EXPECT_EQ(t.state(), gg::TrialState::kIdle);
+  ASSERT_EQ(t.start(gg::TrialConfig{}, 1000), gg::Status::kOk);
+  t.update(2000, 1.0);
+  t.expire();
+  EXPECT_EQ(t.state(), gg::TrialState::kFailed);
+  EXPECT_DOUBLE_EQ(t.result().completion_s, 90.0);
+  EXPECT_DOUBLE_EQ(t.result().final_error_deg, 1.0);
 }
 
 TEST(Trial, CustomThresholdHoldAndTimeoutAndAbort) {

@@ -58,6 +58,10 @@ class Trial {
 
   void abort() { if (state_ == TrialState::kRunning) state_ = TrialState::kIdle; }
 
+  // Ends a running trial as timed out whatever its timestamps say: the caller's own clock
+  // saw the timeout pass (the device's guard against timestamps that stopped advancing).
+  void expire() { if (state_ == TrialState::kRunning) finish(false, timeout_us_); }
+
   TrialState state() const { return state_; }
   bool running() const { return state_ == TrialState::kRunning; }
   const TrialResult& result() const { return result_; }

@@ -9,10 +9,17 @@
 #ifndef GRASPGUIDE_STALE_TIMEOUT_MS
 #define GRASPGUIDE_STALE_TIMEOUT_MS 200  // no POSE for this long: motors off
 #endif
+#ifndef GRASPGUIDE_TRIAL_CLOCK_SLACK_MS
+// How far the device's own clock may run past timeout_s before it ends a trial whose pose
+// timestamps stopped advancing. Host and device clocks agree far better than this; the
+// slack only keeps the host's timeline the one that normally decides.
+#define GRASPGUIDE_TRIAL_CLOCK_SLACK_MS 1000
+#endif
 
 namespace graspguide::device {
 
 inline constexpr uint32_t kDefaultStaleTimeoutUs = uint32_t(GRASPGUIDE_STALE_TIMEOUT_MS) * 1000u;
+inline constexpr uint32_t kTrialClockSlackUs = uint32_t(GRASPGUIDE_TRIAL_CLOCK_SLACK_MS) * 1000u;
 
 enum class DeviceState : uint8_t { kIdle = 0, kSceneSet = 1, kTrialRunning = 2, kStopped = 3 };
 
@@ -54,6 +61,7 @@ struct Counters {
   uint32_t poses = 0;
   uint32_t stale_events = 0;
   uint32_t refused = 0;
+  uint32_t trials_ended_by_device_clock = 0;
 };
 
 class Application {
@@ -65,8 +73,10 @@ class Application {
 
   // A new scene; refused while a trial runs. An invalid one is reported and the previous
   // valid scene stays.
-  Reply set_scene(const Scene<Real>& scene) {
+  // *bad_field, when given, names the trial field behind a kBadConfig.
+  Reply set_scene(const Scene<Real>& scene, TrialField* bad_field = nullptr) {
     if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
+    if (validate_trial_config(scene.trial, bad_field) != Status::kOk) return fail(Status::kBadConfig);
     Status s = geometry_status<Real>(scene);
     if (s == Status::kOk) s = guidance_.set_scene(scene);
     if (s != Status::kOk) return fail(s);
@@ -112,7 +122,15 @@ class Application {
     if (!trial_started_) {
       trial_.start(guidance_.scene().trial, t_us);
       trial_started_ = true;
+      trial_start_clock_us_ = clock_.now_us();
+    } else if (t_us < trial_last_us_) {
+      // A step back, or one forward of 2^31 us or more (the same thing on a 32-bit
+      // timestamp): the host's timeline can no longer be trusted to end the trial, so it
+      // ends here, like STOP, and the host is told why.
+      abort_trial();
+      return fail(Status::kTimeWentBackwards, &out);
     }
+    trial_last_us_ = t_us;
     const uint32_t t0 = clock_.now_us();
     FrameResult<Real> frame;
     const Status s = guidance_.update(in.quat_wxyz, frame);
@@ -150,8 +168,14 @@ class Application {
   // Acts at once, whatever the state.
   void stop() {
     motors_off();
-    trial_.abort();
-    if (state_ != DeviceState::kIdle) state_ = DeviceState::kStopped;
+    abort_trial();
+  }
+
+  // Every ERROR the link sends, and every frame it drops, turns the motors off (safe by
+  // default); a running trial goes on and the next good POSE drives them again.
+  void motors_off() {
+    motors_.write(Pwm{});
+    motors_on_ = false;
   }
 
   // Direct PWM for calibration; the watchdog still switches it off without poses.
@@ -163,15 +187,33 @@ class Application {
     return Reply{};
   }
 
-  // Call as often as possible: switches the motors off when poses stop coming.
-  void tick() {
-    if (!motors_on_) return;
-    if (clock_.now_us() - last_pose_us_ >= stale_timeout_us_) {
+  // Call as often as possible: switches the motors off when poses stop coming, and ends a
+  // trial that the device's own clock has seen outlast its timeout (poses whose timestamps
+  // froze would otherwise keep it running forever). Returns true, with *report filled,
+  // when a trial ended here: a failure at timeout_s, as every timed-out trial.
+  bool tick(TrialReport* report = nullptr) {
+    if (motors_on_ && clock_.now_us() - last_pose_us_ >= stale_timeout_us_) {
       motors_off();
       if (!stale_) ++counters_.stale_events;
       stale_ = true;
     }
+    if (state_ != DeviceState::kTrialRunning || !trial_started_) return false;
+    // Signed: a virtual clock may step back a little when a late POSE resets it.
+    const int32_t ran_us = static_cast<int32_t>(clock_.now_us() - trial_start_clock_us_);
+    const double limit_us = guidance_.scene().trial.timeout_s * 1e6 + kTrialClockSlackUs;
+    if (ran_us <= 0 || double(ran_us) < limit_us) return false;
+    trial_.expire();
+    motors_off();
+    state_ = DeviceState::kSceneSet;
+    ++counters_.trials_ended_by_device_clock;
+    if (report) {
+      report->trial_id = trial_id_;
+      report->result = trial_.result();
+    }
+    return true;
   }
+
+  uint32_t now_us() { return clock_.now_us(); }
 
   DeviceState state() const { return state_; }
   const Counters& counters() const { return counters_; }
@@ -185,9 +227,9 @@ class Application {
     return true;
   }
 
-  void motors_off() {
-    motors_.write(Pwm{});
-    motors_on_ = false;
+  void abort_trial() {
+    trial_.abort();
+    if (state_ != DeviceState::kIdle) state_ = DeviceState::kStopped;
   }
 
   Reply refuse(Refusal r) {
@@ -209,8 +251,10 @@ class Application {
     return reply;
   }
 
-  // Host timestamps are 32-bit microseconds; the trial needs a monotonic 64-bit time.
-  // A step back of more than half the range is "time went backwards", not a wrap.
+  // Host timestamps are 32-bit microseconds that wrap every 71.6 min; the trial needs a
+  // monotonic 64-bit time. The step from the previous POSE is read as a signed 32-bit
+  // difference: a wrap is a small step forward, and any step of 2^31 us or more forward
+  // reads as a step back (trial timeouts are at most 1800 s < 2^31 us, so no trial needs one).
   int64_t unwrap(uint32_t host_us) {
     if (!trial_started_) {
       last_host_us_ = host_us;
@@ -236,6 +280,8 @@ class Application {
   bool motors_on_ = false;
   bool stale_ = false;
   uint32_t last_pose_us_ = 0;
+  uint32_t trial_start_clock_us_ = 0;
+  int64_t trial_last_us_ = 0;
   uint32_t last_host_us_ = 0;
   int64_t host_time_us_ = 0;
 };

@@ -9,9 +9,30 @@
 #include "graspguide_link/parser.h"
 #include "graspguide_link/writer.h"
 
+#ifndef GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS
+// A frame's bytes arrive together (a 92-byte POSE takes 8 ms at 115200 baud); a partial
+// frame followed by this much silence is dropped, so whatever comes next (a STOP from a
+// host that gave up mid-frame) starts clean even without the leading delimiter.
+#define GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS 50
+#endif
+
 namespace graspguide::device {
 
 namespace link = ::graspguide_link;
+
+inline constexpr uint32_t kPartialFrameTimeoutUs = uint32_t(GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS) * 1000u;
+
+// SET_SCENE's field index of a trial field (ERROR.detail of bad_config), found by name in
+// the schema's field list so the two cannot drift apart.
+inline uint8_t set_scene_field_index(TrialField f) {
+  const char* key = trial_field_range(f).key;
+  uint8_t i = 0, found = 0;
+  link::for_each_field(link::SetScene{}, [&](const char* name, const auto&) {
+    if (std::strcmp(name, key) == 0) found = i;
+    ++i;
+  });
+  return found;
+}
 
 static_assert(uint8_t(link::DeviceState::kTrialRunning) == uint8_t(DeviceState::kTrialRunning) &&
                   uint8_t(link::DeviceState::kStopped) == uint8_t(DeviceState::kStopped),
@@ -51,7 +72,14 @@ class LinkDevice {
       total += n;
       if (n < sizeof chunk) break;
     }
-    app_.tick();
+    const uint32_t now = app_.now_us();
+    if (total > 0) {
+      last_byte_us_ = now;
+    } else if (parser_.mid_frame() && now - last_byte_us_ >= kPartialFrameTimeoutUs) {
+      parser_.discard_partial();
+    }
+    TrialReport report;
+    if (app_.tick(&report)) send_trial_result(report);
     return total;
   }
 
@@ -62,6 +90,7 @@ class LinkDevice {
     if (event == link::ParseEvent::kNone) return;
     link::ErrorCode code;
     if (event != link::ParseEvent::kFrame) {
+      app_.motors_off();  // whatever the frame was, it was not what the host meant to send
       // Only frames whose header passed the CRC are answered: their seq can be trusted.
       if (link::has_trusted_header(event) && link::error_code_for(event, &code)) {
         const auto& h = parser_.frame().header;
@@ -103,7 +132,12 @@ class LinkDevice {
     scene.trial.threshold_deg = m.threshold_deg;
     scene.trial.hold_s = m.hold_s;
     scene.trial.timeout_s = m.timeout_s;
-    answer(app_.set_scene(scene), link::MsgId::kSetScene);
+    TrialField bad = TrialField::kNone;
+    const Reply reply = app_.set_scene(scene, &bad);
+    if (reply.status == Status::kBadConfig && bad != TrialField::kNone)
+      send_error(request_seq_, link::ErrorCode::kBadConfig, set_scene_field_index(bad));
+    else
+      answer(reply, link::MsgId::kSetScene);
   }
 
   void on(const link::StartTrial& m) {
@@ -115,7 +149,9 @@ class LinkDevice {
   void on(const link::Pose& m) {
     if (pose_time_) {
       pose_time_->on_pose_time(m.host_time_us);
-      app_.tick();  // a jump in virtual time is a silence the watchdog must see
+      // A jump in virtual time is a silence the watchdog and the trial's clock must see.
+      TrialReport expired;
+      if (app_.tick(&expired)) send_trial_result(expired);
     }
     PoseIn in;
     in.host_time_us = m.host_time_us;
@@ -144,15 +180,17 @@ class LinkDevice {
     t.compute_time_us = tel.compute_time_us;
     if (tel.status != Status::kOk) last_error_ = t.solver_status;
     send(t);
-    if (ended) {
-      link::TrialResult r;
-      r.trial_id = report.trial_id;
-      r.success = report.result.success;
-      r.completion_s = float(report.result.completion_s);
-      r.first_entry_s = float(report.result.first_entry_s);
-      r.final_error_deg = float(report.result.final_error_deg);
-      send(r);
-    }
+    if (ended) send_trial_result(report);
+  }
+
+  void send_trial_result(const TrialReport& report) {
+    link::TrialResult r;
+    r.trial_id = report.trial_id;
+    r.success = report.result.success;
+    r.completion_s = float(report.result.completion_s);
+    r.first_entry_s = float(report.result.first_entry_s);
+    r.final_error_deg = float(report.result.final_error_deg);
+    send(r);
   }
 
   void on(const link::Stop&) {
@@ -195,7 +233,10 @@ class LinkDevice {
     }
   }
 
+  // Every ERROR turns the motors off: a host whose request failed has lost track of what
+  // the wearer feels, so nothing keeps vibrating on a stale command.
   void send_error(uint16_t seq, link::ErrorCode code, uint8_t detail) {
+    app_.motors_off();
     link::Error e;
     e.request_seq = seq;
     e.code = code;
@@ -219,6 +260,7 @@ class LinkDevice {
   link::FrameParser parser_{link::Accept::kHostToDevice};
   link::SequenceCounter seq_;
   uint16_t request_seq_ = 0;
+  uint32_t last_byte_us_ = 0;
   link::ErrorCode last_error_ = link::ErrorCode::kOk;
 };
 

@@ -89,6 +89,9 @@ class FrameParser {
   uint32_t bad_frames() const { return bad_frames_; }
   uint32_t event_count(ParseEvent e) const { return counts_[static_cast<size_t>(e)]; }
 
+  // Whether bytes of an unfinished frame are held (or being dropped up to a delimiter).
+  bool mid_frame() const { return dropping_ || cobs_.started(); }
+
   // Forgets a partial frame (e.g. after a long silence on the line); counts nothing.
   void discard_partial() {
     cobs_.reset();
