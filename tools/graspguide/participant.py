@@ -81,12 +81,23 @@ from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .sources import quat_angle_deg as quaternion_angle_deg  # re-exported: tests, analysis
-from .sources import quat_mul
+
+# Every number a pose depends on is computed on plain Python floats with `math`, in a
+# fixed order. numpy's linear algebra (norm, dot, @) runs in OpenBLAS, whose kernel -- and
+# so the last bit of a sum -- is chosen by the CPU (OPENBLAS_CORETYPE), and numpy's SIMD
+# sin/cos/hypot depend on the CPU's features; a closed loop turns one last-bit difference
+# into a different trajectory, so a seeded study would not reproduce on another machine.
+# numpy stays only for checking inputs and for the seeded random streams (PCG64 draws do
+# not depend on the CPU). Left: the last bit of libm's sin/cos/exp/atan2 (glibc has an FMA
+# code path). tools/tests/test_participant.py checks both: the same bits under another
+# OpenBLAS kernel, and a golden record within a tolerance stated there.
+Vec3 = Tuple[float, float, float]
+Quat = Tuple[float, float, float, float]
 
 PWM_FLOOR = 70      # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
 PWM_RANGE = 185     # PWM span above the floor, docs/algorithm.md step 6
 PWM_MAX = 255
-GRAVITY = np.array([0.0, 0.0, -1.0])
+GRAVITY: Vec3 = (0.0, 0.0, -1.0)
 _POLICIES = ("F", "Fperp")
 _MODES = ("C", "V")
 
@@ -211,32 +222,43 @@ def _qnormalize(q: Tuple[float, ...]) -> Tuple[float, float, float, float]:
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
-def _quat_from_rotvec(v: np.ndarray) -> np.ndarray:
-    angle = float(np.linalg.norm(v))
-    if angle < 1e-15:
-        return np.array([1.0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]) / math.sqrt(
-            1.0 + 0.25 * angle * angle)
-    s = math.sin(0.5 * angle) / angle
-    return np.array([math.cos(0.5 * angle), v[0] * s, v[1] * s, v[2] * s])
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def _rotvec_from_quat(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q)
+def _norm(a: Sequence[float]) -> float:
+    return math.sqrt(_dot(a, a))
+
+
+def _cross(a: Sequence[float], b: Sequence[float]) -> Vec3:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _scale(a: Sequence[float], c: float) -> Vec3:
+    return (a[0] * c, a[1] * c, a[2] * c)
+
+
+def _conj(q: Quat) -> Quat:
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+def _rotvec_from_quat(q: Quat) -> Vec3:
+    q = _qnormalize(q)
     if q[0] < 0:
-        q = -q
-    s = float(np.linalg.norm(q[1:]))
+        q = (-q[0], -q[1], -q[2], -q[3])
+    v = q[1:]
+    s = _norm(v)
     if s < 1e-15:
-        return 2.0 * q[1:]
-    angle = 2.0 * math.atan2(s, q[0])
-    return q[1:] * (angle / s)
+        return _scale(v, 2.0)
+    return _scale(v, 2.0 * math.atan2(s, q[0]) / s)
 
 
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _rotate(q: Quat, v: Sequence[float]) -> Vec3:
     """q (hand -> world) applied to the hand-frame vector v."""
-    w, x, y, z = q
-    u = np.array([x, y, z])
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    w, u = q[0], q[1:]
+    t = _scale(_cross(u, v), 2.0)
+    c = _cross(u, t)
+    return (v[0] + w * t[0] + c[0], v[1] + w * t[1] + c[1], v[2] + w * t[2] + c[2])
 
 
 class FeelLagError(RuntimeError):
@@ -318,7 +340,7 @@ class VirtualParticipant:
         if not np.all(np.isfinite(c)):
             raise ValueError("contacts must be finite")
         y = _finite_vector(y_axis, 3, "y_axis")
-        if not np.linalg.norm(y) > 0:
+        if not _norm(y.tolist()) > 0:
             raise ValueError("y_axis must be non-zero")
         w = _finite_vector(wrench, 6, "wrench")  # never used for a decision (seed only)
         if policy not in _POLICIES:
@@ -326,12 +348,15 @@ class VirtualParticipant:
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
         q = _finite_vector(start_quat, 4, "start_quat (w, x, y, z)")
-        if not np.linalg.norm(q) > 1e-6:
+        q0 = tuple(q.tolist())
+        if not math.sqrt(_dot(q0[1:], q0[1:]) + q0[0] * q0[0]) > 1e-6:
             raise ValueError("start_quat must be a non-zero quaternion")
 
-        r = c - c.mean(axis=0)
-        norms = np.linalg.norm(r, axis=1)
-        if not np.all(norms > 1e-9 * max(1.0, float(norms.max()))):
+        points = c.tolist()
+        centroid = [sum(p[a] for p in points) / len(points) for a in range(3)]
+        r = [(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]) for p in points]
+        norms = [_norm(v) for v in r]
+        if not all(n > 1e-9 * max(1.0, max(norms)) for n in norms):
             raise ValueError("contacts must not coincide with their centroid")
         if noise_seed is None:
             digest = hashlib.sha256(b"|".join([
@@ -344,12 +369,12 @@ class VirtualParticipant:
             trial_key = int(noise_seed)
         self._rng = np.random.default_rng([self.seed & (2**64 - 1), trial_key & (2**64 - 1)])
 
-        self._radial = r / norms[:, None]      # own hand geometry: y_i (hand frame)
+        # own hand geometry: y_i (hand frame)
+        self._radial = [(v[0] / n, v[1] / n, v[2] / n) for v, n in zip(r, norms)]
         self._k = c.shape[0]
         self.policy = policy
         self.mode = mode
-        self._q = q / np.linalg.norm(q)        # commanded (proprioceptive) orientation
-        self._qt = tuple(float(v) for v in self._q)
+        self._qt = _qnormalize(q0)             # commanded (proprioceptive) orientation
         self._motor = [0.0] * self._k          # ERM speeds, PWM units
         self._history: Deque[Tuple[float, List[float]]] = deque()
         self._t_prev: Optional[float] = None   # time of the last motor update
@@ -365,7 +390,7 @@ class VirtualParticipant:
         self._search: Dict[str, Any] = {}
         p = self.params
         # Tremor: two independent horizontal components with random phases.
-        self._tremor_phase = self._rng.uniform(0.0, 2.0 * math.pi, size=2)
+        self._tremor_phase = self._rng.uniform(0.0, 2.0 * math.pi, size=2).tolist()
         self._tremor_amp = math.radians(p.tremor_amplitude_deg)
         self._trial = True
 
@@ -376,43 +401,53 @@ class VirtualParticipant:
         return [float(v) for v in self._motor]
 
     def felt_direction(self, speeds: Optional[Sequence[float]] = None,
-                       noise: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+                       noise: Optional[Sequence[float]] = None) -> Optional[np.ndarray]:
         """Weight direction the participant infers in its hand frame (unit), or None
         when no motor is felt. ``speeds``: motor speeds (default: the current ones);
         ``noise``: k standard normal draws for the Weber noise (default: none)."""
         self._need_trial()
-        s = np.asarray(self._motor if speeds is None else speeds, dtype=np.float64)
-        felt = s >= 0.5 * PWM_FLOOR
-        if not np.any(felt):
+        d = self._direction(self._motor if speeds is None else speeds, noise)
+        return None if d is None else np.array(d)
+
+    def _direction(self, speeds: Sequence[float],
+                   noise: Optional[Sequence[float]]) -> Optional[Vec3]:
+        s = [float(v) for v in speeds]
+        felt = [v >= 0.5 * PWM_FLOOR for v in s]
+        if not any(felt):
             return None
-        above = np.where(felt, np.maximum(s - PWM_FLOOR, 0.0), 0.0)
+        above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
         if noise is not None:
-            above = np.maximum(above * (1.0 + 0.5 * self.params.weber_frac * noise), 0.0)
-        top = float(above.max())
+            g = 0.5 * self.params.weber_frac
+            above = [max(a * (1.0 + g * float(e)), 0.0) for a, e in zip(above, noise)]
+        top = max(above)
         # Relative strength of each felt motor; all felt motors equal if none is above
         # the weakest vibration.
-        w = above / top if top > 0 else felt.astype(np.float64)
-        d = -(w[:, None] * self._radial).sum(axis=0)
-        n = float(np.linalg.norm(d))
+        w = [a / top for a in above] if top > 0 else [float(f) for f in felt]
+        d = [0.0, 0.0, 0.0]
+        for wi, y in zip(w, self._radial):
+            d = [d[0] + wi * y[0], d[1] + wi * y[1], d[2] + wi * y[2]]
+        d = [-d[0], -d[1], -d[2]]
+        n = _norm(d)
         if n < 1e-9:
             return None
-        return d / n
+        return (d[0] / n, d[1] / n, d[2] / n)
 
     def felt_distance_deg(self, speeds: Optional[Sequence[float]] = None,
-                          noise: Optional[np.ndarray] = None) -> Optional[float]:
+                          noise: Optional[Sequence[float]] = None) -> Optional[float]:
         """Distance to the target the participant reads from the intensity [deg]; None in
         mode C (no magnitude information) or when no motor is felt."""
         self._need_trial()
         if self.mode != "V":
             return None
-        s = np.asarray(self._motor if speeds is None else speeds, dtype=np.float64)
-        felt = s >= 0.5 * PWM_FLOOR
-        if not np.any(felt):
+        s = [float(v) for v in (self._motor if speeds is None else speeds)]
+        felt = [v >= 0.5 * PWM_FLOOR for v in s]
+        if not any(felt):
             return None
         if noise is not None:
-            s = s * (1.0 + 0.5 * self.params.weber_frac * noise)
-        above = np.where(felt, np.maximum(s - PWM_FLOOR, 0.0), 0.0)
-        level = min(1.0, float(np.linalg.norm(above)) / PWM_RANGE)
+            g = 0.5 * self.params.weber_frac
+            s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
+        above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
+        level = min(1.0, math.sqrt(sum(a * a for a in above)) / PWM_RANGE)
         return math.degrees(2.0 * math.asin(level))
 
     def resolution_deg(self) -> float:
@@ -530,7 +565,6 @@ class VirtualParticipant:
                 self._move = None
                 self._next_decision = t + m["pause"]
                 self._qt = _qnormalize(self._qt)
-            self._q = np.array(self._qt)
 
         # 4. Tremor on top of the commanded orientation.
         q = self._qt
@@ -600,47 +634,47 @@ class VirtualParticipant:
         if not self._trial:
             raise RuntimeError("call begin_trial() first")
 
-    def _delayed_speeds(self, t: float) -> np.ndarray:
+    def _delayed_speeds(self, t: float) -> List[float]:
         """Motor speeds as they were reaction_time_s before t (the delay line)."""
         horizon = t - self.params.reaction_time_s
         while len(self._history) > 1 and self._history[1][0] <= horizon:
             self._history.popleft()
-        return np.asarray(self._history[0][1], dtype=np.float64)
+        return self._history[0][1]
 
-    def _noise(self) -> np.ndarray:
-        return self._rng.standard_normal(self._k)
+    def _noise(self) -> List[float]:
+        return self._rng.standard_normal(self._k).tolist()
 
-    def _start_move(self, t: float, rotvec: np.ndarray, pause: float) -> None:
+    def _start_move(self, t: float, rotvec: Vec3, pause: float) -> None:
         p = self.params
-        amp = float(np.linalg.norm(rotvec))
+        amp = _norm(rotvec)
         if amp > 0 and p.motor_noise_frac > 0:
-            rotvec = rotvec + p.motor_noise_frac * amp * self._rng.standard_normal(3)
-            amp = float(np.linalg.norm(rotvec))
+            e = _scale(self._rng.standard_normal(3).tolist(), p.motor_noise_frac * amp)
+            rotvec = (rotvec[0] + e[0], rotvec[1] + e[1], rotvec[2] + e[2])
+            amp = _norm(rotvec)
         # Minimum jerk: peak speed 1.875 * amp / T <= peak_speed.
         T = 1.875 * amp / math.radians(p.peak_speed_deg_s)
-        self._move = {"t0": t, "T": T, "rotvec_t": tuple(float(v) for v in rotvec),
-                      "q0_t": self._qt, "pause": pause}
+        self._move = {"t0": t, "T": T, "rotvec_t": rotvec, "q0_t": self._qt, "pause": pause}
 
     def _hold(self, t: float, duration: float) -> None:
         self._next_decision = t + duration
 
-    def _tilt_to_align(self, d_hand: np.ndarray) -> Tuple[np.ndarray, float]:
+    def _tilt_to_align(self, d_hand: Vec3) -> Tuple[Vec3, float]:
         """World rotation vector bringing the hand direction d_hand to gravity, and its angle."""
-        u = _rotate(self._q, d_hand)
-        axis = np.cross(u, GRAVITY)
-        s = float(np.linalg.norm(axis))
-        angle = math.atan2(s, float(u @ GRAVITY))
+        u = _rotate(self._qt, d_hand)
+        axis = _cross(u, GRAVITY)
+        s = _norm(axis)
+        angle = math.atan2(s, _dot(u, GRAVITY))
         if s < 1e-12:
             if angle < 1e-6:
-                return np.zeros(3), 0.0
-            axis = np.array([1.0, 0.0, 0.0])   # antiparallel: any horizontal axis
+                return (0.0, 0.0, 0.0), 0.0
+            axis = (1.0, 0.0, 0.0)             # antiparallel: any horizontal axis
             s = 1.0
-        return axis / s * angle, angle
+        return (axis[0] / s * angle, axis[1] / s * angle, axis[2] / s * angle), angle
 
     def _plan(self, t: float) -> None:
         p = self.params
         speeds = self._delayed_speeds(t)
-        direction = self.felt_direction(speeds, self._noise())
+        direction = self._direction(speeds, self._noise())
         if direction is None:          # nothing felt (cue over): stay
             self._hold(t, p.reaction_time_s)
             return
@@ -650,13 +684,13 @@ class VirtualParticipant:
         if first:
             rotvec, angle = self._tilt_to_align(direction)
             if distance is not None and angle > 0:
-                rotvec = rotvec / angle * math.radians(distance)
+                rotvec = tuple(v / angle * math.radians(distance) for v in rotvec)
             if self.mode == "C":
                 # The first candidate is the first estimate itself (the centre of the
                 # candidate grid); wait there for the cue to stop.
                 grid = _hex_directions(direction, _C_SPACING * p.task_threshold_deg)
-                self._search = {"grid": grid, "readings": direction.copy(), "n_readings": 1,
-                                "tried": np.zeros(len(grid), dtype=bool)}
+                self._search = {"grid": grid, "readings": direction, "n_readings": 1,
+                                "tried": np.zeros(len(grid[0]), dtype=bool)}
                 self._start_move(t, rotvec, self.c_dwell_s())
             else:
                 self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
@@ -666,9 +700,9 @@ class VirtualParticipant:
         else:
             self._plan_compass(t, float(distance))
 
-    def _random_horizontal(self) -> np.ndarray:
-        phi = self._rng.uniform(0.0, 2.0 * math.pi)
-        return np.array([math.cos(phi), math.sin(phi), 0.0])
+    def _random_horizontal(self) -> Vec3:
+        phi = float(self._rng.uniform(0.0, 2.0 * math.pi))
+        return (math.cos(phi), math.sin(phi), 0.0)
 
     def c_dwell_s(self) -> float:
         """Mode C: how long each candidate pose is held [s]: the task's hold, then the
@@ -676,30 +710,33 @@ class VirtualParticipant:
         p = self.params
         return p.task_hold_s + 3.0 * p.erm_tau_s + p.reaction_time_s
 
-    def _plan_candidate(self, t: float, direction: np.ndarray) -> None:
+    def _plan_candidate(self, t: float, direction: Vec3) -> None:
         """Mode C: the cue did not stop, so the pose just held was wrong. Rule out the
         candidates it covered, average the new reading of the (constant) pattern into the
         estimate and move to the candidate not yet ruled out that is nearest to it (most
         likely first); the search widens as the near candidates are used up and never
         returns to a ruled-out one."""
         st = self._search
-        st["readings"] = st["readings"] + direction
+        r = st["readings"]
+        r = st["readings"] = (r[0] + direction[0], r[1] + direction[1], r[2] + direction[2])
         st["n_readings"] += 1
-        centre = st["readings"] / np.linalg.norm(st["readings"])
+        n = _norm(r)
+        centre = (r[0] / n, r[1] / n, r[2] / n)
         grid, tried = st["grid"], st["tried"]
         # The pose just held rules out the candidates within the aim tolerance (a third
         # of the threshold) of where the hand actually pointed (proprioception): with the
         # grid's spacing their whole cells are then inside the threshold cone just tried.
         # A candidate missed by more than that (motor noise) stays untried and is aimed
         # at again, with a small, precise correction.
-        down = _rotate(_conj(self._q), GRAVITY)
+        down = _rotate(_conj(self._qt), GRAVITY)
         tol = math.radians(_C_AIM_TOL * self.params.task_threshold_deg)
-        tried |= grid @ down >= math.cos(tol)
+        gx, gy, gz = grid                  # elementwise only: _hex_directions says why
+        tried |= gx * down[0] + gy * down[1] + gz * down[2] >= math.cos(tol)
         if tried.all():                    # the whole sphere tried: start over
             tried[:] = False
-        cosines = np.where(tried, -np.inf, grid @ centre)
+        cosines = np.where(tried, -np.inf, gx * centre[0] + gy * centre[1] + gz * centre[2])
         i = int(np.argmax(cosines))        # the nearest untried candidate (first on ties)
-        rotvec, _ = self._tilt_to_align(grid[i])
+        rotvec, _ = self._tilt_to_align((float(gx[i]), float(gy[i]), float(gz[i])))
         self._start_move(t, rotvec, self.c_dwell_s())
 
     def _plan_compass(self, t: float, distance: float) -> None:
@@ -719,7 +756,7 @@ class VirtualParticipant:
         pause = p.reaction_time_s + 3.0 * p.erm_tau_s
         if "base_q" not in st:
             # Right after the first (metaphor) move: this pose is the first base.
-            st.update(base_q=self._q.copy(), base_sum=distance, base_n=1,
+            st.update(base_q=self._qt, base_sum=distance, base_n=1,
                       axis=self._random_horizontal(), tries=0, step=max(distance, res),
                       at_base=True, held=False)
         elif st["at_base"]:
@@ -728,18 +765,18 @@ class VirtualParticipant:
         else:
             base_val = st["base_sum"] / st["base_n"]
             if distance < base_val:                # warmer: new base, same direction
-                st.update(base_q=self._q.copy(), base_sum=distance, base_n=1, tries=0,
+                st.update(base_q=self._qt, base_sum=distance, base_n=1, tries=0,
                           step=max(distance, res), held=False)
             else:                                  # colder: back to the base
                 st["tries"] += 1
                 turn = (0.5 * math.pi, math.pi, -0.5 * math.pi, math.pi)[(st["tries"] - 1) % 4]
                 a = st["axis"]
                 c, s = math.cos(turn), math.sin(turn)
-                st["axis"] = np.array([c * a[0] - s * a[1], s * a[0] + c * a[1], 0.0])
+                st["axis"] = (c * a[0] - s * a[1], s * a[0] + c * a[1], 0.0)
                 if st["tries"] % 4 == 0:
                     st["step"] = max(0.5 * st["step"], 0.5 * res)
                 st["at_base"] = True
-                delta = _rotvec_from_quat(quat_mul(st["base_q"], _conj(self._q)))
+                delta = _rotvec_from_quat(_qmul(st["base_q"], _conj(self._qt)))
                 self._start_move(t, delta, pause)
                 return
         base_val = st["base_sum"] / st["base_n"]
@@ -748,15 +785,10 @@ class VirtualParticipant:
             st["held"] = True
             self._hold(t, p.probe_dwell_s)
             return
-        target = quat_mul(_quat_from_rotvec(st["axis"] * math.radians(st["step"])),
-                           st["base_q"])
-        delta = _rotvec_from_quat(quat_mul(target, _conj(self._q)))
+        target = _qmul(_qexp(*_scale(st["axis"], math.radians(st["step"]))), st["base_q"])
+        delta = _rotvec_from_quat(_qmul(target, _conj(self._qt)))
         st["at_base"] = False
         self._start_move(t, delta, pause)
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return np.array([q[0], -q[1], -q[2], -q[3]])
 
 
 #: Mode C, in units of the task threshold r. A held pose within the aim tolerance e of a
@@ -770,29 +802,41 @@ _C_AIM_TOL = 1.0 / 3.0
 _C_SPACING = math.sqrt(3.0) * (1.0 - _C_AIM_TOL)
 
 
-def _hex_directions(centre: np.ndarray, spacing_deg: float) -> np.ndarray:
+def _hex_directions(centre: Vec3, spacing_deg: float) -> Tuple[np.ndarray, ...]:
     """Unit directions on a hexagonal lattice of the given spacing in the tangent plane at
     ``centre`` (mapped onto the sphere by the exponential map), sorted by their angle to
-    the centre (the centre first), out to 180 degrees."""
-    c = centre / np.linalg.norm(centre)
-    a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(c, a)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(c, e1)
+    the centre (the centre first), out to 180 degrees; as three arrays (x, y, z).
+
+    Built with ``math`` on plain floats (see the top of the module): numpy's sin/cos
+    depend on the CPU. The arrays are only ever combined elementwise (+, *, compare),
+    which is IEEE-exact per element, so the search gives the same bits on every CPU."""
+    n0 = _norm(centre)
+    c = (centre[0] / n0, centre[1] / n0, centre[2] / n0)
+    e1 = _cross(c, (1.0, 0.0, 0.0) if abs(c[0]) < 0.9 else (0.0, 1.0, 0.0))
+    m = _norm(e1)
+    e1 = (e1[0] / m, e1[1] / m, e1[2] / m)
+    e2 = _cross(c, e1)
     s = math.radians(spacing_deg)
     n = int(math.ceil(math.pi / s / 0.8)) + 1
-    i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
-    x = (i + 0.5 * j).ravel() * s
-    y = (j * (math.sqrt(3.0) / 2.0)).ravel() * s
-    r = np.hypot(x, y)
-    keep = r <= math.pi + 1e-12
-    x, y, r = x[keep], y[keep], r[keep]
-    order = np.lexsort((np.arctan2(y, x), r))        # by distance, then by angle
-    x, y, r = x[order], y[order], r[order]
-    safe = np.where(r > 0, r, 1.0)
-    tangent = (x / safe)[:, None] * e1 + (y / safe)[:, None] * e2
-    d = np.cos(r)[:, None] * c + np.sin(r)[:, None] * tangent
-    return d / np.linalg.norm(d, axis=1)[:, None]
+    h = math.sqrt(3.0) / 2.0
+    # Point (i, j) lies at (i + j/2, j sqrt(3)/2) s, at the distance sqrt(i^2 + i j + j^2) s:
+    # sorting by that integer orders the rings exactly, then by angle within a ring.
+    points = sorted((k, math.atan2(y, x), x, y, math.sqrt(k) * s)
+                    for i in range(-n, n + 1) for j in range(-n, n + 1)
+                    for k, x, y in ((i * i + i * j + j * j, (i + 0.5 * j) * s, j * h * s),)
+                    if math.sqrt(k) * s <= math.pi + 1e-12)
+    out = []
+    for _, _, x, y, r in points:
+        if r > 0:
+            a, b = x / r, y / r
+            t = (a * e1[0] + b * e2[0], a * e1[1] + b * e2[1], a * e1[2] + b * e2[2])
+            cr, sr = math.cos(r), math.sin(r)
+            d = (cr * c[0] + sr * t[0], cr * c[1] + sr * t[1], cr * c[2] + sr * t[2])
+        else:
+            d = c
+        m = _norm(d)
+        out.append((d[0] / m, d[1] / m, d[2] / m))
+    return tuple(np.array(v, dtype=np.float64) for v in zip(*out))
 
 
 # --------------------------------------------------------------------------------------
