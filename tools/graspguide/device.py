@@ -255,6 +255,10 @@ class DeviceError(LinkError):
             if cls is not None and d < len(cls.FIELDS):
                 return f"; field {cls.FIELDS[d].name!r} (index {d})"
             return f"; field index {d}"
+        if name == "bad_config" and self.request == SetScene.NAME:
+            text = _trial_field_text(d)
+            if text:
+                return text
         return f"; detail {d}" if d else ""
 
     def _describe(self) -> str:
@@ -263,6 +267,28 @@ class DeviceError(LinkError):
         meaning = self.meaning.split("; detail = ")[0]  # the detail is spelled out below
         return (f"device {verb} {self.request}{seq}: {self.code_name} -- {meaning}"
                 f"{self._detail_text()}")
+
+
+def _trial_field_text(index: int) -> str:
+    """'; field 'hold_s' (index 7) must be in [0, 600] s ...' for the SET_SCENE field a
+    bad_config's detail names, with the core's range (TRIAL_LIMITS); '' when the index is
+    not a trial field (a device that does not name it sends 0, the index of k)."""
+    if not 0 <= index < len(SetScene.FIELDS):
+        return ""
+    f = SetScene.FIELDS[index]
+    try:
+        from ._core import TRIAL_LIMITS
+    except ImportError:  # pragma: no cover - host tools without the built extension
+        TRIAL_LIMITS = {}
+    r = TRIAL_LIMITS.get(f.name)
+    if r is None:
+        return ""
+    unit = f" {f.unit}" if f.unit else ""
+    low = "(" if r["min_exclusive"] else "["
+    text = f"; field {f.name!r} (index {index}) must be in {low}{r['min']:g}, {r['max']:g}]{unit}"
+    if f.name == "hold_s":
+        text += " and at most timeout_s"
+    return text
 
 
 # --------------------------------------------------------------------------------------
@@ -373,7 +399,7 @@ class DeviceClient:
 
     ``timeout``: seconds to wait for each answer (per request; a stream's per-answer
     progress limit). On creation it sends one 0x00 so the device drops any partial frame
-    (docs/protocol.md). Counters of what the host saw: :attr:`host_bad_frames` (frames
+    (docs/protocol.md), and every write of frames starts with a 0x00 for the same reason. Counters of what the host saw: :attr:`host_bad_frames` (frames
     the host's parser or decoder rejected), :attr:`device_frames_lost` (gaps in the
     device's frame numbers), :attr:`frames_received`.
     """
@@ -546,9 +572,16 @@ class DeviceClient:
         self._settle()
         return total
 
+    def _write(self, frames: Union[bytes, bytearray]) -> None:
+        """Every frame the host sends goes out here, after a 0x00: it ends whatever
+        partial frame the device still holds (a write cut short by Ctrl-C, a crash or
+        line noise), so a STOP after it cannot merge with those bytes and be lost. The
+        frames of one write are separated by their own delimiters."""
+        self.transport.write(b"\x00" + frames)
+
     def _send(self, message) -> int:
         seq = self._seq.next()
-        self.transport.write(encode_message(message, seq))
+        self._write(encode_message(message, seq))
         return seq
 
     def _timeout_error(self, what: str, timeout: float, bytes_before: int, frames_before: int,
@@ -708,7 +741,7 @@ class DeviceClient:
             return None
         self._settle()
         self._seq.next()
-        self.transport.write(wire)
+        self._write(wire)
         inbox = self._inbox
         timeout = self.timeout if timeout is None else float(timeout)
         deadline = None
@@ -759,7 +792,7 @@ class DeviceClient:
         self._settle()
         for _ in seqs:
             self._seq.next()
-        self.transport.write(b"".join(wires))
+        self._write(b"".join(wires))
         timeout = self.timeout if timeout is None else float(timeout)
         out: List[Any] = []
         inbox = self._inbox
@@ -880,7 +913,7 @@ class DeviceClient:
                     outstanding.append(_Outstanding(seq, msg.host_time_us, index))
                     index += 1
                 if out:
-                    self.transport.write(bytes(out))
+                    self._write(out)
             if not outstanding:
                 break
             # Take answers.

@@ -111,6 +111,31 @@ def test_idle_delimiter_sent_on_open():
     assert sent == [b"\x00"]
 
 
+def test_every_write_of_frames_starts_with_a_delimiter():
+    """A 0x00 before each frame ends whatever partial frame the device holds, so a STOP
+    after a write cut short is not merged with it (docs/protocol.md, framing)."""
+    t = FakeDevice(good_device)
+    sent = []
+    orig = t.write
+    t.write = lambda data: (sent.append(bytes(data)), orig(data))
+    c = gd.DeviceClient(t, timeout=0.2)
+    c.hello()
+    c.set_scene(HAND3)
+    c.start_trial(1, WRENCH)
+    c.pose(5, (1, 0, 0, 0))                                # the fast path
+    c.pose(6, (1, 0, 0, 0), contacts=HAND3)                # the generic path
+    c.pose_batch([(7, (1, 0, 0, 0)), (8, (1, 0, 0, 0))])
+    c.stream([(9, (1, 0, 0, 0)), (10, (1, 0, 0, 0))], window=2)
+    c.status()
+    c.stop()
+    frames = sent[1:]
+    assert sent[0] == b"\x00" and len(frames) == 9
+    for wire in frames:
+        assert wire[:1] == b"\x00" and wire[-1:] == b"\x00" and wire[1:2] != b"\x00", wire
+    assert [type(msg).__name__ for _, msg in t.received][-3:] == ["Pose", "GetStatus", "Stop"]
+    assert t.parser.bad_frames == 0
+
+
 def test_bad_arguments_are_refused_before_sending():
     c = client_for(good_device)
     with pytest.raises(ValueError, match="policy"):
@@ -175,6 +200,27 @@ def test_error_details_are_spelled_out():
     c = client_for(refuse(m.ErrorCode.BAD_ENUM_VALUE, 3))
     with pytest.raises(gd.DeviceError, match="field 'constraints'"):
         c.set_scene(HAND3)
+
+
+def test_bad_config_names_the_field_and_its_range():
+    from graspguide import _core
+
+    names = [f.name for f in m.SetScene.FIELDS]
+    for key, r in _core.TRIAL_LIMITS.items():
+        c = client_for(lambda msg, seq, i=names.index(key): [
+            m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG, detail=i)])
+        with pytest.raises(gd.DeviceError) as info:
+            c.set_scene(HAND3)
+        text = str(info.value)
+        assert f"field '{key}' (index {names.index(key)})" in text, text
+        assert f"{r['min']:g}, {r['max']:g}]" in text and ("(" if r["min_exclusive"] else "[") \
+            + f"{r['min']:g}," in text, text
+    # an index that is no trial field (a device that does not name it) is not guessed
+    c = client_for(lambda msg, seq: [m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG,
+                                             detail=names.index("policy"))])
+    with pytest.raises(gd.DeviceError) as info:
+        c.set_scene(HAND3)
+    assert "field" not in str(info.value) and "threshold, hold or timeout" in str(info.value)
 
 
 def test_telemetry_status_raises_only_when_asked():

@@ -278,7 +278,7 @@ def test_trial_result_after_single_poses_is_queued(client):
 
 
 def test_frames_per_second(client, report_figure):
-    client.set_scene(HAND3, mode="V", timeout_s=1e6)
+    client.set_scene(HAND3, mode="V", timeout_s=600)  # the poses span 35 s
     client.start_trial(44, WRENCH)
     n = 4000
     rng = np.random.default_rng(3)
@@ -404,6 +404,35 @@ def test_stop_turns_motors_off_at_once(tmp_path, report_figure):
                   f"{us_after(acked, sent) / 1000:.3f} ms)")
     assert 0 <= us_after(off, sent) and us_after(acked, off) >= 0  # off before the ACK
     assert after_ms < 20
+
+
+@pytest.mark.parametrize("pause_s", [0.005, 0.1])
+def test_stop_after_half_a_frame_and_a_pause_gets_through(tmp_path, pause_s):
+    """A write cut short (Ctrl-C, a crash) leaves half a frame in the device's parser;
+    the host's 0x00 before each frame ends it, so the STOP that follows is not merged
+    with it and lost. 5 ms is shorter than the device's own partial-frame timeout
+    (50 ms), so there the host's delimiter alone must save it; 100 ms checks the two
+    rules together. Both are shorter than the watchdog: the motors are still on when
+    STOP comes."""
+    trace = tmp_path / "motors.csv"
+    qa, qb = two_pwm_orientations(HAND3, WRENCH)
+    with gt.SimulatedDevice(trace=str(trace)) as sim:
+        c = gd.DeviceClient(sim)
+        _start_rendering(c, qa, qb, 10)
+        bad0 = c.status().bad_frames
+        wire = gd.encode_pose_fast(0x7777, gd.host_time_us(), qb)
+        sim.write(wire[:len(wire) // 2])                  # raw: no delimiter after it
+        time.sleep(pause_s)
+        sent = gd.host_time_us()
+        c.stop(timeout=0.5)                               # ACKed (a lost STOP times out)
+        st = c.status()
+        assert st.state is m.DeviceState.STOPPED
+        assert st.bad_frames - bad0 <= 1                  # the half frame at most
+        with pytest.raises(gd.DeviceError, match="not_allowed_in_state"):
+            c.pose(gd.host_time_us(), qa)                 # no trial: nothing is rendered
+    rows = read_trace(trace)
+    _, off = last_on_then_off(rows)
+    assert not any(rows[-1][1]) and us_after(off, sent) >= 0   # off, and not before STOP
 
 
 # --------------------------------------------------------------------------------------
