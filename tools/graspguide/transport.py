@@ -29,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence
 
 DEFAULT_BAUDRATE = 115200
 SIM_PORT = "sim"
@@ -43,6 +43,7 @@ DEFAULT_SIM_START_TIMEOUT = 5.0
 # SIGKILL.
 DEFAULT_SIM_GRACE = 2.0
 DEFAULT_WRITE_TIMEOUT = 2.0
+PR_SET_PDEATHSIG = 1   # <sys/prctl.h>
 
 
 # --------------------------------------------------------------------------------------
@@ -316,6 +317,29 @@ def find_sim_binary(path: Optional[str] = None) -> str:
     return binary
 
 
+def die_with_parent() -> Optional[Callable[[], None]]:
+    """A ``preexec_fn`` for ``subprocess.Popen``: the child gets SIGTERM when the process
+    that started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``), so no simulated
+    device or runner outlives its host. None where the call does not exist.
+
+    libc is loaded here, in the parent: the child between fork and exec only calls it
+    (importing there could deadlock on a lock another thread held at the fork)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):  # pragma: no cover - no libc prctl
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:  # pragma: no cover - runs in the child
+        prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        if os.getppid() != parent:   # the parent died before the call: nobody to signal
+            os._exit(1)
+    return preexec
+
+
 class SimulatedDevice(Transport):
     """The simulated device as a process on a pseudo-terminal, and a Transport to it.
 
@@ -370,9 +394,12 @@ class SimulatedDevice(Transport):
         self._stderr = tempfile.TemporaryFile()
         t0 = time.perf_counter()
         try:
+            # Its own session: a terminal's Ctrl-C (SIGINT to the foreground process
+            # group) reaches only the host, which sends STOP before closing the device.
             self.process = subprocess.Popen(self.command, stdin=subprocess.DEVNULL,
                                             stdout=subprocess.PIPE, stderr=self._stderr,
-                                            close_fds=True)
+                                            close_fds=True, start_new_session=True,
+                                            preexec_fn=die_with_parent())
         except OSError as e:
             raise DeviceNotFound(f"cannot start the simulated device {self.binary}: {e}; "
                                  "rebuild it with `pio run -e sim`") from e
@@ -525,5 +552,5 @@ __all__ = [
     "Transport", "SerialTransport", "SimulatedDevice", "open_port", "list_serial_ports",
     "find_sim_binary", "find_repo_root", "sim_build_command", "LinkError", "DeviceNotFound",
     "SimNotBuilt", "DeviceDisconnected", "LinkTimeout", "DEFAULT_BAUDRATE", "SIM_PORT",
-    "SIM_ENV",
+    "SIM_ENV", "die_with_parent",
 ]

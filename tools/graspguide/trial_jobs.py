@@ -72,16 +72,6 @@ def count_lines(path: str) -> int:
         return 0
 
 
-def _preexec() -> None:  # pragma: no cover - runs in the child
-    """The child dies with the pool (Linux): SIGTERM when its parent is gone, so a pool
-    killed with SIGKILL leaves no runner holding a participant's folder."""
-    try:
-        import ctypes
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
-    except Exception:
-        pass
-
-
 def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
                    on_exit: Callable[[TrialJob, int], None],
                    on_tick: Optional[Callable[[List[TrialJob]], None]] = None,
@@ -93,6 +83,10 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
+    from .transport import die_with_parent
+
+    # A pool killed with SIGKILL leaves no runner holding a participant's folder.
+    preexec = die_with_parent()
     old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
     queue = list(jobs)
     running: List[Tuple[TrialJob, subprocess.Popen, Any]] = []
@@ -107,7 +101,7 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
                 log.write(f"\n$ {' '.join(cmd)}\n".encode())
                 log.flush()
                 proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
-                                        stderr=subprocess.STDOUT, preexec_fn=_preexec)
+                                        stderr=subprocess.STDOUT, preexec_fn=preexec)
                 running.append((job, proc, log))
             time.sleep(poll_s)
             for item in list(running):
