@@ -34,7 +34,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from .scene import CONSTRAINTS, FINGERS, UNITS, canonical_json, config_hash
+from .scene import (CONSTRAINTS, FINGERS, TRIAL_DEFAULTS, UNITS, canonical_json,
+                    check_trial_fields, config_hash, file_unit_fix, hand_span_problem,
+                    moment_unit_problem)
 from .toml_file import load_toml, loads_toml
 
 MODALITIES = ("F+C", "Fperp+C", "F+V", "Fperp+V")
@@ -42,6 +44,11 @@ MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
 CONTACT_ORDERS = ("alternate", "fixed")
 WRENCH_ORDERS = ("shuffle", "fixed")
 PARTICIPANT_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,30}?([0-9]+)$")
+
+# Below 5 Hz the poses come further apart than the device's 200 ms POSE watchdog, which
+# would turn the motors off between them; 2000 Hz is the fastest motion capture (a
+# 115200-baud link carries about 150 POSEs per second: on a board the link is the limit).
+POSE_RATE_HZ = (5.0, 2000.0)
 
 # table -> {key: (required, default)}; None default with required False: optional.
 _SCHEMA: Dict[str, Dict[str, Tuple[bool, Any]]] = {
@@ -197,18 +204,19 @@ class _Checker:
     def fail(self, where: str, message: str) -> ProtocolFileError:
         return ProtocolFileError(f"{self.source}: {where}: {message}")
 
-    def number(self, where: str, v: Any, lo: float, hi: float, what: str = "",
+    def number(self, where: str, v: Any, lo: float, hi: float, unit: str = "",
                lo_open: bool = False) -> float:
-        if not _is_number(v) or not math.isfinite(v):
-            raise self.fail(where, f"must be a number{what}, got {v!r}")
-        if (v <= lo if lo_open else v < lo) or v > hi:
-            left = "(" if lo_open else "["
-            raise self.fail(where, f"must be in {left}{lo:g}, {hi:g}]{what}, got {v!r}")
+        accepted = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]{' ' + unit if unit else ''}"
+        if not _is_number(v):
+            raise self.fail(where, f"must be a number in {accepted}, got {v!r}")
+        # written so that NaN fails: it compares false with everything
+        if not ((v > lo if lo_open else v >= lo) and v <= hi):
+            raise self.fail(where, f"must be in {accepted}, got {v!r}")
         return float(v)
 
     def integer(self, where: str, v: Any, lo: int, hi: int, what: str = "") -> int:
         if not isinstance(v, int) or isinstance(v, bool):
-            raise self.fail(where, f"must be an integer{what}, got {v!r}")
+            raise self.fail(where, f"must be an integer in {lo}..{hi}{what}, got {v!r}")
         if not lo <= v <= hi:
             raise self.fail(where, f"must be in {lo}..{hi}{what}, got {v!r}")
         return int(v)
@@ -261,17 +269,12 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         raise c.fail("[study] name", f"must be a non-empty string, got {name!r}")
     seed = c.integer("[study] seed", get("study", "seed"), 0, 2**63 - 1)
     participants = c.integer("[study] participants", get("study", "participants"), 1, 10000)
-    rate = c.number("[study] pose_rate_hz", get("study", "pose_rate_hz"), 1.0, 2000.0,
-                    " (poses per second)")
+    rate = c.number("[study] pose_rate_hz", get("study", "pose_rate_hz"), *POSE_RATE_HZ,
+                    "poses per second")
 
-    threshold = c.number("[trial] threshold_deg", get("trial", "threshold_deg"), 0.0, 90.0,
-                         " degrees", lo_open=True)
-    hold = c.number("[trial] hold_s", get("trial", "hold_s"), 0.0, 60.0, " seconds")
-    timeout = c.number("[trial] timeout_s", get("trial", "timeout_s"), 0.0, 3600.0,
-                       " seconds", lo_open=True)
-    if hold >= timeout:
-        raise c.fail("[trial] hold_s", f"must be shorter than timeout_s ({timeout:g} s), "
-                                       f"got {hold:g}")
+    trial = check_trial_fields({k: get("trial", k) for k in TRIAL_DEFAULTS},
+                               lambda key, message: c.fail(f"[trial] {key}", message))
+    threshold, hold, timeout = (trial[k] for k in ("threshold_deg", "hold_s", "timeout_s"))
     constraints = c.choice("[trial] constraints", get("trial", "constraints"), CONSTRAINTS)
     start_quat = c.vector("[trial] start_quat", get("trial", "start_quat"), 4)
     qn = math.sqrt(sum(x * x for x in start_quat))
@@ -324,8 +327,11 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         if missing:
             raise c.fail(where, f"missing {', '.join(missing)} (k = {k} needs "
                          f"{', '.join(FINGERS[:k])}, each [x, y, z] in {units})")
-        hands[k] = tuple(c.vector(f"{where} {f}", table[f], 3, UNITS[units])  # type: ignore
-                         for f in FINGERS[:k])
+        raw = [c.vector(f"{where} {f}", table[f], 3) for f in FINGERS[:k]]
+        problem = hand_span_problem(raw, units, lambda sym: file_unit_fix("[hand] units", sym))
+        if problem:
+            raise c.fail(where, problem)
+        hands[k] = tuple(tuple(x / UNITS[units] for x in p) for p in raw)  # type: ignore
 
     count = c.integer("[wrenches] count", get("wrenches", "count"), 1, 1000)
     single = c.integer("[wrenches] single_motor", get("wrenches", "single_motor"), 0, count,
@@ -335,22 +341,27 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         raise c.fail("[wrenches] split_k", f"k = {split_k} has no [hand.k{split_k}]")
     split_policy = c.choice("[wrenches] split_policy", get("wrenches", "split_policy"),
                             ("F", "Fperp"))
-    force = c.number("[wrenches] force_N", get("wrenches", "force_N"), 0.0, 1000.0, " N",
+    force = c.number("[wrenches] force_N", get("wrenches", "force_N"), 0.0, 1000.0, "N",
                      lo_open=True)
     moment = c.number("[wrenches] moment_max_Nm", get("wrenches", "moment_max_Nm"), 0.0, 100.0,
-                      " N m")
+                      "N m")
+    for k, contacts in sorted(hands.items()):
+        problem = moment_unit_problem(contacts, [force, 0.0, 0.0, moment, 0.0, 0.0])
+        if problem:
+            raise c.fail("[wrenches] moment_max_Nm", f"with force_N and [hand.k{k}]: {problem}")
     span = get("wrenches", "start_error_deg")
-    lo, hi = c.vector("[wrenches] start_error_deg", span, 2)
-    if not (0.0 <= lo < hi <= 180.0):
+    if (not isinstance(span, list) or len(span) != 2 or not all(_is_number(x) for x in span)
+            or not 0.0 <= span[0] < span[1] <= 180.0):   # NaN fails the comparison
         raise c.fail("[wrenches] start_error_deg", f"must be [min, max] with 0 <= min < max "
                      f"<= 180 degrees, got {span!r}")
+    lo, hi = float(span[0]), float(span[1])
     if lo <= threshold:
         raise c.fail("[wrenches] start_error_deg", f"the minimum ({lo:g}) must exceed "
                      f"[trial] threshold_deg ({threshold:g}), or a trial could start aligned")
     max_draws = c.integer("[wrenches] max_draws", get("wrenches", "max_draws"), 1, 10**7)
 
     fam_s = c.number("[familiarization] duration_s", get("familiarization", "duration_s"), 0.0,
-                     3600.0, " seconds")
+                     3600.0, "seconds")
     fam_n = c.integer("[familiarization] trials", get("familiarization", "trials"), 0, 100)
 
     return Protocol(

@@ -17,9 +17,14 @@ Format (every key is checked; an unknown key is an error, so a typo is never ign
     mode = "C"                   # "C" | "V" (default "C")
 
     [trial]                      # the paper's defaults
-    threshold_deg = 3.0
-    hold_s = 0.5
-    timeout_s = 90.0
+    threshold_deg = 3.0          # [0, 180] degrees
+    hold_s = 0.5                 # [0, 600] seconds, at most timeout_s
+    timeout_s = 90.0             # (0, 1800] seconds
+
+The [trial] ranges are the core's (``graspguide._core.TRIAL_LIMITS``, from scene.h), so
+the file, the core and the device accept the same values. The contacts must span like a
+hand in the stated unit (:func:`hand_span_problem`: the two farthest 5 mm to 0.5 m
+apart), so a file in millimetres that says ``units = "m"`` is refused, not guided.
 
 :func:`load_scene` returns a :class:`Scene`; :meth:`Scene.to_dict` is its normalised form
 (metres, every default filled in) and :meth:`Scene.config_hash` the sha256 of that form as
@@ -32,7 +37,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from .toml_file import load_toml, loads_toml
 
@@ -52,6 +57,121 @@ _TABLES = {
 
 class SceneError(ValueError):
     """A scene file that cannot be used; the message names the file, the key and the fix."""
+
+
+# --------------------------------------------------------------------------------------
+# Checks every reader of trial fields and contacts shares (scene and protocol files,
+# `graspguide solve`, `graspguide stream`, pose sources)
+# --------------------------------------------------------------------------------------
+_TRIAL_UNITS = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "seconds"}
+
+
+def trial_limits() -> Dict[str, Dict[str, Any]]:
+    """The core's range of each trial field: key -> {"min", "max", "min_exclusive"}.
+    Read from the compiled core, never copied, so the readers cannot drift from it."""
+    from ._core import TRIAL_LIMITS
+
+    return TRIAL_LIMITS
+
+
+def trial_range_text(key: str) -> str:
+    """The accepted range of a trial field as it reads in an error: "[0, 600] seconds"."""
+    r = trial_limits()[key]
+    low = "(" if r["min_exclusive"] else "["
+    text = f"{low}{r['min']:g}, {r['max']:g}] {_TRIAL_UNITS[key]}"
+    return text + ", at most timeout_s" if key == "hold_s" else text
+
+
+def check_trial_fields(values: Mapping[str, Any],
+                       fail: Callable[[str, str], Exception]) -> Dict[str, float]:
+    """threshold_deg, hold_s and timeout_s as floats, each checked against the core's
+    range (and hold_s <= timeout_s, or the trial could never succeed); ``fail(key,
+    message)`` makes the exception raised for the first bad one."""
+    out: Dict[str, float] = {}
+    for key in TRIAL_DEFAULTS:
+        value = values[key]
+        if not _is_number(value):
+            raise fail(key, f"must be a number in {trial_range_text(key)}, got {value!r}")
+        v = float(value)
+        r = trial_limits()[key]
+        # written so that NaN fails: it compares false with everything
+        if not ((v > r["min"] if r["min_exclusive"] else v >= r["min"]) and v <= r["max"]):
+            raise fail(key, f"must be in {trial_range_text(key)}, got {value!r}")
+        out[key] = v
+    if out["hold_s"] > out["timeout_s"]:
+        raise fail("hold_s", f"must not exceed timeout_s ({out['timeout_s']:g} s), got "
+                             f"{out['hold_s']:g}: the trial could never succeed")
+    return out
+
+
+# A human hand: its two farthest contacts are 5 mm to 0.5 m apart. Outside that the
+# numbers are almost surely in another unit than the one stated (85 "m" are 85 mm);
+# the core cannot tell, since it uses only ratios of positions.
+HAND_SPAN_M = (0.005, 0.5)
+_TYPICAL_SPAN_M = 0.08
+_LENGTH_UNITS = (("millimetres", "mm", 1e-3), ("centimetres", "cm", 1e-2),
+                 ("metres", "m", 1.0))
+# A moment's lever arm |m| / |f| of more than this many hand spans is no hand's: with
+# the contacts known to be in metres, such a moment is almost surely in N mm (1000 times
+# too large). The paper's wrenches have |m| / |f| <= 5 mm, 1/16 of a span.
+MAX_LEVER_SPANS = 10.0
+
+
+def hand_span(contacts: Sequence[Sequence[float]]) -> float:
+    """The largest distance between two contacts."""
+    return max((math.dist(a, b) for i, a in enumerate(contacts) for b in contacts[i + 1:]),
+               default=0.0)
+
+
+def hand_span_problem(contacts: Sequence[Sequence[float]], unit: str,
+                      fix: Callable[[Optional[str]], str]) -> Optional[str]:
+    """None when ``contacts`` (in ``unit``, "m" or "mm") span like a hand
+    (:data:`HAND_SPAN_M`); else what is wrong, the likely unit and ``fix(symbol)`` (the
+    likely unit's symbol, "mm", "cm" or "m", or None when no unit makes it a hand)."""
+    raw = hand_span(contacts)
+    lo, hi = HAND_SPAN_M
+    if lo <= raw / UNITS[unit] <= hi:
+        return None
+    fits = [(abs(math.log(raw * scale / _TYPICAL_SPAN_M)), name, sym)
+            for name, sym, scale in _LENGTH_UNITS if raw > 0 and lo <= raw * scale <= hi]
+    head = (f"contacts span {raw:g} {unit} (the two farthest apart), but a hand spans "
+            f"{lo * 1000:g} mm to {hi:g} m")
+    if not fits:
+        return f"{head}: check the contact positions and their unit; {fix(None)}"
+    _, name, sym = min(fits)
+    return f"{head}: looks like {name}; {fix(sym)}"
+
+
+def file_unit_fix(key: str, sym: Optional[str]) -> str:
+    """How to fix a file's contacts whose likely unit is ``sym`` (hand_span_problem)."""
+    if sym in UNITS:
+        return f'set {key} = "{sym}"'
+    if sym == "cm":
+        return f'give the contacts in millimetres (x 10) and set {key} = "mm"'
+    return f'{key} ("m" or "mm") is the unit of the contact positions'
+
+
+def moment_unit_problem(contacts_m: Sequence[Sequence[float]],
+                        wrench: Sequence[float]) -> Optional[str]:
+    """None unless the wrench's moment is implausibly large for its force and the hand
+    (contacts in metres): a lever arm |m| / |f| over :data:`MAX_LEVER_SPANS` hand spans,
+    which is what a moment in N mm given as N m looks like. A zero force is left to the
+    core (zero_force)."""
+    f = math.sqrt(sum(float(x) ** 2 for x in wrench[:3]))
+    m = math.sqrt(sum(float(x) ** 2 for x in wrench[3:6]))
+    span = hand_span(contacts_m)
+    if not (f > 0 and span > 0 and math.isfinite(f) and math.isfinite(m)):
+        return None
+    lever = m / f
+    if lever <= MAX_LEVER_SPANS * span:
+        return None
+    text = (f"the moment |m| = {m:g} with the force |f| = {f:g} N is a lever arm of "
+            f"{lever:g} m, {lever / span:.0f} times the hand's span ({span * 1000:.0f} mm; "
+            f"at most {MAX_LEVER_SPANS:g} spans are accepted)")
+    if lever / 1000 <= MAX_LEVER_SPANS * span:
+        return (f"{text}: the moment looks like N mm while the contacts are metres; give it "
+                "in N m (divide by 1000)")
+    return f"{text}: check the moment and its unit (N m, about the contacts' centroid)"
 
 
 @dataclass(frozen=True)
@@ -166,7 +286,11 @@ def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
         raise SceneError(f"{where}: missing {', '.join(missing)}: thumb, index and middle "
                          "are required ([x, y, z] each), palm is optional")
     names = list(FINGERS[:3]) + (["palm"] if "palm" in ct else [])
-    contacts = tuple(_vector(where, n, ct[n], scale) for n in names)
+    raw = [_vector(where, n, ct[n]) for n in names]
+    problem = hand_span_problem(raw, units, lambda sym: file_unit_fix("[scene] units", sym))
+    if problem:
+        raise SceneError(f"{where}: {problem}")
+    contacts = tuple(tuple(x / scale for x in c) for c in raw)
     y_axis = _vector(where, "y_axis", ct.get("y_axis", [0.0, 1.0, 0.0]))
     if math.sqrt(sum(x * x for x in y_axis)) < 1e-9:
         raise SceneError(f"{where}: y_axis must not be zero")
@@ -174,13 +298,9 @@ def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
     policy = _choice(where, "policy", ct.get("policy", "F"), POLICIES)
     mode = _choice(where, "mode", ct.get("mode", "C"), MODES)
 
-    trial = dict(TRIAL_DEFAULTS)
-    for key, value in data.get("trial", {}).items():
-        if not _is_number(value) or not math.isfinite(value):
-            raise SceneError(f"{source}: [trial] {key} must be a number, got {value!r}")
-        if value <= 0 and key != "hold_s" or value < 0:
-            raise SceneError(f"{source}: [trial] {key} must be positive, got {value!r}")
-        trial[key] = float(value)
+    trial = check_trial_fields(
+        {**TRIAL_DEFAULTS, **data.get("trial", {})},
+        lambda key, message: SceneError(f"{source}: [trial] {key} {message}"))
     return Scene(contacts=contacts, y_axis=y_axis, constraints=constraints, policy=policy,
                  mode=mode, source=source, units=units, **trial)
 
@@ -195,4 +315,6 @@ def loads_scene(text: str, source: str = "<string>") -> Scene:
 
 
 __all__ = ["Scene", "SceneError", "load_scene", "loads_scene", "parse_scene", "config_hash",
-           "canonical_json", "FINGERS"]
+           "canonical_json", "FINGERS", "check_trial_fields", "trial_limits",
+           "trial_range_text", "hand_span", "hand_span_problem", "moment_unit_problem",
+           "HAND_SPAN_M", "MAX_LEVER_SPANS"]

@@ -127,7 +127,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    metavar="LIST", help="alignment thresholds in degrees, each in (0, 90), "
                    "run at the protocol's pose rate (default 1,2,3,5,7,10)")
     p.add_argument("--rates", default=",".join(f"{v:g}" for v in DEFAULT_RATES),
-                   metavar="LIST", help="pose rates in Hz, each in (0, 2000], run at the "
+                   metavar="LIST", help="pose rates in Hz, each in [5, 2000], run at the "
                    "protocol's threshold (default 30,60,100,240)")
     p.add_argument("--grid", action="store_true",
                    help="also run every threshold x rate pair (else one factor at a time)")
@@ -629,13 +629,16 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .protocol_file import ProtocolFileError
+    from .protocol_file import POSE_RATE_HZ, ProtocolFileError
     from .runner import RunnerError
 
     prog = "graspguide sweep"
     try:
         thresholds = parse_values(args.thresholds, "thresholds", 0.0, 90.0)
-        rates = parse_values(args.rates, "rates", 0.0, 2000.0)
+        rates = parse_values(args.rates, "rates", 0.0, POSE_RATE_HZ[1])
+        if any(r < POSE_RATE_HZ[0] for r in rates):
+            raise SweepError(f"--rates: each value must be at least {POSE_RATE_HZ[0]:g} poses "
+                             "per second, the protocol file's minimum ([study] pose_rate_hz)")
         if any(t >= 90.0 for t in thresholds):
             raise SweepError("--thresholds: each value must be below 90 degrees")
         modalities = parse_modalities(args.modalities) if args.modalities else None

@@ -116,9 +116,9 @@ def test_split_with_policy_F_is_refused_with_the_reason():
     ("[familiarization]", "[familiarisation]", ["[familiarisation]", "unknown table"]),
     ("seed = 2019", "seed = 2019\nsed = 1", ["[study] sed", "unknown key", "seed"]),
     ("seed = 2019\n", "", ["[study] seed", "missing"]),
-    ("threshold_deg = 3.0", "threshold_deg = 0", ["[trial] threshold_deg", "(0, 90]"]),
+    ("threshold_deg = 3.0", "threshold_deg = 181", ["[trial] threshold_deg", "[0, 180]"]),
     ("threshold_deg = 3.0", 'threshold_deg = "3"', ["[trial] threshold_deg", "number"]),
-    ("hold_s = 0.5", "hold_s = 95.0", ["[trial] hold_s"]),
+    ("hold_s = 0.5", "hold_s = 95.0", ["[trial] hold_s", "must not exceed timeout_s"]),
     ("start_quat = [1.0, 0.0, 0.0, 0.0]", "start_quat = [1.0, 1.0, 0.0, 0.0]",
      ["[trial] start_quat", "unit quaternion"]),
     ('constraints = "paper"', 'constraints = "strict"', ["[trial] constraints", "'paper'"]),
@@ -149,6 +149,146 @@ def test_validation_errors_name_the_key(old, new, needles):
     assert msg.startswith("my.toml: ")
     for n in needles:
         assert n in msg, (n, msg)
+
+
+# --------------------------------------------------------------------------------------
+# Ranges: every number of the file, below, above, NaN/inf and of the wrong type
+# --------------------------------------------------------------------------------------
+def set_key(table: str, key: str, literal: str) -> str:
+    """paper.toml with ``key`` of ``[table]`` set to the TOML ``literal``."""
+    text = paper_text()
+    start = text.index(f"[{table}]\n")
+    at = text.index(f"\n{key} ", start) + 1
+    end = text.index("\n", at)
+    return text[:at] + f"{key} = {literal}" + text[end:]
+
+
+def _trial_cases():
+    """(table, key, below, above, accepted range) of the trial fields, from the core's
+    TRIAL_LIMITS: the reader must accept what the core accepts, nothing else."""
+    units = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "seconds"}
+    out = []
+    for key, r in _core.TRIAL_LIMITS.items():
+        low = "(" if r["min_exclusive"] else "["
+        below = r["min"] if r["min_exclusive"] else r["min"] - 0.5
+        out.append(("trial", key, repr(below), repr(r["max"] + 0.5),
+                    f"{low}{r['min']:g}, {r['max']:g}] {units[key]}"))
+    return out
+
+
+# The ranges docs/study.md documents for the other numbers.
+RANGE_CASES = _trial_cases() + [
+    ("study", "seed", "-1", None, "0..9223372036854775807"),
+    ("study", "participants", "0", "10001", "1..10000"),
+    ("study", "pose_rate_hz", "4.99", "2000.5", "[5, 2000] poses per second"),
+    ("wrenches", "count", "0", "1001", "1..1000"),
+    ("wrenches", "single_motor", "-1", "13", "0..12"),
+    ("wrenches", "force_N", "0.0", "1000.5", "(0, 1000] N"),
+    ("wrenches", "moment_max_Nm", "-0.001", "100.5", "[0, 100] N m"),
+    ("wrenches", "max_draws", "0", "10000001", "1..10000000"),
+    ("wrenches", "start_error_deg", "[-1.0, 120.0]", "[20.0, 180.5]", "<= 180 degrees"),
+    ("familiarization", "duration_s", "-0.5", "3600.5", "[0, 3600] seconds"),
+    ("familiarization", "trials", "-1", "101", "0..100"),
+]
+INTEGER_KEYS = {"seed", "participants", "count", "single_motor", "max_draws", "trials"}
+
+
+def _range_params():
+    for table, key, below, above, accepted in RANGE_CASES:
+        ident = f"{table}.{key}"
+        is_list = key == "start_error_deg"
+        bad = {"below": below, "above": above,
+               "nan": "[nan, 120.0]" if is_list else "nan",
+               "inf": "[20.0, inf]" if is_list else "inf",
+               "-inf": None if is_list else "-inf",
+               "string": '"12"', "bool": "true"}
+        for case, literal in bad.items():
+            if literal is not None:
+                yield pytest.param(table, key, literal, accepted, id=f"{ident}-{case}")
+
+
+@pytest.mark.parametrize("table,key,literal,accepted", list(_range_params()))
+def test_every_number_is_range_checked_and_named(table, key, literal, accepted):
+    with pytest.raises(pf.ProtocolFileError) as e:
+        pf.loads_protocol(set_key(table, key, literal), "my.toml")
+    msg = str(e.value)
+    assert msg.startswith(f"my.toml: [{table}] {key}: "), msg
+    if key in INTEGER_KEYS and not literal.lstrip("-").isdigit():
+        assert "integer" in msg and accepted in msg, msg
+    else:
+        assert accepted in msg, msg
+
+
+@pytest.mark.parametrize("table,key,value", [
+    ("trial", "threshold_deg", 0.0), ("trial", "threshold_deg", 19.0),
+    ("trial", "hold_s", 0.0), ("trial", "timeout_s", 1800.0), ("trial", "hold_s", 90.0),
+    ("study", "pose_rate_hz", 5.0), ("study", "pose_rate_hz", 2000.0),
+    ("familiarization", "duration_s", 0.0), ("familiarization", "duration_s", 3600.0),
+])
+def test_range_ends_are_accepted(table, key, value):
+    p = pf.loads_protocol(set_key(table, key, repr(value)))
+    assert p.to_dict()[table][key] == value
+
+
+@pytest.mark.parametrize("key,value", [("timeout_s", "9.3e12"), ("hold_s", "1e13"),
+                                       ("timeout_s", "1e30")])
+def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
+    """timeout_s = 9.3e12 and hold_s = 1e13 were accepted and overflowed the core's int64
+    microseconds (an instant failure or an unearned success)."""
+    with pytest.raises(pf.ProtocolFileError, match=rf"\[trial\] {key}: must be in"):
+        pf.loads_protocol(set_key("trial", key, value))
+
+
+def test_trial_ranges_are_the_cores_not_a_copy(monkeypatch):
+    """The reader takes threshold_deg, hold_s and timeout_s limits from the compiled core:
+    narrowing the core's table narrows what the file may say."""
+    from graspguide import scene
+
+    narrow = {k: dict(v) for k, v in _core.TRIAL_LIMITS.items()}
+    narrow["timeout_s"]["max"] = 60.0
+    monkeypatch.setattr(scene, "trial_limits", lambda: narrow)
+    with pytest.raises(pf.ProtocolFileError, match=r"timeout_s: must be in \(0, 60\] seconds"):
+        pf.loads_protocol(paper_text())
+
+
+@pytest.mark.parametrize("units,scale,needles", [
+    ("m", 1000.0, ["[hand.k3]", "contacts span 77.9", "looks like millimetres",
+                   '[hand] units = "mm"']),
+    ("mm", 1.0, ["[hand.k3]", "contacts span 0.0779", "looks like metres",
+                 '[hand] units = "m"']),
+    ("m", 100.0, ["[hand.k3]", "looks like centimetres", "millimetres (x 10)"]),
+])
+def test_contacts_in_another_unit_than_stated_are_refused(units, scale, needles):
+    text = edited('units = "m"', f'units = "{units}"')
+    for row in ("[0.045, 0.045, 0.035]", "[0.015, 0.095, 0.040]", "[-0.010, 0.100, 0.040]",
+                "[0.0, 0.045, 0.0]"):
+        values = [float(x) * scale for x in row.strip("[]").split(",")]
+        text = text.replace(row, "[" + ", ".join(repr(v) for v in values) + "]")
+    with pytest.raises(pf.ProtocolFileError) as e:
+        pf.loads_protocol(text, "my.toml")
+    for n in needles:
+        assert n in str(e.value), (n, str(e.value))
+
+
+def test_the_same_hand_in_millimetres_loads_to_the_same_metres(paper):
+    text = edited('units = "m"', 'units = "mm"')
+    for row in ("[0.045, 0.045, 0.035]", "[0.015, 0.095, 0.040]", "[-0.010, 0.100, 0.040]",
+                "[0.0, 0.045, 0.0]"):
+        text = text.replace(row, "[" + ", ".join(
+            f"{float(x) * 1000:.1f}" for x in row.strip("[]").split(",")) + "]")
+    p = pf.loads_protocol(text)
+    for k in (3, 4):
+        assert [x for c in p.hands[k] for x in c] == pytest.approx(
+            [x for c in paper.hands[k] for x in c], abs=1e-15)
+
+
+def test_a_moment_in_newton_millimetres_is_refused():
+    """moment_max_Nm = 5 with force_N = 1 (5 N mm written as N m): a 5 m lever arm."""
+    with pytest.raises(pf.ProtocolFileError) as e:
+        pf.loads_protocol(set_key("wrenches", "moment_max_Nm", "5.0"), "my.toml")
+    msg = str(e.value)
+    assert msg.startswith("my.toml: [wrenches] moment_max_Nm: ")
+    assert "looks like N mm" in msg and "divide by 1000" in msg
 
 
 def test_missing_hand_for_a_used_contact_count():

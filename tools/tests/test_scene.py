@@ -6,6 +6,7 @@ import os
 
 import pytest
 
+from graspguide import _core
 from graspguide import scene as gs
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
@@ -82,7 +83,7 @@ def test_hash_is_stable_known_value():
     (MIN3 + 'mode = "X"\n', ["mode", "'C'", "'V'"]),
     (MIN3 + "y_axis = [0, 0, 0]\n", ["y_axis", "zero"]),
     (MIN3 + "[trial]\nhold_s = \"long\"\n", ["[trial] hold_s", "number"]),
-    (MIN3 + "[trial]\ntimeout_s = -1\n", ["[trial] timeout_s", "positive"]),
+    (MIN3 + "[trial]\ntimeout_s = -1\n", ["[trial] timeout_s", "(0, 1800] seconds"]),
     (MIN3 + "[trial]\nthreshold = 3\n", ["unknown key 'threshold'", "threshold_deg"]),
     ("[scene\n", ["not valid TOML"]),
 ])
@@ -100,3 +101,97 @@ def test_errors_name_file_key_and_fix(tmp_path, text, words):
 def test_missing_file():
     with pytest.raises(gs.SceneError, match="cannot read"):
         gs.load_scene("/nonexistent/scene.toml")
+
+
+# --------------------------------------------------------------------------------------
+# [trial] ranges: the core's (TRIAL_LIMITS), checked on load with the key and the range
+# --------------------------------------------------------------------------------------
+def _trial_params():
+    units = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "seconds"}
+    for key, r in _core.TRIAL_LIMITS.items():
+        accepted = (f"{'(' if r['min_exclusive'] else '['}{r['min']:g}, {r['max']:g}] "
+                    f"{units[key]}")
+        below = r["min"] if r["min_exclusive"] else r["min"] - 1e-3
+        for case, literal in (("below", repr(below)), ("above", repr(r["max"] + 1e-3)),
+                              ("nan", "nan"), ("inf", "inf"), ("-inf", "-inf"),
+                              ("string", '"3"'), ("bool", "true"), ("list", "[3.0]")):
+            yield pytest.param(key, literal, accepted, id=f"{key}-{case}")
+
+
+@pytest.mark.parametrize("key,literal,accepted", list(_trial_params()))
+def test_trial_fields_out_of_the_cores_range_are_refused(tmp_path, key, literal, accepted):
+    path = tmp_path / "s.toml"
+    path.write_text(MIN3 + f"[trial]\n{key} = {literal}\n")
+    with pytest.raises(gs.SceneError) as e:
+        gs.load_scene(str(path))
+    msg = str(e.value)
+    assert msg.startswith(f"{path}: [trial] {key} must "), msg
+    assert accepted in msg, msg
+
+
+@pytest.mark.parametrize("key,value", [("timeout_s", "9.3e12"), ("hold_s", "1e13"),
+                                       ("timeout_s", "1e30"), ("hold_s", "9.3e12")])
+def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
+    """Accepted before and sent in SET_SCENE: the core's int64 microseconds overflowed
+    (an instant failure with completion -9.2e12 s, or a success without the hold)."""
+    with pytest.raises(gs.SceneError, match=rf"\[trial\] {key} must be in"):
+        gs.loads_scene(MIN3 + f"[trial]\n{key} = {value}\n")
+
+
+def test_trial_range_ends_and_hold_up_to_the_timeout():
+    lim = _core.TRIAL_LIMITS
+    s = gs.loads_scene(MIN3 + f"[trial]\nthreshold_deg = {lim['threshold_deg']['min']!r}\n"
+                       f"hold_s = {lim['hold_s']['max']!r}\ntimeout_s = "
+                       f"{lim['timeout_s']['max']!r}\n")
+    assert (s.threshold_deg, s.hold_s, s.timeout_s) == (
+        lim["threshold_deg"]["min"], lim["hold_s"]["max"], lim["timeout_s"]["max"])
+    assert gs.loads_scene(MIN3 + "[trial]\nhold_s = 20\ntimeout_s = 20\n").hold_s == 20.0
+    with pytest.raises(gs.SceneError, match=r"\[trial\] hold_s must not exceed timeout_s"):
+        gs.loads_scene(MIN3 + "[trial]\nhold_s = 20.5\ntimeout_s = 20\n")
+
+
+# --------------------------------------------------------------------------------------
+# Units: contacts must span like a hand in the stated unit
+# --------------------------------------------------------------------------------------
+def _scaled(units: str, factor: float) -> str:
+    rows = {"thumb": (0.045, 0.045, 0.035), "index": (0.015, 0.095, 0.040),
+            "middle": (-0.010, 0.100, 0.040)}
+    body = "".join(f"{n} = [{', '.join(repr(x * factor) for x in v)}]\n"
+                   for n, v in rows.items())
+    return f'[scene]\nunits = "{units}"\n[contacts]\n' + body
+
+
+@pytest.mark.parametrize("units,factor,needles", [
+    ("m", 1000.0, ["[contacts]", "contacts span 77.9", "looks like millimetres",
+                   'set [scene] units = "mm"']),
+    ("mm", 1.0, ["contacts span 0.0779", "mm", "looks like metres",
+                 'set [scene] units = "m"']),
+    ("m", 100.0, ["looks like centimetres", "millimetres (x 10)"]),
+    ("m", 1e-5, ["contacts span 7.79", "5 mm to 0.5 m", "check the contact positions"]),
+    ("m", 20.0, ["contacts span 1.55", "5 mm to 0.5 m"]),
+])
+def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor, needles):
+    with pytest.raises(gs.SceneError) as e:
+        gs.loads_scene(_scaled(units, factor), "hand.toml")
+    msg = str(e.value)
+    assert msg.startswith("hand.toml: "), msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+@pytest.mark.parametrize("factor", [0.07, 1.0, 6.0])   # spans of 5.5 mm, 78 mm, 0.47 m
+def test_hands_from_5_mm_to_half_a_metre_load(factor):
+    s = gs.loads_scene(_scaled("m", factor))
+    assert gs.HAND_SPAN_M[0] <= gs.hand_span(s.contacts) <= gs.HAND_SPAN_M[1]
+    mm = gs.loads_scene(_scaled("mm", 1000 * factor)).contacts
+    assert [x for c in mm for x in c] == pytest.approx([x for c in s.contacts for x in c])
+
+
+def test_moment_unit_check_catches_newton_millimetres():
+    hand = gs.loads_scene(MIN3).contacts            # metres, span 78 mm
+    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None    # 5 mm lever
+    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None      # 9 spans
+    msg = gs.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])                # 5 N mm as N m
+    assert "looks like N mm" in msg and "divide by 1000" in msg
+    assert "check the moment" in gs.moment_unit_problem(hand, [1, 0, 0, 5000, 0, 0])
+    assert gs.moment_unit_problem(hand, [0, 0, 0, 5, 0, 0]) is None       # the core's zero_force
