@@ -81,6 +81,25 @@ def hardware_port(request):
     return port
 
 
+def running_in_ci() -> bool:
+    return os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under CI=true a skip is a failure (the QEMU firmware tests without QEMU or their
+    ELF, a missing data file, ...): CI promises that every check that can run here ran.
+    Only the hardware tests still skip, since no board is attached to a CI machine (the
+    simulated device runs the same checks)."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.skipped and running_in_ci() and not hasattr(report, "wasxfail"):
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        if HARDWARE_SKIP_REASON not in reason:
+            report.outcome = "failed"
+            report.longrepr = f"CI=true: this test may not skip here: {reason}"
+
+
 # Figures the device tests measure (start time, frames/s, latencies, agreement counts),
 # printed together at the end of the run so they show in tools/run-tests.sh's output.
 _MEASUREMENTS = []
