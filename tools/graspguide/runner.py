@@ -62,6 +62,7 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Text
 from .protocol_file import (PlannedTrial, Protocol, Session,
                             derive_seed, draw_familiarization_wrenches, draw_wrenches, plan,
                             session_order)
+from .session_log import RecordWriteError, append_record, open_append, write_json_file
 
 TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
 TLX_NAMES = {"MD": "Mental Demand", "TD": "Temporal Demand", "PD": "Physical Demand",
@@ -97,23 +98,72 @@ def _dumps(obj: Any) -> str:
                       separators=(", ", ": "))
 
 
+# Said after a disk fault (RecordWriteError): every completed trial is kept.
+_RESUME_HINT = ", then run again (completed trials are kept)"
+
+
 def append_line(path: str, obj: Any) -> None:
-    """Append one JSON line in one write, flushed and fsync'ed."""
-    text = _dumps(obj) + "\n"
-    with open(path, "a", encoding="utf-8", newline="") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
+    """Append one JSON line, fsync'ed, whole or not at all (RecordWriteError)."""
+    data = (_dumps(obj) + "\n").encode("utf-8")
+    fd = open_append(path, _RESUME_HINT)
+    try:
+        append_record(fd, path, data, sync=True, hint=_RESUME_HINT)
+    finally:
+        os.close(fd)
 
 
 def write_json_atomic(path: str, data: Any) -> None:
-    tmp = f"{path}.tmp.{os.getpid()}"
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(data, f, indent=2, sort_keys=True)
-        f.write("\n")
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_json_file(path, data, _RESUME_HINT, indent=2, sort_keys=True)
+
+
+class _FramesFile:
+    """A trial's frames CSV (a temporary file until the trial is recorded): a write
+    error becomes RecordWriteError naming it, and the partial file is removed on close
+    (it holds no record, and on a full disk its space is wanted)."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.failed = False
+        try:
+            self.f = open(path, "w", encoding="utf-8", newline="", buffering=1 << 20)
+        except OSError as e:
+            raise RecordWriteError(path, e, _RESUME_HINT) from e
+
+    def _fault(self, e: OSError) -> RecordWriteError:
+        self.failed = True
+        return RecordWriteError(self.path, e, _RESUME_HINT)
+
+    def write(self, text: str) -> None:
+        try:
+            self.f.write(text)
+        except OSError as e:
+            raise self._fault(e) from e
+
+    def restart(self) -> None:
+        try:
+            self.f.seek(0)
+            self.f.truncate()
+        except OSError as e:
+            raise self._fault(e) from e
+        self.write(_FRAME_HEADER)
+
+    def sync(self) -> None:
+        try:
+            self.f.flush()
+            os.fsync(self.f.fileno())
+        except OSError as e:
+            raise self._fault(e) from e
+
+    def close(self) -> None:
+        try:
+            self.f.close()
+        except OSError:
+            self.failed = True     # the buffer's rest did not fit either
+        if self.failed:
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass
 
 
 @dataclass
@@ -552,8 +602,12 @@ class StudyRunner:
         return done, tlx_done
 
     def _lock(self) -> None:
-        os.makedirs(self.frames_dir, exist_ok=True)
-        fd = os.open(os.path.join(self.pdir, ".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+        path = os.path.join(self.pdir, ".lock")
+        try:
+            os.makedirs(self.frames_dir, exist_ok=True)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise RecordWriteError(e.filename or path, e, _RESUME_HINT) from e
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -570,7 +624,10 @@ class StudyRunner:
     def _read_checked(self, path: str) -> List[Dict[str, Any]]:
         contents = read_jsonl(path)
         if contents.damaged_tail is not None:
-            aside = set_aside_damaged_tail(path, contents)
+            try:
+                aside = set_aside_damaged_tail(path, contents)
+            except OSError as e:
+                raise RecordWriteError(e.filename or path, e, _RESUME_HINT) from e
             msg = (f"{path}: the last line was half-written ({len(contents.damaged_tail)} "
                    f"bytes, a write cut by a crash or power loss); moved it to {aside} and "
                    "will run what it recorded again")
@@ -770,7 +827,7 @@ class StudyRunner:
             it = self._poses(trial)
         frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
         frames_path = frames_tmp[:-4]
-        f = open(frames_tmp, "w", encoding="utf-8", newline="", buffering=1 << 20)
+        f = _FramesFile(frames_tmp)
         f.write(_FRAME_HEADER)
         result = None
         poses = 0
@@ -791,9 +848,7 @@ class StudyRunner:
                     self.pipeline_fallbacks += 1
                     print(f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
                           "running it again in lockstep", file=self.err, flush=True)
-                    f.seek(0)
-                    f.truncate()
-                    f.write(_FRAME_HEADER)
+                    f.restart()
                     self._restart_trial(trial, model, contacts)
                     window = 1
             while window <= 1:
@@ -827,15 +882,17 @@ class StudyRunner:
                         p.timeout_s + 10 * RESULT_MARGIN_S:
                     raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT after "
                                       f"{time.monotonic() - wall0:.1f} s")
-            f.flush()
-            os.fsync(f.fileno())
+            f.sync()
         finally:
             f.close()
         if int(result.trial_id) != trial.trial_index & 0xFFFF:
             raise RunnerError(f"trial {trial.trial_index}: the device answered with the "
                               f"TRIAL_RESULT of trial id {result.trial_id}; run again (this "
                               "trial was not recorded)")
-        os.replace(frames_tmp, frames_path)
+        try:
+            os.replace(frames_tmp, frames_path)
+        except OSError as e:
+            raise RecordWriteError(frames_path, e, _RESUME_HINT) from e
         self._vt_base_us += int(round((t_s + 1.0) * 1e6))
         success = bool(result.success)
         completion = round(float(result.completion_s), 6) if success else float(p.timeout_s)
@@ -874,12 +931,17 @@ class StudyRunner:
     # ---- all
     def run(self) -> Dict[str, Any]:
         """Run what is left of the plan. Returns a summary; raises RunnerError, LinkError,
-        KeyboardInterrupt. STOP is sent on the way out, whatever happens."""
-        self._lock()
+        KeyboardInterrupt. STOP is sent on the way out, whatever happens. A disk fault
+        (full, read-only, a size limit) is a RunnerError naming the file; no record is
+        left half-written."""
         try:
-            return self._run_locked()
-        finally:
-            self._unlock()
+            self._lock()
+            try:
+                return self._run_locked()
+            finally:
+                self._unlock()
+        except RecordWriteError as e:
+            raise RunnerError(str(e)) from e
 
     def _run_locked(self) -> Dict[str, Any]:
         done, tlx_done = self.prepare()
@@ -897,6 +959,7 @@ class StudyRunner:
         total = len(self.plan)
         n_sessions = len(self.sessions)
         outcome = "error"
+        cause: Optional[BaseException] = None
         try:
             by_session: Dict[int, List[PlannedTrial]] = {}
             for t in self.plan:
@@ -918,6 +981,9 @@ class StudyRunner:
         except KeyboardInterrupt:
             outcome = "interrupted"
             raise
+        except BaseException as e:
+            cause = e
+            raise
         finally:
             try:
                 self.client.stop()
@@ -927,8 +993,16 @@ class StudyRunner:
                 # keep the error that ended the run; this one is secondary
                 print(f"graspguide trial: STOP failed: {e}", file=self.err, flush=True)
             finally:
-                self._log_run("end", outcome=outcome, ran=self.ran,
-                              completed=len(done), planned=total)
+                try:
+                    self._log_run("end", outcome=outcome, ran=self.ran,
+                                  completed=len(done), planned=total)
+                except RecordWriteError as e:
+                    if outcome == "complete":
+                        raise
+                    # The error that ended the run is reported; a disk fault that ended
+                    # it is this one again.
+                    if not isinstance(cause, RecordWriteError):
+                        print(f"graspguide trial: warning: {e}", file=self.err, flush=True)
         return {"participant": self.participant, "planned": total, "ran": self.ran,
                 "skipped": self.skipped, "completed": len(done)}
 

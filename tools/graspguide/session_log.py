@@ -15,13 +15,16 @@ loss too):
 * ``results.jsonl`` -- TRIAL_RESULTs (and the run's end record ``{"event": "end", ...}``).
 
 The JSON files are written whole (temporary file, then rename), so they are either absent
-or complete.
+or complete. A record is appended whole or not at all: a write the disk cut short (full,
+a size limit) is cut back off the file, and :class:`RecordWriteError` says which file and
+what to do.
 """
 
 from __future__ import annotations
 
 import csv
 import enum
+import errno
 import io
 import json
 import os
@@ -44,24 +47,109 @@ def _default(o: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+class RecordWriteError(OSError):
+    """A file could not be written (disk full, read-only or unwritable folder, a size
+    limit). ``str()`` is one line: what happened, which file, what to do. An appended
+    record that failed is not in the file (see :func:`append_record`)."""
+
+    def __init__(self, path: str, cause: OSError, hint: str = "", appended: bool = False,
+                 cut_back: bool = True):
+        super().__init__(cause.errno, cause.strerror, path)
+        reason, todo = _DISK_FAULTS.get(cause.errno, ("", "check the disk and the folder"))
+        what = cause.strerror or str(cause) or type(cause).__name__
+        if reason and reason.lower() != what.lower():
+            what = f"{reason} ({what})"
+        if appended:
+            what += ("; the record was not written, the file holds only whole records"
+                     if cut_back else "; it could not be cut back: its last line is partial")
+        self.message = f"cannot write {path}: {what}; {todo}{hint}"
+
+    def __str__(self) -> str:
+        return self.message
+
+
+_WRITE_ELSEWHERE = "use a folder you can write to"
+_DISK_FAULTS = {
+    errno.ENOSPC: ("the disk is full", "free some space on it"),
+    errno.EDQUOT: ("the disk quota is used up", "free some space or raise the quota"),
+    errno.EFBIG: ("the file reached a size limit (`ulimit -f` or the file system's)",
+                  "raise the limit or start a new folder"),
+    errno.EROFS: ("the folder is on a read-only file system", _WRITE_ELSEWHERE),
+    errno.EACCES: ("permission denied", _WRITE_ELSEWHERE + " or fix its permissions"),
+    errno.EPERM: ("not permitted", _WRITE_ELSEWHERE + " or fix its permissions"),
+    errno.EIO: ("an I/O error (a failing or removed drive?)", "check the drive"),
+}
+
+
+def append_record(fd: int, path: str, data: bytes, sync: bool = False, hint: str = "") -> None:
+    """Append ``data`` (one or more whole lines) to ``fd`` (opened O_APPEND) whole or not
+    at all: if the disk takes only part of it or refuses it (or the fsync fails), the
+    file is cut back to its previous length and RecordWriteError raised."""
+    start = os.lseek(fd, 0, os.SEEK_END)
+    view = memoryview(data)
+    done = 0
+    try:
+        while done < len(data):
+            n = os.write(fd, view[done:])
+            if n <= 0:  # pragma: no cover - regular files never take 0 bytes of >0
+                raise OSError(errno.EIO, "the write took no bytes")
+            done += n    # a short write: the next one says why (ENOSPC, EFBIG, ...)
+        if sync:
+            os.fsync(fd)
+    except OSError as e:
+        cut_back = True
+        if done:
+            try:
+                os.ftruncate(fd, start)
+            except OSError:
+                cut_back = False
+        raise RecordWriteError(path, e, hint, appended=True, cut_back=cut_back) from e
+
+
+def open_append(path: str, hint: str = "") -> int:
+    """An O_APPEND descriptor of ``path`` (created if missing); RecordWriteError if not."""
+    try:
+        return os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as e:
+        raise RecordWriteError(path, e, hint) from e
+
+
+def write_json_file(path: str, data: Any, hint: str = "", **dump_args: Any) -> None:
+    """``path`` written whole (temporary file, fsync, rename) or left as it was;
+    RecordWriteError (and no temporary file left) if the disk refuses."""
+    tmp = f"{path}.tmp.{os.getpid()}"
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(data, f, **dump_args)
+            f.write("\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise RecordWriteError(path, e, hint) from e
+
+
+_HINT = " (or give another --log folder)"
+
+
 class _Lines:
     """An append-only text file; every write is one complete line, flushed (and fsync'ed
-    when ``sync``)."""
+    when ``sync``), or nothing (RecordWriteError)."""
 
     def __init__(self, path: str, header: Optional[Sequence[str]] = None, sync: bool = False):
-        new = not os.path.exists(path) or os.path.getsize(path) == 0
-        self.f = open(path, "a", encoding="utf-8", newline="")
+        self.path = path
+        self.fd = open_append(path, _HINT)
         self.sync = sync
         self.lines = 0
-        if header is not None and new:
+        if header is not None and os.fstat(self.fd).st_size == 0:
             self.write_row(header)
 
     def write_line(self, text: str) -> None:
-        # One write() call of the whole line: never a half line in the file.
-        self.f.write(text + "\n")
-        self.f.flush()
-        if self.sync:
-            os.fsync(self.f.fileno())
+        append_record(self.fd, self.path, (text + "\n").encode("utf-8"), self.sync, _HINT)
         self.lines += 1
 
     def write_row(self, row: Sequence[Any]) -> None:
@@ -70,10 +158,14 @@ class _Lines:
         self.write_line(buf.getvalue())
 
     def close(self) -> None:
-        if not self.f.closed:
-            self.f.flush()
-            os.fsync(self.f.fileno())
-            self.f.close()
+        if self.fd >= 0:
+            fd, self.fd = self.fd, -1
+            try:
+                os.fsync(fd)
+            except OSError as e:
+                raise RecordWriteError(self.path, e, _HINT) from e
+            finally:
+                os.close(fd)
 
 
 class SessionLog:
@@ -81,7 +173,10 @@ class SessionLog:
 
     def __init__(self, folder: str):
         self.folder = folder
-        os.makedirs(folder, exist_ok=True)
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as e:
+            raise RecordWriteError(folder, e, _HINT) from e
         self.t0 = time.monotonic()
         self.poses = _Lines(self.path("poses.csv"), POSE_COLUMNS)
         self.telemetry_file = _Lines(self.path("telemetry.csv"), TELEMETRY_COLUMNS)
@@ -94,13 +189,8 @@ class SessionLog:
         return round(time.monotonic() - self.t0, 6)
 
     def write_json(self, name: str, data: Any) -> None:
-        tmp = self.path(name + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=2, sort_keys=True, default=_default)
-            f.write("\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, self.path(name))
+        write_json_file(self.path(name), data, _HINT, indent=2, sort_keys=True,
+                        default=_default)
 
     def scene(self, data: Dict[str, Any]) -> None:
         self.write_json("scene.json", data)
@@ -134,8 +224,14 @@ class SessionLog:
         self.results.write_line(json.dumps(d, sort_keys=True, default=_default))
 
     def close(self) -> None:
+        errors = []
         for f in (self.poses, self.telemetry_file, self.results):
-            f.close()
+            try:
+                f.close()
+            except RecordWriteError as e:
+                errors.append(e)
+        if errors:
+            raise errors[0]
 
     def __enter__(self) -> "SessionLog":
         return self
@@ -144,4 +240,5 @@ class SessionLog:
         self.close()
 
 
-__all__ = ["SessionLog", "POSE_COLUMNS", "TELEMETRY_COLUMNS"]
+__all__ = ["SessionLog", "RecordWriteError", "append_record", "open_append", "write_json_file",
+           "POSE_COLUMNS", "TELEMETRY_COLUMNS"]
