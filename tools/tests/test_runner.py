@@ -301,7 +301,7 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     assert p.returncode == 130, stderr
     assert "interrupted" in stderr and "run the same command again" in stderr
     assert lines(out / "U2" / "runs.jsonl")[-1]["outcome"] == "interrupted"
-    # 2) SIGKILL the runner and its simulated device (its process group) mid-trial
+    # 2) SIGKILL the runner mid-trial (its simulator, in a session of its own, dies with it)
     p = subprocess.Popen(_trial_cmd(path, out), env=_env(), stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
