@@ -399,9 +399,10 @@ class DeviceClient:
 
     ``timeout``: seconds to wait for each answer (per request; a stream's per-answer
     progress limit). On creation it sends one 0x00 so the device drops any partial frame
-    (docs/protocol.md), and every write of frames starts with a 0x00 for the same reason. Counters of what the host saw: :attr:`host_bad_frames` (frames
-    the host's parser or decoder rejected), :attr:`device_frames_lost` (gaps in the
-    device's frame numbers), :attr:`frames_received`.
+    (docs/protocol.md), and every write of frames starts with a 0x00 for the same reason.
+    Counters of what the host saw: :attr:`host_bad_frames` (frames the host's parser or
+    decoder rejected), :attr:`device_frames_lost` (gaps in the device's frame numbers),
+    :attr:`frames_received`.
     """
 
     def __init__(self, transport: Transport, timeout: float = DEFAULT_TIMEOUT,
