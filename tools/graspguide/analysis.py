@@ -923,7 +923,9 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """``graspguide analyze`` on its own: ``main(["STUDY", "--out", "DIR"])``."""
-    p = argparse.ArgumentParser(prog="graspguide analyze", description=DESCRIPTION,
+    from .cli import ArgumentParser
+
+    p = ArgumentParser(prog="graspguide analyze", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     _configure(p)
     try:

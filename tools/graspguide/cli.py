@@ -12,9 +12,12 @@ participant's trials of a study protocol (graspguide.runner, docs/study.md). See
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
+import re
+import signal
 import sys
 import time
 from typing import Any, BinaryIO, Dict, Iterator, Optional, TextIO, Tuple, Union
@@ -43,9 +46,11 @@ A bad request is answered with an error line and the stream goes on.
 
 Request fields (anything else is rejected, so a typo is never ignored):
   contacts     required  3 or 4 [x, y, z] in the hand frame: thumb, index, middle
-                         (, palm); any length unit, only differences matter
-  wrench       required  [fx, fy, fz, mx, my, mz] in the object frame (moment about
-                         the contacts' centroid, force x the contacts' length unit)
+                         (, palm); in metres (millimetres with "units": "mm")
+  wrench       required  [fx, fy, fz, mx, my, mz] in the object frame: force in N,
+                         moment about the contacts' centroid in N m (N mm with
+                         "units": "mm"): contacts and moments share a length unit
+  units        "m" (default) | "mm" | "any": that length unit
   policy       "F" (default) | "Fperp"
   mode         "C" (default) | "V"
   constraints  "paper" (default) | "normal" | "none"
@@ -56,6 +61,14 @@ beyond the double range (1e400) is infinite: they reach the core, which answers
 non_finite_input. Booleans and strings are never numbers. A contact count other
 than 3 or 4 is the core's bad_contact_count.
 
+Units are checked, since the core cannot tell them apart (it uses only ratios of
+positions): a hand whose two farthest contacts are less than 5 mm or more than 0.5 m
+apart in the stated unit, or a moment whose lever arm |m| / |f| exceeds 10 hand spans
+(what a moment in N mm given as N m looks like: 1000 times too large), is a
+bad_request that names the likely unit, e.g. "contacts span 77.9423 m ...: looks like
+millimetres; give metres (divide by 1000), or add "units": "mm"". "units": "any"
+skips both checks (synthetic geometry, such as scale tests of the core).
+
 Success:
   {"ok": true, "pwm": [k ints 0..255], "levels": [k], "lambda": [3k],
    "constraints_used": "paper"|"normal"|"none", "relevant": [k bools],
@@ -64,7 +77,8 @@ Error:
   {"ok": false, "error": CODE, "message": "what is wrong and how to fix it"}
   CODE: "bad_json"     the line is not a JSON object (or not UTF-8, or too long)
         "bad_request"  a missing or unknown field, a wrong type or length, an
-                       unknown policy/mode/constraints name
+                       unknown policy/mode/constraints/units name, a hand or a
+                       moment in another unit than stated (see above)
         otherwise the core's status, e.g. "non_finite_input", "bad_contact_count",
         "coincident_contacts", "rank_deficient", "zero_force", "bad_quaternion"
 
@@ -75,9 +89,10 @@ iterations, alpha (levels, lambda, relevant and fallback_mask are not on the wir
 Bad requests get the same codes and messages; compare with --scalar float.
 
 Exit status: 0 when the input ends (even if some requests were bad), 2 for a usage
-error, 130 when interrupted (Ctrl-C; every answer so far is flushed), 1 when the
-reader closes the output pipe, or when the link to the device fails (that request
-is answered with error "link_error" and the reason goes to stderr).
+error, 130 when interrupted (Ctrl-C, SIGTERM or SIGHUP; every answer so far is
+flushed, and a device is sent STOP), 1 when the reader closes the output pipe, or
+when the link to the device fails (that request is answered with error "link_error"
+and the reason goes to stderr).
 """
 
 SOLVE_EPILOG = """\
@@ -214,7 +229,9 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
     if not line.strip():
         return None
     try:
-        kwargs = solver.parse_request(_decode(line, number))
+        obj = _decode(line, number)
+        obj, units = _pop_units(obj)
+        kwargs = _in_metres(solver.parse_request(obj), units)
     except solver.RequestError as e:
         message = e.message
         if not message.startswith("line "):
@@ -234,6 +251,62 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
     if res["status"] != "ok":
         return _error(res["status"], solver.status_message(res["status"]))
     return _success(res)
+
+
+REQUEST_UNITS = ("m", "mm", "any")
+
+
+def _pop_units(obj: Any) -> Tuple[Any, str]:
+    """The request without its "units" field, and that field ("m" by default)."""
+    from .solver import RequestError
+
+    if not isinstance(obj, dict) or "units" not in obj:
+        return obj, "m"
+    obj = dict(obj)
+    units = obj.pop("units")
+    if not isinstance(units, str) or units not in REQUEST_UNITS:
+        raise RequestError("bad_request",
+                           f'field "units" must be "m" (the default), "mm" or "any", got '
+                           f"{json.dumps(units)}")
+    return obj, units
+
+
+def _solve_unit_fix(units: str, sym: Optional[str]) -> str:
+    if sym == "mm":
+        return 'give metres (divide by 1000), or add "units": "mm" (moments in N mm then)'
+    if sym == "cm":
+        return "give metres (divide by 100)"
+    if sym == "m":
+        return 'drop "units": "mm" (metres are the default)'
+    return 'give the contacts in metres, or in millimetres with "units": "mm"'
+
+
+def _in_metres(kw: Dict[str, Any], units: str) -> Dict[str, Any]:
+    """The request's solve() arguments with contacts in metres and moments in N m; a hand
+    that does not span like one in the stated unit, or a moment in another length unit
+    than the contacts, is a bad_request naming the likely unit. Requests the core would
+    refuse anyway (a contact count other than 3 or 4, a non-finite number, all contacts
+    at one point) go on to the core's own answer; "units": "any" skips the checks (the
+    core uses only ratios: synthetic geometry such as its scale tests)."""
+    from .scene import hand_span, hand_span_problem, moment_unit_problem
+    from .solver import RequestError
+
+    contacts, wrench = kw["contacts"], kw["wrench"]
+    if units == "any" or len(contacts) not in (3, 4) or not all(
+            math.isfinite(x) for x in [*(v for c in contacts for v in c), *wrench]):
+        return kw
+    if hand_span(contacts) > 0.0:
+        problem = hand_span_problem(contacts, units, lambda sym: _solve_unit_fix(units, sym))
+        if problem:
+            raise RequestError("bad_request", problem)
+    if units == "mm":
+        contacts = [[v / 1000.0 for v in c] for c in contacts]
+        wrench = list(wrench[:3]) + [v / 1000.0 for v in wrench[3:]]
+        kw = {**kw, "contacts": contacts, "wrench": wrench}
+    problem = moment_unit_problem(contacts, wrench)
+    if problem:
+        raise RequestError("bad_request", problem)
+    return kw
 
 
 def _dumps(obj: Dict[str, Any]) -> str:
@@ -324,6 +397,25 @@ class DeviceEngine:
 # --------------------------------------------------------------------------------------
 # Command line
 # --------------------------------------------------------------------------------------
+_NUM = r"(?:(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?|inf(?:inity)?|nan)"
+# A word that starts with a negative number and goes on as a comma-separated list of
+# numbers: "-1,0,0", "-1e-3", "-.5,2", "-inf".
+_NEGATIVE_VALUE = re.compile(rf"-{_NUM}(?:\s*,\s*[-+]?{_NUM})*", re.IGNORECASE)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse takes a word that starts with "-" for an option unless it is a plain
+    negative number, so `--wrench -1,0,0` failed with "expected one argument". Here every
+    negative number or list of numbers is a value (no option of these commands looks like
+    one); the option's type then checks it. Subparsers are made of this class too."""
+
+    def _parse_optional(self, arg_string):
+        if (_NEGATIVE_VALUE.fullmatch(arg_string)
+                and arg_string not in self._option_string_actions):
+            return None
+        return super()._parse_optional(arg_string)
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -335,7 +427,7 @@ def _positive_int(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="graspguide",
         description="GraspGuide host tools: hand guidance by a grasping metaphor "
                     "(Algorithm 1 from the C++ core in lib/graspguide).",
@@ -418,6 +510,27 @@ def _add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
                    help=f"baud rate (default {DEFAULT_BAUDRATE})")
     p.add_argument("--timeout", type=_positive_float, default=1.0, metavar="S",
                    help="seconds to wait for each answer of the device (default 1)")
+
+
+@contextlib.contextmanager
+def signals_interrupt():
+    """SIGTERM and SIGHUP (a `kill`, a closed terminal, a supervisor stopping the run)
+    raise KeyboardInterrupt in the main thread, as Ctrl-C does, so every command leaves
+    through the same path: STOP sent, logs closed, exit status 130. Only the first one
+    interrupts: a second signal must not cut the STOP on the way out short."""
+    fired = []
+
+    def interrupt(signum, frame):
+        if not fired:
+            fired.append(signum)
+            raise KeyboardInterrupt
+
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def _connect(args):
@@ -559,6 +672,7 @@ def _check_engine_options(args) -> None:
                      "--max-iterations")
 
 
+@signals_interrupt()   # with --engine device: a request in flight still ends with STOP
 def _cmd_solve(args) -> int:
     _check_engine_options(args)
     inp, out = _open_streams(args.command_parser, args)
@@ -614,7 +728,7 @@ stream the poses of --source at the source's rate (real time; with --port sim
 --virtual-clock as fast as the link allows, the device's clock following the poses'
 times) while showing the guidance error, the motors' PWM, the rate and dropped frames.
 Stops at the TRIAL_RESULT or at the end of the source, and always sends STOP on the way
-out (also on Ctrl-C or an error).
+out (also on Ctrl-C, SIGTERM, SIGHUP or an error).
 
 sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker the
          values are a tracker's raw export and are converted),
@@ -627,11 +741,12 @@ STREAM_EPILOG = """\
 examples:
   graspguide stream --port sim --virtual-clock --scene tools/examples/scene_paper_3.toml \\
       --wrench 0.3,-1.2,-0.8 --source synthetic --log runs/s1
-  graspguide stream --port /dev/ttyACM0 --scene my_scene.toml --wrench 0,0,-2 \\
+  graspguide stream --port /dev/ttyACM0 --scene my_scene.toml --wrench -1,0,-2 \\
       --source replay:poses.csv --trial-id 3
 
 exit status: 0 when the trial ended (success or failure) or the source ended, 1 on a link
-error, 2 on a usage error (bad scene, wrench or source), 130 on Ctrl-C."""
+error, 2 on a usage error (bad scene, wrench or source), 130 on Ctrl-C, SIGTERM or SIGHUP
+(STOP is sent and the log's end record written first)."""
 
 
 def _wrench(text: str):
@@ -654,7 +769,10 @@ def _add_stream_parser(sub) -> None:
     p.add_argument("--scene", required=True, metavar="SCENE.toml",
                    help="scene file (tools/examples/scene_paper_3.toml shows the format)")
     p.add_argument("--wrench", required=True, type=_wrench, metavar="FX,FY,FZ[,MX,MY,MZ]",
-                   help="the virtual object's wrench in the object frame (N, N m)")
+                   help="the virtual object's wrench in the object frame: force in N, "
+                        "moment about the contacts' centroid in N m; negative values as "
+                        "they are: --wrench -1,0,0 (a moment of more than 10 hand spans "
+                        "times the force is refused: it looks like N mm)")
     p.add_argument("--source", required=True, metavar="SOURCE",
                    help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0] or "
                         "plugin:MODULE:CLASS[:ARG]")
@@ -834,8 +952,9 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
             "last_error_deg": None if last_tel is None else last_tel.error_deg}
 
 
+@signals_interrupt()   # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
 def _cmd_stream(args) -> int:
-    from .scene import SceneError, config_hash, load_scene
+    from .scene import SceneError, config_hash, load_scene, moment_unit_problem
     from .session_log import SessionLog
     from .sources import SourceError, SyntheticSource, open_source
     from .transport import SIM_PORT as _SIM, open_port
@@ -847,6 +966,9 @@ def _cmd_stream(args) -> int:
         parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
     try:
         scene = load_scene(args.scene)
+        problem = moment_unit_problem(scene.contacts, args.wrench)
+        if problem:
+            raise SceneError(f"--wrench with {args.scene}: {problem}")
         source = open_source(args.source, tracker=args.tracker)
         if isinstance(source, SyntheticSource):
             source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints,
@@ -865,6 +987,7 @@ def _cmd_stream(args) -> int:
     log = view = None
     code = EXIT_OK
     summary = None
+    stop_acked = False
     try:
         hello = client.hello()
         config = {"scene": scene.to_dict(), "wrench": args.wrench}
@@ -891,6 +1014,7 @@ def _cmd_stream(args) -> int:
             view.close()
         try:
             client.stop()
+            stop_acked = True
         except LinkError as e:
             print(f"graspguide stream: STOP failed: {e}", file=sys.stderr)
             code = code or EXIT_FAILURE
@@ -898,7 +1022,7 @@ def _cmd_stream(args) -> int:
             pass
         transport.close()
         if log is not None:
-            end = {"event": "end", "exit_code": code}
+            end = {"event": "end", "exit_code": code, "stop_acknowledged": stop_acked}
             if summary is not None:
                 end.update({k: v for k, v in summary.items() if k != "trial_result"})
             log.result(end)
@@ -979,9 +1103,8 @@ def _add_trial_parser(sub) -> None:
     p.set_defaults(handler=_cmd_trial, command_parser=p)
 
 
+@signals_interrupt()   # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def _cmd_trial(args) -> int:
-    import signal
-
     from .protocol_file import ProtocolFileError, load_protocol, participant_number
     from .runner import (Progress, RunnerError, StudyRunner, load_tlx_file,
                          open_runner_source, summary_lines)
@@ -1008,11 +1131,6 @@ def _cmd_trial(args) -> int:
     virtual_clock = args.port == _SIM and source.simulated and not source.live
     kwargs = {"virtual_clock": True} if virtual_clock else {}
 
-    # SIGTERM (and SIGHUP) end the run like Ctrl-C: STOP, then exit; trials are kept.
-    def _interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
     transport = None
     code = EXIT_OK
     runner = None
@@ -1058,8 +1176,6 @@ def _cmd_trial(args) -> int:
     finally:
         if transport is not None:
             transport.close()
-        for s, h in old.items():
-            signal.signal(s, h)
     return code
 
 

@@ -689,7 +689,9 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """`graspguide sweep` on its own (``python -m graspguide.sweep ...``)."""
-    parser = argparse.ArgumentParser(prog="graspguide sweep", description=DESCRIPTION,
+    from .cli import ArgumentParser
+
+    parser = ArgumentParser(prog="graspguide sweep", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(parser)
     argv = list(sys.argv[1:] if argv is None else argv)

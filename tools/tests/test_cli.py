@@ -3,6 +3,7 @@ independent float64 reference (test/data/known_answers.json)."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -135,7 +136,12 @@ def test_example_file():
     combos = set()
     for line, ans in zip(lines, answers):
         req = json.loads(line)
-        if set(req) <= set(solver.REQUEST_FIELDS):
+        if set(req) <= set(solver.REQUEST_FIELDS) | {"units"}:
+            if "units" not in req and max(abs(x) for c in req["contacts"] for x in c) > 1:
+                # contacts in mm without "units": "mm": refused with the likely unit
+                assert ans["error"] == "bad_request", ans
+                assert "looks like millimetres" in ans["message"], ans
+                continue
             assert ans["ok"] is True, ans
             ks.add(len(req["contacts"]))
             combos.add((req.get("policy", "F"), req.get("mode", "C")))
@@ -288,6 +294,22 @@ BAD_CASES = [
      "rank_deficient", []),
     ("bad_axis", _req(y_axis=[0, 0, 0]).encode(), "bad_axis", []),
     ("bad_quaternion", _req(orientation=[0, 0, 0, 0]).encode(), "bad_quaternion", []),
+    ("units_value", _req(units="cm").encode(), "bad_request",
+     ['"units"', '"m"', '"mm"', '"any"', '"cm"']),
+    ("units_type", _req(units=1).encode(), "bad_request", ['"units"', '"mm"']),
+    ("contacts_in_mm", _req(contacts=[[x * 1000 for x in c] for c in HAND3]).encode(),
+     "bad_request", ["contacts span 77.9", "looks like millimetres", "give metres",
+                     '"units": "mm"']),
+    ("contacts_in_cm", _req(contacts=[[x * 100 for x in c] for c in HAND3]).encode(),
+     "bad_request", ["looks like centimetres", "divide by 100"]),
+    ("contacts_m_said_mm", _req(units="mm").encode(), "bad_request",
+     ["contacts span 0.0779", "looks like metres", 'drop "units": "mm"']),
+    ("hand_of_1_mm", _req(contacts=[[x / 78 for x in c] for c in HAND3]).encode(),
+     "bad_request", ["contacts span 0.000999", "5 mm to 0.5 m", "check the contact"]),
+    ("moment_in_N_mm", _req(wrench=[0.3, -1.2, -0.8, 5, 0, -2]).encode(), "bad_request",
+     ["moment", "lever arm", "looks like N mm", "divide by 1000"]),
+    ("moment_implausible", _req(wrench=[0.3, -1.2, -0.8, 5000, 0, -2]).encode(),
+     "bad_request", ["moment", "check the moment"]),
 ]
 
 
@@ -316,6 +338,125 @@ def test_bad_input(case, bad_case_answers):
     if code not in ("bad_json", "bad_request"):
         assert bad["message"] == solver.status_message(code)
     assert good["ok"] is True, good  # the stream goes on
+
+
+def test_units_mm_gives_the_metre_answer_and_any_skips_the_checks():
+    moment = [0.3, -1.2, -0.8, 0.005, 0.0, -0.002]
+    metres = _req(wrench=moment, mode="V")
+    mm = _req(contacts=[[x * 1000 for x in c] for c in HAND3],
+              wrench=moment[:3] + [x * 1000 for x in moment[3:]], mode="V", units="mm")
+    default = _req(wrench=moment, mode="V", units="m")
+    huge = _req(contacts=[[x * 200 for x in c] for c in HAND3], units="any")
+    tiny = _req(contacts=[[x * 2e-3 for x in c] for c in HAND3], units="any")
+    a_m, a_mm, a_def, a_huge, a_tiny = solve_lines([metres, mm, default, huge, tiny])
+    assert a_m["ok"] and a_mm["ok"] and a_m == a_def
+    assert a_mm["pwm"] == a_m["pwm"] and a_mm["relevant"] == a_m["relevant"]
+    assert np.allclose(a_mm["lambda"], a_m["lambda"], rtol=0, atol=1e-12)
+    assert a_huge["ok"] and a_tiny["ok"]      # the core is scale-free: only ratios count
+    assert a_huge["pwm"] == a_tiny["pwm"] == solve_lines([GOOD_LINE])[0]["pwm"]
+
+
+def test_hands_from_5_mm_to_half_a_metre_are_accepted():
+    span = 0.0779423                                     # HAND3's two farthest contacts
+    for target in (0.0051, 0.499):
+        k = target / span
+        ans = solve_lines([_req(contacts=[[x * k for x in c] for c in HAND3],
+                                wrench=[0.3, -1.2, -0.8, 0, 0, 0])])[0]
+        assert ans["ok"] is True, (target, ans)
+
+
+# --------------------------------------------------------------------------------------
+# Negative numbers as option values, in every subcommand
+# --------------------------------------------------------------------------------------
+def _parse(argv, capsys):
+    from graspguide import cli
+
+    try:
+        return cli.build_parser().parse_args(argv), ""
+    except SystemExit:
+        return None, capsys.readouterr().err
+
+
+_REQUIRED = {
+    "stream": ["--port", "sim", "--scene", "s.toml", "--wrench", "1,0,0", "--source", "x"],
+    "trial": ["--protocol", "p.toml", "--participant", "U1", "--port", "sim", "--source", "x"],
+    "analyze": ["study"], "info": ["--port", "sim"],
+}
+
+
+def _value_options():
+    """(command, option) for every option of every subcommand that takes a value."""
+    from graspguide import cli
+
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    out = []
+    for name, p in sub.choices.items():
+        for action in p._actions:
+            if action.option_strings and action.nargs is None and not isinstance(
+                    action, (argparse._HelpAction, argparse._VersionAction)):
+                out.append((name, action.option_strings[0]))
+    return out
+
+
+@pytest.mark.parametrize("command,option", _value_options())
+@pytest.mark.parametrize("value", ["-1", "-1,0,0", "-1e-3", "-.5,2", "-inf"])
+def test_every_option_takes_a_negative_value(command, option, value, capsys):
+    """A negative number or list reaches the option's own check: never argparse's
+    "expected one argument" (it took "-1,0,0" for an option)."""
+    required = list(_REQUIRED.get(command, []))
+    if option in required:
+        i = required.index(option)
+        del required[i:i + 2]
+    args, err = _parse([command, *required, option, value], capsys)
+    assert "expected one argument" not in err, err
+    if args is None:              # refused by the option's type: named, with its range
+        assert f"argument {option}" in err, err
+
+
+@pytest.mark.parametrize("value,expect", [
+    ("-1,0,0", [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+    ("-0.3,-1.2,-0.8", [-0.3, -1.2, -0.8, 0.0, 0.0, 0.0]),
+    ("-1e-1,2,-3,-4e-3,0,0", [-0.1, 2.0, -3.0, -0.004, 0.0, 0.0]),
+])
+def test_stream_wrench_accepts_negative_values(value, expect, capsys):
+    args, err = _parse(["stream", "--port", "sim", "--scene", "s.toml", "--wrench", value,
+                        "--source", "synthetic"], capsys)
+    assert args is not None, err
+    assert args.wrench == expect
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-inf,0,0"],
+     ["--wrench", "finite"]),
+    (["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-1,0"],
+     ["--wrench", "3 or 6"]),
+    (["solve", "--timeout", "-1e-3"], ["--timeout", "(0, 3600]"]),
+    (["solve", "--max-iterations", "-1"], ["--max-iterations", "between 1 and"]),
+    (["demo", "--jobs", "-2"], ["--jobs", "between 1 and"]),
+    (["sweep", "--participants", "-1,2"], ["--participants", "not an integer"]),
+])
+def test_negative_values_get_the_options_own_message(argv, words, capsys):
+    args, err = _parse(argv, capsys)
+    assert args is None
+    for w in words:
+        assert w in err, (w, err)
+
+
+def test_sweep_lists_and_analyze_main_take_negative_values(capsys):
+    from graspguide import analysis, sweep
+
+    args, err = _parse(["sweep", "--thresholds", "-2,3", "--rates", "-30"], capsys)
+    assert (args.thresholds, args.rates) == ("-2,3", "-30"), err
+    assert sweep.main(["--thresholds", "-2,3"]) == 2        # then the range check says why
+    assert "--thresholds" in capsys.readouterr().err
+    assert analysis.main(["-1,0"]) == 1                       # a folder named "-1,0"
+    assert "-1,0" in capsys.readouterr().err
+
+
+def test_help_shows_the_negative_wrench_form():
+    text = run_cli(["stream", "--help"], b"").stdout.decode()
+    assert "--wrench -1,0,0" in " ".join(text.split())
 
 
 def test_blank_lines_crlf_bom_and_missing_final_newline():
@@ -405,7 +546,9 @@ def _case_names():
 def known_answers():
     """(cases, double answers, float answers): every case through one CLI per scalar."""
     cases = _load_known_answers()
-    lines = _known_answer_lines(cases)
+    # "units": "any": the cases include hands of 0.1 mm and 10 m (the core's scale tests)
+    lines = [json.dumps({**json.loads(ln), "units": "any"}, allow_nan=True)
+             for ln in _known_answer_lines(cases)]
     double = solve_lines(lines, "--scalar", "double")
     single = solve_lines(lines, "--scalar", "float")
     assert len(double) == len(single) == len(cases)
