@@ -62,6 +62,14 @@ def test_synthetic_trial_succeeds_and_log_is_consistent(tmp_path, scene_file):
     assert len(poses) < 2401
 
 
+def test_negative_wrench_runs_a_trial():
+    """`--wrench -1,0,0` was read by argparse as an option ("expected one argument")."""
+    p = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", "-1,0,-0.5",
+             "--source", "synthetic:rate=240,duration=10,seed=0"])
+    assert p.returncode == 0, p.stderr
+    assert "trial 1: success" in p.stdout, p.stdout
+
+
 def test_source_ending_first_stops_and_exits_0(tmp_path):
     csv_path = tmp_path / "identity.csv"   # identity: 57 degrees off, never succeeds
     csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i * 0.01},1,0,0,0\n"
@@ -131,6 +139,8 @@ def test_run_stream_then_stop_leaves_device_idle():
      "3 or 6"),
     (["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "synthetic",
       "--tracker", "vicon"], 2, "only applies to replay"),
+    (["--port", "sim", "--scene", SCENE3, "--wrench", "-0.3,-1.2,-0.8,5,0,-2", "--source",
+      "synthetic"], 2, "looks like N mm"),
 ])
 def test_errors_and_exit_codes(args, code, words):
     p = run(args)
@@ -163,3 +173,78 @@ def test_ctrl_c_stops_and_keeps_the_log(tmp_path):
     poses = list(csv.DictReader(open(folder / "poses.csv")))
     tel = list(csv.DictReader(open(folder / "telemetry.csv")))
     assert 10 <= len(tel) <= len(poses) <= len(tel) + 1
+
+
+# --------------------------------------------------------------------------------------
+# SIGTERM and SIGHUP: like Ctrl-C (STOP, the end record, exit 130)
+# --------------------------------------------------------------------------------------
+def _start_streaming(port, folder, extra=()):
+    import signal  # noqa: F401  (the callers send it)
+
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    p = subprocess.Popen(CLI + ["--port", port, "--scene", SCENE3, "--wrench", WRENCH,
+                                "--source", "synthetic:rate=100,duration=30", "--log",
+                                str(folder), *extra],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = p.stdout.readline()
+        assert line.startswith("t="), (line, p.poll())   # streaming in real time
+    except BaseException:
+        p.kill()
+        p.wait()
+        raise
+    return p
+
+
+def _signal_and_wait(p, sig):
+    import time
+
+    time.sleep(0.3)
+    p.send_signal(sig)
+    try:
+        return p.communicate(timeout=15)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_stop_and_keep_the_log(tmp_path, signame):
+    import signal
+
+    folder = tmp_path / "log"
+    p = _start_streaming("sim", folder)
+    out, err = _signal_and_wait(p, getattr(signal, signame))
+    assert p.returncode == 130 and "interrupted" in err, (p.returncode, err)
+    assert "STOP failed" not in err, err
+    end = [json.loads(line) for line in open(folder / "results.jsonl")][-1]
+    assert end["event"] == "end" and end["exit_code"] == 130, end
+    assert end["stop_acknowledged"] is True, end
+    tel = list(csv.DictReader(open(folder / "telemetry.csv")))
+    assert len(tel) >= 10
+
+
+def test_sigterm_stop_reaches_the_device(tmp_path):
+    """The device outlives the host here (a simulated device the test holds, as a board
+    would), with its POSE watchdog out of the way: after SIGTERM the device is STOPPED
+    and its motor trace ends with every motor off, which only STOP can do."""
+    import signal
+
+    from graspguide import device as gd, transport as gt
+    from graspguide.protocol import messages as m
+
+    trace = tmp_path / "motors.csv"
+    with gt.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:
+        p = _start_streaming(dev.pty_path, tmp_path / "log")
+        _, err = _signal_and_wait(p, signal.SIGTERM)
+        assert p.returncode == 130, (p.returncode, err)
+        client = gd.DeviceClient(dev, timeout=2.0)
+        client.drain(0.1)
+        assert client.status().state is m.DeviceState.STOPPED
+        # read while the device runs: its exit would switch the motors off by itself
+        rows = list(csv.DictReader(open(trace)))
+    pwm = [[int(r[f"pwm{i}"]) for i in range(4)] for r in rows]
+    assert any(any(row) for row in pwm), "the motors never ran: nothing was tested"
+    assert pwm[-1] == [0, 0, 0, 0]
