@@ -266,6 +266,10 @@ class ReplaySource(Source):
                                       f"unit length (|q| = {n:.6g})")
                 last_t = t
                 contacts = [vals[5 + 3 * i: 8 + 3 * i] for i in range(k)] if k else None
+                if contacts is not None:
+                    problem = _contact_units_problem(contacts, convention)
+                    if problem:
+                        raise SourceError(f"{path}:{line}: {problem}")
                 if convention is not WORLD:
                     q, contacts = convention.convert(q, contacts)
                 samples.append((t, tuple(q), contacts))  # type: ignore[arg-type]
@@ -321,12 +325,38 @@ class TrackerAdapter(Source):
                 raise SourceError(f"{self.name}: the tracker gave a non-finite sample "
                                   f"t={t} q={list(q)}")
             t0 = float(t) if t0 is None else t0
+            if positions is not None:
+                problem = _contact_units_problem(positions, self.convention, adapter=True)
+                if problem:
+                    raise SourceError(f"{self.name}: the tracker's contacts at t={t}: "
+                                      f"{problem}")
             wxyz, contacts = self.convention.convert(q, positions)
             yield (float(t) - t0, wxyz, contacts)
 
     def describe(self):
         return {"source": self.name, "rate_hz": self.rate_hz,
                 "tracker_convention": self.convention.describe()}
+
+
+def _contact_units_problem(positions, convention: TrackerConvention,
+                           adapter: bool = False) -> Optional[str]:
+    """What is wrong with a pose's contacts in the convention's unit (a hand spans 5 mm to
+    0.5 m), or None. All contacts at one point are left to the device (coincident)."""
+    from .scene import hand_span, hand_span_problem
+
+    if hand_span(positions) == 0.0:
+        return None
+
+    def fix(sym: Optional[str]) -> str:
+        if sym not in ("m", "mm"):
+            return f"the positions are read as {convention.units}; check their unit"
+        c = convention
+        if adapter:
+            return (f"the adapter's convention says units {c.units!r}: declare "
+                    f"TrackerConvention(units={sym!r}, ...)")
+        return (f"the positions are read as {c.units}: convert them, or replay with "
+                f"--tracker {sym}/{c.up_axis}/{c.handedness}/{c.quat_order}")
+    return hand_span_problem(positions, convention.units, fix)
 
 
 def _is_float(text: str) -> bool:
