@@ -432,10 +432,18 @@ class Statistics:
     def n(self) -> int:
         return int(len(self.retained))
 
+    @property
+    def inferential(self) -> bool:
+        """False when too few participants remain for the ANOVA and the t-tests (a pilot):
+        the tables, the participant means and Figure 4 are there, the tests are not."""
+        return self.anova is not None
+
     def anova_line(self) -> str:
         a, sm = self.anova, self.anova_statsmodels
         removed = (f"{len(self.removed)} removed as boxplot outliers ({', '.join(self.removed)})"
                    if self.removed else "none removed as outliers")
+        if a is None:
+            return f"Inferential statistics not computed: {self.notes[0]}."
         return (f"One-way repeated-measures ANOVA on sqrt(completion time), n = {self.n} "
                 f"participants ({removed}): F({a['df1']:g}, {a['df2']:g}) = {a['F']:.3f}, "
                 f"p = {_p(a['p'])}; statsmodels AnovaRM F = {sm['F']:.3f}, p = {_p(sm['p'])}")
@@ -470,25 +478,42 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     if means.isna().any().any():
         raise AnalysisError("participant means contain missing values")
     notes: List[str] = []
-    if len(means) < 2:
-        raise AnalysisError(
-            f"the repeated-measures ANOVA needs at least 2 participants with all four "
-            f"modalities; got {len(means)} ({', '.join(map(str, means.index)) or 'none'}): "
-            "analyse more participants")
+    if len(means) == 0:
+        raise AnalysisError("no participant has trials of all four modalities to analyse")
     if remove_outliers:
         outliers, fences = boxplot_outliers(means)
     else:
         outliers, fences = [], {}
     removed = sorted({p for p, _, _ in outliers}, key=list(means.index).index)
     retained = means.drop(index=removed)
-    if len(retained) < 2:
-        raise AnalysisError(
-            f"the repeated-measures ANOVA needs at least 2 participants; after removing the "
-            f"boxplot outliers ({', '.join(removed)}) {len(retained)} remain(s): analyse more "
-            "participants, or keep the outliers (--keep-outliers)")
     if (retained < 0).any().any():
         raise AnalysisError("negative completion times cannot be square-root transformed")
     transformed = np.sqrt(retained)
+    if len(retained) < 2:
+        # A pilot (or outlier removal) leaves one participant: no within-subject variance,
+        # so no test; the descriptive results stand on their own.
+        if removed:
+            why = (f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
+                   f"participants; after removing the boxplot outliers ({', '.join(removed)}) "
+                   f"{len(retained)} remains: analyse more participants, or keep the "
+                   "outliers (--keep-outliers)")
+        else:
+            why = (f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
+                   f"participants with all four modalities; this study has {len(means)} "
+                   f"({', '.join(map(str, means.index))}), e.g. a pilot: Tables I-III, the "
+                   "participant means and Figure 4 are descriptive only")
+        nan_frame = pd.DataFrame({"W": math.nan, "pval": math.nan, "normal": False},
+                                 index=pd.Index(list(MODALITIES), name="modality"))
+        return Statistics(
+            means=means, outliers=outliers, fences=fences, removed=removed,
+            retained=retained, transformed=transformed, normality=nan_frame,
+            sphericity={"W": math.nan, "chi2": math.nan,
+                        "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
+                        "pval": math.nan, "pval_second_order": math.nan, "spher": None},
+            anova=None, anova_statsmodels=None,
+            pairwise=pd.DataFrame(columns=["A", "B", "T", "dof", "p_unc", "p_bonf",
+                                           "mean_A_s", "mean_B_s", "diff_s"]),
+            notes=[why])
     long = _long(transformed)
     n = len(retained)
 
@@ -612,8 +637,12 @@ def figure4(stats: Statistics, out_dir: os.PathLike, simulated: bool = False,
         level += step
     ax.set_ylim(0, level + 0.5 * step)
     a = stats.anova
-    title = (f"RM ANOVA F({a['df1']:g}, {a['df2']:g}) = {a['F']:.2f}, p = {_p(a['p'])}; "
-             f"n = {stats.n}; Bonferroni p")
+    if a is None:
+        title = (f"n = {stats.n}: descriptive only (the tests need at least 2 "
+                 "participants)")
+    else:
+        title = (f"RM ANOVA F({a['df1']:g}, {a['df2']:g}) = {a['F']:.2f}, p = {_p(a['p'])}; "
+                 f"n = {stats.n}; Bonferroni p")
     if simulated:
         title = SIMULATED_BANNER + "\n" + title
     ax.set_title(title, fontsize=9, color="black")
@@ -759,42 +788,46 @@ def report_markdown(res: Result, figure_names: Sequence[str] = ("figure4.png",
             out += ["- none", ""]
     else:
         out += ["Outlier removal was switched off (--keep-outliers).", ""]
-    out += ["Data are square-root transformed before the tests.", "",
-            "**Shapiro–Wilk** per modality (sqrt data):", "",
-            _md_table(["modality", "W", "p", "normal (p > 0.05)"],
-                      [[m, f"{st.normality.loc[m, 'W']:.4f}", _p(st.normality.loc[m, 'pval']),
-                        "yes" if st.normality.loc[m, 'normal'] else "no"]
-                       for m in MODALITIES]), ""]
-    sp = st.sphericity
-    if sp["spher"] is None:
-        out += [f"**Mauchly's test of sphericity**: not computed (fewer than "
-                f"{len(MODALITIES)} participants).", ""]
+    if not st.inferential:
+        out += [f"**Inferential statistics not computed**: {st.notes[0]}.", ""]
     else:
-        out += [f"**Mauchly's test of sphericity**: W = {sp['W']:.4f}, "
-                f"χ²({sp['dof']}) = {sp['chi2']:.3f}, p = {_p(sp['pval'])} (χ² "
-                f"approximation, as the paper reports; with R's second-order term p = "
-                f"{_p(sp['pval_second_order'])}) — sphericity "
-                f"{'not violated' if sp['spher'] else 'violated (see the Greenhouse–Geisser p)'}"
-                ".", ""]
-    a, sm = st.anova, st.anova_statsmodels
-    out += [f"**One-way repeated-measures ANOVA** (pingouin): F({a['df1']:g}, {a['df2']:g}) = "
-            f"{a['F']:.3f}, p = {_p(a['p'])}; Greenhouse–Geisser ε = {a['eps_gg']:.3f}, "
-            f"p(GG) = {_p(a['p_gg'])}; generalized η² = {a['ng2']:.3f}.  ",
-            f"Cross-check (statsmodels AnovaRM): F = {sm['F']:.6f}, p = {sm['p']:.6g} "
-            f"(pingouin F = {a['F']:.6f}, p = {a['p']:.6g}; |ΔF| = "
-            f"{abs(a['F'] - sm['F']):.2g}).", ""]
-    out += ["**Pairwise paired t-tests**, Bonferroni-corrected (6 comparisons, "
-            "p_bonf = min(1, 6 p)); differences of the means in seconds:", "",
-            _md_table(["A", "B", "mean A [s]", "mean B [s]", "A − B [s]", "t", "df", "p",
-                       "p (Bonferroni)"],
-                      [[r.A, r.B, f"{r.mean_A_s:.2f}", f"{r.mean_B_s:.2f}", f"{r.diff_s:.2f}",
-                        f"{r.T:.3f}", f"{r.dof:g}", _p(r.p_unc), _p(r.p_bonf)]
-                       for r in st.pairwise.itertuples(index=False)]), ""]
-    for note in st.notes:
-        out += [f"Note: {note}.", ""]
+        out += ["Data are square-root transformed before the tests.", "",
+                "**Shapiro–Wilk** per modality (sqrt data):", "",
+                _md_table(["modality", "W", "p", "normal (p > 0.05)"],
+                          [[m, f"{st.normality.loc[m, 'W']:.4f}", _p(st.normality.loc[m, 'pval']),
+                            "yes" if st.normality.loc[m, 'normal'] else "no"]
+                           for m in MODALITIES]), ""]
+        sp = st.sphericity
+        if sp["spher"] is None:
+            out += [f"**Mauchly's test of sphericity**: not computed (fewer than "
+                    f"{len(MODALITIES)} participants).", ""]
+        else:
+            out += [f"**Mauchly's test of sphericity**: W = {sp['W']:.4f}, "
+                    f"χ²({sp['dof']}) = {sp['chi2']:.3f}, p = {_p(sp['pval'])} (χ² "
+                    f"approximation, as the paper reports; with R's second-order term p = "
+                    f"{_p(sp['pval_second_order'])}) — sphericity "
+                    + ("not violated." if sp["spher"]
+                       else "violated (see the Greenhouse–Geisser p)."), ""]
+        a, sm = st.anova, st.anova_statsmodels
+        out += [f"**One-way repeated-measures ANOVA** (pingouin): F({a['df1']:g}, {a['df2']:g}) = "
+                f"{a['F']:.3f}, p = {_p(a['p'])}; Greenhouse–Geisser ε = {a['eps_gg']:.3f}, "
+                f"p(GG) = {_p(a['p_gg'])}; generalized η² = {a['ng2']:.3f}.  ",
+                f"Cross-check (statsmodels AnovaRM): F = {sm['F']:.6f}, p = {sm['p']:.6g} "
+                f"(pingouin F = {a['F']:.6f}, p = {a['p']:.6g}; |ΔF| = "
+                f"{abs(a['F'] - sm['F']):.2g}).", ""]
+        out += ["**Pairwise paired t-tests**, Bonferroni-corrected (6 comparisons, "
+                "p_bonf = min(1, 6 p)); differences of the means in seconds:", "",
+                _md_table(["A", "B", "mean A [s]", "mean B [s]", "A − B [s]", "t", "df", "p",
+                           "p (Bonferroni)"],
+                          [[r.A, r.B, f"{r.mean_A_s:.2f}", f"{r.mean_B_s:.2f}", f"{r.diff_s:.2f}",
+                            f"{r.T:.3f}", f"{r.dof:g}", _p(r.p_unc), _p(r.p_bonf)]
+                           for r in st.pairwise.itertuples(index=False)]), ""]
+        for note in st.notes:
+            out += [f"Note: {note}.", ""]
     out += ["## Figure 4", "",
             "Mean ± SD of the participant means per modality (after outlier removal), with "
-            "the Bonferroni-corrected p-value of every pair.", ""]
+            "the Bonferroni-corrected p-value of every pair." if st.inferential else
+            f"The participant means per modality (n = {st.n}: no SD, no p-values).", ""]
     if figure_names:
         out += [f"![Figure 4]({figure_names[0]})", "",
                 "Files: " + ", ".join(f"`{n}`" for n in figure_names), ""]
@@ -880,7 +913,10 @@ test, one-way repeated-measures ANOVA and Bonferroni-corrected paired t-tests; F
 DIR is a study folder (one folder per participant, each with trials.jsonl and
 tlx.jsonl) or a participant folder; give several to pool them. Prints Tables I-II and
 the ANOVA; writes report.md, figure4.png, figure4.svg and CSV tables to --out.
-Simulated records make the report and the output say SIMULATED DATA.
+Simulated records make the report and the output say SIMULATED DATA. With a single
+participant (a pilot), or a single one left after outlier removal, the tables, the
+participant means and Figure 4 are written and the output says that the inferential
+statistics (ANOVA, t-tests) need at least 2 participants.
 
 Exit status: 0 done, 1 bad or insufficient data (the message says what and where),
 2 usage error.

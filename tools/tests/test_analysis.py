@@ -434,13 +434,25 @@ def test_error_participant_missing_a_modality_says_which(tmp_path):
     assert "all four modalities" in msg
 
 
-def test_error_fewer_than_two_participants(tmp_path):
-    make_study(tmp_path / "S", n=1)
-    msg = _error([tmp_path / "S"])
-    assert "needs at least 2 participants" in msg and "got 1" in msg
+def test_one_participant_gives_tables_and_figure_and_says_why_no_tests(tmp_path, capsys):
+    """A pilot: Tables I-III, the means and Figure 4; the tests need 2 participants."""
+    trials, _ = make_study(tmp_path / "S", n=1)
+    code = A.main([str(tmp_path / "S"), "--out", str(tmp_path / "out")])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "Table I" in out and "Table II" in out
+    assert "need at least 2 participants" in out and "(U1)" in out
+    res = A.analyze([tmp_path / "S"])
+    assert not res.stats.inferential and res.stats.n == 1
+    analysed = [t for t in trials if not t["familiarization"]]
+    assert int(res.table1["trials"].sum()) == len(analysed)
+    for name in ("figure4.png", "figure4.svg", "table1.csv", "table2.csv", "report.md"):
+        assert (tmp_path / "out" / name).stat().st_size > 0, name
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "Inferential statistics not computed" in report and "ANOVA** (pingouin)" not in report
 
 
-def test_error_outlier_removal_leaves_too_few():
+def test_outlier_removal_leaving_one_participant_says_so():
     """Participant j is the outlier of modality j (j = 0..2): three rows go, one stays."""
     import pandas as pd
 
@@ -451,11 +463,11 @@ def test_error_outlier_removal_leaves_too_few():
     for j in range(3):
         vals[j, j] = 100.0
     wide = pd.DataFrame(vals, index=["P0", "P1", "P2", "P3"], columns=ORDER)
-    with pytest.raises(A.AnalysisError) as e:
-        A.paper_statistics(wide)
-    msg = str(e.value)
-    assert "needs at least 2 participants" in msg and "P0, P1, P2" in msg
-    assert "--keep-outliers" in msg
+    st = A.paper_statistics(wide)
+    assert st.removed == ["P0", "P1", "P2"] and st.n == 1 and not st.inferential
+    line = st.anova_line()
+    assert "need at least 2 participants" in line and "P0, P1, P2" in line
+    assert "--keep-outliers" in line
     assert A.paper_statistics(wide, remove_outliers=False).n == 4
 
 
@@ -568,3 +580,38 @@ def test_cli_error_goes_to_stderr_with_exit_1(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("graspguide analyze: error:") and "no such file" in err
     assert A.main([]) == 2
+
+
+def test_pilot_of_one_real_participant_run_is_analysed(tmp_path):
+    """`graspguide trial` runs the paper's protocol for one virtual participant (100 trials,
+    the simulated device on its virtual clock), then `graspguide analyze` on that folder:
+    exit 0, Tables I-II, Figure 4 and why there are no tests (it exited 1 before)."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import REPO_ROOT, subprocess_env
+
+    study = tmp_path / "pilot"
+    run = subprocess.run([sys.executable, "-m", "graspguide", "trial", "--protocol",
+                          os.path.join(REPO_ROOT, "protocols", "paper.toml"), "--participant",
+                          "U1", "--port", "sim", "--source", "participant", "--out",
+                          str(study)], capture_output=True, text=True, timeout=600,
+                         env=subprocess_env(), cwd=REPO_ROOT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    lines = (study / "U1" / "trials.jsonl").read_text().splitlines()
+    assert len(lines) == 100
+    an = subprocess.run([sys.executable, "-m", "graspguide", "analyze", str(study)],
+                        capture_output=True, text=True, timeout=300, env=subprocess_env(),
+                        cwd=REPO_ROOT)
+    assert an.returncode == 0, an.stderr
+    out = an.stdout
+    assert "Table I: successfully accomplished tasks" in out
+    assert "Table II: completion time" in out
+    assert "need at least 2 participants" in out and "(U1)" in out
+    assert an.stderr == ""
+    png = study / "analysis" / "figure4.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    table1 = (study / "analysis" / "table1.csv").read_text().splitlines()
+    assert len(table1) == 1 + 8                        # header + 2 contact counts x 4
+    assert sum(int(r.split(",")[-2]) for r in table1[1:]) == 96   # 100 - 4 familiarization
