@@ -157,7 +157,7 @@ def test_validation_errors_name_the_key(old, new, needles):
 def set_key(table: str, key: str, literal: str) -> str:
     """paper.toml with ``key`` of ``[table]`` set to the TOML ``literal``."""
     text = paper_text()
-    start = text.index(f"[{table}]\n")
+    start = text.index(f"\n[{table}]") + 1
     at = text.index(f"\n{key} ", start) + 1
     end = text.index("\n", at)
     return text[:at] + f"{key} = {literal}" + text[end:]
