@@ -271,7 +271,7 @@ def _pop_units(obj: Any) -> Tuple[Any, str]:
     return obj, units
 
 
-def _solve_unit_fix(units: str, sym: Optional[str]) -> str:
+def _solve_unit_fix(sym: Optional[str]) -> str:
     if sym == "mm":
         return 'give metres (divide by 1000), or add "units": "mm" (moments in N mm then)'
     if sym == "cm":
@@ -296,7 +296,7 @@ def _in_metres(kw: Dict[str, Any], units: str) -> Dict[str, Any]:
             math.isfinite(x) for x in [*(v for c in contacts for v in c), *wrench]):
         return kw
     if hand_span(contacts) > 0.0:
-        problem = hand_span_problem(contacts, units, lambda sym: _solve_unit_fix(units, sym))
+        problem = hand_span_problem(contacts, units, _solve_unit_fix)
         if problem:
             raise RequestError("bad_request", problem)
     if units == "mm":
