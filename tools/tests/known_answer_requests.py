@@ -33,11 +33,14 @@ def load_cases():
 
 
 def request_lines(cases):
-    """One JSON request line per case, in order."""
+    """One JSON request line per case, in order. "units": "any": the cases include hands
+    of 0.1 mm and 10 m (the core's scale tests), which `graspguide solve` would otherwise
+    refuse as contacts in another unit than metres."""
     lines = []
     for case in cases:
         req = {key: decode_numbers(case[key])
                for key in ("contacts", "wrench", "y_axis", "orientation")}
-        req.update(policy=case["policy"], mode=case["mode"], constraints=case["constraints"])
+        req.update(policy=case["policy"], mode=case["mode"], constraints=case["constraints"],
+                   units="any")
         lines.append(json.dumps(req, allow_nan=True))
     return lines

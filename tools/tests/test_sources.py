@@ -170,10 +170,12 @@ def test_replay_with_tracker_converts_a_raw_export(tmp_path):
     assert src.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
     assert src.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
     assert np.allclose(got[0][2], HAND3)
-    # the same file read as if it were already in world convention is visibly wrong
-    plain = list(src.open_source("replay:" + path))
-    assert src.quat_angle_deg(plain[0][1], world([0, 0, 1])) > 1.0
-    assert not np.allclose(plain[0][2], HAND3)
+    # the same file read as if it were already in world convention (metres) is refused:
+    # its contacts span 78 "m", no hand
+    with pytest.raises(src.SourceError) as e:
+        src.open_source("replay:" + path)
+    assert str(e.value).startswith(path + ":2:") and "looks like millimetres" in str(e.value)
+    assert "--tracker mm/z/right/wxyz" in str(e.value)
 
 
 def test_tracker_by_explicit_convention_and_bad_names(tmp_path):
