@@ -988,6 +988,7 @@ def _cmd_stream(args) -> int:
     code = EXIT_OK
     summary = None
     stop_acked = False
+    log_failed = False
     try:
         hello = client.hello()
         config = {"scene": scene.to_dict(), "wrench": args.wrench}
@@ -1003,9 +1004,10 @@ def _cmd_stream(args) -> int:
         view = _StatusView(scene.k)
         summary = run_stream(client, scene, args.wrench, source, args.trial_id,
                              args.virtual_clock, log, view)
-    except LinkError as e:
+    except (LinkError, OSError) as e:   # OSError: the session log's disk (RecordWriteError)
         code = EXIT_FAILURE
         print(f"graspguide stream: error: {e}", file=sys.stderr)
+        log_failed = isinstance(e, OSError) and not isinstance(e, LinkError)
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
         print("graspguide stream: interrupted", file=sys.stderr)
@@ -1025,8 +1027,13 @@ def _cmd_stream(args) -> int:
             end = {"event": "end", "exit_code": code, "stop_acknowledged": stop_acked}
             if summary is not None:
                 end.update({k: v for k, v in summary.items() if k != "trial_result"})
-            log.result(end)
-            log.close()
+            try:
+                log.result(end)
+                log.close()
+            except OSError as e:   # the records before stay whole (session_log)
+                if not log_failed:
+                    print(f"graspguide stream: error: {e}", file=sys.stderr)
+                code = code or EXIT_FAILURE
     if summary is not None:
         r = summary["trial_result"]
         if r is None:

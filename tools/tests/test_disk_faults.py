@@ -207,3 +207,30 @@ def test_trial_into_a_read_only_folder_says_so_in_one_line(tmp_path):
         assert _sizes(ro) == before
     finally:
         subprocess.run(["umount", "-l", str(ro)], capture_output=True)
+
+
+def test_stream_log_on_a_size_limit_stops_with_one_line(tmp_path):
+    """`graspguide stream --log` whose telemetry.csv hits a size limit: once a traceback
+    (and a second one from writing the end record); now one line, exit 1, whole rows."""
+    def limited():  # pragma: no cover - runs in the child
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, resource.RLIM_INFINITY))
+
+    scene = os.path.join(os.path.dirname(TESTS_DIR), "examples", "scene_paper_3.toml")
+    env = subprocess_env()
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    folder = tmp_path / "session"
+    p = subprocess.run([sys.executable, "-m", "graspguide", "stream", "--port", "sim",
+                        "--virtual-clock", "--scene", scene, "--wrench", "0.3,-1.2,-0.8",
+                        "--source", "synthetic:rate=240,duration=60,seed=0",
+                        "--log", str(folder)],
+                       capture_output=True, text=True, env=env, timeout=120,
+                       preexec_fn=limited)
+    assert p.returncode == 1, (p.stdout, p.stderr)
+    err = [line for line in p.stderr.splitlines() if line.strip()]
+    assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
+    assert err[0].startswith("graspguide stream: error: cannot write ") and \
+        "size limit" in err[0], err
+    for name in ("poses.csv", "telemetry.csv"):
+        data = (folder / name).read_bytes()
+        assert data.endswith(b"\n"), name       # no cut row
