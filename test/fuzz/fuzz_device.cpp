@@ -604,7 +604,8 @@ class Rig {
       REQUIRE(before == gd::DeviceState::kTrialRunning && r.trial_id == trial_id_,
               "TRIAL_RESULT names the trial that was running");
       REQUIRE(after != gd::DeviceState::kTrialRunning, "TRIAL_RESULT ends the trial");
-      REQUIRE(r.completion_s >= 0 && r.completion_s <= trial_timeout_s_ * (1 + 1e-6),
+      // The trial counts whole microseconds: timeout_s rounds to the nearest one.
+      REQUIRE(r.completion_s >= 0 && r.completion_s <= double(trial_timeout_s_) * (1 + 1e-6) + 1e-6,
               "TRIAL_RESULT.completion_s is within [0, timeout_s]");
       REQUIRE(r.first_entry_s == -1.0f || (r.first_entry_s >= 0 && std::isfinite(r.first_entry_s)),
               "TRIAL_RESULT.first_entry_s is -1 or a time");
@@ -629,6 +630,12 @@ class Rig {
         gl::unpack(req->payload, req->payload_size, &p);
         std::fprintf(stderr, "(host_time_us=%u)", p.host_time_us);
       }
+      if (req->header.msg_id == uint8_t(gl::MsgId::kSetScene) && req->event == gl::ParseEvent::kFrame) {
+        gl::SetScene m;
+        if (gl::unpack(req->payload, req->payload_size, &m) == gl::LinkStatus::kOk)
+          std::fprintf(stderr, "(k=%u threshold_deg=%g hold_s=%g timeout_s=%g)", m.k, double(m.threshold_deg),
+                       double(m.hold_s), double(m.timeout_s));
+      }
     }
     for (const DeviceFrame& d : out) {
       std::fprintf(stderr, " -> %s", gl::message_name(d.id));
@@ -640,7 +647,8 @@ class Rig {
         std::fprintf(stderr, "(%s, err %.2f deg)", gl::enum_name(t.solver_status), double(t.error_deg));
       } else if (d.id == uint8_t(gl::MsgId::kTrialResult)) {
         const gl::TrialResult r = d.as<gl::TrialResult>();
-        std::fprintf(stderr, "(success %d, completion %g s)", int(r.success), double(r.completion_s));
+        std::fprintf(stderr, "(id %u, success %d, completion %g s, first entry %g s)", r.trial_id, int(r.success),
+                     double(r.completion_s), double(r.first_entry_s));
       }
     }
     const gg::Pwm& m = motors_.last();
