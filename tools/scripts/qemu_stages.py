@@ -128,7 +128,10 @@ def compare(current: Dict[str, object], baseline: Dict[str, object]) -> List[str
                 for stat in ("median", "max"):
                     b = base[k][stage][stat]
                     c = cur[k][stage][stat]
-                    if c > b * (1 + TOLERANCE):
+                    # A stage's count is read off a SysTick that ticks every 40
+                    # instructions, at a phase that any code change before it moves: one
+                    # tick more is the counter's resolution, not growth (grasp k3 is 5 ticks).
+                    if c > max(b * (1 + TOLERANCE), b + INSTRUCTIONS_PER_TICK):
                         grown.append(f"{target} {k} {stage} {stat}: {c} instructions, "
                                      f"baseline {b} (+{100 * (c / b - 1):.1f} %)")
     return grown
@@ -193,7 +196,8 @@ def main() -> int:
     for t in bad_status:
         print(f"FAIL {t}: statuses differ from the float64 reference (listed above)")
     print(f"baseline check: {'FAILED' if grown or bad_status else 'ok'} "
-          f"(tolerance +{int(TOLERANCE * 100)} % per stage, median and max)")
+          f"(tolerance +{int(TOLERANCE * 100)} % per stage, at least one {INSTRUCTIONS_PER_TICK}-"
+          "instruction tick, median and max)")
     return 1 if grown or bad_status else 0
 
 

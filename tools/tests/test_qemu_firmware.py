@@ -36,7 +36,7 @@ import numpy as np
 import pytest
 from known_answer_requests import load_cases, request_lines
 
-from graspguide import scenes, solver
+from graspguide import _core, scenes, solver
 from graspguide import device as gd
 from graspguide import transport as gt
 from graspguide.protocol import messages as m
@@ -72,6 +72,8 @@ SCENES = {
                        policy="Fperp", mode="V", constraints="paper"),
 }
 POSES_PER_SCENE = 40
+# The longest trial a scene may ask for (the core's range): nothing times out mid-test.
+LONGEST_TRIAL_S = _core.TRIAL_LIMITS["timeout_s"]["max"]
 
 
 # --------------------------------------------------------------------------------------
@@ -266,8 +268,9 @@ def test_pose_pwm_equals_the_core_in_float(client, board, name, report_figure):
     sc = SCENES[name]
     kw = {k: sc[k] for k in ("policy", "mode", "constraints")}
     k = len(sc["contacts"])
-    # No success (hold 0.5 s below 3 deg) and no timeout can end the trial mid-test.
-    client.set_scene(sc["contacts"], timeout_s=1e6, **kw)
+    # No success (hold 0.5 s below 3 deg) and no timeout can end the trial mid-test: the
+    # poses are 10 ms apart in host time and seconds apart at most in the device's.
+    client.set_scene(sc["contacts"], timeout_s=LONGEST_TRIAL_S, **kw)
     client.start_trial(k, sc["wrench"])
     rng = np.random.default_rng([20261122, k])
     round_trips, diffs = [], []
@@ -309,7 +312,7 @@ def test_pose_pwm_equals_the_core_in_float(client, board, name, report_figure):
 def test_pipelined_stream_matches_the_core(client, board, report_figure):
     sc = SCENES["k3_F_V"]
     kw = {k: sc[k] for k in ("policy", "mode", "constraints")}
-    client.set_scene(sc["contacts"], timeout_s=1e6, **kw)
+    client.set_scene(sc["contacts"], timeout_s=LONGEST_TRIAL_S, **kw)
     client.start_trial(9, sc["wrench"])
     rng = np.random.default_rng(7)
     quats = [list(scenes.random_quaternion(rng)) for _ in range(200)]
@@ -329,7 +332,7 @@ def _render(client, board):
     """A running trial whose last TELEMETRY turned motors on; returns when that POSE was
     sent (time.monotonic())."""
     sc = SCENES["k3_F_V"]
-    client.set_scene(sc["contacts"], timeout_s=1e6,
+    client.set_scene(sc["contacts"], timeout_s=LONGEST_TRIAL_S,
                      **{k: sc[k] for k in ("policy", "mode", "constraints")})
     client.start_trial(11, sc["wrench"])
     sent = time.monotonic()
