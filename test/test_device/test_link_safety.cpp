@@ -3,6 +3,7 @@
 // ends whatever its timestamps do, and a STOP after half a frame still gets through.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <string>
@@ -269,10 +270,16 @@ TEST(LinkSafety, ATimestampJumpOrStepBackEndsTheTrial) {
     Rig r;
     motors_on_in_trial(r);  // first POSE at 0
     r.send(pose_at(4096));
+    r.received();
     r.send(pose_at(4096 + second));
-    const auto tel = r.all<gl::Telemetry>();
-    ASSERT_EQ(tel.size(), 2u);
-    EXPECT_EQ(tel[1].solver_status, gl::ErrorCode::kTimeWentBackwards);
+    // Answered by an ERROR, not a TELEMETRY (which a host reads as "the trial goes on").
+    const auto answers = r.received();
+    ASSERT_EQ(answers.size(), 1u);
+    ASSERT_EQ(answers[0].first, uint8_t(gl::MsgId::kError));
+    gl::Error e;
+    ASSERT_EQ(gl::unpack(answers[0].second.data(), answers[0].second.size(), &e), gl::LinkStatus::kOk);
+    EXPECT_EQ(e.code, gl::ErrorCode::kTimeWentBackwards);
+    EXPECT_EQ(e.detail, uint8_t(gl::DeviceState::kStopped));
     EXPECT_TRUE(r.motors.all_off());
     r.send(gl::GetStatus{});
     const auto st = r.all<gl::Status>();
@@ -372,4 +379,81 @@ TEST(LinkSafety, WithoutAPauseOrDelimiterTheMergedFrameIsDropped) {
   r.raw(r.frame_of(gl::Stop{}));
   EXPECT_TRUE(r.all<gl::Ack>().empty());
   EXPECT_TRUE(r.motors.all_off());  // the dropped frame still turned them off
+}
+
+// F1. A core failure inside a running trial does not end the trial, so its TELEMETRY must
+// still say the trial runs: runner.py ends its trial loop on a clear flag and then waits for
+// a TRIAL_RESULT that never comes, while the device goes on with the trial.
+TEST(LinkSafety, ACoreFailureInATrialKeepsTheTrialRunningFlag) {
+  for (const bool nan_quaternion : {true, false}) {
+    SCOPED_TRACE(nan_quaternion ? "NaN quaternion" : "two contacts on top of each other");
+    Rig r;
+    motors_on_in_trial(r);
+    gl::Pose p = pose_at(10 * kMs);
+    if (nan_quaternion) {
+      p.quat_wxyz[0] = NAN;
+    } else {
+      const gl::SetScene s = scene_msg();
+      p.has_contacts = true;
+      std::memcpy(p.contacts, s.contacts, sizeof p.contacts);
+      std::memcpy(p.contacts[1], p.contacts[0], sizeof p.contacts[1]);
+    }
+    r.send(p);
+    const auto tel = r.all<gl::Telemetry>();
+    ASSERT_EQ(tel.size(), 1u);
+    EXPECT_NE(tel[0].solver_status, gl::ErrorCode::kOk);
+    EXPECT_TRUE(r.motors.all_off());
+    ASSERT_EQ(r.app.state(), gd::DeviceState::kTrialRunning);
+    EXPECT_TRUE(tel[0].flags & gl::kTelemetryFlagTrialRunning);
+  }
+}
+
+// F2. A timestamp jump ends the trial (like STOP); the host must hear that the trial is
+// over from TRIAL_RESULT or ERROR, not from a TELEMETRY that runner.py reads as "wait for
+// the TRIAL_RESULT".
+TEST(LinkSafety, ATrialEndedByATimestampJumpIsAnsweredWithAnError) {
+  Rig r;
+  motors_on_in_trial(r);
+  r.send(pose_at(0x80000000u));  // 2^31 us after the first POSE
+  ASSERT_NE(r.app.state(), gd::DeviceState::kTrialRunning);
+  size_t errors = 0, results = 0;
+  for (const auto& f : r.received()) {
+    errors += f.first == uint8_t(gl::MsgId::kError);
+    results += f.first == uint8_t(gl::MsgId::kTrialResult);
+  }
+  EXPECT_EQ(errors + results, 1u);
+}
+
+// F3. The device clock's trial bound reads the time since the first POSE as a signed 32-bit
+// difference; one poll gap that takes it past 2^31 us (2147.5 s) hides the end for 35 more
+// minutes. With timeout_s = 1800 a gap of 347 s is enough (a sim stopped with Ctrl-Z).
+TEST(LinkSafety, AnEighteenHundredSecondTrialEndsAfterASixMinutePollGap) {
+  Rig r;
+  gl::SetScene s = scene_msg();
+  s.timeout_s = 1800;
+  r.send(s);
+  r.send(trial_msg());
+  r.send(pose_at(0));
+  r.clock.advance_us(1800500u * kMs);  // 0.5 s before the device's bound
+  r.device.poll();
+  ASSERT_EQ(r.app.state(), gd::DeviceState::kTrialRunning);
+  r.clock.advance_us(347000u * kMs);
+  r.device.poll();
+  EXPECT_NE(r.app.state(), gd::DeviceState::kTrialRunning);
+  EXPECT_EQ(r.all<gl::TrialResult>().size(), 1u);
+}
+
+// F4. The trial's device clock starts only at the first POSE whose contacts pass the check;
+// after one POSE with non-finite contacts and a host that goes quiet, the trial never ends.
+TEST(LinkSafety, ATrialWhoseFirstPoseFailedStillEndsOnTheDeviceClock) {
+  Rig r;
+  r.send(scene_msg());
+  r.send(trial_msg());
+  gl::Pose p = pose_at(0);
+  p.has_contacts = true;
+  p.contacts[0][0] = NAN;
+  r.send(p);
+  r.clock.advance_us(90 * 1000 * kMs + gd::kTrialClockSlackUs + kMs);
+  r.device.poll();
+  EXPECT_NE(r.app.state(), gd::DeviceState::kTrialRunning);
 }

@@ -189,7 +189,7 @@ MAX_CONTACTS = 4
 BOARD_NAME_SIZE = 16
 # the grasp part (steps 1-3) ran for this POSE
 TELEMETRY_FLAG_GRASP_RECOMPUTED = 0x01
-# a trial was running when this POSE was handled
+# the trial still runs after this POSE (also when its solver_status is an error)
 TELEMETRY_FLAG_TRIAL_RUNNING = 0x02
 MAX_PAYLOAD_SIZE = 76
 HOST_TO_DEVICE_IDS = range(0x01, 0x40)

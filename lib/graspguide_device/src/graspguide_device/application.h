@@ -23,8 +23,9 @@ inline constexpr uint32_t kTrialClockSlackUs = uint32_t(GRASPGUIDE_TRIAL_CLOCK_S
 
 enum class DeviceState : uint8_t { kIdle = 0, kSceneSet = 1, kTrialRunning = 2, kStopped = 3 };
 
-// Why a request was refused without reaching the core.
-enum class Refusal : uint8_t { kNone = 0, kNotAllowedInState, kNoScene };
+// Why a request was refused without reaching the core. kTrialEnded: a POSE whose timestamp
+// could not follow the trial's ended that trial (Reply::status says why).
+enum class Refusal : uint8_t { kNone = 0, kNotAllowedInState, kNoScene, kTrialEnded };
 
 struct Reply {
   Status status = Status::kOk;
@@ -114,23 +115,28 @@ class Application {
       motors_off();
       return refuse(Refusal::kNotAllowedInState);  // no wrench to render outside a trial
     }
-    if (in.has_contacts) {
-      const Status s = guidance_.set_contacts(in.contacts);
-      if (s != Status::kOk) return fail(s, &out);
-    }
+    // The trial's clocks start with its first POSE, even one that fails below: a trial must
+    // end on the device's clock whatever its POSEs carry.
     const int64_t t_us = unwrap(in.host_time_us);
     if (!trial_started_) {
       trial_.start(guidance_.scene().trial, t_us);
       trial_started_ = true;
-      trial_start_clock_us_ = clock_.now_us();
+      trial_device_us_ = 0;
+      last_tick_us_ = clock_.now_us();
     } else if (t_us < trial_last_us_) {
       // A step back, or one forward of 2^31 us or more (the same thing on a 32-bit
       // timestamp): the host's timeline can no longer be trusted to end the trial, so it
-      // ends here, like STOP, and the host is told why.
+      // ends here, like STOP, and the POSE is answered with an ERROR that says why.
       abort_trial();
-      return fail(Status::kTimeWentBackwards, &out);
+      Reply reply = fail(Status::kTimeWentBackwards);
+      reply.refusal = Refusal::kTrialEnded;
+      return reply;
     }
     trial_last_us_ = t_us;
+    if (in.has_contacts) {
+      const Status s = guidance_.set_contacts(in.contacts);
+      if (s != Status::kOk) return fail(s, &out);
+    }
     const uint32_t t0 = clock_.now_us();
     FrameResult<Real> frame;
     const Status s = guidance_.update(in.quat_wxyz, frame);
@@ -198,10 +204,14 @@ class Application {
       stale_ = true;
     }
     if (state_ != DeviceState::kTrialRunning || !trial_started_) return false;
-    // Signed: a virtual clock may step back a little when a late POSE resets it.
-    const int32_t ran_us = static_cast<int32_t>(clock_.now_us() - trial_start_clock_us_);
+    // Summed step by step into 64 bits, so a long gap between calls (a process stopped
+    // for minutes) cannot wrap it; each step signed, as a virtual clock may step back a
+    // little when a late POSE resets it.
+    const uint32_t now = clock_.now_us();
+    trial_device_us_ += static_cast<int32_t>(now - last_tick_us_);
+    last_tick_us_ = now;
     const double limit_us = guidance_.scene().trial.timeout_s * 1e6 + kTrialClockSlackUs;
-    if (ran_us <= 0 || double(ran_us) < limit_us) return false;
+    if (double(trial_device_us_) < limit_us) return false;
     trial_.expire();
     motors_off();
     state_ = DeviceState::kSceneSet;
@@ -245,6 +255,9 @@ class Application {
     if (out) {
       out->status = s;
       out->pwm = Pwm{};
+      // A failed POSE does not end the trial; a host reading a cleared flag would wait
+      // for a TRIAL_RESULT that never comes.
+      out->trial_running = state_ == DeviceState::kTrialRunning;
     }
     Reply reply;
     reply.status = s;
@@ -280,7 +293,8 @@ class Application {
   bool motors_on_ = false;
   bool stale_ = false;
   uint32_t last_pose_us_ = 0;
-  uint32_t trial_start_clock_us_ = 0;
+  uint32_t last_tick_us_ = 0;
+  int64_t trial_device_us_ = 0;  // device time since the trial's first POSE
   int64_t trial_last_us_ = 0;
   uint32_t last_host_us_ = 0;
   int64_t host_time_us_ = 0;

@@ -228,6 +228,8 @@ class LinkDevice {
       send_error(request_seq_, link::ErrorCode::kNoScene, uint8_t(id));
     } else if (reply.refusal == Refusal::kNotAllowedInState) {
       send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+    } else if (reply.refusal == Refusal::kTrialEnded) {
+      send_error(request_seq_, static_cast<link::ErrorCode>(reply.status), uint8_t(app_.state()));
     } else {
       send_error(request_seq_, static_cast<link::ErrorCode>(reply.status), 0);
     }

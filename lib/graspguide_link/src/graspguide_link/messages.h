@@ -24,7 +24,7 @@ inline constexpr uint8_t kMaxContacts = 4;
 inline constexpr uint8_t kBoardNameSize = 16;
 // the grasp part (steps 1-3) ran for this POSE
 inline constexpr uint8_t kTelemetryFlagGraspRecomputed = 0x01;
-// a trial was running when this POSE was handled
+// the trial still runs after this POSE (also when its solver_status is an error)
 inline constexpr uint8_t kTelemetryFlagTrialRunning = 0x02;
 
 // Every schema enum has an EnumInfo: its values in schema order.
