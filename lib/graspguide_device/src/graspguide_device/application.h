@@ -123,6 +123,9 @@ class Application {
       trial_started_ = true;
       trial_device_us_ = 0;
       last_tick_us_ = clock_.now_us();
+      // Once per trial: tick() runs every poll, and double arithmetic is soft-float on the MCU.
+      trial_device_limit_us_ =
+          static_cast<int64_t>(guidance_.scene().trial.timeout_s * 1e6) + kTrialClockSlackUs;
     } else if (t_us < trial_last_us_) {
       // A step back, or one forward of 2^31 us or more (the same thing on a 32-bit
       // timestamp): the host's timeline can no longer be trusted to end the trial, so it
@@ -210,8 +213,7 @@ class Application {
     const uint32_t now = clock_.now_us();
     trial_device_us_ += static_cast<int32_t>(now - last_tick_us_);
     last_tick_us_ = now;
-    const double limit_us = guidance_.scene().trial.timeout_s * 1e6 + kTrialClockSlackUs;
-    if (double(trial_device_us_) < limit_us) return false;
+    if (trial_device_us_ < trial_device_limit_us_) return false;
     trial_.expire();
     motors_off();
     state_ = DeviceState::kSceneSet;
@@ -295,6 +297,7 @@ class Application {
   uint32_t last_pose_us_ = 0;
   uint32_t last_tick_us_ = 0;
   int64_t trial_device_us_ = 0;  // device time since the trial's first POSE
+  int64_t trial_device_limit_us_ = 0;
   int64_t trial_last_us_ = 0;
   uint32_t last_host_us_ = 0;
   int64_t host_time_us_ = 0;
