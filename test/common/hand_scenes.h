@@ -1,5 +1,5 @@
 // Seeded hand-like scenes for property tests (the same recipe as
-// tools/graspguide/scenes.py, drawn with the C++ standard generator).
+// tools/graspguide/core/scene_generators.py, drawn with the C++ standard generator).
 #pragma once
 
 #include <cmath>

@@ -557,7 +557,7 @@ class Rig {
       gl::Pose p;
       gl::unpack(req->payload, req->payload_size, &p);
       REQUIRE(t.host_time_us == p.host_time_us, "TELEMETRY echoes the POSE's host_time_us");
-      // The host ends its trial loop on a clear flag (tools/graspguide/runner.py).
+      // The host ends its trial loop on a clear flag (tools/graspguide/study/runner.py).
       REQUIRE(bool(t.flags & gl::kTelemetryFlagTrialRunning) == (after == gd::DeviceState::kTrialRunning),
               "TELEMETRY's trial_running flag says whether the trial still runs");
     }

@@ -1,5 +1,5 @@
 // The whole pipeline against the independent float64 reference
-// (tools/graspguide/reference.py -> test/data/known_answers.h): random hand-like scenes
+// (tools/graspguide/core/reference.py -> test/data/known_answers.h): random hand-like scenes
 // for every policy, mode and constraint model, and the extreme cases.
 #include <gtest/gtest.h>
 

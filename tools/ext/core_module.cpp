@@ -1,4 +1,4 @@
-// graspguide._core: the GraspGuide C++ core (lib/graspguide) for Python, via nanobind.
+// graspguide.core._core: the GraspGuide C++ core (lib/graspguide) for Python, via nanobind.
 //
 // Only graspguide::Guidance<float> and Guidance<double> are instantiated here; the heavy
 // templates (QR, SVD, QP, steps 1-6) are `extern template` in the core's headers and
@@ -291,7 +291,7 @@ constexpr const char* kResultDoc =
     "relevant, error_deg and alpha are None unless status is 'ok'.";
 
 // ---------------------------------------------------------------------------------------
-// Timing entries for `graspguide bench` (tools/graspguide/bench.py). The loops run here,
+// Timing entries for `graspguide bench` (tools/graspguide/bench/host_bench.py). The loops run here,
 // in C++, so that Python's per-call overhead (~1 us, larger than a whole frame) is not
 // in the figures. Every sample is the mean of `reps` consecutive calls on one instance,
 // timed with steady_clock around the whole batch (one clock read per batch, not per call,

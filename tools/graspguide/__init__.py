@@ -1,10 +1,10 @@
 """GraspGuide host tools.
 
 * :func:`graspguide.solve.solve` -- Algorithm 1 from the C++ core (float or double),
-  through the compiled extension :mod:`graspguide._core`;
+  through the compiled extension :mod:`graspguide.core._core`;
 * ``graspguide solve`` -- the JSON Lines command line (:mod:`graspguide.cli`);
-* :mod:`graspguide.reference` -- the independent float64 reference;
-* :mod:`graspguide.scenes` -- seeded scene generators.
+* :mod:`graspguide.core.reference` -- the independent float64 reference;
+* :mod:`graspguide.core.scene_generators` -- seeded scene generators.
 """
 
 __version__ = "0.1.0"

@@ -6,7 +6,7 @@
 
 Outputs (all carry a do-not-edit banner, all are checked in):
     lib/graspguide_link/src/graspguide_link/messages.h   C++ structs, pack/unpack, visit
-    tools/graspguide/protocol/messages.py                Python dataclasses, pack/unpack
+    tools/graspguide/link/messages.py                    Python dataclasses, pack/unpack
     test/data/golden_frames.json, test/data/golden_frames.h  the schema's golden frames
     docs/protocol.md, between its GENERATED markers      the message reference
 
@@ -35,7 +35,7 @@ ROOT = os.path.dirname(os.path.dirname(_HERE))
 
 SCHEMA_PATH = os.path.join(ROOT, "tools", "protocol", "messages.toml")
 CPP_PATH = os.path.join(ROOT, "lib", "graspguide_link", "src", "graspguide_link", "messages.h")
-PY_PATH = os.path.join(ROOT, "tools", "graspguide", "protocol", "messages.py")
+PY_PATH = os.path.join(ROOT, "tools", "graspguide", "link", "messages.py")
 GOLDEN_JSON_PATH = os.path.join(ROOT, "test", "data", "golden_frames.json")
 GOLDEN_H_PATH = os.path.join(ROOT, "test", "data", "golden_frames.h")
 DOC_PATH = os.path.join(ROOT, "docs", "protocol.md")

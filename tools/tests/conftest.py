@@ -2,7 +2,7 @@
 
 The binding and CLI tests run against the package INSTALLED in the interpreter's
 environment (``tools/bootstrap.sh`` installs ./tools into .venv), because only that copy
-has the compiled extension ``graspguide._core``. Other test modules put ``tools/`` at the
+has the compiled extension ``graspguide.core._core``. Other test modules put ``tools/`` at the
 front of ``sys.path`` to reach the pure-Python reference; importing the installed
 package here, first, keeps ``graspguide`` the installed one for the whole session.
 """
@@ -26,9 +26,9 @@ try:
     import graspguide  # noqa: E402
 
     try:
-        from graspguide import _core  # noqa: E402,F401
+        from graspguide.core import _core  # noqa: E402,F401
     except ImportError as e:  # pragma: no cover - setup problem
-        _CORE_ERROR = (f"graspguide._core is not importable ({e}); graspguide comes from "
+        _CORE_ERROR = (f"graspguide.core._core is not importable ({e}); graspguide comes from "
                        f"{os.path.dirname(graspguide.__file__)}. Run `bash tools/bootstrap.sh` "
                        "and the tests with .venv/bin/python (tools/run-tests.sh does both).")
     else:
@@ -41,7 +41,7 @@ finally:
 def core():
     if _CORE_ERROR:
         pytest.fail(_CORE_ERROR)
-    from graspguide import _core as module
+    from graspguide.core import _core as module
 
     return module
 

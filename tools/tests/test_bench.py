@@ -16,8 +16,9 @@ import sys
 import numpy as np
 import pytest
 
-from graspguide import bench, reference
-from graspguide.scene import load_scene
+from graspguide.bench import host_bench as bench
+from graspguide.core import reference
+from graspguide.study.scene_file import load_scene
 
 TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

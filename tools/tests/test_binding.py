@@ -1,4 +1,4 @@
-"""The nanobind binding graspguide._core and its Python wrapper graspguide.solver."""
+"""The nanobind binding graspguide.core._core and its Python wrapper graspguide.core.solver."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import os
 import numpy as np
 import pytest
 
-from graspguide import _core, scenes, solver
+from graspguide.core import _core, scene_generators as scenes, solver
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                         "examples", "solve_requests.jsonl")
@@ -364,7 +364,7 @@ def test_contacts_in_a_plane_containing_y_axis_match_the_reference():
     """All contacts in z = 0 (a plane containing y_O = +y): every lambda_ix is fixed by
     equilibrium, so its constraint row is rounding noise (~1e-16). Such a row must count
     as dependent (an infeasibility certificate), not as a direction for a 1e30 step."""
-    from graspguide import reference as ref
+    from graspguide.core import reference as ref
 
     rng = np.random.default_rng(1)
     disagree = []

@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from graspguide import solver
+from graspguide.core import solver
 from known_answer_requests import decode_numbers as _decode_numbers
 from known_answer_requests import load_cases as _load_known_answers
 from known_answer_requests import KNOWN_ANSWERS
@@ -27,7 +27,7 @@ _ROOT = os.path.dirname(_TOOLS)
 
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 
-CLI = [sys.executable, "-m", "graspguide.cli"]
+CLI = [sys.executable, "-m", "graspguide"]
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HAND4 = HAND3 + [[0.0, 0.045, 0.0]]
 GOOD = {"contacts": HAND3, "wrench": [0.3, -1.2, -0.8, 0, 0, 0]}
@@ -369,7 +369,7 @@ def test_hands_from_5_mm_to_half_a_metre_are_accepted():
 # Negative numbers as option values, in every subcommand
 # --------------------------------------------------------------------------------------
 def _parse(argv, capsys):
-    from graspguide import cli
+    from graspguide.cli import app as cli
 
     try:
         return cli.build_parser().parse_args(argv), ""
@@ -386,7 +386,7 @@ _REQUIRED = {
 
 def _value_options():
     """(command, option) for every option of every subcommand that takes a value."""
-    from graspguide import cli
+    from graspguide.cli import app as cli
 
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -444,7 +444,7 @@ def test_negative_values_get_the_options_own_message(argv, words, capsys):
 
 
 def test_sweep_lists_and_analyze_main_take_negative_values(capsys):
-    from graspguide import analysis, sweep
+    from graspguide.study import analysis, sweep
 
     args, err = _parse(["sweep", "--thresholds", "-2,3", "--rates", "-30"], capsys)
     assert (args.thresholds, args.rates) == ("-2,3", "-30"), err

@@ -1,12 +1,12 @@
 """Contacts in another unit than stated are refused where poses enter the host (replay
 files, tracker adapters), with the likely unit: the same check as scene and protocol
-files and `graspguide solve` (graspguide.scene.hand_span_problem)."""
+files and `graspguide solve` (graspguide.study.scene_file.hand_span_problem)."""
 
 from __future__ import annotations
 
 import pytest
 
-from graspguide import sources as src
+from graspguide.study import sources as src
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HEAD = "t_s,qw,qx,qy,qz," + ",".join(f"{n}_{a}" for n in ("thumb", "index", "middle")

@@ -18,11 +18,11 @@ import pytest
 
 from conftest import subprocess_env
 
-from graspguide import device as dv
-from graspguide import protocol_file as pf
-from graspguide import runner as rn
-from graspguide.protocol import framing
-from graspguide.protocol import messages as m
+from graspguide.link import client as dv
+from graspguide.study import study_protocol as pf
+from graspguide.study import runner as rn
+from graspguide.link import codec
+from graspguide.link import messages as m
 
 TINY = """
 [study]
@@ -175,7 +175,7 @@ def test_demo_usage_errors(tmp_path):
 # Pipelined closed loop == lockstep
 # --------------------------------------------------------------------------------------
 def _run(protocol, out, pid, pipeline):
-    from graspguide.transport import SimulatedDevice
+    from graspguide.link.transport import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)
@@ -209,7 +209,7 @@ def test_pipelined_and_lockstep_runs_give_identical_trials(tmp_path):
 
 
 def test_pipeline_window_only_for_the_virtual_participant():
-    from graspguide.participant import VirtualParticipant
+    from graspguide.study.participant import VirtualParticipant
 
     vp = VirtualParticipant.from_spec("", 1)
     assert rn.pipeline_window(vp, 100.0) == 20
@@ -229,7 +229,7 @@ def test_fast_pose_encoding_matches_the_reference():
     for _ in range(3000):
         q = [rnd.choice(specials + [rnd.uniform(-2, 2)] * 4) for _ in range(4)]
         seq, t = rnd.randrange(65536), rnd.randrange(2 ** 32)
-        ref = framing.encode_message(m.Pose(host_time_us=t, quat_wxyz=tuple(q)), seq)
+        ref = codec.encode_message(m.Pose(host_time_us=t, quat_wxyz=tuple(q)), seq)
         assert dv.encode_pose_fast(seq, t, q) == ref
     assert dv.encode_pose_fast(1, 0, [1e300, 0, 0, 0]) is None    # generic path: +inf
 
@@ -254,7 +254,7 @@ class _Chunks:
 
 def test_fast_frame_path_matches_the_byte_wise_parser(monkeypatch):
     rnd = random.Random(9)
-    seq = framing.SequenceCounter()
+    seq = codec.SequenceCounter()
     frames = []
     for i in range(300):
         kind = rnd.random()
@@ -263,19 +263,19 @@ def test_fast_frame_path_matches_the_byte_wise_parser(monkeypatch):
                               alpha=rnd.uniform(0, 200),
                               pwm=tuple(rnd.randrange(256) for _ in range(4)),
                               flags=rnd.choice([0, 2, 3]), iterations=rnd.randrange(256))
-            wire = framing.encode_message(msg, seq.next())
+            wire = codec.encode_message(msg, seq.next())
         elif kind < 0.75:
-            wire = framing.encode_message(m.TrialResult(trial_id=i, success=True,
+            wire = codec.encode_message(m.TrialResult(trial_id=i, success=True,
                                                         completion_s=1.5), seq.next())
         elif kind < 0.85:                                         # a bad enum value
-            raw = bytearray(framing.cobs_decode(
-                framing.encode_message(m.Telemetry(host_time_us=i), seq.next())[:-1]))
+            raw = bytearray(codec.cobs_decode(
+                codec.encode_message(m.Telemetry(host_time_us=i), seq.next())[:-1]))
             raw[4 + 17] = 200                                     # solver_status
             body = bytes(raw[:-2])
-            raw[-2:] = struct.pack("<H", framing.crc16(body))
-            wire = framing.cobs_encode(bytes(raw)) + b"\0"
+            raw[-2:] = struct.pack("<H", codec.crc16(body))
+            wire = codec.cobs_encode(bytes(raw)) + b"\0"
         elif kind < 0.95:                                         # a corrupted byte
-            wire = bytearray(framing.encode_message(m.Telemetry(host_time_us=i), seq.next()))
+            wire = bytearray(codec.encode_message(m.Telemetry(host_time_us=i), seq.next()))
             wire[rnd.randrange(len(wire) - 1)] ^= 1 << rnd.randrange(8)
             wire = bytes(wire).replace(b"\0", b"\1", wire.count(0) - 1) \
                 if wire.count(0) > 1 else bytes(wire)

@@ -11,9 +11,9 @@ import tomllib
 
 import pytest
 
-from graspguide import device as gd
-from graspguide import transport as gt
-from graspguide.protocol import framing, messages as m
+from graspguide.link import client as gd
+from graspguide.link import transport as gt
+from graspguide.link import codec, messages as m
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCHEMA = os.path.join(_TOOLS, "protocol", "messages.toml")
@@ -30,19 +30,19 @@ class FakeDevice(gt.Transport):
     def __init__(self, respond, version: int = m.PROTOCOL_VERSION):
         self.respond = respond
         self.version = version
-        self.parser = framing.FrameParser(framing.Accept.HOST_TO_DEVICE)
-        self.seq = framing.SequenceCounter()
+        self.parser = codec.FrameParser(codec.Accept.HOST_TO_DEVICE)
+        self.seq = codec.SequenceCounter()
         self.rx = bytearray()
         self.received = []  # (seq, message) the device got
         self.closed = False
 
     def frame(self, msg) -> bytes:
-        return framing.encode_frame(msg.MSG_ID, self.seq.next(), msg.pack(), self.version)
+        return codec.encode_frame(msg.MSG_ID, self.seq.next(), msg.pack(), self.version)
 
     def write(self, data: bytes) -> None:
         for event, frame in self.parser.feed(data):
-            assert event is framing.ParseEvent.FRAME, event
-            msg = framing.message_of(frame)
+            assert event is codec.ParseEvent.FRAME, event
+            msg = codec.message_of(frame)
             self.received.append((frame.seq, msg))
             for out in self.respond(msg, frame.seq) or []:
                 self.rx += out if isinstance(out, (bytes, bytearray)) else self.frame(out)
@@ -203,7 +203,7 @@ def test_error_details_are_spelled_out():
 
 
 def test_bad_config_names_the_field_and_its_range():
-    from graspguide import _core
+    from graspguide.core import _core
 
     names = [f.name for f in m.SetScene.FIELDS]
     for key, r in _core.TRIAL_LIMITS.items():
@@ -272,10 +272,10 @@ def test_answer_after_garbage_and_stale_answers():
     all counted or kept, and the real answer still found."""
     def noisy(msg, seq):
         raw = bytes([m.PROTOCOL_VERSION, m.Ack.MSG_ID, 99, 0]) + m.Ack(seq).pack()
-        bad_crc = framing.cobs_encode(raw + bytes([framing.crc16(raw) & 0xFF ^ 0x55,
-                                                   framing.crc16(raw) >> 8])) + b"\x00"
+        bad_crc = codec.cobs_encode(raw + bytes([codec.crc16(raw) & 0xFF ^ 0x55,
+                                                   codec.crc16(raw) >> 8])) + b"\x00"
         return [b"\x13\x37\xff\x00", bad_crc, m.Ack(request_seq=(seq + 500) & 0xFFFF),
-                framing.encode_frame(0xBF, 0, b""), m.Ack(request_seq=seq)]
+                codec.encode_frame(0xBF, 0, b""), m.Ack(request_seq=seq)]
 
     c = client_for(noisy)
     c.set_scene(HAND3)

@@ -28,15 +28,15 @@ import numpy as np
 import pytest
 from known_answer_requests import load_cases, request_lines
 
-from graspguide import scenes, solver
-from graspguide import device as gd
-from graspguide import transport as gt
-from graspguide.protocol import framing, messages as m
+from graspguide.core import scene_generators as scenes, solver
+from graspguide.link import client as gd
+from graspguide.link import transport as gt
+from graspguide.link import codec as framing, messages as m
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
-CLI = [sys.executable, "-m", "graspguide.cli"]
+CLI = [sys.executable, "-m", "graspguide"]
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]
@@ -335,8 +335,8 @@ def test_stale_stream_turns_motors_off_within_the_watchdog(tmp_path, report_figu
 
 CHILD = r"""
 import sys, time
-from graspguide.device import DeviceClient, host_time_us
-from graspguide.transport import SerialTransport
+from graspguide.link.client import DeviceClient, host_time_us
+from graspguide.link.transport import SerialTransport
 c = DeviceClient(SerialTransport(sys.argv[1]))
 qs = [[1.0, 0, 0, 0], [0.9394, 0.1125, 0.2250, -0.2312]]
 c.stop()

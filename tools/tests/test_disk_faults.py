@@ -31,10 +31,10 @@ WRITER = textwrap.dedent("""
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
     if kind == "trials":
-        from graspguide.runner import append_line
+        from graspguide.study.runner import append_line
         write = lambda rec: append_line(target, rec)
     else:
-        from graspguide.session_log import SessionLog
+        from graspguide.study.records import SessionLog
         log = SessionLog(target)
         write = log.result if kind == "results" else \\
             lambda rec: log.pose(rec["i"], 0.5, (1.0, 0.0, 0.0, 0.0), False)

@@ -1,4 +1,4 @@
-"""The virtual participant (graspguide.participant): determinism, ERM lag, reaction delay,
+"""The virtual participant (graspguide.study.participant): determinism, ERM lag, reaction delay,
 speed bound, mode C vs V, input errors, and the closed loop against the C++ core.
 
 Everything the participant produces is SIMULATED (never human data).
@@ -15,10 +15,16 @@ import numpy as np
 import pytest
 
 from conftest import subprocess_env
-from graspguide import _core
-from graspguide import scene as gs
-from graspguide.participant import (PWM_FLOOR, FeelLagError, ParticipantParams,
-                                    VirtualParticipant, parse_spec, quaternion_angle_deg)
+from graspguide.core import _core
+from graspguide.study import scene_file as gs
+from graspguide.study.participant import (
+    PWM_FLOOR,
+    FeelLagError,
+    ParticipantParams,
+    VirtualParticipant,
+    parse_spec,
+    quaternion_angle_deg,
+)
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                         "examples")

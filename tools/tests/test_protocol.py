@@ -1,4 +1,4 @@
-"""The serial link protocol, Python side (graspguide.protocol): CRC, COBS, the generated
+"""The serial link protocol, Python side (graspguide.link): CRC, COBS, the generated
 messages, the golden frames shared with the C++ tests (test/data/golden_frames.json),
 the parser's resynchronization, agreement with the core, and generated code freshness."""
 
@@ -17,12 +17,24 @@ import sys
 
 import pytest
 
-from graspguide import protocol as gp
-from graspguide.protocol import messages as M
-from graspguide.protocol.framing import (FRAME_OVERHEAD, MAX_RAW_FRAME_SIZE, Accept, FrameParser,
-                                         ParseEvent, check_frame, cobs_decode, cobs_encode,
-                                         cobs_max_encoded_size, crc16, decode_frame,
-                                         decode_message, encode_frame, encode_message)
+from graspguide import link as gp
+from graspguide.link import messages as M
+from graspguide.link.codec import (
+    FRAME_OVERHEAD,
+    MAX_RAW_FRAME_SIZE,
+    Accept,
+    FrameParser,
+    ParseEvent,
+    check_frame,
+    cobs_decode,
+    cobs_encode,
+    cobs_max_encoded_size,
+    crc16,
+    decode_frame,
+    decode_message,
+    encode_frame,
+    encode_message,
+)
 
 TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REPO_ROOT = os.path.dirname(TOOLS_DIR)
@@ -384,7 +396,7 @@ def test_recovers_every_frame_from_random_streams():
             msg, seq = random_message(rng.choice(classes), rng), rng.randint(0, 0xFFFF)
             sent.append((seq, msg))
             stream += encode_message(msg, seq)
-        got += [(f.seq, gp.framing.message_of(f)) for e, f in p.feed(stream) if e is ParseEvent.FRAME]
+        got += [(f.seq, gp.codec.message_of(f)) for e, f in p.feed(stream) if e is ParseEvent.FRAME]
     assert got == sent
 
 
@@ -400,7 +412,7 @@ def test_stale_generated_code_fails_the_check(tmp_path):
     """--check must notice a hand edit of any output: run it on a copy of the tree."""
     rel = ["tools/scripts/gen_protocol.py", "tools/protocol/messages.toml",
            "lib/graspguide_link/src/graspguide_link/messages.h",
-           "tools/graspguide/protocol/messages.py", "test/data/golden_frames.json",
+           "tools/graspguide/link/messages.py", "test/data/golden_frames.json",
            "test/data/golden_frames.h", "docs/protocol.md"]
     for r in rel:
         os.makedirs(tmp_path / os.path.dirname(r), exist_ok=True)
@@ -419,7 +431,7 @@ def test_stale_generated_code_fails_the_check(tmp_path):
 
 
 def test_the_installed_package_has_the_current_protocol_code():
-    for name in ("messages.py", "framing.py", "errors.py", "__init__.py"):
+    for name in ("messages.py", "codec.py", "errors.py", "__init__.py"):
         installed = os.path.join(os.path.dirname(gp.__file__), name)
-        assert filecmp.cmp(installed, os.path.join(TOOLS_DIR, "graspguide", "protocol", name),
+        assert filecmp.cmp(installed, os.path.join(TOOLS_DIR, "graspguide", "link", name),
                            shallow=False), f"{name}: run tools/bootstrap.sh to reinstall ./tools"

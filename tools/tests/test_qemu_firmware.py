@@ -36,10 +36,10 @@ import numpy as np
 import pytest
 from known_answer_requests import load_cases, request_lines
 
-from graspguide import _core, scenes, solver
-from graspguide import device as gd
-from graspguide import transport as gt
-from graspguide.protocol import messages as m
+from graspguide.core import _core, scene_generators as scenes, solver
+from graspguide.link import client as gd
+from graspguide.link import transport as gt
+from graspguide.link import messages as m
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
@@ -400,7 +400,7 @@ def test_cli_solve_engine_device_agrees_with_core_float(tmp_path, report_figure)
     data = ("\n".join(lines) + "\n").encode()
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
-    cli = [sys.executable, "-m", "graspguide.cli", "solve"]
+    cli = [sys.executable, "-m", "graspguide", "solve"]
     b = QemuBoard(str(tmp_path))
     try:
         t0 = time.perf_counter()

@@ -1,4 +1,4 @@
-"""Self-checks of the float64 reference (tools/graspguide/reference.py) and the
+"""Self-checks of the float64 reference (tools/graspguide/core/reference.py) and the
 known-answer data generated from it."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ _ROOT = os.path.dirname(_TOOLS)
 if _TOOLS not in sys.path:
     sys.path.insert(0, _TOOLS)
 
-from graspguide import reference as ref  # noqa: E402
-from graspguide import scenes  # noqa: E402
+from graspguide.core import reference as ref  # noqa: E402
+from graspguide.core import scene_generators as scenes  # noqa: E402
 
 KNOWN_ANSWERS = os.path.join(_ROOT, "test", "data", "known_answers.json")
 

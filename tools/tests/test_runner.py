@@ -1,4 +1,4 @@
-"""`graspguide trial` (graspguide.runner): a small protocol run against the simulated device
+"""`graspguide trial` (graspguide.study.runner): a small protocol run against the simulated device
 with a closed-loop test source, the output layout the analysis reads, resume after
 SIGTERM and SIGKILL (every trial exactly once), a half-written last line, NASA-TLX from a
 file, interactively and absent for simulated sources, and STOP on every way out."""
@@ -18,10 +18,10 @@ import pytest
 
 from conftest import subprocess_env
 
-from graspguide import cli
-from graspguide import protocol_file as pf
-from graspguide import runner as rn
-from graspguide.sources import aligned_quaternion, quat_angle_deg, slerp
+from graspguide.cli import app as cli
+from graspguide.study import study_protocol as pf
+from graspguide.study import runner as rn
+from graspguide.study.sources import aligned_quaternion, quat_angle_deg, slerp
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 
@@ -138,7 +138,7 @@ class RecordingClient:
 
 @pytest.fixture
 def sim():
-    from graspguide.transport import SimulatedDevice
+    from graspguide.link.transport import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         yield dev
@@ -163,7 +163,7 @@ def lines(path):
 # A full run
 # --------------------------------------------------------------------------------------
 def test_full_small_run_and_output_layout(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path)
     client = RecordingClient(DeviceClient(sim))
@@ -237,7 +237,7 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
     """A replay of 0.2 s at the start pose (every wrench starts >= 20 degrees off): its
     last pose is held until the device ends the trial; a failure is recorded with
     completion_s = timeout_s."""
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, timeout=3.0, fam=0)
     replay = tmp_path / "still.csv"
@@ -347,7 +347,7 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
 
 
 def test_half_written_last_line_is_reported_and_rerun(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0)
     out = tmp_path / "out"
@@ -373,7 +373,7 @@ def test_half_written_last_line_is_reported_and_rerun(tmp_path, sim):
 
 
 def test_damaged_line_before_the_last_stops_the_run(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0)
     out = tmp_path / "out"
@@ -385,7 +385,7 @@ def test_damaged_line_before_the_last_stops_the_run(tmp_path, sim):
 
 
 def test_other_protocol_or_mixed_data_refused(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     out = tmp_path / "out"
@@ -414,7 +414,7 @@ def _good_tlx(session, **over):
 
 
 def test_tlx_from_file(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     sessions = pf.session_order(protocol, "U1")
@@ -455,7 +455,7 @@ def test_bad_tlx_values_rejected_with_a_message(tmp_path, capsys, row, needle):
 
 
 def test_tlx_asked_interactively_with_retries(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     answers = iter(["abc", "0", "7"] + ["3"] * 5 + ["4", "5", "6", "7", "8", "9"] * 3)
@@ -478,7 +478,7 @@ def test_tlx_asked_interactively_with_retries(tmp_path, sim):
 
 
 def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
-    from graspguide.device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
 
@@ -503,8 +503,8 @@ def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
 @pytest.mark.parametrize("how,exc", [("interrupt", KeyboardInterrupt),
                                      ("error", RuntimeError)])
 def test_stop_sent_on_exit(tmp_path, sim, how, exc):
-    from graspguide.device import DeviceClient
-    from graspguide.protocol.messages import DeviceState
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.messages import DeviceState
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     client = RecordingClient(DeviceClient(sim))
@@ -551,8 +551,8 @@ def test_cli_usage_errors(tmp_path, capsys):
 def test_real_time_run_on_the_device_clock(tmp_path):
     """Without the virtual clock (a board, or a person): poses paced by the host clock,
     host_time_us from it, a progress line every period."""
-    from graspguide.device import DeviceClient
-    from graspguide.transport import SimulatedDevice
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.transport import SimulatedDevice
 
     path = tmp_path / "rt.toml"
     path.write_text(SMALL.format(timeout=5.0, fam=0).replace(
@@ -594,8 +594,8 @@ def test_terminal_progress_line():
 def test_device_lost_mid_trial_keeps_the_link_error(tmp_path):
     """The simulated device dies in trial 2: the run ends with the link error (not the
     failed STOP's), trial 1 is kept, the end of the run is logged."""
-    from graspguide.device import DeviceClient
-    from graspguide.transport import LinkError, SimulatedDevice
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.transport import LinkError, SimulatedDevice
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     out = tmp_path / "out"

@@ -1,4 +1,4 @@
-"""scene.toml loader (graspguide.scene): examples, units, defaults, errors, stable hash."""
+"""scene.toml loader (graspguide.study.scene_file): examples, units, defaults, errors, stable hash."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from graspguide import _core
-from graspguide import scene as gs
+from graspguide.core import _core
+from graspguide.study import scene_file as gs
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                         "examples")

@@ -1,4 +1,4 @@
-"""Session folder writer (graspguide.session_log): files, formats, and nothing lost when the
+"""Session folder writer (graspguide.study.records): files, formats, and nothing lost when the
 writer is killed (SIGKILL) mid-stream."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import subprocess
 import sys
 import textwrap
 
-from graspguide import session_log as sl
-from graspguide.protocol import messages as m
+from graspguide.study import records as sl
+from graspguide.link import messages as m
 
 
 def test_files_and_formats(tmp_path):
@@ -43,8 +43,8 @@ def test_files_and_formats(tmp_path):
 
 WRITER = textwrap.dedent("""
     import sys
-    from graspguide import session_log as sl
-    from graspguide.protocol import messages as m
+    from graspguide.study import records as sl
+    from graspguide.link import messages as m
     log = sl.SessionLog(sys.argv[1])
     i = 0
     while True:

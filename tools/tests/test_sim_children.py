@@ -1,6 +1,6 @@
 """The host's side of `--port sim`: the simulated device it starts never outlives it, and a
 Ctrl-C or SIGTERM of `graspguide trial` reaches the host alone, which sends STOP before it
-closes the simulator (tools/graspguide/transport.py, SimulatedDevice.start).
+closes the simulator (tools/graspguide/link/transport.py, SimulatedDevice.start).
 
 The simulator's own rule (it exits when its parent goes, tools/tests/test_sim_safety.py)
 is one half; these tests check the other: the child is started in its own session with
@@ -19,7 +19,7 @@ import pytest
 
 from conftest import REPO_ROOT, subprocess_env
 
-from graspguide import transport as gt
+from graspguide.link import transport as gt
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 
@@ -74,7 +74,7 @@ while True:
 
 HOST = textwrap.dedent("""
     import sys
-    from graspguide.transport import SimulatedDevice
+    from graspguide.link.transport import SimulatedDevice
     sim = SimulatedDevice(binary=sys.argv[1] or None).start()
     print(sim.process.pid, flush=True)
     sys.stdin.read()

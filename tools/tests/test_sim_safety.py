@@ -11,9 +11,9 @@ import subprocess
 import sys
 import time
 
-from graspguide import device as gd
-from graspguide import transport as gt
-from graspguide.protocol import messages as m
+from graspguide.link import client as gd
+from graspguide.link import transport as gt
+from graspguide.link import messages as m
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]

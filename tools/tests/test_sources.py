@@ -1,4 +1,4 @@
-"""Pose sources (graspguide.sources): replay CSV, synthetic hand, tracker conventions."""
+"""Pose sources (graspguide.study.sources): replay CSV, synthetic hand, tracker conventions."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from graspguide import solver
-from graspguide import sources as src
+from graspguide.core import solver
+from graspguide.study import sources as src
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]

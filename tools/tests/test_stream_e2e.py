@@ -11,12 +11,12 @@ import sys
 
 import pytest
 
-from graspguide import scene as gs
+from graspguide.study import scene_file as gs
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
 SCENE4 = os.path.join(_TOOLS, "examples", "scene_paper_4.toml")
-CLI = [sys.executable, "-m", "graspguide.cli", "stream"]
+CLI = [sys.executable, "-m", "graspguide", "stream"]
 WRENCH = "0.3,-1.2,-0.8"
 
 
@@ -86,7 +86,7 @@ def test_source_ending_first_stops_and_exits_0(tmp_path):
 def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     """The synthetic hand written as an OptiTrack export (y up, x,y,z,w): streamed with
     --tracker optitrack it succeeds; streamed as if it were world data it cannot."""
-    from graspguide import sources
+    from graspguide.study import sources
     scene = gs.load_scene(SCENE3)
     hand = sources.open_source("synthetic:rate=100,duration=6,seed=3")
     hand.aim(scene.contacts, [0.3, -1.2, -0.8, 0, 0, 0], scene.policy, scene.constraints,
@@ -110,8 +110,10 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
 
 
 def test_run_stream_then_stop_leaves_device_idle():
-    from graspguide import cli, device as gd, sources, transport as gt
-    from graspguide.protocol import messages as m
+    from graspguide.cli import app as cli
+    from graspguide.link import client as gd, transport as gt
+    from graspguide.study import sources
+    from graspguide.link import messages as m
 
     scene = gs.load_scene(SCENE3)
     src = sources.open_source("synthetic:rate=100,duration=0.5")
@@ -232,8 +234,8 @@ def test_sigterm_stop_reaches_the_device(tmp_path):
     and its motor trace ends with every motor off, which only STOP can do."""
     import signal
 
-    from graspguide import device as gd, transport as gt
-    from graspguide.protocol import messages as m
+    from graspguide.link import client as gd, transport as gt
+    from graspguide.link import messages as m
 
     trace = tmp_path / "motors.csv"
     with gt.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:

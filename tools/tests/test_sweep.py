@@ -1,4 +1,4 @@
-"""`graspguide sweep` (graspguide.sweep): the speed-accuracy trade, SIMULATED.
+"""`graspguide sweep` (graspguide.study.sweep): the speed-accuracy trade, SIMULATED.
 
 A tiny sweep end to end against the simulated device with the virtual participant (the
 JSON has every point with sane fields, the PNG is a PNG, a second run resumes without
@@ -16,8 +16,8 @@ import os
 
 import pytest
 
-from graspguide import protocol_file as pf
-from graspguide import sweep as sw
+from graspguide.study import study_protocol as pf
+from graspguide.study import sweep as sw
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(TESTS_DIR))
@@ -27,7 +27,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 @pytest.fixture(autouse=True)
 def _no_pythonpath(monkeypatch):
-    # the runner subprocesses must import the installed package (with graspguide._core)
+    # the runner subprocesses must import the installed package (with graspguide.core._core)
     monkeypatch.delenv("PYTHONPATH", raising=False)
 
 

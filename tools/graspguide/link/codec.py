@@ -14,10 +14,25 @@ import struct
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
-from .errors import (BadCobsError, BadCrcError, BadLengthError, BadVersionError, FrameError,
-                     IncompleteFrameError, TooLongError, TooShortError, UnknownIdError)
-from .messages import (DEVICE_TO_HOST_IDS, HOST_TO_DEVICE_IDS, MAX_PAYLOAD_SIZE,
-                       PROTOCOL_VERSION, payload_size_of, unpack_payload)
+from graspguide.link.errors import (
+    BadCobsError,
+    BadCrcError,
+    BadLengthError,
+    BadVersionError,
+    FrameError,
+    IncompleteFrameError,
+    TooLongError,
+    TooShortError,
+    UnknownIdError,
+)
+from graspguide.link.messages import (
+    DEVICE_TO_HOST_IDS,
+    HOST_TO_DEVICE_IDS,
+    MAX_PAYLOAD_SIZE,
+    PROTOCOL_VERSION,
+    payload_size_of,
+    unpack_payload,
+)
 
 FRAME_DELIMITER = 0x00
 HEADER_SIZE = 4  # version, msg_id, seq
@@ -295,7 +310,7 @@ def decode_frame(wire: bytes, accept: Accept = Accept.ALL) -> Frame:
 @dataclass(frozen=True)
 class DecodedMessage:
     seq: int
-    message: object  # an instance of a class of graspguide.protocol.messages
+    message: object  # an instance of a class of graspguide.link.messages
 
 
 def encode_message(message, seq: int) -> bytes:

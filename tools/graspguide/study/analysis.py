@@ -959,7 +959,7 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """``graspguide analyze`` on its own: ``main(["STUDY", "--out", "DIR"])``."""
-    from .cli import ArgumentParser
+    from graspguide.cli.app import ArgumentParser
 
     p = ArgumentParser(prog="graspguide analyze", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -1,6 +1,6 @@
 """Byte transports to a GraspGuide device: a serial port, or the simulated device.
 
-:class:`Transport` is the small interface :class:`graspguide.device.DeviceClient` talks
+:class:`Transport` is the small interface :class:`graspguide.link.client.DeviceClient` talks
 through (``write``, ``read(max_bytes, timeout)``, ``close``), so tests can put a fake
 device behind it. Two implementations:
 

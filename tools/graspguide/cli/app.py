@@ -5,7 +5,7 @@ line per request, in order, flushed after each line, so it can be driven through
 one request at a time; with ``--engine device --port PORT|sim`` a device answers instead
 of the core. ``graspguide ports`` lists serial ports (and ``sim``), ``graspguide info``
 identifies a device, ``graspguide stream`` runs one trial, ``graspguide trial`` runs a
-participant's trials of a study protocol (graspguide.runner, docs/study.md). See
+participant's trials of a study protocol (graspguide.study.runner, docs/study.md). See
 ``graspguide COMMAND --help``.
 """
 
@@ -22,8 +22,8 @@ import sys
 import time
 from typing import Any, BinaryIO, Dict, Iterator, Optional, TextIO, Tuple, Union
 
-from . import __version__
-from .transport import DEFAULT_BAUDRATE, SIM_PORT, LinkError
+from graspguide import __version__
+from graspguide.link.transport import DEFAULT_BAUDRATE, SIM_PORT, LinkError
 
 # A request is a few hundred bytes; a longer line is answered with bad_json without
 # being parsed (the rest of it is read and dropped, so the stream goes on).
@@ -154,7 +154,7 @@ def _no_duplicates(pairs):
 
 def _decode(line: bytes, number: int):
     """The JSON value of one line, or raise RequestError."""
-    from .solver import RequestError
+    from graspguide.core.solver import RequestError
 
     try:
         text = line.decode("utf-8")
@@ -218,7 +218,7 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
            engine: Optional["DeviceEngine"] = None) -> Optional[Dict[str, Any]]:
     """The response to one input line, or None for a blank line. With ``engine`` (a
     :class:`DeviceEngine`) the device answers instead of the core."""
-    from . import solver
+    from graspguide.core import solver
 
     if isinstance(line, _LineTooLong):
         return _error("bad_json",
@@ -258,7 +258,7 @@ REQUEST_UNITS = ("m", "mm", "any")
 
 def _pop_units(obj: Any) -> Tuple[Any, str]:
     """The request without its "units" field, and that field ("m" by default)."""
-    from .solver import RequestError
+    from graspguide.core.solver import RequestError
 
     if not isinstance(obj, dict) or "units" not in obj:
         return obj, "m"
@@ -288,8 +288,8 @@ def _in_metres(kw: Dict[str, Any], units: str) -> Dict[str, Any]:
     refuse anyway (a contact count other than 3 or 4, a non-finite number, all contacts
     at one point) go on to the core's own answer; "units": "any" skips the checks (the
     core uses only ratios: synthetic geometry such as its scale tests)."""
-    from .scene import hand_span, hand_span_problem, moment_unit_problem
-    from .solver import RequestError
+    from graspguide.study.scene_file import hand_span, hand_span_problem, moment_unit_problem
+    from graspguide.core.solver import RequestError
 
     contacts, wrench = kw["contacts"], kw["wrench"]
     if units == "any" or len(contacts) not in (3, 4) or not all(
@@ -357,8 +357,8 @@ class DeviceEngine:
         client.stop()  # a trial left running by an earlier session would refuse SET_SCENE
 
     def answer(self, kw: Dict[str, Any]) -> Dict[str, Any]:
-        from . import solver
-        from .device import DeviceError
+        from graspguide.core import solver
+        from graspguide.link.client import DeviceError
 
         client = self.client
         self._trial_id = (self._trial_id + 1) & 0xFFFF
@@ -484,7 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_stream_parser(sub)
     _add_bench_parser(sub)
     _add_trial_parser(sub)
-    from . import analysis as _analysis, demo as _demo, sweep as _sweep
+    from graspguide.study import analysis as _analysis, demo as _demo, sweep as _sweep
     _analysis.register(sub)   # `graspguide analyze`: Tables I-III, statistics, Figure 4
     _demo.add_parser(sub)     # `graspguide demo`: the paper's study end to end, simulated
     _sweep.register(sub)      # `graspguide sweep`: threshold and pose rate vs time/success
@@ -535,8 +535,8 @@ def signals_interrupt():
 
 def _connect(args):
     """(transport, client) for --port, or raise LinkError."""
-    from .device import DeviceClient
-    from .transport import open_port
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.transport import open_port
 
     transport = open_port(args.port, baudrate=args.baud)
     try:
@@ -554,7 +554,11 @@ def _fail(command: str, e: BaseException) -> int:
 
 
 def _cmd_ports(args) -> int:
-    from .transport import LinkError as _LinkError, find_sim_binary, list_serial_ports
+    from graspguide.link.transport import (
+        LinkError as _LinkError,
+        find_sim_binary,
+        list_serial_ports,
+    )
 
     try:
         ports = list_serial_ports()
@@ -581,7 +585,7 @@ def _cmd_ports(args) -> int:
 
 
 def _cmd_info(args) -> int:
-    from .protocol.messages import PROTOCOL_VERSION
+    from graspguide.link.messages import PROTOCOL_VERSION
 
     try:
         transport, client = _connect(args)
@@ -734,7 +738,7 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          values are a tracker's raw export and are converted),
          synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
          scene's force with gravity),
-         plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.sources.TrackerAdapter
+         plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.study.sources.TrackerAdapter
          subclass that reads the lab's tracker SDK)."""
 
 STREAM_EPILOG = """\
@@ -819,7 +823,7 @@ def _add_bench_parser(sub) -> None:
                    help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)")
 
     def handler(args) -> int:
-        from . import bench
+        from graspguide.bench import host_bench as bench
 
         return bench.main_args(args)
 
@@ -882,8 +886,8 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
     """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
     (paced in real time unless ``virtual_clock``), until TRIAL_RESULT or the end of the
     source. Returns a summary dict; raises LinkError. STOP is the caller's job."""
-    from .device import DeviceError, LinkTimeout, host_time_us
-    from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, ErrorCode
+    from graspguide.link.client import DeviceError, LinkTimeout, host_time_us
+    from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, ErrorCode
 
     client.set_scene(**scene.set_scene_kwargs())
     client.start_trial(trial_id, wrench)
@@ -954,10 +958,15 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
 
 @signals_interrupt()   # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
 def _cmd_stream(args) -> int:
-    from .scene import SceneError, config_hash, load_scene, moment_unit_problem
-    from .session_log import SessionLog
-    from .sources import SourceError, SyntheticSource, open_source
-    from .transport import SIM_PORT as _SIM, open_port
+    from graspguide.study.scene_file import (
+        SceneError,
+        config_hash,
+        load_scene,
+        moment_unit_problem,
+    )
+    from graspguide.study.records import SessionLog
+    from graspguide.study.sources import SourceError, SyntheticSource, open_source
+    from graspguide.link.transport import SIM_PORT as _SIM, open_port
 
     parser = args.command_parser
     if args.virtual_clock and args.port != _SIM:
@@ -981,7 +990,7 @@ def _cmd_stream(args) -> int:
         transport = open_port(args.port, baudrate=args.baud, **kwargs)
     except LinkError as e:
         return _fail("stream", e)
-    from .device import DeviceClient
+    from graspguide.link.client import DeviceClient
 
     client = DeviceClient(transport, timeout=args.timeout)
     log = view = None
@@ -1048,7 +1057,7 @@ def _cmd_stream(args) -> int:
 
 
 # --------------------------------------------------------------------------------------
-# graspguide trial (the study runner, graspguide.runner)
+# graspguide trial (the study runner, graspguide.study.runner)
 # --------------------------------------------------------------------------------------
 TRIAL_DESCRIPTION = """\
 Run one participant's trials of a study protocol (docs/study.md) on a device: the plan
@@ -1112,10 +1121,20 @@ def _add_trial_parser(sub) -> None:
 
 @signals_interrupt()   # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def _cmd_trial(args) -> int:
-    from .protocol_file import ProtocolFileError, load_protocol, participant_number
-    from .runner import (Progress, RunnerError, StudyRunner, load_tlx_file,
-                         open_runner_source, summary_lines)
-    from .transport import SIM_PORT as _SIM, open_port
+    from graspguide.study.study_protocol import (
+        ProtocolFileError,
+        load_protocol,
+        participant_number,
+    )
+    from graspguide.study.runner import (
+        Progress,
+        RunnerError,
+        StudyRunner,
+        load_tlx_file,
+        open_runner_source,
+        summary_lines,
+    )
+    from graspguide.link.transport import SIM_PORT as _SIM, open_port
 
     def usage(message: str) -> int:
         print(f"graspguide trial: error: {message}", file=sys.stderr)
@@ -1127,7 +1146,7 @@ def _cmd_trial(args) -> int:
         source = open_runner_source(args.source, protocol, args.participant)
         runner_tlx = None
         if args.tlx is not None:
-            from .protocol_file import session_order
+            from graspguide.study.study_protocol import session_order
 
             runner_tlx = load_tlx_file(args.tlx, args.participant,
                                        session_order(protocol, args.participant))
@@ -1146,7 +1165,7 @@ def _cmd_trial(args) -> int:
             transport = open_port(args.port, baudrate=args.baud, **kwargs)
         except LinkError as e:
             return _fail("trial", e)
-        from .device import DeviceClient
+        from graspguide.link.client import DeviceClient
 
         client = DeviceClient(transport, timeout=args.timeout)
         try:

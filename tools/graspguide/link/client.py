@@ -1,8 +1,8 @@
 """Talk to a GraspGuide device (a board or the simulated device) over the serial protocol
 of docs/protocol.md.
 
->>> from graspguide.transport import open_port
->>> from graspguide.device import DeviceClient
+>>> from graspguide.link.transport import open_port
+>>> from graspguide.link.client import DeviceClient
 >>> with DeviceClient(open_port("sim")) as dev:
 ...     info = dev.hello()
 ...     dev.set_scene(contacts, policy="F", mode="V")
@@ -38,16 +38,53 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
-from .protocol.errors import BadEnumValueError, ProtocolError
-from .protocol.framing import (CRC16_INIT, FRAME_OVERHEAD, MAX_RAW_FRAME_SIZE, Accept, Frame,
-                               FrameParser, ParseEvent, SequenceCounter, check_frame,
-                               encode_message, message_of)
-from .protocol.messages import (MAX_CONTACTS, MESSAGES, PROTOCOL_VERSION, Ack, ConstraintModel,
-                                DeviceState, Error, ErrorCode, GetStatus, Hello, HelloReply, Mode,
-                                MsgId, Policy, Pose, SetMotors, SetScene, StartTrial, Status, Stop,
-                                TELEMETRY_FLAG_TRIAL_RUNNING, Telemetry, TrialResult)
-from .transport import (DeviceDisconnected, DeviceNotFound, LinkError, LinkTimeout, SimNotBuilt,
-                        Transport)
+from graspguide.link.errors import BadEnumValueError, ProtocolError
+from graspguide.link.codec import (
+    CRC16_INIT,
+    FRAME_OVERHEAD,
+    MAX_RAW_FRAME_SIZE,
+    Accept,
+    Frame,
+    FrameParser,
+    ParseEvent,
+    SequenceCounter,
+    check_frame,
+    encode_message,
+    message_of,
+)
+from graspguide.link.messages import (
+    MAX_CONTACTS,
+    MESSAGES,
+    PROTOCOL_VERSION,
+    Ack,
+    ConstraintModel,
+    DeviceState,
+    Error,
+    ErrorCode,
+    GetStatus,
+    Hello,
+    HelloReply,
+    Mode,
+    MsgId,
+    Policy,
+    Pose,
+    SetMotors,
+    SetScene,
+    StartTrial,
+    Status,
+    Stop,
+    TELEMETRY_FLAG_TRIAL_RUNNING,
+    Telemetry,
+    TrialResult,
+)
+from graspguide.link.transport import (
+    DeviceDisconnected,
+    DeviceNotFound,
+    LinkError,
+    LinkTimeout,
+    SimNotBuilt,
+    Transport,
+)
 
 DEFAULT_TIMEOUT = 1.0      # s, per request: a board answers in a few ms at 115200 baud
 READ_CHUNK = 4096          # bytes per transport read
@@ -74,7 +111,7 @@ _CODE = [bytes((n + 1,)) for n in range(254)]
 
 def _cobs_small(raw: bytes) -> bytes:
     """COBS of a frame shorter than 254 bytes (delimiter excluded): the same bytes as
-    framing.cobs_encode for such inputs."""
+    codec.cobs_encode for such inputs."""
     if 0 not in raw:
         return bytes((len(raw) + 1,)) + raw
     return b"".join([_CODE[len(part)] + part for part in raw.split(b"\0")])
@@ -277,7 +314,7 @@ def _trial_field_text(index: int) -> str:
         return ""
     f = SetScene.FIELDS[index]
     try:
-        from ._core import TRIAL_LIMITS
+        from graspguide.core._core import TRIAL_LIMITS
     except ImportError:  # pragma: no cover - host tools without the built extension
         TRIAL_LIMITS = {}
     r = TRIAL_LIMITS.get(f.name)

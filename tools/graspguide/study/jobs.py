@@ -35,7 +35,7 @@ class TrialJob:
 
 def repo_root() -> Optional[str]:
     try:
-        from .transport import find_repo_root
+        from graspguide.link.transport import find_repo_root
         return find_repo_root()
     except Exception:  # pragma: no cover - informational default only
         return None
@@ -83,7 +83,7 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
-    from .transport import die_with_parent
+    from graspguide.link.transport import die_with_parent
 
     # A pool killed with SIGKILL leaves no runner holding a participant's folder.
     preexec = die_with_parent()

@@ -19,7 +19,7 @@ import math
 import numbers
 from typing import Any, Dict, List, Mapping, Sequence, Tuple
 
-from . import _core
+from graspguide.core import _core
 
 STATUS_NAMES: Tuple[str, ...] = tuple(_core.STATUS_NAMES)
 POLICIES: Tuple[str, ...] = tuple(_core.POLICIES)

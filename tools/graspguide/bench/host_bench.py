@@ -2,12 +2,12 @@
 with the solvers a user would otherwise pick, on the same instances, in one process.
 
 Instances (:func:`make_instances`): per contact count k, ``--instances`` seeded random
-hands (:func:`graspguide.scenes.random_scenes`) and the paper's hand
+hands (:func:`graspguide.core.scene_generators.random_scenes`) and the paper's hand
 (``scenes.nominal_contacts``, the contacts of ``tools/examples/scene_paper_{3,4}.toml``)
 under the 26 unit-force directions of a cube's faces, edges and corners plus the named
-nominal-hand cases of :func:`graspguide.scenes.extreme_scenes` that are expected to be ok.
+nominal-hand cases of :func:`graspguide.core.scene_generators.extreme_scenes` that are expected to be ok.
 Every scene is run twice: constraint model ``paper`` with policy F, mode C, and ``normal``
-with Fperp, mode V. The float64 reference (:func:`graspguide.reference.solve`: SVD and
+with Fperp, mode V. The float64 reference (:func:`graspguide.core.reference.solve`: SVD and
 exhaustive active-set enumeration) answers every instance once.
 
 The QP (docs/algorithm.md, step 5) is handed to every solver in the same form, computed
@@ -61,7 +61,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _core, reference, scenes
+from graspguide.core import _core, reference, scene_generators as scenes
 
 SCHEMA = "graspguide-bench/1"
 

@@ -2,7 +2,7 @@
 
 For every modality of the protocol (F+C, Fperp+C, F+V, Fperp+V by default) it runs the
 study protocol (default ``protocols/paper.toml``) again at other alignment thresholds and
-other pose rates, with the virtual participant (:mod:`graspguide.participant`, a model,
+other pose rates, with the virtual participant (:mod:`graspguide.study.participant`, a model,
 never human data) on the simulated device (virtual clock), and reports success rate and
 completion time against each.
 
@@ -43,15 +43,25 @@ import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from .trial_jobs import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TrialJob,
-                         count_lines, default_protocol, default_out as _default_out,
-                         int_arg as _int_arg, repo_root as _repo_root, run_trial_jobs)
+from graspguide.study.jobs import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    TrialJob,
+    count_lines,
+    default_protocol,
+    default_out as _default_out,
+    int_arg as _int_arg,
+    repo_root as _repo_root,
+    run_trial_jobs,
+)
 
 SWEEP_FORMAT = "graspguide-sweep/1"
 DEFAULT_THRESHOLDS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0)
 DEFAULT_RATES = (30.0, 60.0, 100.0, 240.0)
 DEFAULT_SOURCE = "participant"
-SIMULATED_NOTE = ("SIMULATED: virtual participants (graspguide.participant, a model of a "
+SIMULATED_NOTE = ("SIMULATED: virtual participants (graspguide.study.participant, a model of a "
                   "person) on the simulated device; not human data")
 
 DESCRIPTION = """\
@@ -98,7 +108,7 @@ def parse_values(text: str, what: str, lo: float, hi: float) -> Tuple[float, ...
 
 
 def parse_modalities(text: str) -> Tuple[str, ...]:
-    from .protocol_file import MODALITIES
+    from graspguide.study.study_protocol import MODALITIES
 
     items = [s.strip() for s in str(text).split(",") if s.strip()]
     if not items:
@@ -209,7 +219,7 @@ def derive_protocol(base, threshold_deg: float, pose_rate_hz: float, wrenches: i
                     contacts: Optional[Sequence[int]] = None):
     """The protocol of one point: ``base`` with the threshold and pose rate changed,
     ``wrenches`` wrenches (single-motor share scaled), no familiarization trials."""
-    from .protocol_file import ProtocolFileError
+    from graspguide.study.study_protocol import ProtocolFileError
 
     if threshold_deg >= base.start_error_deg[0]:
         raise SweepError(f"threshold {threshold_deg:g} deg: must be below the protocol's "
@@ -250,7 +260,7 @@ def _toml_value(v: Any) -> str:
 
 def protocol_toml(protocol) -> str:
     """A protocol file (metres) that loads back to ``protocol`` (same config hash)."""
-    from .protocol_file import FINGERS
+    from graspguide.study.study_protocol import FINGERS
 
     d = protocol.to_dict()
     lines = ["# A point of `graspguide sweep` (SIMULATED): derived from "
@@ -322,7 +332,7 @@ def summarize(records: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
 
 
 def read_point_trials(study_dir: str, participants: Sequence[str]) -> List[Dict[str, Any]]:
-    from .runner import read_jsonl
+    from graspguide.study.runner import read_jsonl
 
     out: List[Dict[str, Any]] = []
     for pid in participants:
@@ -495,8 +505,8 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
               contacts: Optional[Sequence[int]] = None, grid: bool = False,
               quiet: bool = False, err=None) -> Tuple[int, Optional[Dict[str, Any]]]:
     """Run (or resume) the sweep into ``out``; returns (exit status, result dict)."""
-    from .protocol_file import load_protocol, plan
-    from .runner import RunnerError, open_runner_source
+    from graspguide.study.study_protocol import load_protocol, plan
+    from graspguide.study.runner import RunnerError, open_runner_source
 
     err = err or sys.stderr
     t0 = time.monotonic()
@@ -629,8 +639,8 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .protocol_file import POSE_RATE_HZ, ProtocolFileError
-    from .runner import RunnerError
+    from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
+    from graspguide.study.runner import RunnerError
 
     prog = "graspguide sweep"
     try:
@@ -688,8 +698,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    """`graspguide sweep` on its own (``python -m graspguide.sweep ...``)."""
-    from .cli import ArgumentParser
+    """`graspguide sweep` on its own (``python -m graspguide.study.sweep ...``)."""
+    from graspguide.cli.app import ArgumentParser
 
     parser = ArgumentParser(prog="graspguide sweep", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -342,7 +342,7 @@ def _contact_units_problem(positions, convention: TrackerConvention,
                            adapter: bool = False) -> Optional[str]:
     """What is wrong with a pose's contacts in the convention's unit (a hand spans 5 mm to
     0.5 m), or None. All contacts at one point are left to the device (coincident)."""
-    from .scene import hand_span, hand_span_problem
+    from graspguide.study.scene_file import hand_span, hand_span_problem
 
     if hand_span(positions) == 0.0:
         return None
@@ -372,7 +372,7 @@ def aligned_quaternion(contacts, wrench, policy="F", constraints="paper",
     """An orientation with zero guidance error (the scene's force along gravity), from the
     core: the force direction f (hand frame) probed through mode V's gain
     alpha = |R f - g| / 2 * span for three orientations, then rotated onto g = -z."""
-    from . import solver
+    from graspguide.core import solver
 
     s = math.sqrt(0.5)
 
@@ -471,7 +471,7 @@ def _open_plugin(rest: str) -> Source:
     cls = getattr(module, class_name, None)
     if not (isinstance(cls, type) and issubclass(cls, TrackerAdapter)):
         raise SourceError(f"plugin: {module_name}.{class_name} must be a "
-                          "graspguide.sources.TrackerAdapter subclass")
+                          "graspguide.study.sources.TrackerAdapter subclass")
     return cls(arg) if arg else cls()
 
 

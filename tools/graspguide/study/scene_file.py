@@ -21,7 +21,7 @@ Format (every key is checked; an unknown key is an error, so a typo is never ign
     hold_s = 0.5                 # [0, 600] seconds, at most timeout_s
     timeout_s = 90.0             # (0, 1800] seconds
 
-The [trial] ranges are the core's (``graspguide._core.TRIAL_LIMITS``, from scene.h), so
+The [trial] ranges are the core's (``graspguide.core._core.TRIAL_LIMITS``, from scene.h), so
 the file, the core and the device accept the same values. The contacts must span like a
 hand in the stated unit (:func:`hand_span_problem`: the two farthest 5 mm to 0.5 m
 apart), so a file in millimetres that says ``units = "m"`` is refused, not guided.
@@ -39,7 +39,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
-from .toml_file import load_toml, loads_toml
+from graspguide.study.toml_file import load_toml, loads_toml
 
 FINGERS = ("thumb", "index", "middle", "palm")
 UNITS = {"m": 1.0, "mm": 1000.0}   # divisor to metres (x / 1000 is correctly rounded)
@@ -69,7 +69,7 @@ _TRIAL_UNITS = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "s
 def trial_limits() -> Dict[str, Dict[str, Any]]:
     """The core's range of each trial field: key -> {"min", "max", "min_exclusive"}.
     Read from the compiled core, never copied, so the readers cannot drift from it."""
-    from ._core import TRIAL_LIMITS
+    from graspguide.core._core import TRIAL_LIMITS
 
     return TRIAL_LIMITS
 
@@ -216,7 +216,7 @@ class Scene:
         return config_hash(self.to_dict())
 
     def set_scene_kwargs(self) -> Dict[str, Any]:
-        """Keyword arguments of :meth:`graspguide.device.DeviceClient.set_scene`."""
+        """Keyword arguments of :meth:`graspguide.link.client.DeviceClient.set_scene`."""
         return {"contacts": [list(c) for c in self.contacts], "y_axis": list(self.y_axis),
                 "constraints": self.constraints, "policy": self.policy, "mode": self.mode,
                 "threshold_deg": self.threshold_deg, "hold_s": self.hold_s,

@@ -1,8 +1,8 @@
 """`graspguide demo`: the paper's user study end to end, SIMULATED.
 
 One command runs the simulated device (virtual clock) and N virtual participants (U1..UN,
-:class:`graspguide.participant.VirtualParticipant`) through a study protocol (default
-``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.analysis`): it
+:class:`graspguide.study.participant.VirtualParticipant`) through a study protocol (default
+``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.study.analysis`): it
 prints Tables I-II and the repeated-measures ANOVA line and writes Figure 4 (PNG, SVG),
 the Markdown report and the CSV tables to ``OUT/analysis/``.
 
@@ -25,14 +25,23 @@ import sys
 import time
 from typing import Dict, List, Tuple
 
-from .trial_jobs import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, TrialJob,
-                         count_lines, default_protocol, default_out as _default_out, int_arg,
-                         run_trial_jobs)
+from graspguide.study.jobs import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    TrialJob,
+    count_lines,
+    default_protocol,
+    default_out as _default_out,
+    int_arg,
+    run_trial_jobs,
+)
 DEFAULT_SOURCE = "participant"
 
 DESCRIPTION = """\
 The paper's user study end to end, SIMULATED: the simulated device (virtual clock) and
-N virtual participants U1..UN (graspguide.participant; a model, never human data) run
+N virtual participants U1..UN (graspguide.study.participant; a model, never human data) run
 through a study protocol with `graspguide trial` (--jobs participants at a time, each
 with its own simulated device), then `graspguide analyze`: prints Tables I-II and the
 repeated-measures ANOVA, writes Figure 4 (PNG, SVG), report.md and CSV tables to
@@ -72,7 +81,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                         "(default: the CPU count)")
     p.add_argument("--source", default=DEFAULT_SOURCE, metavar="SPEC",
                    help="the virtual participant: participant[:key=value,...] "
-                        "(graspguide.participant parameters; default: the documented "
+                        "(graspguide.study.participant parameters; default: the documented "
                         "defaults)")
     p.set_defaults(handler=run, command_parser=p)
     return p
@@ -80,8 +89,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def _status(protocol, out: str, pid: str) -> Tuple[int, int, bool]:
     """(completed trials, planned trials, complete incl. TLX) of a participant."""
-    from .protocol_file import plan, session_order
-    from .runner import read_jsonl
+    from graspguide.study.study_protocol import plan, session_order
+    from graspguide.study.runner import read_jsonl
 
     planned = len(plan(protocol, pid))
     pdir = os.path.join(out, pid)
@@ -96,8 +105,8 @@ def _status(protocol, out: str, pid: str) -> Tuple[int, int, bool]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .protocol_file import ProtocolFileError, load_protocol
-    from .runner import RunnerError, open_runner_source
+    from graspguide.study.study_protocol import ProtocolFileError, load_protocol
+    from graspguide.study.runner import RunnerError, open_runner_source
 
     t0 = time.monotonic()
     protocol_path = args.protocol or default_protocol()
@@ -178,7 +187,7 @@ def _run_participants(args, protocol_path: str, out: str, logs: str, todo: List[
 
 
 def _analyse(out: str, run_s: float, t0: float) -> int:
-    from .analysis import AnalysisError, analyze, summary_text, write_outputs
+    from graspguide.study.analysis import AnalysisError, analyze, summary_text, write_outputs
 
     target = os.path.join(out, "analysis")
     try:

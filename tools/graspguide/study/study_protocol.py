@@ -11,7 +11,7 @@ does not depend on the numpy version); :func:`plan` lists one participant's tria
 Rules (docs/study.md explains why):
 
 * **single motor**: a wrench "drives a single motor" in a condition (k, policy) when the
-  core (:func:`graspguide.solver.solve`, mode C, the protocol's constraint model) at the
+  core (:func:`graspguide.core.solver.solve`, mode C, the protocol's constraint model) at the
   trial's start orientation answers ``ok`` with exactly one motor PWM > 0. The paper's
   split (5 single, 7 several) is reproduced in the reference condition
   ``[wrenches] split_k`` / ``split_policy``; every trial also carries the flag for its own
@@ -34,10 +34,19 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from .scene import (CONSTRAINTS, FINGERS, TRIAL_DEFAULTS, UNITS, canonical_json,
-                    check_trial_fields, config_hash, file_unit_fix, hand_span_problem,
-                    moment_unit_problem)
-from .toml_file import load_toml, loads_toml
+from graspguide.study.scene_file import (
+    CONSTRAINTS,
+    FINGERS,
+    TRIAL_DEFAULTS,
+    UNITS,
+    canonical_json,
+    check_trial_fields,
+    config_hash,
+    file_unit_fix,
+    hand_span_problem,
+    moment_unit_problem,
+)
+from graspguide.study.toml_file import load_toml, loads_toml
 
 MODALITIES = ("F+C", "Fperp+C", "F+V", "Fperp+V")
 MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
@@ -392,7 +401,7 @@ def motors_driven(protocol: Protocol, k: int, policy: str, wrench: Sequence[floa
                   ) -> Optional[int]:
     """How many motors the core drives (PWM > 0) for this wrench in condition (k, policy)
     at the protocol's start orientation, mode C; None if the core cannot solve it."""
-    from . import solver
+    from graspguide.core import solver
 
     r = solver.solve([list(c) for c in protocol.hands[k]], list(wrench), policy=policy,
                      mode="C", constraints=protocol.constraints,
@@ -403,7 +412,7 @@ def motors_driven(protocol: Protocol, k: int, policy: str, wrench: Sequence[floa
 
 
 def _start_error_deg(protocol: Protocol, k: int, wrench: Sequence[float]) -> Optional[float]:
-    from . import solver
+    from graspguide.core import solver
 
     r = solver.solve([list(c) for c in protocol.hands[k]], list(wrench), policy="F", mode="V",
                      constraints=protocol.constraints, orientation=list(protocol.start_quat),

@@ -1,4 +1,4 @@
-"""`graspguide trial`: run a participant's planned trials (graspguide.protocol_file) through
+"""`graspguide trial`: run a participant's planned trials (graspguide.study.study_protocol) through
 a device, log every trial and frame, ask the NASA-TLX after each session, and resume after
 a crash or Ctrl-C without repeating or losing a completed trial.
 
@@ -24,8 +24,8 @@ one stops the run (it needs a person to look).
 Sources (``--source``): ``synthetic[:...]`` and ``replay:FILE`` (open loop: the hand moves
 whatever the motors do; after the source ends its last pose is held until the device
 ends the trial), ``participant[:PARAMS]`` (the virtual participant,
-``graspguide.participant.VirtualParticipant.from_spec(PARAMS, seed)``), and
-``plugin:MODULE:CLASS[:ARG]``: a :class:`graspguide.sources.TrackerAdapter` (a live
+``graspguide.study.participant.VirtualParticipant.from_spec(PARAMS, seed)``), and
+``plugin:MODULE:CLASS[:ARG]``: a :class:`graspguide.study.sources.TrackerAdapter` (a live
 tracker, a person: real time, TLX asked) or a closed-loop class. A closed-loop source has
 ``rate_hz``, ``SIMULATED``, ``begin_trial(*, contacts, y_axis, wrench, policy, mode,
 start_quat)`` and ``step(t_s, pwm) -> quat (w, x, y, z)``; it runs in lockstep with the
@@ -59,10 +59,22 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, TextIO, Tuple
 
-from .protocol_file import (PlannedTrial, Protocol, Session,
-                            derive_seed, draw_familiarization_wrenches, draw_wrenches, plan,
-                            session_order)
-from .session_log import RecordWriteError, append_record, open_append, write_json_file
+from graspguide.study.study_protocol import (
+    PlannedTrial,
+    Protocol,
+    Session,
+    derive_seed,
+    draw_familiarization_wrenches,
+    draw_wrenches,
+    plan,
+    session_order,
+)
+from graspguide.study.records import (
+    RecordWriteError,
+    append_record,
+    open_append,
+    write_json_file,
+)
 
 TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
 TLX_NAMES = {"MD": "Mental Demand", "TD": "Temporal Demand", "PD": "Physical Demand",
@@ -396,7 +408,12 @@ class OpenLoopSource(RunnerSource):
 
 def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
     """The source of ``--source SPEC`` for this protocol and participant."""
-    from .sources import SourceError, SyntheticSource, TrackerAdapter, open_source
+    from graspguide.study.sources import (
+        SourceError,
+        SyntheticSource,
+        TrackerAdapter,
+        open_source,
+    )
 
     kind, _, rest = spec.partition(":")
     seed = derive_seed(protocol.seed, "source", participant) % 2**32
@@ -406,7 +423,7 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             cls = getattr(mod, "VirtualParticipant")
         except (ImportError, AttributeError) as e:
             raise RunnerError(f"--source {spec}: the virtual participant "
-                              f"(graspguide.participant.VirtualParticipant) is not available: "
+                              f"(graspguide.study.participant.VirtualParticipant) is not available: "
                               f"{e}", usage=True) from None
         try:
             model = cls.from_spec(rest, seed)
@@ -721,7 +738,7 @@ class StudyRunner:
 
     def _trial_result(self, trial: PlannedTrial) -> Any:
         """The TRIAL_RESULT of a trial the device has ended (already queued, or awaited)."""
-        from .device import LinkTimeout
+        from graspguide.link.client import LinkTimeout
 
         client = self.client
         if client.trial_results:
@@ -756,7 +773,7 @@ class StudyRunner:
         not_allowed_in_state) and not recorded. An act() too far ahead raises the
         model's FeelLagError, turned into _Diverged (the caller runs the trial again in
         lockstep): a broken source cannot give a wrong record."""
-        from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
+        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
 
         p = self.protocol
         k = trial.k
@@ -807,8 +824,8 @@ class StudyRunner:
             i += len(batch)
 
     def run_trial(self, trial: PlannedTrial) -> Dict[str, Any]:
-        from .device import host_time_us
-        from .protocol.messages import TELEMETRY_FLAG_TRIAL_RUNNING
+        from graspguide.link.client import host_time_us
+        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
 
         p = self.protocol
         self._scene(trial)
@@ -1035,7 +1052,7 @@ MAX_PIPELINE = 32
 
 def _feel_lag_error() -> Any:
     try:
-        from .participant import FeelLagError
+        from graspguide.study.participant import FeelLagError
     except ImportError:  # pragma: no cover
         return RuntimeError
     return FeelLagError

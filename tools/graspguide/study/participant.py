@@ -80,7 +80,7 @@ from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .sources import quat_angle_deg as quaternion_angle_deg  # re-exported: tests, analysis
+from graspguide.study.sources import quat_angle_deg as quaternion_angle_deg  # re-exported: tests, analysis
 
 # Every number a pose depends on is computed on plain Python floats with `math`, in a
 # fixed order. numpy's linear algebra (norm, dot, @) runs in OpenBLAS, whose kernel -- and

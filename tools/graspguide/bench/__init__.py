@@ -1,0 +1,1 @@
+"""Host benchmarks: the core's frame and QP against peer solvers (``graspguide bench``)."""
