@@ -23,7 +23,7 @@ import math
 import os
 import sys
 import time
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 _TOOLS = os.path.dirname(_HERE)
@@ -45,23 +45,23 @@ COMBOS = [(p, m, c) for p in ref.POLICIES for m in ref.MODES for c in ref.MODELS
 
 # Random cases whose decisions sit near a threshold are redrawn, so that an
 # implementation with different rounding (or float) makes the same discrete decisions.
-SLACK_PWM = 1e-3          # |frac(70 + gain |m_i|) - 0.5| must exceed this (PWM counts)
-SLACK_OFF = 1e-5          # ||m_i| - kMotorOffLevel| must exceed this
-SLACK_COS = 1e-4          # |cos(f, r_i) - kRelevanceCosTol| must exceed this
-SLACK_SIN = 1e-4          # |sin(y_i, y_O) - kAxisParallelTol| must exceed this
-MIN_RANK_RATIO = 1e-2     # sigma_6 / sigma_1 must exceed this
+SLACK_PWM = 1e-3  # |frac(70 + gain |m_i|) - 0.5| must exceed this (PWM counts)
+SLACK_OFF = 1e-5  # ||m_i| - kMotorOffLevel| must exceed this
+SLACK_COS = 1e-4  # |cos(f, r_i) - kRelevanceCosTol| must exceed this
+SLACK_SIN = 1e-4  # |sin(y_i, y_O) - kAxisParallelTol| must exceed this
+MIN_RANK_RATIO = 1e-2  # sigma_6 / sigma_1 must exceed this
 MARGIN_BAND = (-1e-3, -1e-8)  # margins of the tried models must lie outside this band
 FEAS_TOL_RANGE = (1e-12, 1e-4)  # the model used must not change over this kFeasRelTol range
-FLOAT_TOL = 1e-7          # --check: relative float tolerance (ill-conditioned cases: ~1e-9)
+FLOAT_TOL = 1e-7  # --check: relative float tolerance (ill-conditioned cases: ~1e-9)
 
 NOTES = [
-    "Inputs: non-finite numbers are stored as the strings \"nan\", \"inf\" and \"-inf\" "
+    'Inputs: non-finite numbers are stored as the strings "nan", "inf" and "-inf" '
     "(JSON has no portable NaN); every other number is a JSON number written with "
     "Python's repr, which round-trips float64 exactly.",
     "Outputs not defined for a status are null: lambda, levels and relevant before the "
     "QP; error_deg and alpha unless status is ok or nothing_to_display; margin for the "
     "'none' model or before the QP. pwm is always k ints (all 0 unless status is ok). "
-    "constraints_used is \"\" and fallback_mask is 0 unless status is ok.",
+    'constraints_used is "" and fallback_mask is 0 unless status is ok.',
     "lambda: 3k contact-frame components [x y z] per contact, the QP optimum "
     "lambda0 + N xi before normalisation, of the model actually used.",
     "levels: the normalised motor levels m (signed for policy Fperp), before the "
@@ -97,11 +97,11 @@ def dec_num(x: Any) -> float:
     return float(x)
 
 
-def _opt_list(v: Optional[List[Any]], conv=float) -> Optional[List[Any]]:
+def _opt_list(v: list[Any] | None, conv=float) -> list[Any] | None:
     return None if v is None else [conv(x) for x in v]
 
 
-def expected_block(res: Dict[str, Any], constraints: str) -> Dict[str, Any]:
+def expected_block(res: dict[str, Any], constraints: str) -> dict[str, Any]:
     margin = res["margins"].get(constraints) if res["margins"] else None
     return {
         "status": res["status"],
@@ -117,15 +117,27 @@ def expected_block(res: Dict[str, Any], constraints: str) -> Dict[str, Any]:
     }
 
 
-def run_case(scene: Dict[str, Any], policy: str, mode: str, constraints: str
-             ) -> Dict[str, Any]:
-    return ref.solve(scene["contacts"], scene["wrench"], policy=policy, mode=mode,
-                     constraints=constraints, orientation=scene["orientation"],
-                     y_axis=scene["y_axis"])
+def run_case(scene: dict[str, Any], policy: str, mode: str, constraints: str) -> dict[str, Any]:
+    return ref.solve(
+        scene["contacts"],
+        scene["wrench"],
+        policy=policy,
+        mode=mode,
+        constraints=constraints,
+        orientation=scene["orientation"],
+        y_axis=scene["y_axis"],
+    )
 
 
-def case_entry(name: str, scene: Dict[str, Any], policy: str, mode: str, constraints: str,
-               res: Dict[str, Any], note: Optional[str] = None) -> Dict[str, Any]:
+def case_entry(
+    name: str,
+    scene: dict[str, Any],
+    policy: str,
+    mode: str,
+    constraints: str,
+    res: dict[str, Any],
+    note: str | None = None,
+) -> dict[str, Any]:
     entry = {
         "name": name,
         "k": len(scene["contacts"]),
@@ -146,7 +158,7 @@ def case_entry(name: str, scene: Dict[str, Any], policy: str, mode: str, constra
 # --------------------------------------------------------------------------------------
 # Self-checks (cheap; the thorough ones are in tools/tests/test_reference.py)
 # --------------------------------------------------------------------------------------
-def check_result(scene: Dict[str, Any], res: Dict[str, Any], constraints: str) -> None:
+def check_result(scene: dict[str, Any], res: dict[str, Any], constraints: str) -> None:
     if res["status"] != "ok":
         return
     C = np.asarray(scene["contacts"], dtype=float)
@@ -167,7 +179,7 @@ def check_result(scene: Dict[str, Any], res: Dict[str, Any], constraints: str) -
     # Margin vs enumeration: feasible => margin >= -delta (minus LP noise);
     # infeasible => margin < 0 (plus LP noise).
     chain = ref.FALLBACK_CHAIN[constraints]
-    for model in chain[:chain.index(used)]:
+    for model in chain[: chain.index(used)]:
         t = res["margins"][model]
         assert t < 1e-9, (scene["name"], model, "enumeration infeasible but margin", t)
     t = res["margins"].get(used)
@@ -176,26 +188,37 @@ def check_result(scene: Dict[str, Any], res: Dict[str, Any], constraints: str) -
     assert abs(np.linalg.norm(res["levels"]) - 1.0) < 1e-12
 
 
-def feasibility_depends_on_tol(scene: Dict[str, Any], res: Dict[str, Any],
-                               constraints: str) -> bool:
+def feasibility_depends_on_tol(
+    scene: dict[str, Any], res: dict[str, Any], constraints: str
+) -> bool:
     """True if the model used changes when kFeasRelTol spans FEAS_TOL_RANGE (float's
     1e-4 down to 1e-12): a numerically borderline feasibility decision."""
     for tol in FEAS_TOL_RANGE:
-        other = ref.solve(scene["contacts"], scene["wrench"], constraints=constraints,
-                          orientation=scene["orientation"], y_axis=scene["y_axis"],
-                          compute_margins=False, feas_rel_tol=tol)
+        other = ref.solve(
+            scene["contacts"],
+            scene["wrench"],
+            constraints=constraints,
+            orientation=scene["orientation"],
+            y_axis=scene["y_axis"],
+            compute_margins=False,
+            feas_rel_tol=tol,
+        )
         if other["constraints_used"] != res["constraints_used"]:
             return True
     return False
 
 
-def fragile_reason(res: Dict[str, Any], constraints: str,
-                   scene: Optional[Dict[str, Any]] = None) -> Optional[str]:
+def fragile_reason(
+    res: dict[str, Any], constraints: str, scene: dict[str, Any] | None = None
+) -> str | None:
     """Why a random case is too close to a decision threshold (None if it is not)."""
     if res["status"] != "ok":
         return f"status {res['status']}"
-    if scene is not None and constraints != "none" and \
-            feasibility_depends_on_tol(scene, res, constraints):
+    if (
+        scene is not None
+        and constraints != "none"
+        and feasibility_depends_on_tol(scene, res, constraints)
+    ):
         return "feasibility depends on kFeasRelTol"
     d = res["diagnostics"]
     if d["rank_ratio"] < MIN_RANK_RATIO:
@@ -207,7 +230,7 @@ def fragile_reason(res: Dict[str, Any], constraints: str,
         if abs(s - ref.kAxisParallelTol) < SLACK_SIN:
             return f"axis sine {s:.3g}"
     chain = ref.FALLBACK_CHAIN[constraints]
-    for model in chain[:chain.index(res["constraints_used"]) + 1]:
+    for model in chain[: chain.index(res["constraints_used"]) + 1]:
         t = res["margins"].get(model)
         if t is not None and MARGIN_BAND[0] < t < MARGIN_BAND[1]:
             return f"margin {t:.3g} of {model}"
@@ -220,7 +243,7 @@ def fragile_reason(res: Dict[str, Any], constraints: str,
     return None
 
 
-def check_extreme(case: Dict[str, Any], res: Dict[str, Any]) -> None:
+def check_extreme(case: dict[str, Any], res: dict[str, Any]) -> None:
     name = case["name"]
     if case.get("expect_status") is not None:
         assert res["status"] == case["expect_status"], (name, res["status"])
@@ -232,7 +255,7 @@ def check_extreme(case: Dict[str, Any], res: Dict[str, Any]) -> None:
             assert got == want, (name, key, got, want)
 
 
-def check_same(name: str, a: Dict[str, Any], b: Dict[str, Any], other: str) -> None:
+def check_same(name: str, a: dict[str, Any], b: dict[str, Any], other: str) -> None:
     assert a["status"] == b["status"] == "ok", (name, other)
     assert a["pwm"] == b["pwm"], (name, other, a["pwm"], b["pwm"])
     assert a["relevant"] == b["relevant"] and a["constraints_used"] == b["constraints_used"]
@@ -243,9 +266,9 @@ def check_same(name: str, a: Dict[str, Any], b: Dict[str, Any], other: str) -> N
 # --------------------------------------------------------------------------------------
 # Generation
 # --------------------------------------------------------------------------------------
-def generate(verbose: bool = False) -> Tuple[Dict[str, Any], Dict[str, Any]]:
+def generate(verbose: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     t0 = time.perf_counter()
-    cases: List[Dict[str, Any]] = []
+    cases: list[dict[str, Any]] = []
     stats = {"redrawn": 0, "redraw_reasons": {}}
 
     for k in (3, 4):
@@ -266,11 +289,12 @@ def generate(verbose: bool = False) -> Tuple[Dict[str, Any], Dict[str, Any]]:
                 assert attempt < 50, "too many redraws"
             name = f"random_k{k}_{i:03d}_{policy}_{mode}_{constraints}"
             check_result(scene, res, constraints)
-            cases.append(case_entry(name, scene, policy, mode, constraints, res,
-                                    note=f"seed {seed}"))
+            cases.append(
+                case_entry(name, scene, policy, mode, constraints, res, note=f"seed {seed}")
+            )
 
     extremes = scenes.extreme_scenes()
-    by_name: Dict[str, Dict[Tuple[str, str, str], Dict[str, Any]]] = {}
+    by_name: dict[str, dict[tuple[str, str, str], dict[str, Any]]] = {}
     for case in extremes:
         for policy, mode, constraints in case["runs"]:
             res = run_case(case, policy, mode, constraints)
@@ -279,8 +303,9 @@ def generate(verbose: bool = False) -> Tuple[Dict[str, Any], Dict[str, Any]]:
             check_result(case, res, constraints)
             by_name.setdefault(case["name"], {})[(policy, mode, constraints)] = res
             name = f"{case['name']}__{policy}_{mode}_{constraints}"
-            cases.append(case_entry(name, case, policy, mode, constraints, res,
-                                    note=case.get("note")))
+            cases.append(
+                case_entry(name, case, policy, mode, constraints, res, note=case.get("note"))
+            )
     for case in extremes:
         if "same_as" in case:
             for run, res in by_name[case["name"]].items():
@@ -288,13 +313,14 @@ def generate(verbose: bool = False) -> Tuple[Dict[str, Any], Dict[str, Any]]:
 
     names = [c["name"] for c in cases]
     assert len(set(names)) == len(names), "duplicate case names"
-    seen = {(c["policy"], c["mode"], c["constraints"]) for c in cases
-            if c["name"].startswith("random_")}
+    seen = {
+        (c["policy"], c["mode"], c["constraints"]) for c in cases if c["name"].startswith("random_")
+    }
     assert seen == set(COMBOS)
 
     data = {
         "generator": "tools/scripts/gen_known_answers.py (float64 reference "
-                     "tools/graspguide/core/reference.py: SVD + exhaustive active-set QP)",
+        "tools/graspguide/core/reference.py: SVD + exhaustive active-set QP)",
         "generator_env": {"numpy": np.__version__, "scipy": _scipy_version()},
         "notes": NOTES,
         "tolerances": dict(ref.TOLERANCES),
@@ -307,13 +333,14 @@ def generate(verbose: bool = False) -> Tuple[Dict[str, Any], Dict[str, Any]]:
 
 def _scipy_version() -> str:
     import scipy
+
     return scipy.__version__
 
 
 # --------------------------------------------------------------------------------------
 # Rendering
 # --------------------------------------------------------------------------------------
-def render_json(data: Dict[str, Any]) -> str:
+def render_json(data: dict[str, Any]) -> str:
     return json.dumps(data, indent=1, allow_nan=False) + "\n"
 
 
@@ -335,21 +362,21 @@ def _cstr(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def _carr(values: List[str]) -> str:
+def _carr(values: list[str]) -> str:
     return "{" + ", ".join(values) + "}"
 
 
-def _pad(values: List[Any], n: int, fill: Any) -> List[Any]:
+def _pad(values: list[Any], n: int, fill: Any) -> list[Any]:
     values = list(values or [])
     return values + [fill] * (n - len(values))
 
 
-def render_header(data: Dict[str, Any]) -> str:
+def render_header(data: dict[str, Any]) -> str:
     out = [
         "// GENERATED by tools/scripts/gen_known_answers.py from the float64 reference",
         "// (tools/graspguide/core/reference.py). DO NOT EDIT: regenerate with",
         "//   python tools/scripts/gen_known_answers.py",
-        "// Same cases as test/data/known_answers.json (see its \"notes\"). Unused entries",
+        '// Same cases as test/data/known_answers.json (see its "notes"). Unused entries',
         "// are zero; error_deg and margin are NAN where not applicable.",
         "#pragma once",
         "#include <cmath>",
@@ -357,11 +384,11 @@ def render_header(data: Dict[str, Any]) -> str:
         "struct KnownAnswer {",
         "  const char* name; int k;",
         "  double contacts[4][3]; double wrench[6]; double y_axis[3]; double orientation[4];",
-        "  const char* policy;        // \"F\" or \"Fperp\"",
-        "  const char* mode;          // \"C\" or \"V\"",
+        '  const char* policy;        // "F" or "Fperp"',
+        '  const char* mode;          // "C" or "V"',
         "  const char* constraints;   // requested model",
         "  const char* status;        // expected status name",
-        "  const char* constraints_used; // \"\" when status != ok",
+        '  const char* constraints_used; // "" when status != ok',
         "  double lambda[12]; double levels[4]; int pwm[4]; int relevant[4];",
         "  double error_deg; int fallback_mask; double margin; "
         "// margin of the requested model, NAN if n/a",
@@ -370,23 +397,44 @@ def render_header(data: Dict[str, Any]) -> str:
     ]
     for c in data["cases"]:
         e = c["expect"]
-        contacts = _pad([_carr([_cdouble(v) for v in row]) for row in c["contacts"]], 4,
-                        "{0.0, 0.0, 0.0}")
+        contacts = _pad(
+            [_carr([_cdouble(v) for v in row]) for row in c["contacts"]], 4, "{0.0, 0.0, 0.0}"
+        )
         lam = _pad([_cdouble(v) for v in (e["lambda"] or [])], 12, "0.0")
         levels = _pad([_cdouble(v) for v in (e["levels"] or [])], 4, "0.0")
         pwm = _pad([str(int(v)) for v in e["pwm"]], 4, "0")
         relevant = _pad([str(int(bool(v))) for v in (e["relevant"] or [])], 4, "0")
         out.append("  {" + _cstr(c["name"]) + ", " + str(c["k"]) + ",")
         out.append("   " + _carr(contacts) + ",")
-        out.append("   " + _carr([_cdouble(v) for v in c["wrench"]]) + ", "
-                   + _carr([_cdouble(v) for v in c["y_axis"]]) + ", "
-                   + _carr([_cdouble(v) for v in c["orientation"]]) + ",")
-        out.append("   " + ", ".join(_cstr(c[key]) for key in ("policy", "mode", "constraints"))
-                   + ", " + _cstr(e["status"]) + ", " + _cstr(e["constraints_used"]) + ",")
+        out.append(
+            "   "
+            + _carr([_cdouble(v) for v in c["wrench"]])
+            + ", "
+            + _carr([_cdouble(v) for v in c["y_axis"]])
+            + ", "
+            + _carr([_cdouble(v) for v in c["orientation"]])
+            + ","
+        )
+        out.append(
+            "   "
+            + ", ".join(_cstr(c[key]) for key in ("policy", "mode", "constraints"))
+            + ", "
+            + _cstr(e["status"])
+            + ", "
+            + _cstr(e["constraints_used"])
+            + ","
+        )
         out.append("   " + _carr(lam) + ",")
         out.append("   " + _carr(levels) + ", " + _carr(pwm) + ", " + _carr(relevant) + ",")
-        out.append("   " + _cdouble(e["error_deg"]) + ", " + str(int(e["fallback_mask"])) + ", "
-                   + _cdouble(e["margin"]) + "},")
+        out.append(
+            "   "
+            + _cdouble(e["error_deg"])
+            + ", "
+            + str(int(e["fallback_mask"]))
+            + ", "
+            + _cdouble(e["margin"])
+            + "},"
+        )
     out += [
         "};",
         f"inline constexpr int kKnownAnswerCount = {len(data['cases'])};",
@@ -399,7 +447,7 @@ def render_header(data: Dict[str, Any]) -> str:
 # --------------------------------------------------------------------------------------
 # --check
 # --------------------------------------------------------------------------------------
-def _compare(a: Any, b: Any, path: str, diffs: List[str]) -> None:
+def _compare(a: Any, b: Any, path: str, diffs: list[str]) -> None:
     if len(diffs) >= 20:
         return
     if isinstance(a, dict) and isinstance(b, dict):
@@ -414,15 +462,20 @@ def _compare(a: Any, b: Any, path: str, diffs: List[str]) -> None:
             return
         for i, (x, y) in enumerate(zip(a, b)):
             _compare(x, y, f"{path}[{i}]", diffs)
-    elif (isinstance(a, float) or isinstance(b, float)) and not isinstance(a, (bool, str)) \
-            and not isinstance(b, (bool, str)) and a is not None and b is not None:
+    elif (
+        (isinstance(a, float) or isinstance(b, float))
+        and not isinstance(a, (bool, str))
+        and not isinstance(b, (bool, str))
+        and a is not None
+        and b is not None
+    ):
         if abs(a - b) > FLOAT_TOL * max(1.0, abs(a), abs(b)):
             diffs.append(f"{path}: {a!r} != {b!r}")
     elif a != b or type(a) is not type(b):
         diffs.append(f"{path}: {a!r} != {b!r}")
 
 
-def check(data: Dict[str, Any], strict: bool) -> int:
+def check(data: dict[str, Any], strict: bool) -> int:
     new_json = render_json(data)
     new_header = render_header(data)
     try:
@@ -441,21 +494,32 @@ def check(data: Dict[str, Any], strict: bool) -> int:
         return 1
     old = json.loads(old_json)
     if old_header != render_header(old):
-        print("known_answers.h is not the rendering of known_answers.json "
-              "(edited by hand?); regenerate", file=sys.stderr)
+        print(
+            "known_answers.h is not the rendering of known_answers.json "
+            "(edited by hand?); regenerate",
+            file=sys.stderr,
+        )
         return 1
-    diffs: List[str] = []
-    _compare({k: v for k, v in old.items() if k != "generator_env"},
-             {k: v for k, v in data.items() if k != "generator_env"}, "$", diffs)
+    diffs: list[str] = []
+    _compare(
+        {k: v for k, v in old.items() if k != "generator_env"},
+        {k: v for k, v in data.items() if k != "generator_env"},
+        "$",
+        diffs,
+    )
     if diffs:
-        print("known answers are stale; regenerate with "
-              "`python tools/scripts/gen_known_answers.py`. First differences:",
-              file=sys.stderr)
+        print(
+            "known answers are stale; regenerate with "
+            "`python tools/scripts/gen_known_answers.py`. First differences:",
+            file=sys.stderr,
+        )
         for d in diffs:
             print("  " + d, file=sys.stderr)
         return 1
-    print(f"known answers are up to date (equal to within {FLOAT_TOL:g} relative; "
-          "not byte-identical, e.g. another numpy/scipy build)")
+    print(
+        f"known answers are up to date (equal to within {FLOAT_TOL:g} relative; "
+        "not byte-identical, e.g. another numpy/scipy build)"
+    )
     return 0
 
 
@@ -464,10 +528,10 @@ def fallback_stats(count: int, seed: int = BASE_SEED + 1) -> None:
     for k in (3, 4):
         total = 0.0
         fell = {"normal": 0, "none": 0}
-        pure = [0, 0]      # [scenes, fell back] with zero moment
+        pure = [0, 0]  # [scenes, fell back] with zero moment
         slow = 0.0
         band = disagree = 0  # margin within [-2e-9, 1e-9]; margin contradicting enumeration
-        borderline = 0       # the paper decision changes over FEAS_TOL_RANGE
+        borderline = 0  # the paper decision changes over FEAS_TOL_RANGE
         for sc in scenes.random_scenes(seed, k, count):
             t1 = time.perf_counter()
             res = run_case(sc, "F", "C", "paper")
@@ -485,25 +549,34 @@ def fallback_stats(count: int, seed: int = BASE_SEED + 1) -> None:
                 pure[0] += 1
                 pure[1] += used != "paper"
         n_fell = fell["normal"] + fell["none"]
-        print(f"k={k}: {count} scenes (F/C/paper): paper infeasible in {n_fell} "
-              f"({100 * n_fell / count:.1f}%), fell to none in {fell['none']} "
-              f"({100 * fell['none'] / count:.1f}%); pure-force scenes {pure[0]}, of which "
-              f"{pure[1]} fell back ({100 * pure[1] / max(pure[0], 1):.1f}%); with moment "
-              f"{count - pure[0]}, of which {n_fell - pure[1]} fell back "
-              f"({100 * (n_fell - pure[1]) / max(count - pure[0], 1):.1f}%); "
-              f"{1e3 * total / count:.1f} ms/scene mean, {1e3 * slow:.1f} ms max; paper margin "
-              f"in [-2e-9, 1e-9] for {band}, contradicting the enumeration for {disagree}; "
-              f"paper decision changes for kFeasRelTol in {FEAS_TOL_RANGE}: {borderline}")
+        print(
+            f"k={k}: {count} scenes (F/C/paper): paper infeasible in {n_fell} "
+            f"({100 * n_fell / count:.1f}%), fell to none in {fell['none']} "
+            f"({100 * fell['none'] / count:.1f}%); pure-force scenes {pure[0]}, of which "
+            f"{pure[1]} fell back ({100 * pure[1] / max(pure[0], 1):.1f}%); with moment "
+            f"{count - pure[0]}, of which {n_fell - pure[1]} fell back "
+            f"({100 * (n_fell - pure[1]) / max(count - pure[0], 1):.1f}%); "
+            f"{1e3 * total / count:.1f} ms/scene mean, {1e3 * slow:.1f} ms max; paper margin "
+            f"in [-2e-9, 1e-9] for {band}, contradicting the enumeration for {disagree}; "
+            f"paper decision changes for kFeasRelTol in {FEAS_TOL_RANGE}: {borderline}"
+        )
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--check", action="store_true",
-                    help="do not write; exit 1 if the checked-in files are stale")
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="do not write; exit 1 if the checked-in files are stale",
+    )
     ap.add_argument("--strict", action="store_true", help="with --check: byte-exact")
     ap.add_argument("-v", "--verbose", action="store_true")
-    ap.add_argument("--stats", type=int, metavar="N",
-                    help="only print fallback statistics over N random scenes per k")
+    ap.add_argument(
+        "--stats",
+        type=int,
+        metavar="N",
+        help="only print fallback statistics over N random scenes per k",
+    )
     args = ap.parse_args(argv)
     if args.stats:
         fallback_stats(args.stats)
@@ -512,8 +585,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     data, stats = generate(verbose=args.verbose)
     if args.verbose or not args.check:
         reasons = ", ".join(f"{k}: {v}" for k, v in sorted(stats["redraw_reasons"].items()))
-        print(f"{stats['cases']} cases in {stats['seconds']:.1f} s; "
-              f"{stats['redrawn']} random draws redrawn ({reasons or 'none'})")
+        print(
+            f"{stats['cases']} cases in {stats['seconds']:.1f} s; "
+            f"{stats['redrawn']} random draws redrawn ({reasons or 'none'})"
+        )
     if args.check:
         return check(data, args.strict)
     os.makedirs(os.path.dirname(JSON_PATH), exist_ok=True)

@@ -27,8 +27,9 @@ import re
 import struct
 import sys
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(_HERE))
@@ -52,7 +53,7 @@ HOST_TO_DEVICE_IDS = (0x01, 0x3F)
 DEVICE_TO_HOST_IDS = (0x80, 0xBF)
 
 # kind -> (struct code, bytes, C++ type, C++ store/load suffix, min, max)
-SCALARS: Dict[str, Tuple[str, int, str, str, int, int]] = {
+SCALARS: dict[str, tuple[str, int, str, str, int, int]] = {
     "u8": ("B", 1, "uint8_t", "u8", 0, 0xFF),
     "u16": ("H", 2, "uint16_t", "u16", 0, 0xFFFF),
     "u32": ("I", 4, "uint32_t", "u32", 0, 0xFFFFFFFF),
@@ -84,15 +85,15 @@ class EnumValue:
 class Enum:
     name: str
     doc: str
-    values: List[EnumValue]
+    values: list[EnumValue]
 
 
 @dataclass
 class Field:
     name: str
     kind: str  # a SCALARS key, "enum" or "ascii"
-    enum: Optional[str]
-    shape: Tuple[int, ...]
+    enum: str | None
+    shape: tuple[int, ...]
     size: int  # bytes of one element
     unit: str
     doc: str
@@ -115,8 +116,11 @@ class Field:
 
     @property
     def type_label(self) -> str:
-        base = self.enum if self.kind == "enum" else (
-            f"ascii[{self.size}]" if self.kind == "ascii" else self.kind)
+        base = (
+            self.enum
+            if self.kind == "enum"
+            else (f"ascii[{self.size}]" if self.kind == "ascii" else self.kind)
+        )
         return base + "".join(f"[{n}]" for n in self.shape)
 
 
@@ -126,7 +130,7 @@ class Message:
     msg_id: int
     direction: str
     doc: str
-    fields: List[Field]
+    fields: list[Field]
 
     @property
     def class_name(self) -> str:
@@ -162,18 +166,18 @@ class Golden:
     name: str
     message: Message
     seq: int
-    fields: Dict[str, Any]  # canonical: floats rounded to f32, enums as names
+    fields: dict[str, Any]  # canonical: floats rounded to f32, enums as names
 
 
 @dataclass
 class Schema:
     version: int
     link_error_base: int
-    constants: List[Constant]
-    enums: Dict[str, Enum]
-    flags: List[Flag]
-    messages: List[Message]
-    goldens: List[Golden]
+    constants: list[Constant]
+    enums: dict[str, Enum]
+    flags: list[Flag]
+    messages: list[Message]
+    goldens: list[Golden]
 
     @property
     def max_payload(self) -> int:
@@ -215,9 +219,11 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
         constants.append(Constant(c["name"], c["value"], SCALARS[c["type"]][2], c.get("doc", "")))
     const_by_name = {c.name: c.value for c in constants}
 
-    enums: Dict[str, Enum] = {}
+    enums: dict[str, Enum] = {}
     for e in raw.get("enum", []):
-        _require(re.match(r"^[A-Z][A-Za-z0-9]*$", e["name"]) is not None, f"enum name {e['name']!r}")
+        _require(
+            re.match(r"^[A-Z][A-Za-z0-9]*$", e["name"]) is not None, f"enum name {e['name']!r}"
+        )
         _require(e["name"] not in enums and e["name"] not in SCALARS, f"duplicate enum {e['name']}")
         values = [EnumValue(v["name"], v["value"], v.get("doc", "")) for v in e["values"]]
         _require(bool(values), f"enum {e['name']} has no values")
@@ -243,7 +249,7 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
             bits.add(v["bit"])
             flags.append(Flag(group["name"], v["name"], v["bit"], v.get("doc", "")))
 
-    messages: List[Message] = []
+    messages: list[Message] = []
     for m in raw.get("message", []):
         name = m["name"]
         _require(_MSG_NAME.match(name) is not None, f"message name {name!r}")
@@ -256,17 +262,34 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
             fname, ftype = f["name"], f["type"]
             _require(_SNAKE.match(fname) is not None, f"{name}.{fname}: field name")
             shape = tuple(f.get("shape", ()))
-            _require(all(isinstance(n, int) and n > 0 for n in shape) and len(shape) <= 2,
-                     f"{name}.{fname}: shape must be 1 or 2 positive sizes")
+            _require(
+                all(isinstance(n, int) and n > 0 for n in shape) and len(shape) <= 2,
+                f"{name}.{fname}: shape must be 1 or 2 positive sizes",
+            )
             if ftype in SCALARS:
-                fields.append(Field(fname, ftype, None, shape, SCALARS[ftype][1],
-                                    f.get("unit", ""), f.get("doc", "")))
+                fields.append(
+                    Field(
+                        fname,
+                        ftype,
+                        None,
+                        shape,
+                        SCALARS[ftype][1],
+                        f.get("unit", ""),
+                        f.get("doc", ""),
+                    )
+                )
             elif ftype in enums:
-                fields.append(Field(fname, "enum", ftype, shape, 1, f.get("unit", ""), f.get("doc", "")))
+                fields.append(
+                    Field(fname, "enum", ftype, shape, 1, f.get("unit", ""), f.get("doc", ""))
+                )
             elif ftype == "ascii":
-                _require(not shape and isinstance(f.get("size"), int) and f["size"] > 0,
-                         f"{name}.{fname}: ascii needs a size and no shape")
-                fields.append(Field(fname, "ascii", None, (), f["size"], f.get("unit", ""), f.get("doc", "")))
+                _require(
+                    not shape and isinstance(f.get("size"), int) and f["size"] > 0,
+                    f"{name}.{fname}: ascii needs a size and no shape",
+                )
+                fields.append(
+                    Field(fname, "ascii", None, (), f["size"], f.get("unit", ""), f.get("doc", ""))
+                )
             else:
                 raise SchemaError(f"{name}.{fname}: unknown type {ftype!r}")
         _require(len({f.name for f in fields}) == len(fields), f"{name}: duplicate field names")
@@ -292,18 +315,24 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
         msg = by_name[g["message"]]
         _require(0 <= g["seq"] <= 0xFFFF, f"golden {g['name']}: seq")
         given = dict(g.get("fields", {}))
-        _require(set(given) == {f.name for f in msg.fields},
-                 f"golden {g['name']}: fields must be exactly {[f.name for f in msg.fields]}")
-        canon = {f.name: _canonical(schema.enums, f, given[f.name], f"golden {g['name']}.{f.name}")
-                 for f in msg.fields}
+        _require(
+            set(given) == {f.name for f in msg.fields},
+            f"golden {g['name']}: fields must be exactly {[f.name for f in msg.fields]}",
+        )
+        canon = {
+            f.name: _canonical(schema.enums, f, given[f.name], f"golden {g['name']}.{f.name}")
+            for f in msg.fields
+        }
         schema.goldens.append(Golden(g["name"], msg, g["seq"], canon))
     _require(len({g.name for g in schema.goldens}) == len(schema.goldens), "duplicate golden names")
-    _require({g.message.name for g in schema.goldens} == set(by_name),
-             "every message needs at least one golden frame")
+    _require(
+        {g.message.name for g in schema.goldens} == set(by_name),
+        "every message needs at least one golden frame",
+    )
     return schema
 
 
-def _canonical(enums: Dict[str, Enum], f: Field, value: Any, where: str) -> Any:
+def _canonical(enums: dict[str, Enum], f: Field, value: Any, where: str) -> Any:
     def one(v: Any) -> Any:
         if f.kind == "f32":
             _require(isinstance(v, (int, float)) and not isinstance(v, bool), f"{where}: number")
@@ -316,14 +345,18 @@ def _canonical(enums: Dict[str, Enum], f: Field, value: Any, where: str) -> Any:
             _require(v in names, f"{where}: one of {names}")
             return v
         if f.kind == "ascii":
-            _require(isinstance(v, str) and len(v) <= f.size and
-                     all(0x20 <= ord(c) <= 0x7E for c in v), f"{where}: printable ASCII <= {f.size}")
+            _require(
+                isinstance(v, str) and len(v) <= f.size and all(0x20 <= ord(c) <= 0x7E for c in v),
+                f"{where}: printable ASCII <= {f.size}",
+            )
             return v
         lo, hi = SCALARS[f.kind][4:6]
-        _require(isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi, f"{where}: int range")
+        _require(
+            isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi, f"{where}: int range"
+        )
         return v
 
-    def walk(v: Any, shape: Tuple[int, ...]) -> Any:
+    def walk(v: Any, shape: tuple[int, ...]) -> Any:
         if not shape:
             return one(v)
         _require(isinstance(v, list) and len(v) == shape[0], f"{where}: shape {f.shape}")
@@ -337,7 +370,7 @@ def _canonical(enums: Dict[str, Enum], f: Field, value: Any, where: str) -> Any:
 # --------------------------------------------------------------------------------------
 
 
-def _flat(v: Any) -> List[Any]:
+def _flat(v: Any) -> list[Any]:
     return [y for x in v for y in _flat(x)] if isinstance(v, list) else [v]
 
 
@@ -431,7 +464,7 @@ def cpp_member(schema: Schema, f: Field) -> str:
     return f"{ctype} {f.name}{dims} = {init};"
 
 
-def _loops(f: Field, body: str, indent: str) -> List[str]:
+def _loops(f: Field, body: str, indent: str) -> list[str]:
     """Nested index loops over f.shape around body (which uses i0, i1 and `flat`)."""
     lines = []
     idx = ["i0", "i1"][: len(f.shape)]
@@ -453,8 +486,10 @@ def _element(f: Field) -> str:
     return f.name + "".join(f"[{v}]" for v in ["i0", "i1"][: len(f.shape)])
 
 
-def cpp_pack(m: Message) -> List[str]:
-    L = [f"inline LinkStatus pack(const {m.class_name}& m, uint8_t* out, size_t capacity, size_t* written) {{"]
+def cpp_pack(m: Message) -> list[str]:
+    L = [
+        f"inline LinkStatus pack(const {m.class_name}& m, uint8_t* out, size_t capacity, size_t* written) {{"
+    ]
     if not m.fields:
         L.append("  (void)m;")
         L.append("  (void)out;")
@@ -463,12 +498,16 @@ def cpp_pack(m: Message) -> List[str]:
     for f in m.fields:
         if f.kind == "enum":
             if f.shape:
-                L += _loops(f, f"if (!is_valid(m.{_element(f)})) return LinkStatus::kBadEnumValue;", "  ")
+                L += _loops(
+                    f, f"if (!is_valid(m.{_element(f)})) return LinkStatus::kBadEnumValue;", "  "
+                )
             else:
                 L.append(f"  if (!is_valid(m.{f.name})) return LinkStatus::kBadEnumValue;")
         if f.kind == "ascii":
-            L.append(f"  if (!ascii_field_valid(reinterpret_cast<const uint8_t*>(m.{f.name}), {f.size})) "
-                     "return LinkStatus::kBadEnumValue;")
+            L.append(
+                f"  if (!ascii_field_valid(reinterpret_cast<const uint8_t*>(m.{f.name}), {f.size})) "
+                "return LinkStatus::kBadEnumValue;"
+            )
     off = 0
     for f in m.fields:
         if f.kind == "ascii":
@@ -493,9 +532,11 @@ def cpp_pack(m: Message) -> List[str]:
     return L
 
 
-def cpp_unpack(m: Message) -> List[str]:
-    L = [f"inline LinkStatus unpack(const uint8_t* in, size_t size, {m.class_name}* out,",
-         "                         uint8_t* bad_field = nullptr) {"]
+def cpp_unpack(m: Message) -> list[str]:
+    L = [
+        f"inline LinkStatus unpack(const uint8_t* in, size_t size, {m.class_name}* out,",
+        "                         uint8_t* bad_field = nullptr) {",
+    ]
     if not m.fields:
         L.append("  (void)in;")
         L.append("  (void)out;")
@@ -506,19 +547,27 @@ def cpp_unpack(m: Message) -> List[str]:
         L.append(f"  {m.class_name} m;")
     off = 0
     for index, f in enumerate(m.fields):
-        bad = (f"{{ if (bad_field != nullptr) *bad_field = {index}; "
-               "return LinkStatus::kBadEnumValue; }")
+        bad = (
+            f"{{ if (bad_field != nullptr) *bad_field = {index}; "
+            "return LinkStatus::kBadEnumValue; }"
+        )
         if f.kind == "ascii":
             L.append(f"  if (!ascii_field_valid(in + {off}, {f.size})) {bad}")
             L.append(f"  std::memcpy(m.{f.name}, in + {off}, {f.size});")
         elif f.kind in ("enum", "bool"):
             at = f"in + {off}" + (f" + {_flat_index(f)}" if f.shape else "")
             if f.kind == "enum":
-                body = [f"const {f.enum} v = static_cast<{f.enum}>(load_u8({at}));",
-                        f"if (!is_valid(v)) {bad}", f"m.{_element(f) if f.shape else f.name} = v;"]
+                body = [
+                    f"const {f.enum} v = static_cast<{f.enum}>(load_u8({at}));",
+                    f"if (!is_valid(v)) {bad}",
+                    f"m.{_element(f) if f.shape else f.name} = v;",
+                ]
             else:
-                body = [f"const uint8_t v = load_u8({at});", f"if (v > 1) {bad}",
-                        f"m.{_element(f) if f.shape else f.name} = v == 1;"]
+                body = [
+                    f"const uint8_t v = load_u8({at});",
+                    f"if (v > 1) {bad}",
+                    f"m.{_element(f) if f.shape else f.name} = v == 1;",
+                ]
             if f.shape:
                 L += _loops(f, "{ " + " ".join(body) + " }", "  ")
             else:
@@ -540,7 +589,7 @@ def cpp_unpack(m: Message) -> List[str]:
     return L
 
 
-def cpp_equal(m: Message) -> List[str]:
+def cpp_equal(m: Message) -> list[str]:
     c = m.class_name
     L = [f"inline bool operator==(const {c}& a, const {c}& b) {{"]
     if not m.fields:
@@ -566,7 +615,7 @@ def cpp_equal(m: Message) -> List[str]:
 
 def render_cpp(schema: Schema) -> str:
     s = schema
-    L: List[str] = [
+    L: list[str] = [
         "// GENERATED by tools/scripts/gen_protocol.py from tools/protocol/messages.toml.",
         f"// DO NOT EDIT: change the schema, then run `{REGEN}`.",
         "// The GraspGuide link messages: ids, enums, payload structs, and their wire codecs",
@@ -591,9 +640,16 @@ def render_cpp(schema: Schema) -> str:
         L.append(f"inline constexpr {c.ctype} k{camel(c.name)} = {c.value};")
     for fl in s.flags:
         L.append(f"// {fl.doc}")
-        L.append(f"inline constexpr uint8_t k{camel(fl.group)}{camel(fl.name)} = 0x{1 << fl.bit:02X};")
-    L += ["", "// Every schema enum has an EnumInfo: its values in schema order.",
-          "template <class E>", "struct EnumInfo;", ""]
+        L.append(
+            f"inline constexpr uint8_t k{camel(fl.group)}{camel(fl.name)} = 0x{1 << fl.bit:02X};"
+        )
+    L += [
+        "",
+        "// Every schema enum has an EnumInfo: its values in schema order.",
+        "template <class E>",
+        "struct EnumInfo;",
+        "",
+    ]
     for e in s.enums.values():
         L.append(f"// {e.doc}")
         L.append(f"enum class {e.name} : uint8_t {{")
@@ -616,7 +672,7 @@ def render_cpp(schema: Schema) -> str:
         L.append("  }")
         L.append("  return false;")
         L.append("}")
-        L.append("// The schema's snake_case name; \"unknown\" for a value outside the enum.")
+        L.append('// The schema\'s snake_case name; "unknown" for a value outside the enum.')
         L.append(f"constexpr const char* enum_name({e.name} v) {{")
         L.append("  switch (v) {")
         for v in e.values:
@@ -634,13 +690,17 @@ def render_cpp(schema: Schema) -> str:
     L.append(f"inline constexpr size_t kMaxPayloadSize = {s.max_payload};")
     L.append("")
     L.append("constexpr bool is_host_to_device_id(uint8_t id) {")
-    L.append(f"  return id >= 0x{HOST_TO_DEVICE_IDS[0]:02X} && id <= 0x{HOST_TO_DEVICE_IDS[1]:02X};")
+    L.append(
+        f"  return id >= 0x{HOST_TO_DEVICE_IDS[0]:02X} && id <= 0x{HOST_TO_DEVICE_IDS[1]:02X};"
+    )
     L.append("}")
     L.append("constexpr bool is_device_to_host_id(uint8_t id) {")
-    L.append(f"  return id >= 0x{DEVICE_TO_HOST_IDS[0]:02X} && id <= 0x{DEVICE_TO_HOST_IDS[1]:02X};")
+    L.append(
+        f"  return id >= 0x{DEVICE_TO_HOST_IDS[0]:02X} && id <= 0x{DEVICE_TO_HOST_IDS[1]:02X};"
+    )
     L.append("}")
     L.append("")
-    L.append("// The schema's name of a message id; \"unknown\" if no message has it.")
+    L.append('// The schema\'s name of a message id; "unknown" if no message has it.')
     L.append("constexpr const char* message_name(uint8_t msg_id) {")
     L.append("  switch (msg_id) {")
     for m in s.messages:
@@ -672,12 +732,16 @@ def render_cpp(schema: Schema) -> str:
         L.append("")
         L.append(f"// Writes the {m.payload_size}-byte payload; refuses values no decoder accepts.")
         L += cpp_pack(m)
-        L.append("// kBadLength for a wrong size; kBadEnumValue (and *bad_field = the field's index)")
-        L.append("// for an enum, bool or ascii field outside its declared set. *out is untouched then.")
+        L.append(
+            "// kBadLength for a wrong size; kBadEnumValue (and *bad_field = the field's index)"
+        )
+        L.append(
+            "// for an enum, bool or ascii field outside its declared set. *out is untouched then."
+        )
         L += cpp_unpack(m)
         L.append("// Wire equality: floats compare by bit pattern (NaN == same NaN, -0 != +0).")
         L += cpp_equal(m)
-        L.append("// Calls fn(\"name\", member) for every field, in wire order.")
+        L.append('// Calls fn("name", member) for every field, in wire order.')
         for const in ("const ", ""):
             L.append("template <class Fn>")
             L.append(f"void for_each_field({const}{m.class_name}& m, Fn&& fn) {{")
@@ -690,12 +754,16 @@ def render_cpp(schema: Schema) -> str:
 
     L.append("template <class... Messages>")
     L.append("struct MessageList {};")
-    L.append("using AllMessages = MessageList<" + ", ".join(m.class_name for m in s.messages) + ">;")
+    L.append(
+        "using AllMessages = MessageList<" + ", ".join(m.class_name for m in s.messages) + ">;"
+    )
     L.append("")
     L.append("// Unpacks a payload into the struct its id names and calls visitor(message).")
     L.append("// kUnknownId, or unpack()'s status, without calling the visitor when it fails.")
     L.append("template <class Visitor>")
-    L.append("LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Visitor&& visitor,")
+    L.append(
+        "LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Visitor&& visitor,"
+    )
     L.append("                         uint8_t* bad_field = nullptr) {")
     L.append("  switch (msg_id) {")
     for m in s.messages:
@@ -922,7 +990,9 @@ def py_default(schema: Schema, f: Field) -> str:
 
 
 def py_annotation(f: Field) -> str:
-    base = {"f32": "float", "bool": "bool", "ascii": "str"}.get(f.kind, f.enum if f.kind == "enum" else "int")
+    base = {"f32": "float", "bool": "bool", "ascii": "str"}.get(
+        f.kind, f.enum if f.kind == "enum" else "int"
+    )
     for _ in f.shape:
         base = f"Tuple[{base}, ...]"
     return base
@@ -930,7 +1000,7 @@ def py_annotation(f: Field) -> str:
 
 def render_py(schema: Schema) -> str:
     s = schema
-    L: List[str] = [
+    L: list[str] = [
         '"""GENERATED by tools/scripts/gen_protocol.py from tools/protocol/messages.toml.',
         "",
         f"DO NOT EDIT: change the schema, then run `{REGEN}`.",
@@ -950,10 +1020,13 @@ def render_py(schema: Schema) -> str:
     for fl in s.flags:
         L.append(f"# {fl.doc}")
         L.append(f"{fl.group.upper()}_{fl.name.upper()} = 0x{1 << fl.bit:02X}")
-    L += [f"MAX_PAYLOAD_SIZE = {s.max_payload}",
-          f"HOST_TO_DEVICE_IDS = range(0x{HOST_TO_DEVICE_IDS[0]:02X}, 0x{HOST_TO_DEVICE_IDS[1] + 1:02X})",
-          f"DEVICE_TO_HOST_IDS = range(0x{DEVICE_TO_HOST_IDS[0]:02X}, 0x{DEVICE_TO_HOST_IDS[1] + 1:02X})",
-          "", ""]
+    L += [
+        f"MAX_PAYLOAD_SIZE = {s.max_payload}",
+        f"HOST_TO_DEVICE_IDS = range(0x{HOST_TO_DEVICE_IDS[0]:02X}, 0x{HOST_TO_DEVICE_IDS[1] + 1:02X})",
+        f"DEVICE_TO_HOST_IDS = range(0x{DEVICE_TO_HOST_IDS[0]:02X}, 0x{DEVICE_TO_HOST_IDS[1] + 1:02X})",
+        "",
+        "",
+    ]
     for e in s.enums.values():
         L.append(f"class {e.name}(enum.IntEnum):")
         L.append(f'    """{e.doc}"""')
@@ -981,8 +1054,10 @@ def render_py(schema: Schema) -> str:
         L.append("    FIELDS: ClassVar[Tuple[FieldSpec, ...]] = (")
         for f in m.fields:
             enum_ref = f.enum if f.kind == "enum" else "None"
-            L.append(f'        FieldSpec("{f.name}", "{f.kind}", {tuple(f.shape)!r}, {enum_ref}, {f.size}, '
-                     f'"{f.unit}", {json.dumps(f.doc)}),')
+            L.append(
+                f'        FieldSpec("{f.name}", "{f.kind}", {tuple(f.shape)!r}, {enum_ref}, {f.size}, '
+                f'"{f.unit}", {json.dumps(f.doc)}),'
+            )
         L.append("    )")
         L.append(f'    _STRUCT: ClassVar[struct.Struct] = struct.Struct("{m.struct_format}")')
         if m.fields:
@@ -995,33 +1070,39 @@ def render_py(schema: Schema) -> str:
     for m in s.messages:
         L.append(f"    MsgId.{m.name}: {m.class_name},")
     L.append("}")
-    L += ["", "",
-          "def message_class(msg_id: int) -> Type[_Message]:",
-          '    """The class of a message id; UnknownIdError if no message has it."""',
-          "    try:",
-          "        return MESSAGES[msg_id]",
-          "    except KeyError:",
-          '        raise UnknownIdError(f"no message has id 0x{msg_id:02X}") from None',
-          "",
-          "",
-          "def payload_size_of(msg_id: int) -> Optional[int]:",
-          '    """Payload size of a message id, or None if no message has it."""',
-          "    cls = MESSAGES.get(msg_id)",
-          "    return None if cls is None else cls.PAYLOAD_SIZE",
-          "",
-          "",
-          "def unpack_payload(msg_id: int, payload: bytes) -> _Message:",
-          '    """The message of a payload: UnknownIdError, BadLengthError or BadEnumValueError."""',
-          "    return message_class(msg_id).unpack(payload)",
-          "",
-          "",
-          "__all__ = [",
-          '    "FieldSpec", "PROTOCOL_VERSION", "LINK_ERROR_BASE", "MAX_PAYLOAD_SIZE",',
-          '    "HOST_TO_DEVICE_IDS", "DEVICE_TO_HOST_IDS", "MsgId", "MESSAGES",',
-          '    "message_class", "payload_size_of", "unpack_payload",']
-    names = ([c.name.upper() for c in s.constants] +
-             [f"{fl.group.upper()}_{fl.name.upper()}" for fl in s.flags] +
-             list(s.enums) + [m.class_name for m in s.messages])
+    L += [
+        "",
+        "",
+        "def message_class(msg_id: int) -> Type[_Message]:",
+        '    """The class of a message id; UnknownIdError if no message has it."""',
+        "    try:",
+        "        return MESSAGES[msg_id]",
+        "    except KeyError:",
+        '        raise UnknownIdError(f"no message has id 0x{msg_id:02X}") from None',
+        "",
+        "",
+        "def payload_size_of(msg_id: int) -> Optional[int]:",
+        '    """Payload size of a message id, or None if no message has it."""',
+        "    cls = MESSAGES.get(msg_id)",
+        "    return None if cls is None else cls.PAYLOAD_SIZE",
+        "",
+        "",
+        "def unpack_payload(msg_id: int, payload: bytes) -> _Message:",
+        '    """The message of a payload: UnknownIdError, BadLengthError or BadEnumValueError."""',
+        "    return message_class(msg_id).unpack(payload)",
+        "",
+        "",
+        "__all__ = [",
+        '    "FieldSpec", "PROTOCOL_VERSION", "LINK_ERROR_BASE", "MAX_PAYLOAD_SIZE",',
+        '    "HOST_TO_DEVICE_IDS", "DEVICE_TO_HOST_IDS", "MsgId", "MESSAGES",',
+        '    "message_class", "payload_size_of", "unpack_payload",',
+    ]
+    names = (
+        [c.name.upper() for c in s.constants]
+        + [f"{fl.group.upper()}_{fl.name.upper()}" for fl in s.flags]
+        + list(s.enums)
+        + [m.class_name for m in s.messages]
+    )
     line = "   "
     for n in names:
         item = f' "{n}",'
@@ -1043,17 +1124,19 @@ def render_py(schema: Schema) -> str:
 def render_golden_json(schema: Schema) -> str:
     frames = []
     for g in schema.goldens:
-        frames.append({
-            "name": g.name,
-            "message": g.message.name,
-            "msg_id": g.message.msg_id,
-            "seq": g.seq,
-            "fields": g.fields,
-            "hex": golden_frame(schema, g).hex(),
-        })
+        frames.append(
+            {
+                "name": g.name,
+                "message": g.message.name,
+                "msg_id": g.message.msg_id,
+                "seq": g.seq,
+                "fields": g.fields,
+                "hex": golden_frame(schema, g).hex(),
+            }
+        )
     doc = {
         "generated_by": "tools/scripts/gen_protocol.py from tools/protocol/messages.toml; "
-                        f"DO NOT EDIT, regenerate with `{REGEN}`",
+        f"DO NOT EDIT, regenerate with `{REGEN}`",
         "notes": [
             "hex is the whole frame on the wire: COBS(version | msg_id | seq u16 LE | payload | "
             "crc16 LE) followed by the 0x00 delimiter.",
@@ -1079,8 +1162,13 @@ def _cpp_value(schema: Schema, f: Field, v: Any, ns: str = "gl::") -> str:
     if f.kind == "enum":
         return f"{ns}{f.enum}::{cpp_enumerator(v)}"
     if f.kind == "ascii":
-        return "{" + ", ".join([f"'{c}'" if c not in "'\\" else f"'\\{c}'" for c in v] +
-                               ["0"] * (f.size - len(v))) + "}"
+        return (
+            "{"
+            + ", ".join(
+                [f"'{c}'" if c not in "'\\" else f"'\\{c}'" for c in v] + ["0"] * (f.size - len(v))
+            )
+            + "}"
+        )
     if f.kind.startswith("u"):
         return f"{v}u"
     return str(v)
@@ -1113,7 +1201,7 @@ def render_golden_h(schema: Schema) -> str:
         L.append("  {")
         L.append(f"    static const uint8_t kBytes[{len(wire)}] = {{")
         for i in range(0, len(wire), 12):
-            L.append("        " + ", ".join(f"0x{b:02X}" for b in wire[i:i + 12]) + ",")
+            L.append("        " + ", ".join(f"0x{b:02X}" for b in wire[i : i + 12]) + ",")
         L.append("    };")
         values = ", ".join(_cpp_value(schema, f, g.fields[f.name]) for f in g.message.fields)
         L.append(f"    const gl::{g.message.class_name} message{{{values}}};")
@@ -1130,25 +1218,32 @@ def render_golden_h(schema: Schema) -> str:
 
 def render_doc_section(schema: Schema) -> str:
     s = schema
-    L = [DOC_BEGIN, "",
-         f"Protocol version **{s.version}**. Largest payload: {s.max_payload} bytes. "
-         "Sizes are in bytes; every multi-byte value is little-endian; f32 is IEEE-754 "
-         "binary32.",
-         "",
-         "| id | message | direction | payload | frame on the wire (max) |",
-         "|---|---|---|---|---|"]
+    L = [
+        DOC_BEGIN,
+        "",
+        f"Protocol version **{s.version}**. Largest payload: {s.max_payload} bytes. "
+        "Sizes are in bytes; every multi-byte value is little-endian; f32 is IEEE-754 "
+        "binary32.",
+        "",
+        "| id | message | direction | payload | frame on the wire (max) |",
+        "|---|---|---|---|---|",
+    ]
     for m in s.messages:
         arrow = "host → device" if m.direction == "host_to_device" else "device → host"
         raw = HEADER_SIZE + m.payload_size + CRC_SIZE
         wire = raw + raw // 254 + 1 + 1
-        L.append(f"| 0x{m.msg_id:02X} | [{m.name}](#{m.name.lower()}) | {arrow} | "
-                 f"{m.payload_size} | {wire} |")
+        L.append(
+            f"| 0x{m.msg_id:02X} | [{m.name}](#{m.name.lower()}) | {arrow} | "
+            f"{m.payload_size} | {wire} |"
+        )
     L.append("")
     for m in s.messages:
         L.append(f"### {m.name}")
         L.append("")
-        L.append(f"0x{m.msg_id:02X}, {'host → device' if m.direction == 'host_to_device' else 'device → host'}, "
-                 f"{m.payload_size}-byte payload. {m.doc}")
+        L.append(
+            f"0x{m.msg_id:02X}, {'host → device' if m.direction == 'host_to_device' else 'device → host'}, "
+            f"{m.payload_size}-byte payload. {m.doc}"
+        )
         L.append("")
         if not m.fields:
             L.append("No fields.")
@@ -1159,7 +1254,9 @@ def render_doc_section(schema: Schema) -> str:
         off = 0
         for f in m.fields:
             default = "" if f.default is None else f"; default {json.dumps(f.default)}"
-            L.append(f"| {off} | `{f.name}` | {f.type_label} | {f.unit or '–'} | {f.doc}{default} |")
+            L.append(
+                f"| {off} | `{f.name}` | {f.type_label} | {f.unit or '–'} | {f.doc}{default} |"
+            )
             off += f.wire_size
         L.append("")
     for e in s.enums.values():
@@ -1178,7 +1275,9 @@ def render_doc_section(schema: Schema) -> str:
         L.append("| constant | bit | meaning |")
         L.append("|---|---|---|")
         for fl in s.flags:
-            L.append(f"| `{fl.group.upper()}_{fl.name.upper()}` | {fl.bit} (0x{1 << fl.bit:02X}) | {fl.doc} |")
+            L.append(
+                f"| `{fl.group.upper()}_{fl.name.upper()}` | {fl.bit} (0x{1 << fl.bit:02X}) | {fl.doc} |"
+            )
         L.append("")
     L.append("### Constants")
     L.append("")
@@ -1196,13 +1295,13 @@ def render_doc(schema: Schema, current: str) -> str:
     end = current.find(DOC_END)
     if start < 0 or end < start:
         raise SchemaError(f"{DOC_PATH} lacks the markers {DOC_BEGIN!r} ... {DOC_END!r}")
-    return current[:start] + render_doc_section(schema) + current[end + len(DOC_END):]
+    return current[:start] + render_doc_section(schema) + current[end + len(DOC_END) :]
 
 
 # --------------------------------------------------------------------------------------
 
 
-def outputs(schema: Schema) -> Dict[str, str]:
+def outputs(schema: Schema) -> dict[str, str]:
     out = {
         CPP_PATH: render_cpp(schema),
         PY_PATH: render_py(schema),
@@ -1215,10 +1314,13 @@ def outputs(schema: Schema) -> Dict[str, str]:
     return out
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--check", action="store_true",
-                    help="compare the checked-in outputs with what the schema generates; exit 1 if stale")
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="compare the checked-in outputs with what the schema generates; exit 1 if stale",
+    )
     args = ap.parse_args(argv)
     try:
         schema = load_schema()
@@ -1242,13 +1344,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 fh.write(text)
     if args.check:
         if stale:
-            print("gen_protocol: STALE (regenerate with `" + REGEN + "`): " + ", ".join(stale),
-                  file=sys.stderr)
+            print(
+                "gen_protocol: STALE (regenerate with `" + REGEN + "`): " + ", ".join(stale),
+                file=sys.stderr,
+            )
             return 1
         print(f"gen_protocol: {len(files)} outputs up to date")
         return 0
-    print(f"gen_protocol: wrote {len(stale)} of {len(files)} outputs" +
-          (": " + ", ".join(stale) if stale else " (all were up to date)"))
+    print(
+        f"gen_protocol: wrote {len(stale)} of {len(files)} outputs"
+        + (": " + ", ".join(stale) if stale else " (all were up to date)")
+    )
     return 0
 
 

@@ -10,6 +10,7 @@ status and PWM, so the target's agreement with float64 is measured on the target
 
     python tools/scripts/gen_stage_scenes.py [--check]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,9 +25,11 @@ OUT = ROOT / "src" / "stages" / "stage_scenes.h"
 
 POLICY = {"F": "graspguide::Policy::kF", "Fperp": "graspguide::Policy::kFperp"}
 MODE = {"C": "graspguide::Mode::kC", "V": "graspguide::Mode::kV"}
-MODEL = {"paper": "graspguide::ConstraintModel::kPaper",
-         "normal": "graspguide::ConstraintModel::kNormal",
-         "none": "graspguide::ConstraintModel::kNone"}
+MODEL = {
+    "paper": "graspguide::ConstraintModel::kPaper",
+    "normal": "graspguide::ConstraintModel::kNormal",
+    "none": "graspguide::ConstraintModel::kNone",
+}
 
 
 def f32(x: float) -> str:
@@ -78,9 +81,10 @@ def render() -> str:
         pwm = list(pwm) + [0] * (4 - len(pwm))
         lines.append(
             f'  {{"{c["name"]}", {c["k"]}, {{{", ".join(arr(p) for p in contacts)}}}, '
-            f'{arr(c["wrench"])}, {arr(c["y_axis"])}, {arr(c["orientation"])}, '
-            f'{POLICY[c["policy"]]}, {MODE[c["mode"]]}, {MODEL[c["constraints"]]}, '
-            f'"{e["status"]}", {{{", ".join(str(int(p)) for p in pwm)}}}}},')
+            f"{arr(c['wrench'])}, {arr(c['y_axis'])}, {arr(c['orientation'])}, "
+            f"{POLICY[c['policy']]}, {MODE[c['mode']]}, {MODEL[c['constraints']]}, "
+            f'"{e["status"]}", {{{", ".join(str(int(p)) for p in pwm)}}}}},'
+        )
         n += 1
     lines += ["};", f"inline constexpr int kStageSceneCount = {n};", "}  // namespace stages", ""]
     return "\n".join(lines)
@@ -93,8 +97,10 @@ def main() -> int:
     text = render()
     if args.check:
         if not OUT.exists() or OUT.read_text() != text:
-            print(f"{OUT.relative_to(ROOT)} is stale: run tools/scripts/gen_stage_scenes.py",
-                  file=sys.stderr)
+            print(
+                f"{OUT.relative_to(ROOT)} is stale: run tools/scripts/gen_stage_scenes.py",
+                file=sys.stderr,
+            )
             return 1
         print(f"{OUT.relative_to(ROOT)} is current")
         return 0

@@ -7,6 +7,7 @@ point per configuration, and the Cortex-M instruction counts per stage
 
     python tools/scripts/plot_tradeoff.py docs/perf/bench_host.json docs/perf/qemu_stages.json
 """
+
 from __future__ import annotations
 
 import json
@@ -33,10 +34,18 @@ def main(bench_path: str, stages_path: str, out: str = "docs/perf/tradeoff.png")
             continue
         miss = (acc["pwm_mismatch"] + acc["failures"]) / acc["instances"]
         marker = "o" if row["k"] == 3 else "s"
-        ax.scatter(timing["median_ns"], max(miss, 1e-4), marker=marker,
-                   color="C0" if row["solver"] == "graspguide" else "C3")
-        ax.annotate(f"k{row['k']} {row['name']}", (timing["median_ns"], max(miss, 1e-4)),
-                    fontsize=6, alpha=0.8)
+        ax.scatter(
+            timing["median_ns"],
+            max(miss, 1e-4),
+            marker=marker,
+            color="C0" if row["solver"] == "graspguide" else "C3",
+        )
+        ax.annotate(
+            f"k{row['k']} {row['name']}",
+            (timing["median_ns"], max(miss, 1e-4)),
+            fontsize=6,
+            alpha=0.8,
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("host median time per call (ns, C++ loop or solver's internal time)")
@@ -49,8 +58,7 @@ def main(bench_path: str, stages_path: str, out: str = "docs/perf/tradeoff.png")
         for j, k in enumerate(("k3", "k4")):
             vals = [stages[target][k][s]["median"] for s in STAGES]
             xs = [x + (2 * i + j) * width / 2 for x in range(len(STAGES))]
-            bx.bar(xs, vals, width / 2, color=colour, alpha=0.5 + 0.4 * j,
-                   label=f"{target} {k}")
+            bx.bar(xs, vals, width / 2, color=colour, alpha=0.5 + 0.4 * j, label=f"{target} {k}")
     bx.set_xticks([x + 0.25 for x in range(len(STAGES))], STAGES)
     bx.set_ylabel("instructions (median over accepted scenes)")
     bx.set_title("On target (QEMU -icount): where a full frame goes")

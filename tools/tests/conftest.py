@@ -20,17 +20,18 @@ KNOWN_ANSWERS = os.path.join(REPO_ROOT, "test", "data", "known_answers.json")
 EXAMPLES = os.path.join(TOOLS_DIR, "examples", "solve_requests.jsonl")
 
 _saved_path = list(sys.path)
-sys.path[:] = [p for p in sys.path
-               if os.path.abspath(p or os.getcwd()) != TOOLS_DIR]
+sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.getcwd()) != TOOLS_DIR]
 try:
     import graspguide  # noqa: E402
 
     try:
         from graspguide.core import _core  # noqa: E402,F401
     except ImportError as e:  # pragma: no cover - setup problem
-        _CORE_ERROR = (f"graspguide.core._core is not importable ({e}); graspguide comes from "
-                       f"{os.path.dirname(graspguide.__file__)}. Run `bash tools/bootstrap.sh` "
-                       "and the tests with .venv/bin/python (tools/run-tests.sh does both).")
+        _CORE_ERROR = (
+            f"graspguide.core._core is not importable ({e}); graspguide comes from "
+            f"{os.path.dirname(graspguide.__file__)}. Run `bash tools/bootstrap.sh` "
+            "and the tests with .venv/bin/python (tools/run-tests.sh does both)."
+        )
     else:
         _CORE_ERROR = None
 finally:
@@ -59,17 +60,30 @@ def subprocess_env() -> dict:
 # Devices: `--port PATH` runs the hardware subset of test_device_e2e.py against a board;
 # without it those tests are skipped (and say so). The simulated-device tests always run.
 # --------------------------------------------------------------------------------------
-HARDWARE_SKIP_REASON = ("hardware test: no board given; run pytest with --port PATH "
-                        "(e.g. --port /dev/ttyACM0) to run it against a real device")
+HARDWARE_SKIP_REASON = (
+    "hardware test: no board given; run pytest with --port PATH "
+    "(e.g. --port /dev/ttyACM0) to run it against a real device"
+)
 
 
 def pytest_addoption(parser):
     group = parser.getgroup("graspguide", "GraspGuide device tests")
-    group.addoption("--port", action="store", default=None, metavar="PATH",
-                    help="serial port of a GraspGuide board: runs the hardware tests of "
-                         "test_device_e2e.py against it (skipped without this option)")
-    group.addoption("--baud", action="store", type=int, default=115200, metavar="RATE",
-                    help="baud rate for --port (default 115200)")
+    group.addoption(
+        "--port",
+        action="store",
+        default=None,
+        metavar="PATH",
+        help="serial port of a GraspGuide board: runs the hardware tests of "
+        "test_device_e2e.py against it (skipped without this option)",
+    )
+    group.addoption(
+        "--baud",
+        action="store",
+        type=int,
+        default=115200,
+        metavar="RATE",
+        help="baud rate for --port (default 115200)",
+    )
 
 
 @pytest.fixture(scope="session")
@@ -108,8 +122,10 @@ _MEASUREMENTS = []
 @pytest.fixture(scope="session")
 def report_figure():
     """report_figure(name, value_text): one line in the end-of-run summary."""
+
     def add(name: str, text: str) -> None:
         _MEASUREMENTS.append((name, text))
+
     return add
 
 

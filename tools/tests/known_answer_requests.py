@@ -38,9 +38,12 @@ def request_lines(cases):
     refuse as contacts in another unit than metres."""
     lines = []
     for case in cases:
-        req = {key: decode_numbers(case[key])
-               for key in ("contacts", "wrench", "y_axis", "orientation")}
-        req.update(policy=case["policy"], mode=case["mode"], constraints=case["constraints"],
-                   units="any")
+        req = {
+            key: decode_numbers(case[key])
+            for key in ("contacts", "wrench", "y_axis", "orientation")
+        }
+        req.update(
+            policy=case["policy"], mode=case["mode"], constraints=case["constraints"], units="any"
+        )
         lines.append(json.dumps(req, allow_nan=True))
     return lines

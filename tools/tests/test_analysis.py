@@ -32,8 +32,9 @@ def _fails(p_idx: int, k: int, modality: str, w: int) -> bool:
     return mode == "C" and (w + p_idx + k + (policy == "Fperp")) % 6 == 0
 
 
-def make_participant(root: Path, p_idx: int, rng, simulated=True, slow=None,
-                     modalities=ORDER, familiarization=3):
+def make_participant(
+    root: Path, p_idx: int, rng, simulated=True, slow=None, modalities=ORDER, familiarization=3
+):
     """Write STUDY/<PID>/trials.jsonl and tlx.jsonl; returns (trial records, tlx records).
 
     slow: {modality: factor} multiplies that participant's times (to make an outlier)."""
@@ -49,11 +50,24 @@ def make_participant(root: Path, p_idx: int, rng, simulated=True, slow=None,
             policy, mode = modality.split("+")
             for f in range(familiarization if session == 1 else 0):
                 index += 1
-                trials.append(dict(participant=pid, simulated=simulated, trial_index=index,
-                                   session=session, k=k, policy=policy, mode=mode,
-                                   modality=modality, wrench_id=100 + f,
-                                   wrench=[0, 0, -1, 0, 0, 0], single_motor=False,
-                                   success=False, completion_s=90.0, familiarization=True))
+                trials.append(
+                    dict(
+                        participant=pid,
+                        simulated=simulated,
+                        trial_index=index,
+                        session=session,
+                        k=k,
+                        policy=policy,
+                        mode=mode,
+                        modality=modality,
+                        wrench_id=100 + f,
+                        wrench=[0, 0, -1, 0, 0, 0],
+                        single_motor=False,
+                        success=False,
+                        completion_s=90.0,
+                        familiarization=True,
+                    )
+                )
             for w in range(12):
                 index += 1
                 fail = _fails(p_idx, k, modality, w)
@@ -61,15 +75,36 @@ def make_participant(root: Path, p_idx: int, rng, simulated=True, slow=None,
                 t = 90.0 if fail else float(base * rng.lognormal(0.0, 0.35))
                 if slow and modality in slow and not fail:
                     t = min(89.0, t * slow[modality])
-                trials.append(dict(participant=pid, simulated=simulated, trial_index=index,
-                                   session=session, k=k, policy=policy, mode=mode,
-                                   modality=modality, wrench_id=w,
-                                   wrench=[float(x) for x in rng.normal(size=6)],
-                                   single_motor=w < 5, success=not fail, completion_s=t,
-                                   familiarization=False))
+                trials.append(
+                    dict(
+                        participant=pid,
+                        simulated=simulated,
+                        trial_index=index,
+                        session=session,
+                        k=k,
+                        policy=policy,
+                        mode=mode,
+                        modality=modality,
+                        wrench_id=w,
+                        wrench=[float(x) for x in rng.normal(size=6)],
+                        single_motor=w < 5,
+                        success=not fail,
+                        completion_s=t,
+                        familiarization=False,
+                    )
+                )
             scales = {s: int(rng.integers(1, 22)) for s in SCALES}
-            tlx.append(dict(participant=pid, simulated=simulated, session=session, k=k,
-                            modality=modality, mode=mode, scales=scales))
+            tlx.append(
+                dict(
+                    participant=pid,
+                    simulated=simulated,
+                    session=session,
+                    k=k,
+                    modality=modality,
+                    mode=mode,
+                    scales=scales,
+                )
+            )
     (folder / "trials.jsonl").write_text("".join(json.dumps(t) + "\n" for t in trials))
     (folder / "tlx.jsonl").write_text("".join(json.dumps(t) + "\n" for t in tlx))
     return trials, tlx
@@ -80,8 +115,7 @@ def make_study(root: Path, seed=7, n=8, simulated=True, slow=None):
     root.mkdir(parents=True, exist_ok=True)
     all_trials, all_tlx = [], []
     for i in range(n):
-        t, q = make_participant(root, i, rng, simulated=simulated,
-                                slow=(slow or {}).get(PIDS[i]))
+        t, q = make_participant(root, i, rng, simulated=simulated, slow=(slow or {}).get(PIDS[i]))
         all_trials += t
         all_tlx += q
     return all_trials, all_tlx
@@ -128,12 +162,25 @@ def test_table1_counts_equal_hand_counts(study, result):
     t1 = result.table1
     # the paper's layout: k = 3 then 4, F+V, Fperp+V, F+C, Fperp+C
     assert list(zip(t1["k"], t1["modality"])) == [
-        (k, m) for k in (3, 4) for m in ["F+V", "Fperp+V", "F+C", "Fperp+C"]]
+        (k, m) for k in (3, 4) for m in ["F+V", "Fperp+V", "F+C", "Fperp+C"]
+    ]
     for r in t1.itertuples(index=False):
-        hand_s = sum(1 for t in trials if not t["familiarization"] and t["k"] == r.k
-                     and t["modality"] == r.modality and t["success"])
-        hand_f = sum(1 for t in trials if not t["familiarization"] and t["k"] == r.k
-                     and t["modality"] == r.modality and not t["success"])
+        hand_s = sum(
+            1
+            for t in trials
+            if not t["familiarization"]
+            and t["k"] == r.k
+            and t["modality"] == r.modality
+            and t["success"]
+        )
+        hand_f = sum(
+            1
+            for t in trials
+            if not t["familiarization"]
+            and t["k"] == r.k
+            and t["modality"] == r.modality
+            and not t["success"]
+        )
         assert (r.successes, r.failures, r.trials) == (hand_s, hand_f, 96)
         # by construction: 2 failures of 12 per participant in C, none in V
         if r.modality.endswith("+C"):
@@ -146,8 +193,11 @@ def test_table1_counts_equal_hand_counts(study, result):
 def test_table2_mean_and_sd_per_condition(study, result):
     _, trials, _ = study
     for r in result.table2.itertuples(index=False):
-        times = [t["completion_s"] for t in trials if not t["familiarization"]
-                 and t["k"] == r.k and t["modality"] == r.modality]
+        times = [
+            t["completion_s"]
+            for t in trials
+            if not t["familiarization"] and t["k"] == r.k and t["modality"] == r.modality
+        ]
         assert r.trials == len(times) == 96
         assert r.mean_s == pytest.approx(statistics.fmean(times), rel=1e-12)
         assert r.sd_s == pytest.approx(statistics.stdev(times), rel=1e-12)
@@ -173,8 +223,11 @@ def test_participant_means_pool_contact_counts(study, result):
     assert list(means.columns) == ORDER and sorted(means.index) == PIDS
     for pid in ("U1", "U5"):
         for m in ORDER:
-            vals = [t["completion_s"] for t in trials if t["participant"] == pid
-                    and t["modality"] == m and not t["familiarization"]]
+            vals = [
+                t["completion_s"]
+                for t in trials
+                if t["participant"] == pid and t["modality"] == m and not t["familiarization"]
+            ]
             assert len(vals) == 24
             assert means.loc[pid, m] == pytest.approx(statistics.fmean(vals), rel=1e-12)
 
@@ -194,8 +247,9 @@ def test_outlier_removed_with_its_paired_values(result):
     kept = [p for p in PIDS if p not in st.removed]
     assert sorted(st.retained.index) == sorted(st.transformed.index) == kept
     assert st.n == len(kept) < 8 and st.anova["df2"] == 3 * (len(kept) - 1)
-    np.testing.assert_allclose(st.transformed.loc[kept].to_numpy(),
-                               np.sqrt(st.means.loc[kept].to_numpy()))
+    np.testing.assert_allclose(
+        st.transformed.loc[kept].to_numpy(), np.sqrt(st.means.loc[kept].to_numpy())
+    )
 
 
 def test_keep_outliers_keeps_every_participant(study):
@@ -229,7 +283,8 @@ def test_bonferroni_pairs_against_scipy_ttest_rel(result):
     pw = st.pairwise
     assert len(pw) == 6
     assert {frozenset((r.A, r.B)) for r in pw.itertuples()} == {
-        frozenset((ORDER[i], ORDER[j])) for i in range(4) for j in range(i + 1, 4)}
+        frozenset((ORDER[i], ORDER[j])) for i in range(4) for j in range(i + 1, 4)
+    }
     for r in pw.itertuples():
         t, p = scipy.stats.ttest_rel(st.transformed[r.A], st.transformed[r.B])
         assert r.T == pytest.approx(t, rel=1e-9)
@@ -267,12 +322,10 @@ def test_known_answer_anova_from_sums_of_squares():
     F from numpy sums of squares, p from the F distribution."""
     import pandas as pd
 
-    root = np.array([[2, 3, 5, 6],
-                     [3, 3, 4, 7],
-                     [1, 2, 4, 4],
-                     [2, 4, 6, 5],
-                     [3, 4, 5, 7]], dtype=float)
-    wide = pd.DataFrame(root ** 2, index=[f"P{i}" for i in range(5)], columns=ORDER)
+    root = np.array(
+        [[2, 3, 5, 6], [3, 3, 4, 7], [1, 2, 4, 4], [2, 4, 6, 5], [3, 4, 5, 7]], dtype=float
+    )
+    wide = pd.DataFrame(root**2, index=[f"P{i}" for i in range(5)], columns=ORDER)
     wide.index.name = "participant"
     st = A.paper_statistics(wide, remove_outliers=True)
     assert st.removed == []
@@ -307,13 +360,21 @@ def test_report_has_tables_statistics_and_simulated_banner(written, result):
     text = (written / "report.md").read_text(encoding="utf-8")
     head = text[:400]
     assert "SIMULATED DATA — not human results" in head
-    for needle in ("Table I", "Table II", "Table III", "Shapiro", "Mauchly",
-                   "repeated-measures ANOVA", "Bonferroni", "figure4.png", "U3, F+V",
-                   "statsmodels AnovaRM"):
+    for needle in (
+        "Table I",
+        "Table II",
+        "Table III",
+        "Shapiro",
+        "Mauchly",
+        "repeated-measures ANOVA",
+        "Bonferroni",
+        "figure4.png",
+        "U3, F+V",
+        "statsmodels AnovaRM",
+    ):
         assert needle in text, needle
     assert f"{result.stats.anova['F']:.3f}" in text
-    for name in ("table1.csv", "table2.csv", "table3.csv", "pairwise.csv",
-                 "participant_means.csv"):
+    for name in ("table1.csv", "table2.csv", "table3.csv", "pairwise.csv", "participant_means.csv"):
         assert (written / name).stat().st_size > 0
 
 
@@ -346,8 +407,16 @@ def test_register_adds_analyze_subcommand(study, tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="graspguide")
     sub = parser.add_subparsers(dest="command")
     A.register(sub)
-    args = parser.parse_args(["analyze", str(root / "U1"), str(root / "U2"),
-                              "--out", str(tmp_path / "o"), "--keep-outliers"])
+    args = parser.parse_args(
+        [
+            "analyze",
+            str(root / "U1"),
+            str(root / "U2"),
+            "--out",
+            str(tmp_path / "o"),
+            "--keep-outliers",
+        ]
+    )
     assert args.handler(args) == 0
     assert "n = 2 participants" in capsys.readouterr().out
     assert (tmp_path / "o" / "report.md").is_file()
@@ -456,10 +525,14 @@ def test_outlier_removal_leaving_one_participant_says_so():
     """Participant j is the outlier of modality j (j = 0..2): three rows go, one stays."""
     import pandas as pd
 
-    vals = np.array([[10.0, 11.0, 12.0, 10.0],
-                     [11.0, 10.0, 11.0, 11.0],
-                     [12.0, 12.0, 10.0, 12.0],
-                     [13.0, 13.0, 13.0, 13.0]])
+    vals = np.array(
+        [
+            [10.0, 11.0, 12.0, 10.0],
+            [11.0, 10.0, 11.0, 11.0],
+            [12.0, 12.0, 10.0, 12.0],
+            [13.0, 13.0, 13.0, 13.0],
+        ]
+    )
     for j in range(3):
         vals[j, j] = 100.0
     wide = pd.DataFrame(vals, index=["P0", "P1", "P2", "P3"], columns=ORDER)
@@ -515,9 +588,17 @@ def test_runner_records_with_named_wrenches_and_extra_fields(tmp_path):
             fam = r["familiarization"]
             r["wrench_id"] = f"{'F' if fam else 'W'}{r['wrench_id'] % 100 + 1:02d}"
             r["session"] = 0 if fam else r["session"]
-            r.update(session_trial=1, wrench_class="multi", first_entry_s=1.0,
-                     final_error_deg=2.0, poses=100, wall_s=0.1, config_hash="abc",
-                     source="participant", recorded_at="2026-11-22T07:00:00Z")
+            r.update(
+                session_trial=1,
+                wrench_class="multi",
+                first_entry_s=1.0,
+                final_error_deg=2.0,
+                poses=100,
+                wall_s=0.1,
+                config_hash="abc",
+                source="participant",
+                recorded_at="2026-11-22T07:00:00Z",
+            )
         f.write_text("".join(json.dumps(r) + "\n" for r in recs))
         q = tmp_path / "S" / pid / "tlx.jsonl"
         recs = [json.loads(x) for x in q.read_text().splitlines()]
@@ -593,17 +674,40 @@ def test_pilot_of_one_real_participant_run_is_analysed(tmp_path):
     from conftest import REPO_ROOT, subprocess_env
 
     study = tmp_path / "pilot"
-    run = subprocess.run([sys.executable, "-m", "graspguide", "trial", "--protocol",
-                          os.path.join(REPO_ROOT, "protocols", "paper.toml"), "--participant",
-                          "U1", "--port", "sim", "--source", "participant", "--out",
-                          str(study)], capture_output=True, text=True, timeout=600,
-                         env=subprocess_env(), cwd=REPO_ROOT)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "graspguide",
+            "trial",
+            "--protocol",
+            os.path.join(REPO_ROOT, "protocols", "paper.toml"),
+            "--participant",
+            "U1",
+            "--port",
+            "sim",
+            "--source",
+            "participant",
+            "--out",
+            str(study),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=subprocess_env(),
+        cwd=REPO_ROOT,
+    )
     assert run.returncode == 0, run.stderr[-2000:]
     lines = (study / "U1" / "trials.jsonl").read_text().splitlines()
     assert len(lines) == 100
-    an = subprocess.run([sys.executable, "-m", "graspguide", "analyze", str(study)],
-                        capture_output=True, text=True, timeout=300, env=subprocess_env(),
-                        cwd=REPO_ROOT)
+    an = subprocess.run(
+        [sys.executable, "-m", "graspguide", "analyze", str(study)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=subprocess_env(),
+        cwd=REPO_ROOT,
+    )
     assert an.returncode == 0, an.stderr
     out = an.stdout
     assert "Table I: successfully accomplished tasks" in out
@@ -613,5 +717,5 @@ def test_pilot_of_one_real_participant_run_is_analysed(tmp_path):
     png = study / "analysis" / "figure4.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     table1 = (study / "analysis" / "table1.csv").read_text().splitlines()
-    assert len(table1) == 1 + 8                        # header + 2 contact counts x 4
-    assert sum(int(r.split(",")[-2]) for r in table1[1:]) == 96   # 100 - 4 familiarization
+    assert len(table1) == 1 + 8  # header + 2 contact counts x 4
+    assert sum(int(r.split(",")[-2]) for r in table1[1:]) == 96  # 100 - 4 familiarization

@@ -30,8 +30,7 @@ def subprocess_env() -> dict:
     return env
 
 
-OPTS = bench.Options(instances=3, seed=11, ks=(3, 4), quick=True, min_passes=1,
-                     max_passes=2)
+OPTS = bench.Options(instances=3, seed=11, ks=(3, 4), quick=True, min_passes=1, max_passes=2)
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +76,7 @@ def test_every_solution_satisfies_the_constraints_or_is_a_failure(run):
         tol = bench.VIOLATION_TOL[cfg.scalar]
         summary = next(r for r in rep["results"] if r["name"] == cfg.name and r["k"] == cfg.k)
         failed = {f["instance"] for f in summary["accuracy"]["failed"]}
-        assert len(cfg.outcomes) == len(cfg.instances), cfg.name   # nothing dropped
+        assert len(cfg.outcomes) == len(cfg.instances), cfg.name  # nothing dropped
         for inst, out in zip(cfg.instances, cfg.outcomes):
             if out.lam is None or not inst.ok:
                 assert inst.name in failed or out.status == inst.ref["status"], cfg.name
@@ -97,9 +96,14 @@ def test_every_solution_satisfies_the_constraints_or_is_a_failure(run):
 
 def test_this_projects_pwm_equals_the_reference_on_the_paper_scenes(run):
     _, configs, _ = run
-    names = [c.name for c in configs if c.k == 3 and c.solver == "graspguide"
-             and c.group in ("frame", "fixed", "py-call")
-             and c.settings.get("max_iterations", 64) == 64]
+    names = [
+        c.name
+        for c in configs
+        if c.k == 3
+        and c.solver == "graspguide"
+        and c.group in ("frame", "fixed", "py-call")
+        and c.settings.get("max_iterations", 64) == 64
+    ]
     assert len(names) >= 8 + 2 + 3
     for k in (3, 4):
         for name in names:
@@ -116,7 +120,7 @@ def test_report_has_the_documented_keys_and_finite_times(run, tmp_path):
     _, _, rep = run
     path = tmp_path / "bench.json"
     bench.write_json(rep, str(path))
-    data = json.loads(path.read_text())   # strict JSON: write_json refuses NaN
+    data = json.loads(path.read_text())  # strict JSON: write_json refuses NaN
     assert data["schema"] == bench.SCHEMA
     for key in ("settings", "machine", "instances", "results", "goal", "elapsed_s"):
         assert key in data
@@ -125,17 +129,40 @@ def test_report_has_the_documented_keys_and_finite_times(run, tmp_path):
     solvers = {r["solver"] for r in data["results"]}
     assert {"graspguide", "daqp", "quadprog", "osqp", "scipy-slsqp", "numpy+scipy"} <= solvers
     for r in data["results"]:
-        assert set(r) >= {"name", "group", "solver", "k", "scalar", "settings", "timing",
-                          "accuracy"}
+        assert set(r) >= {
+            "name",
+            "group",
+            "solver",
+            "k",
+            "scalar",
+            "settings",
+            "timing",
+            "accuracy",
+        }
         for t in r["timing"].values():
-            for key in ("median_ns", "p99_ns", "passes", "samples", "median_spread",
-                        "p99_spread", "stable"):
+            for key in (
+                "median_ns",
+                "p99_ns",
+                "passes",
+                "samples",
+                "median_spread",
+                "p99_spread",
+                "stable",
+            ):
                 assert key in t, (r["name"], key)
             assert math.isfinite(t["median_ns"]) and 0 < t["median_ns"] <= t["p99_ns"]
             assert 1 <= t["passes"] <= OPTS.max_passes
         a = r["accuracy"]
-        for key in ("instances", "failures", "failure_reasons", "failed", "pwm_mismatch",
-                    "max_pwm_diff", "max_violation_rel", "max_objective_gap_rel"):
+        for key in (
+            "instances",
+            "failures",
+            "failure_reasons",
+            "failed",
+            "pwm_mismatch",
+            "max_pwm_diff",
+            "max_violation_rel",
+            "max_objective_gap_rel",
+        ):
             assert key in a
     g = data["goal"]
     assert g["ratio"] == pytest.approx(g["frame_median_ns"] / g["daqp_solve_median_ns"])
@@ -193,8 +220,14 @@ def test_qp_tolerance_variant_is_the_core_solver_at_the_core_tolerance(run, core
     qps = [i for i in insts if i.ok][:40]
     args = bench._qp_args(qps)
     base = core.time_qp(*args, scalar="double", reps=1, batches=1, warmup=0)
-    same = core.time_qp(*args, scalar="double", violation_rel=core.TOLERANCES["double"]
-                        ["kFeasRelTol"], reps=1, batches=1, warmup=0)
+    same = core.time_qp(
+        *args,
+        scalar="double",
+        violation_rel=core.TOLERANCES["double"]["kFeasRelTol"],
+        reps=1,
+        batches=1,
+        warmup=0,
+    )
     assert base["lambda"] == same["lambda"]
     assert base["constraints_used"] == same["constraints_used"]
 
@@ -203,7 +236,7 @@ def test_noise_rule_repeats_noisy_series_and_keeps_every_pass():
     def steady(cfg):
         cfg.serie("x", "fake").add([50.0] * 10)
 
-    medians = iter([100, 130, 100, 130, 100])   # pass medians 30 % apart: too noisy
+    medians = iter([100, 130, 100, 130, 100])  # pass medians 30 % apart: too noisy
 
     def noisy(cfg):
         cfg.serie("x", "fake").add([float(next(medians))] * 10)
@@ -212,42 +245,71 @@ def test_noise_rule_repeats_noisy_series_and_keeps_every_pass():
     b = bench.Config("noisy", "frame", "fake", 3, "double", {}, noisy, [])
     bench.run_passes([a, b], bench.Options(min_passes=3, max_passes=5))
     sa, sb = a.series["x"].summary(), b.series["x"].summary()
-    assert sa["passes"] == 3 and sa["stable"]           # stops at the minimum
-    assert sb["passes"] == 5 and not sb["stable"]       # repeated up to the cap
-    assert sb["samples"] == 50                          # every pass pooled, none dropped
+    assert sa["passes"] == 3 and sa["stable"]  # stops at the minimum
+    assert sb["passes"] == 5 and not sb["stable"]  # repeated up to the cap
+    assert sb["samples"] == 50  # every pass pooled, none dropped
     assert sb["pass_medians_ns"] == [100, 130, 100, 130, 100]
     assert sb["median_ns"] == 100 and sb["median_spread"] == pytest.approx(0.3)
 
 
 def test_bad_options_are_clear_errors(core):
     env = subprocess_env()
-    for argv, words in ((["--k", "5"], "invalid choice"),
-                        (["--solvers", "daqp,cplex"], "unknown solver 'cplex'"),
-                        (["--instances", "-1"], "between 0 and 100000"),
-                        (["--seed", "-3"], "--seed must be >= 0"),
-                        (["--max-passes", "0"], "--max-passes must be >= 1")):
-        p = subprocess.run([sys.executable, "-m", "graspguide", "bench", *argv],
-                           capture_output=True, text=True, env=env, timeout=60)
+    for argv, words in (
+        (["--k", "5"], "invalid choice"),
+        (["--solvers", "daqp,cplex"], "unknown solver 'cplex'"),
+        (["--instances", "-1"], "between 0 and 100000"),
+        (["--seed", "-3"], "--seed must be >= 0"),
+        (["--max-passes", "0"], "--max-passes must be >= 1"),
+    ):
+        p = subprocess.run(
+            [sys.executable, "-m", "graspguide", "bench", *argv],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=60,
+        )
         assert p.returncode == 2, (argv, p.stderr)
         assert words in p.stderr, (argv, p.stderr)
     with pytest.raises(ValueError, match="expected 9 \\(k=3\\) or 12"):
         core.time_qp([[0.0] * 5], [[0.0] * 5], [[0.0] * 5], ["paper"])
     with pytest.raises(ValueError, match="one per instance"):
         core.time_frames([[[0, 0, 0]] * 3], [], [], [], [], [], [])
-    for timer, lists in ((core.time_frames, [[]] * 7), (core.time_stages, [[]] * 7),
-                         (core.time_qp, [[]] * 4)):
+    for timer, lists in (
+        (core.time_frames, [[]] * 7),
+        (core.time_stages, [[]] * 7),
+        (core.time_qp, [[]] * 4),
+    ):
         with pytest.raises(ValueError, match="unknown scalar 'half'; accepted"):
             timer(*lists, scalar="half")
 
 
 def test_cli_writes_json_and_prints_the_table(tmp_path):
     path = tmp_path / "b.json"
-    p = subprocess.run([sys.executable, "-m", "graspguide", "bench", "--quick", "--k", "3",
-                        "--instances", "1", "--solvers", "daqp", "--max-passes", "1",
-                        "--json", str(path)],
-                       capture_output=True, text=True, env=subprocess_env(), timeout=120)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "graspguide",
+            "bench",
+            "--quick",
+            "--k",
+            "3",
+            "--instances",
+            "1",
+            "--solvers",
+            "daqp",
+            "--max-passes",
+            "1",
+            "--json",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        env=subprocess_env(),
+        timeout=120,
+    )
     assert p.returncode == 0, p.stderr
     assert "frame double qr cold" in p.stdout and "daqp" in p.stdout
     data = json.loads(path.read_text())
-    assert data["settings"]["k"] == [3] and data["goal"] is None   # the goal needs k=4
+    assert data["settings"]["k"] == [3] and data["goal"] is None  # the goal needs k=4
     assert all(t["passes"] == 1 for r in data["results"] for t in r["timing"].values())

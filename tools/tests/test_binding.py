@@ -5,25 +5,37 @@ from __future__ import annotations
 import itertools
 import json
 import math
-
 import os
 
 import numpy as np
 import pytest
 
-from graspguide.core import _core, scene_generators as scenes, solver
+from graspguide.core import _core, solver
+from graspguide.core import scene_generators as scenes
 
-EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "examples", "solve_requests.jsonl")
+EXAMPLES = os.path.join(
+    os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "solve_requests.jsonl"
+)
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HAND4 = HAND3 + [[0.0, 0.045, 0.0]]
 PURE_F = [0.3, -1.2, -0.8, 0.0, 0.0, 0.0]
 Q_TILT = [0.9394, 0.1125, 0.2250, -0.2312]
 COMBOS = list(itertools.product(("F", "Fperp"), ("C", "V"), ("paper", "normal", "none")))
-RESULT_KEYS = {"status", "pwm", "levels", "lambda", "constraints_used", "relevant",
-               "error_deg", "alpha", "fallback_mask", "iterations", "rank_ratio",
-               "recomputed"}
+RESULT_KEYS = {
+    "status",
+    "pwm",
+    "levels",
+    "lambda",
+    "constraints_used",
+    "relevant",
+    "error_deg",
+    "alpha",
+    "fallback_mask",
+    "iterations",
+    "rank_ratio",
+    "recomputed",
+}
 
 
 def _example_requests():
@@ -58,9 +70,21 @@ def _scenes():
 def test_module_constants():
     assert _core.STATUS_NAMES[0] == "ok"
     assert len(set(_core.STATUS_NAMES)) == len(_core.STATUS_NAMES) == 15
-    for name in ("non_finite_input", "bad_contact_count", "bad_axis", "bad_quaternion",
-                 "coincident_contacts", "imprecise_contacts", "zero_wrench", "zero_force", "rank_deficient",
-                 "qp_infeasible", "qp_iteration_limit", "nothing_to_display", "bad_config"):
+    for name in (
+        "non_finite_input",
+        "bad_contact_count",
+        "bad_axis",
+        "bad_quaternion",
+        "coincident_contacts",
+        "imprecise_contacts",
+        "zero_wrench",
+        "zero_force",
+        "rank_deficient",
+        "qp_infeasible",
+        "qp_iteration_limit",
+        "nothing_to_display",
+        "bad_config",
+    ):
         assert name in _core.STATUS_NAMES
     for name in _core.STATUS_NAMES:
         message = _core.status_message(name)
@@ -104,8 +128,11 @@ def test_result_shapes_and_types(scalar, contacts, combo):
     assert isinstance(r["lambda"], list) and len(r["lambda"]) == 3 * k
     assert all(type(v) is float and math.isfinite(v) for v in r["lambda"])
     assert r["constraints_used"] in ("paper", "normal", "none")
-    assert ("paper", "normal", "none").index(r["constraints_used"]) >= \
-        ("paper", "normal", "none").index(constraints)
+    assert ("paper", "normal", "none").index(r["constraints_used"]) >= (
+        "paper",
+        "normal",
+        "none",
+    ).index(constraints)
     assert isinstance(r["relevant"], list) and len(r["relevant"]) == k
     assert all(type(v) is bool for v in r["relevant"])
     assert type(r["error_deg"]) is float and 0.0 <= r["error_deg"] <= 180.0
@@ -129,9 +156,18 @@ def test_error_result_shape(scalar):
 
 def test_defaults_match_explicit_arguments():
     a = _core.solve(HAND3, PURE_F)
-    b = _core.solve(HAND3, PURE_F, policy="F", mode="C", constraints="paper",
-                    orientation=[1, 0, 0, 0], y_axis=[0, 1, 0], scalar="double",
-                    decomposition="qr", max_iterations=64)
+    b = _core.solve(
+        HAND3,
+        PURE_F,
+        policy="F",
+        mode="C",
+        constraints="paper",
+        orientation=[1, 0, 0, 0],
+        y_axis=[0, 1, 0],
+        scalar="double",
+        decomposition="qr",
+        max_iterations=64,
+    )
     assert a == b
     assert solver.solve(HAND3, PURE_F) == a
 
@@ -153,8 +189,7 @@ def test_order_of_checks(scalar):
         ((HAND3[:2], [0.3, -1.2, nan, 0, 0, 0]), {}, "non_finite_input"),
         ((HAND3[:1] + [[nan, 0, 0]], PURE_F), {}, "non_finite_input"),
         ((HAND3[:2], PURE_F), {"orientation": [nan, 0, 0, 0]}, "non_finite_input"),
-        ((HAND3, PURE_F), {"orientation": [nan, 0, 0, 0], "y_axis": [0, 0, 0]},
-         "non_finite_input"),
+        ((HAND3, PURE_F), {"orientation": [nan, 0, 0, 0], "y_axis": [0, 0, 0]}, "non_finite_input"),
         ((HAND3[:2], PURE_F), {"y_axis": [0, 0, 0]}, "bad_contact_count"),
         ((HAND3, PURE_F), {"y_axis": [0, 0, 0], "orientation": [0, 0, 0, 0]}, "bad_axis"),
         (([HAND3[0]] * 3, PURE_F), {"orientation": [0, 0, 0, 0]}, "bad_quaternion"),
@@ -164,13 +199,18 @@ def test_order_of_checks(scalar):
         assert _core.solve(*args, scalar=scalar, **kw)["status"] == status, (args, kw)
 
 
-@pytest.mark.parametrize("field,index", [("contacts", (1, 2)), ("wrench", 4),
-                                         ("orientation", 0), ("y_axis", 1)])
+@pytest.mark.parametrize(
+    "field,index", [("contacts", (1, 2)), ("wrench", 4), ("orientation", 0), ("y_axis", 1)]
+)
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
 @pytest.mark.parametrize("scalar", ["double", "float"])
 def test_non_finite_inputs_reach_the_core(field, index, value, scalar):
-    kw = {"contacts": [list(c) for c in HAND4], "wrench": list(PURE_F),
-          "orientation": list(Q_TILT), "y_axis": [0.0, 1.0, 0.0]}
+    kw = {
+        "contacts": [list(c) for c in HAND4],
+        "wrench": list(PURE_F),
+        "orientation": list(Q_TILT),
+        "y_axis": [0.0, 1.0, 0.0],
+    }
     if field == "contacts":
         kw["contacts"][index[0]][index[1]] = value
     else:
@@ -192,16 +232,27 @@ def test_max_iterations_and_decomposition():
 
 
 def test_unknown_names_raise_value_error():
-    for kw in ({"policy": "f"}, {"mode": "c"}, {"constraints": "Paper"},
-               {"scalar": "half"}, {"decomposition": "lu"}, {"policy": "F\0perp"}):
+    for kw in (
+        {"policy": "f"},
+        {"mode": "c"},
+        {"constraints": "Paper"},
+        {"scalar": "half"},
+        {"decomposition": "lu"},
+        {"policy": "F\0perp"},
+    ):
         with pytest.raises(ValueError) as e:
             _core.solve(HAND3, PURE_F, **kw)
         assert "accepted" in str(e.value)
 
 
 def test_wrong_types_raise_type_error_in_the_binding():
-    for args in ((HAND3, PURE_F[:5]), ("abc", PURE_F), (HAND3, None),
-                 ([[1, 2]], PURE_F), (HAND3, PURE_F + [0.0])):
+    for args in (
+        (HAND3, PURE_F[:5]),
+        ("abc", PURE_F),
+        (HAND3, None),
+        ([[1, 2]], PURE_F),
+        (HAND3, PURE_F + [0.0]),
+    ):
         with pytest.raises(TypeError):
             _core.solve(*args)
 
@@ -236,19 +287,43 @@ def test_python_validation():
 
 
 def test_weird_values_never_crash():
-    values = [0.0, -0.0, 1e-320, -1e-300, 1e-30, 1.0, 1e30, 1e300, -1e308, 1.7e308,
-              math.inf, -math.inf, math.nan]
+    values = [
+        0.0,
+        -0.0,
+        1e-320,
+        -1e-300,
+        1e-30,
+        1.0,
+        1e30,
+        1e300,
+        -1e308,
+        1.7e308,
+        math.inf,
+        -math.inf,
+        math.nan,
+    ]
     rng = np.random.default_rng(5)
     for _ in range(400):
         k = int(rng.integers(3, 5))
-        pick = lambda n: [values[i] if rng.random() < 0.3 else float(rng.normal())  # noqa
-                          for i in rng.integers(0, len(values), n)]
+
+        def pick(n):
+            return [
+                values[i] if rng.random() < 0.3 else float(rng.normal())
+                for i in rng.integers(0, len(values), n)
+            ]
+
         contacts = [pick(3) for _ in range(k)]
         for scalar in ("double", "float"):
             for decomposition in ("qr", "svd"):
-                r = _core.solve(contacts, pick(6), orientation=pick(4), y_axis=pick(3),
-                                scalar=scalar, decomposition=decomposition,
-                                constraints=("paper", "normal", "none")[_ % 3])
+                r = _core.solve(
+                    contacts,
+                    pick(6),
+                    orientation=pick(4),
+                    y_axis=pick(3),
+                    scalar=scalar,
+                    decomposition=decomposition,
+                    constraints=("paper", "normal", "none")[_ % 3],
+                )
                 assert r["status"] in _core.STATUS_NAMES
                 if r["status"] == "ok":
                     assert all(0 <= v <= 255 for v in r["pwm"])
@@ -272,8 +347,7 @@ def test_float_and_double_agree_within_one_pwm_count():
         n_ok += 1
         diff = max(abs(a - b) for a, b in zip(d["pwm"], f["pwm"]))
         if diff > 1 or f["constraints_used"] != d["constraints_used"]:
-            worse.append((req, d["pwm"], f["pwm"], d["constraints_used"],
-                          f["constraints_used"]))
+            worse.append((req, d["pwm"], f["pwm"], d["constraints_used"], f["constraints_used"]))
     assert n_ok > 0.9 * len(cases)
     assert not worse, f"{len(worse)} of {n_ok} scenes differ: {worse[:3]}"
 
@@ -298,8 +372,7 @@ def test_guidance_recomputes_only_when_the_grasp_changes():
     assert second["status"] == "ok" and second["recomputed"] is False
     assert second["lambda"] == first["lambda"] and second["levels"] == first["levels"]
     assert second["error_deg"] != first["error_deg"]
-    assert second == dict(solver.solve(HAND4, PURE_F, "Fperp", "V", "normal", q2),
-                          recomputed=False)
+    assert second == dict(solver.solve(HAND4, PURE_F, "Fperp", "V", "normal", q2), recomputed=False)
     assert g.update(q2)["recomputed"] is False
 
     # Exactly the same contacts / wrench: still nothing to recompute.
@@ -372,20 +445,31 @@ def test_contacts_in_a_plane_containing_y_axis_match_the_reference():
         contacts = rng.uniform(-0.05, 0.05, (3, 3))
         contacts[:, 2] = 0.0
         wrench = np.concatenate([rng.normal(size=3), rng.normal(size=3) * 0.02 * (t % 2)])
-        expect = ref.solve(contacts.tolist(), wrench.tolist(), constraints="paper",
-                           compute_margins=False)
+        expect = ref.solve(
+            contacts.tolist(), wrench.tolist(), constraints="paper", compute_margins=False
+        )
         for scalar in ("double", "float"):
-            r = _core.solve(contacts.tolist(), wrench.tolist(), constraints="paper",
-                            scalar=scalar)
+            r = _core.solve(contacts.tolist(), wrench.tolist(), constraints="paper", scalar=scalar)
             same = r["status"] == expect["status"]
             if same and r["status"] == "ok":
-                same = (r["constraints_used"] == expect["constraints_used"] and
-                        max(abs(a - b) for a, b in zip(r["pwm"], expect["pwm"])) <= 1 and
-                        max(abs(v) for v in r["lambda"]) < 1e3)
+                same = (
+                    r["constraints_used"] == expect["constraints_used"]
+                    and max(abs(a - b) for a, b in zip(r["pwm"], expect["pwm"])) <= 1
+                    and max(abs(v) for v in r["lambda"]) < 1e3
+                )
             if not same:
-                disagree.append((t, scalar, r["constraints_used"], expect["constraints_used"],
-                                 r["pwm"], expect["pwm"]))
+                disagree.append(
+                    (
+                        t,
+                        scalar,
+                        r["constraints_used"],
+                        expect["constraints_used"],
+                        r["pwm"],
+                        expect["pwm"],
+                    )
+                )
     assert not disagree, disagree[:5]
-    r = _core.solve([[0.045, 0.045, 0.0], [0.015, 0.095, 0.0], [-0.01, 0.1, 0.0]],
-                    [0, 0, 1.0, 0, 0, 0])
+    r = _core.solve(
+        [[0.045, 0.045, 0.0], [0.015, 0.095, 0.0], [-0.01, 0.1, 0.0]], [0, 0, 1.0, 0, 0, 0]
+    )
     assert r["constraints_used"] == "normal" and r["pwm"] == [177, 177, 177]

@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 import pytest
-
-from graspguide.core import solver
+from known_answer_requests import KNOWN_ANSWERS
 from known_answer_requests import decode_numbers as _decode_numbers
 from known_answer_requests import load_cases as _load_known_answers
-from known_answer_requests import KNOWN_ANSWERS
 from known_answer_requests import request_lines as _known_answer_lines
+
+from graspguide.core import solver
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
@@ -32,8 +32,16 @@ HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HAND4 = HAND3 + [[0.0, 0.045, 0.0]]
 GOOD = {"contacts": HAND3, "wrench": [0.3, -1.2, -0.8, 0, 0, 0]}
 GOOD_LINE = json.dumps(GOOD)
-SUCCESS_KEYS = ["ok", "pwm", "levels", "lambda", "constraints_used", "relevant",
-                "error_deg", "iterations"]
+SUCCESS_KEYS = [
+    "ok",
+    "pwm",
+    "levels",
+    "lambda",
+    "constraints_used",
+    "relevant",
+    "error_deg",
+    "iterations",
+]
 
 
 def _env():
@@ -43,8 +51,9 @@ def _env():
 
 
 def run_cli(args, data: bytes, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run(CLI + list(args), input=data, capture_output=True,
-                          timeout=timeout, env=_env(), cwd=_ROOT)
+    return subprocess.run(
+        CLI + list(args), input=data, capture_output=True, timeout=timeout, env=_env(), cwd=_ROOT
+    )
 
 
 def solve_lines(lines, *args) -> list:
@@ -67,19 +76,40 @@ def test_help_texts():
     sub = run_cli(["solve", "--help"], b"")
     assert sub.returncode == 0
     text = sub.stdout.decode()
-    for word in ("contacts", "wrench", "policy", "Fperp", "mode", "constraints", "paper",
-                 "normal", "orientation", "y_axis", "bad_json", "bad_request",
-                 "non_finite_input", "--scalar", "--decomposition", "--max-iterations",
-                 "--input", "--output", "Blank lines", "NaN"):
+    for word in (
+        "contacts",
+        "wrench",
+        "policy",
+        "Fperp",
+        "mode",
+        "constraints",
+        "paper",
+        "normal",
+        "orientation",
+        "y_axis",
+        "bad_json",
+        "bad_request",
+        "non_finite_input",
+        "--scalar",
+        "--decomposition",
+        "--max-iterations",
+        "--input",
+        "--output",
+        "Blank lines",
+        "NaN",
+    ):
         assert word in text, word
 
 
-@pytest.mark.parametrize("command, words", [
-    ("trial", ["--protocol", "--participant", "--source"]),
-    ("analyze", ["--out", "--keep-outliers"]),
-    ("demo", ["--participants", "--jobs"]),
-    ("sweep", ["--thresholds", "--rates"]),
-])
+@pytest.mark.parametrize(
+    "command, words",
+    [
+        ("trial", ["--protocol", "--participant", "--source"]),
+        ("analyze", ["--out", "--keep-outliers"]),
+        ("demo", ["--participants", "--jobs"]),
+        ("sweep", ["--thresholds", "--rates"]),
+    ],
+)
 def test_study_commands_are_registered(command, words):
     top = run_cli(["--help"], b"")
     assert command.encode() in top.stdout
@@ -95,18 +125,30 @@ def test_version_and_console_script():
     assert proc.stdout.decode().strip() == "graspguide 0.1.0"
     script = os.path.join(os.path.dirname(sys.executable), "graspguide")
     assert os.path.exists(script), "console script not installed next to the interpreter"
-    proc = subprocess.run([script, "solve"], input=(GOOD_LINE + "\n").encode(),
-                          capture_output=True, timeout=60, env=_env())
+    proc = subprocess.run(
+        [script, "solve"],
+        input=(GOOD_LINE + "\n").encode(),
+        capture_output=True,
+        timeout=60,
+        env=_env(),
+    )
     assert proc.returncode == 0
     assert json.loads(proc.stdout)["ok"] is True
 
 
-@pytest.mark.parametrize("args", [[], ["frobnicate"], ["solve", "--scalar", "half"],
-                                  ["solve", "--max-iterations", "0"],
-                                  ["solve", "--max-iterations", "x"],
-                                  ["solve", "--input", "/nonexistent/requests.jsonl"],
-                                  ["solve", "--output", "/nonexistent/dir/out.jsonl"],
-                                  ["solve", "--bogus"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        [],
+        ["frobnicate"],
+        ["solve", "--scalar", "half"],
+        ["solve", "--max-iterations", "0"],
+        ["solve", "--max-iterations", "x"],
+        ["solve", "--input", "/nonexistent/requests.jsonl"],
+        ["solve", "--output", "/nonexistent/dir/out.jsonl"],
+        ["solve", "--bogus"],
+    ],
+)
 def test_usage_errors_exit_2(args):
     proc = run_cli(args, b"")
     assert proc.returncode == 2
@@ -157,16 +199,21 @@ def test_success_response_matches_the_binding():
         for policy in ("F", "Fperp"):
             for mode in ("C", "V"):
                 for constraints in ("paper", "normal", "none"):
-                    requests.append({"contacts": contacts,
-                                     "wrench": [0.3, -1.2, -0.8, 0.01, 0.0, -0.02],
-                                     "policy": policy, "mode": mode,
-                                     "constraints": constraints,
-                                     "orientation": [0.9394, 0.1125, 0.2250, -0.2312],
-                                     "y_axis": [0, 1, 0]})
+                    requests.append(
+                        {
+                            "contacts": contacts,
+                            "wrench": [0.3, -1.2, -0.8, 0.01, 0.0, -0.02],
+                            "policy": policy,
+                            "mode": mode,
+                            "constraints": constraints,
+                            "orientation": [0.9394, 0.1125, 0.2250, -0.2312],
+                            "y_axis": [0, 1, 0],
+                        }
+                    )
     for scalar in ("double", "float"):
         answers = solve_lines([json.dumps(r) for r in requests], "--scalar", scalar)
         for req, ans in zip(requests, answers):
-            assert list(ans)[:len(SUCCESS_KEYS)] == SUCCESS_KEYS
+            assert list(ans)[: len(SUCCESS_KEYS)] == SUCCESS_KEYS
             assert set(ans) == set(SUCCESS_KEYS) | {"alpha", "fallback_mask"}
             ref = solver.solve(scalar=scalar, **req)
             for key in SUCCESS_KEYS[1:]:
@@ -181,9 +228,15 @@ def test_output_order_equals_input_order():
     for i in range(200):
         contacts = HAND4 if i % 3 == 0 else HAND3
         wrench = list(rng.normal(size=6) * [1, 1, 1, 0.02, 0.02, 0.02])
-        requests.append({"contacts": contacts, "wrench": wrench,
-                         "policy": ("F", "Fperp")[i % 2], "mode": ("C", "V")[i % 5 == 0],
-                         "orientation": list(rng.normal(size=4))})
+        requests.append(
+            {
+                "contacts": contacts,
+                "wrench": wrench,
+                "policy": ("F", "Fperp")[i % 2],
+                "mode": ("C", "V")[i % 5 == 0],
+                "orientation": list(rng.normal(size=4)),
+            }
+        )
     lines = [json.dumps(r) for r in requests]
     lines[50] = "not json"
     lines[120] = json.dumps({"contacts": HAND3})
@@ -240,76 +293,152 @@ BAD_CASES = [
     ("non_utf8", b'{"contacts": "\xff\xfe"}', "bad_json", ["UTF-8"]),
     ("latin1", '{"policy": "Fé"}'.encode("latin-1"), "bad_json", ["UTF-8"]),
     ("deep_nesting", b"[" * 200000 + b"]" * 200000, "bad_json", ["nested"]),
-    ("deep_in_field", b'{"contacts": ' + b"[" * 5000 + b"]" * 5000 + b"}", "bad_json",
-     ["nested"]),
+    ("deep_in_field", b'{"contacts": ' + b"[" * 5000 + b"]" * 5000 + b"}", "bad_json", ["nested"]),
     ("long_line", b'{"contacts": "' + b"x" * (3 << 20) + b'"}', "bad_json", ["long"]),
-    ("missing_contacts", json.dumps({"wrench": GOOD["wrench"]}).encode(), "bad_request",
-     ["contacts"]),
+    (
+        "missing_contacts",
+        json.dumps({"wrench": GOOD["wrench"]}).encode(),
+        "bad_request",
+        ["contacts"],
+    ),
     ("missing_both", b"{}", "bad_request", ["contacts", "wrench"]),
-    ("typo_field", _req(contsraints="normal").encode(), "bad_request",
-     ["contsraints", "constraints"]),
+    (
+        "typo_field",
+        _req(contsraints="normal").encode(),
+        "bad_request",
+        ["contsraints", "constraints"],
+    ),
     ("unknown_field", _req(id=7).encode(), "bad_request", ['"id"']),
-    ("duplicate_field", b'{"contacts": 1, "contacts": 2, "wrench": 3}', "bad_request",
-     ["more than once"]),
-    ("bool_in_wrench", _req(wrench=[True, 0, 0, 0, 0, 0]).encode(), "bad_request",
-     ["wrench[0]", "boolean"]),
-    ("string_in_wrench", _req(wrench=["1", 0, 0, 0, 0, 0]).encode(), "bad_request",
-     ["wrench[0]", "string"]),
-    ("null_in_contacts", _req(contacts=[[1, 2, None]] + HAND3[1:]).encode(), "bad_request",
-     ["contacts[0][2]"]),
-    ("bool_in_orientation", _req(orientation=[1, 0, 0, False]).encode(), "bad_request",
-     ["orientation[3]"]),
+    (
+        "duplicate_field",
+        b'{"contacts": 1, "contacts": 2, "wrench": 3}',
+        "bad_request",
+        ["more than once"],
+    ),
+    (
+        "bool_in_wrench",
+        _req(wrench=[True, 0, 0, 0, 0, 0]).encode(),
+        "bad_request",
+        ["wrench[0]", "boolean"],
+    ),
+    (
+        "string_in_wrench",
+        _req(wrench=["1", 0, 0, 0, 0, 0]).encode(),
+        "bad_request",
+        ["wrench[0]", "string"],
+    ),
+    (
+        "null_in_contacts",
+        _req(contacts=[[1, 2, None]] + HAND3[1:]).encode(),
+        "bad_request",
+        ["contacts[0][2]"],
+    ),
+    (
+        "bool_in_orientation",
+        _req(orientation=[1, 0, 0, False]).encode(),
+        "bad_request",
+        ["orientation[3]"],
+    ),
     ("wrench_length", _req(wrench=[1, 2, 3]).encode(), "bad_request", ["wrench", "6"]),
     ("wrench_not_array", _req(wrench=5).encode(), "bad_request", ["wrench"]),
     ("contacts_not_array", _req(contacts="thumb").encode(), "bad_request", ["contacts"]),
-    ("contact_pair", _req(contacts=[[1, 2], [3, 4], [5, 6]]).encode(), "bad_request",
-     ["contacts[0]", "3"]),
-    ("contact_not_triple", _req(contacts=[1, 2, 3]).encode(), "bad_request",
-     ["contacts[0]", "triple"]),
-    ("orientation_length", _req(orientation=[1, 0, 0]).encode(), "bad_request",
-     ["orientation", "4"]),
+    (
+        "contact_pair",
+        _req(contacts=[[1, 2], [3, 4], [5, 6]]).encode(),
+        "bad_request",
+        ["contacts[0]", "3"],
+    ),
+    (
+        "contact_not_triple",
+        _req(contacts=[1, 2, 3]).encode(),
+        "bad_request",
+        ["contacts[0]", "triple"],
+    ),
+    (
+        "orientation_length",
+        _req(orientation=[1, 0, 0]).encode(),
+        "bad_request",
+        ["orientation", "4"],
+    ),
     ("y_axis_length", _req(y_axis=[0, 1]).encode(), "bad_request", ["y_axis", "3"]),
     ("policy", _req(policy="G").encode(), "bad_request", ['"F"', '"Fperp"']),
     ("policy_case", _req(policy="fperp").encode(), "bad_request", ["Fperp"]),
     ("policy_type", _req(policy=1).encode(), "bad_request", ["policy", '"F"']),
     ("mode", _req(mode="X").encode(), "bad_request", ['"C"', '"V"']),
-    ("constraints", _req(constraints="soft").encode(), "bad_request",
-     ['"paper"', '"normal"', '"none"']),
+    (
+        "constraints",
+        _req(constraints="soft").encode(),
+        "bad_request",
+        ['"paper"', '"normal"', '"none"'],
+    ),
     ("constraints_null", _req(constraints=None).encode(), "bad_request", ["constraints"]),
     ("two_contacts", _req(contacts=HAND3[:2]).encode(), "bad_contact_count", ["3"]),
-    ("five_contacts", _req(contacts=HAND4 + [[0, 0, 0.1]]).encode(), "bad_contact_count",
-     ["4"]),
+    ("five_contacts", _req(contacts=HAND4 + [[0, 0, 0.1]]).encode(), "bad_contact_count", ["4"]),
     ("no_contacts", _req(contacts=[]).encode(), "bad_contact_count", ["3"]),
     ("nan_token", _req(wrench=[math.nan, 0, 0, 0, 0, 0]).encode(), "non_finite_input", []),
-    ("infinity_token", _req(contacts=[[math.inf, 0, 0]] + HAND3[1:]).encode(),
-     "non_finite_input", []),
-    ("neg_infinity_token", _req(orientation=[1, 0, -math.inf, 0]).encode(),
-     "non_finite_input", []),
+    (
+        "infinity_token",
+        _req(contacts=[[math.inf, 0, 0]] + HAND3[1:]).encode(),
+        "non_finite_input",
+        [],
+    ),
+    ("neg_infinity_token", _req(orientation=[1, 0, -math.inf, 0]).encode(), "non_finite_input", []),
     ("huge_number", _req().replace("0.3", "1e400").encode(), "non_finite_input", []),
     ("huge_integer", _req().replace("0.3", "9" * 5000).encode(), "non_finite_input", []),
     ("zero_wrench", _req(wrench=[0] * 6).encode(), "zero_wrench", []),
     ("zero_force", _req(wrench=[0, 0, 0, 0.01, 0, 0]).encode(), "zero_force", []),
     ("coincident", _req(contacts=[HAND3[0]] * 3).encode(), "coincident_contacts", []),
-    ("collinear", _req(contacts=[[0, 0, 0], [0.01, 0.02, 0], [0.03, 0.06, 0]]).encode(),
-     "rank_deficient", []),
+    (
+        "collinear",
+        _req(contacts=[[0, 0, 0], [0.01, 0.02, 0], [0.03, 0.06, 0]]).encode(),
+        "rank_deficient",
+        [],
+    ),
     ("bad_axis", _req(y_axis=[0, 0, 0]).encode(), "bad_axis", []),
     ("bad_quaternion", _req(orientation=[0, 0, 0, 0]).encode(), "bad_quaternion", []),
-    ("units_value", _req(units="cm").encode(), "bad_request",
-     ['"units"', '"m"', '"mm"', '"any"', '"cm"']),
+    (
+        "units_value",
+        _req(units="cm").encode(),
+        "bad_request",
+        ['"units"', '"m"', '"mm"', '"any"', '"cm"'],
+    ),
     ("units_type", _req(units=1).encode(), "bad_request", ['"units"', '"mm"']),
-    ("contacts_in_mm", _req(contacts=[[x * 1000 for x in c] for c in HAND3]).encode(),
-     "bad_request", ["contacts span 77.9", "looks like millimetres", "give metres",
-                     '"units": "mm"']),
-    ("contacts_in_cm", _req(contacts=[[x * 100 for x in c] for c in HAND3]).encode(),
-     "bad_request", ["looks like centimetres", "divide by 100"]),
-    ("contacts_m_said_mm", _req(units="mm").encode(), "bad_request",
-     ["contacts span 0.0779", "looks like metres", 'drop "units": "mm"']),
-    ("hand_of_1_mm", _req(contacts=[[x / 78 for x in c] for c in HAND3]).encode(),
-     "bad_request", ["contacts span 0.000999", "5 mm to 0.5 m", "check the contact"]),
-    ("moment_in_N_mm", _req(wrench=[0.3, -1.2, -0.8, 5, 0, -2]).encode(), "bad_request",
-     ["moment", "lever arm", "looks like N mm", "divide by 1000"]),
-    ("moment_implausible", _req(wrench=[0.3, -1.2, -0.8, 5000, 0, -2]).encode(),
-     "bad_request", ["moment", "check the moment"]),
+    (
+        "contacts_in_mm",
+        _req(contacts=[[x * 1000 for x in c] for c in HAND3]).encode(),
+        "bad_request",
+        ["contacts span 77.9", "looks like millimetres", "give metres", '"units": "mm"'],
+    ),
+    (
+        "contacts_in_cm",
+        _req(contacts=[[x * 100 for x in c] for c in HAND3]).encode(),
+        "bad_request",
+        ["looks like centimetres", "divide by 100"],
+    ),
+    (
+        "contacts_m_said_mm",
+        _req(units="mm").encode(),
+        "bad_request",
+        ["contacts span 0.0779", "looks like metres", 'drop "units": "mm"'],
+    ),
+    (
+        "hand_of_1_mm",
+        _req(contacts=[[x / 78 for x in c] for c in HAND3]).encode(),
+        "bad_request",
+        ["contacts span 0.000999", "5 mm to 0.5 m", "check the contact"],
+    ),
+    (
+        "moment_in_N_mm",
+        _req(wrench=[0.3, -1.2, -0.8, 5, 0, -2]).encode(),
+        "bad_request",
+        ["moment", "lever arm", "looks like N mm", "divide by 1000"],
+    ),
+    (
+        "moment_implausible",
+        _req(wrench=[0.3, -1.2, -0.8, 5000, 0, -2]).encode(),
+        "bad_request",
+        ["moment", "check the moment"],
+    ),
 ]
 
 
@@ -343,8 +472,12 @@ def test_bad_input(case, bad_case_answers):
 def test_units_mm_gives_the_metre_answer_and_any_skips_the_checks():
     moment = [0.3, -1.2, -0.8, 0.005, 0.0, -0.002]
     metres = _req(wrench=moment, mode="V")
-    mm = _req(contacts=[[x * 1000 for x in c] for c in HAND3],
-              wrench=moment[:3] + [x * 1000 for x in moment[3:]], mode="V", units="mm")
+    mm = _req(
+        contacts=[[x * 1000 for x in c] for c in HAND3],
+        wrench=moment[:3] + [x * 1000 for x in moment[3:]],
+        mode="V",
+        units="mm",
+    )
     default = _req(wrench=moment, mode="V", units="m")
     huge = _req(contacts=[[x * 200 for x in c] for c in HAND3], units="any")
     tiny = _req(contacts=[[x * 2e-3 for x in c] for c in HAND3], units="any")
@@ -352,16 +485,17 @@ def test_units_mm_gives_the_metre_answer_and_any_skips_the_checks():
     assert a_m["ok"] and a_mm["ok"] and a_m == a_def
     assert a_mm["pwm"] == a_m["pwm"] and a_mm["relevant"] == a_m["relevant"]
     assert np.allclose(a_mm["lambda"], a_m["lambda"], rtol=0, atol=1e-12)
-    assert a_huge["ok"] and a_tiny["ok"]      # the core is scale-free: only ratios count
+    assert a_huge["ok"] and a_tiny["ok"]  # the core is scale-free: only ratios count
     assert a_huge["pwm"] == a_tiny["pwm"] == solve_lines([GOOD_LINE])[0]["pwm"]
 
 
 def test_hands_from_5_mm_to_half_a_metre_are_accepted():
-    span = 0.0779423                                     # HAND3's two farthest contacts
+    span = 0.0779423  # HAND3's two farthest contacts
     for target in (0.0051, 0.499):
         k = target / span
-        ans = solve_lines([_req(contacts=[[x * k for x in c] for c in HAND3],
-                                wrench=[0.3, -1.2, -0.8, 0, 0, 0])])[0]
+        ans = solve_lines(
+            [_req(contacts=[[x * k for x in c] for c in HAND3], wrench=[0.3, -1.2, -0.8, 0, 0, 0])]
+        )[0]
         assert ans["ok"] is True, (target, ans)
 
 
@@ -380,7 +514,8 @@ def _parse(argv, capsys):
 _REQUIRED = {
     "stream": ["--port", "sim", "--scene", "s.toml", "--wrench", "1,0,0", "--source", "x"],
     "trial": ["--protocol", "p.toml", "--participant", "U1", "--port", "sim", "--source", "x"],
-    "analyze": ["study"], "info": ["--port", "sim"],
+    "analyze": ["study"],
+    "info": ["--port", "sim"],
 }
 
 
@@ -393,8 +528,11 @@ def _value_options():
     out = []
     for name, p in sub.choices.items():
         for action in p._actions:
-            if action.option_strings and action.nargs is None and not isinstance(
-                    action, (argparse._HelpAction, argparse._VersionAction)):
+            if (
+                action.option_strings
+                and action.nargs is None
+                and not isinstance(action, (argparse._HelpAction, argparse._VersionAction))
+            ):
                 out.append((name, action.option_strings[0]))
     return out
 
@@ -407,35 +545,57 @@ def test_every_option_takes_a_negative_value(command, option, value, capsys):
     required = list(_REQUIRED.get(command, []))
     if option in required:
         i = required.index(option)
-        del required[i:i + 2]
+        del required[i : i + 2]
     args, err = _parse([command, *required, option, value], capsys)
     assert "expected one argument" not in err, err
-    if args is None:              # refused by the option's type: named, with its range
+    if args is None:  # refused by the option's type: named, with its range
         assert f"argument {option}" in err, err
 
 
-@pytest.mark.parametrize("value,expect", [
-    ("-1,0,0", [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
-    ("-0.3,-1.2,-0.8", [-0.3, -1.2, -0.8, 0.0, 0.0, 0.0]),
-    ("-1e-1,2,-3,-4e-3,0,0", [-0.1, 2.0, -3.0, -0.004, 0.0, 0.0]),
-])
+@pytest.mark.parametrize(
+    "value,expect",
+    [
+        ("-1,0,0", [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        ("-0.3,-1.2,-0.8", [-0.3, -1.2, -0.8, 0.0, 0.0, 0.0]),
+        ("-1e-1,2,-3,-4e-3,0,0", [-0.1, 2.0, -3.0, -0.004, 0.0, 0.0]),
+    ],
+)
 def test_stream_wrench_accepts_negative_values(value, expect, capsys):
-    args, err = _parse(["stream", "--port", "sim", "--scene", "s.toml", "--wrench", value,
-                        "--source", "synthetic"], capsys)
+    args, err = _parse(
+        [
+            "stream",
+            "--port",
+            "sim",
+            "--scene",
+            "s.toml",
+            "--wrench",
+            value,
+            "--source",
+            "synthetic",
+        ],
+        capsys,
+    )
     assert args is not None, err
     assert args.wrench == expect
 
 
-@pytest.mark.parametrize("argv,words", [
-    (["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-inf,0,0"],
-     ["--wrench", "finite"]),
-    (["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-1,0"],
-     ["--wrench", "3 or 6"]),
-    (["solve", "--timeout", "-1e-3"], ["--timeout", "(0, 3600]"]),
-    (["solve", "--max-iterations", "-1"], ["--max-iterations", "between 1 and"]),
-    (["demo", "--jobs", "-2"], ["--jobs", "between 1 and"]),
-    (["sweep", "--participants", "-1,2"], ["--participants", "not an integer"]),
-])
+@pytest.mark.parametrize(
+    "argv,words",
+    [
+        (
+            ["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-inf,0,0"],
+            ["--wrench", "finite"],
+        ),
+        (
+            ["stream", "--port", "sim", "--scene", "s", "--source", "x", "--wrench", "-1,0"],
+            ["--wrench", "3 or 6"],
+        ),
+        (["solve", "--timeout", "-1e-3"], ["--timeout", "(0, 3600]"]),
+        (["solve", "--max-iterations", "-1"], ["--max-iterations", "between 1 and"]),
+        (["demo", "--jobs", "-2"], ["--jobs", "between 1 and"]),
+        (["sweep", "--participants", "-1,2"], ["--participants", "not an integer"]),
+    ],
+)
 def test_negative_values_get_the_options_own_message(argv, words, capsys):
     args, err = _parse(argv, capsys)
     assert args is None
@@ -448,9 +608,9 @@ def test_sweep_lists_and_analyze_main_take_negative_values(capsys):
 
     args, err = _parse(["sweep", "--thresholds", "-2,3", "--rates", "-30"], capsys)
     assert (args.thresholds, args.rates) == ("-2,3", "-30"), err
-    assert sweep.main(["--thresholds", "-2,3"]) == 2        # then the range check says why
+    assert sweep.main(["--thresholds", "-2,3"]) == 2  # then the range check says why
     assert "--thresholds" in capsys.readouterr().err
-    assert analysis.main(["-1,0"]) == 1                       # a folder named "-1,0"
+    assert analysis.main(["-1,0"]) == 1  # a folder named "-1,0"
     assert "-1,0" in capsys.readouterr().err
 
 
@@ -460,8 +620,15 @@ def test_help_shows_the_negative_wrench_form():
 
 
 def test_blank_lines_crlf_bom_and_missing_final_newline():
-    data = (b"\xef\xbb\xbf" + GOOD_LINE.encode() + b"\r\n" + b"\n   \n\t\r\n" +
-            _req(policy="Fperp").encode() + b"\n\n" + _req(mode="V").encode())
+    data = (
+        b"\xef\xbb\xbf"
+        + GOOD_LINE.encode()
+        + b"\r\n"
+        + b"\n   \n\t\r\n"
+        + _req(policy="Fperp").encode()
+        + b"\n\n"
+        + _req(mode="V").encode()
+    )
     proc = run_cli(["solve"], data)
     assert proc.returncode == 0
     answers = [json.loads(x) for x in proc.stdout.decode().splitlines()]
@@ -472,12 +639,20 @@ def test_blank_lines_crlf_bom_and_missing_final_newline():
 
 
 def test_output_is_strict_ascii_json():
-    proc = run_cli(["solve"], _req(policy="\u00e9\ud800").encode("utf-8", "surrogatepass")
-                   + b"\n" + '{"pol\u00efcy": 1}'.encode() + b"\n" + GOOD_LINE.encode())
+    proc = run_cli(
+        ["solve"],
+        _req(policy="\u00e9\ud800").encode("utf-8", "surrogatepass")
+        + b"\n"
+        + '{"pol\u00efcy": 1}'.encode()
+        + b"\n"
+        + GOOD_LINE.encode(),
+    )
     assert proc.returncode == 0
     text = proc.stdout.decode("ascii")
-    answers = [json.loads(x, parse_constant=lambda c: pytest.fail(f"non-JSON {c}"))
-               for x in text.splitlines()]
+    answers = [
+        json.loads(x, parse_constant=lambda c: pytest.fail(f"non-JSON {c}"))
+        for x in text.splitlines()
+    ]
     assert [a["ok"] for a in answers] == [False, False, True]
 
 
@@ -491,8 +666,14 @@ def _readline(proc, timeout=30.0) -> bytes:
 
 
 def test_interactive_pipe_and_ctrl_c():
-    proc = subprocess.Popen(CLI + ["solve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=_env(), cwd=_ROOT)
+    proc = subprocess.Popen(
+        CLI + ["solve"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=_env(),
+        cwd=_ROOT,
+    )
     try:
         for line in (GOOD_LINE, "oops", _req(mode="V")):
             proc.stdin.write(line.encode() + b"\n")
@@ -511,8 +692,14 @@ def test_interactive_pipe_and_ctrl_c():
 
 def test_closed_output_pipe_is_not_a_traceback():
     lines = (GOOD_LINE + "\n").encode() * 20000
-    proc = subprocess.Popen(CLI + ["solve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=_env(), cwd=_ROOT)
+    proc = subprocess.Popen(
+        CLI + ["solve"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=_env(),
+        cwd=_ROOT,
+    )
     try:
         proc.stdin.write(GOOD_LINE.encode() + b"\n")
         proc.stdin.flush()
@@ -547,8 +734,10 @@ def known_answers():
     """(cases, double answers, float answers): every case through one CLI per scalar."""
     cases = _load_known_answers()
     # "units": "any": the cases include hands of 0.1 mm and 10 m (the core's scale tests)
-    lines = [json.dumps({**json.loads(ln), "units": "any"}, allow_nan=True)
-             for ln in _known_answer_lines(cases)]
+    lines = [
+        json.dumps({**json.loads(ln), "units": "any"}, allow_nan=True)
+        for ln in _known_answer_lines(cases)
+    ]
     double = solve_lines(lines, "--scalar", "double")
     single = solve_lines(lines, "--scalar", "float")
     assert len(double) == len(single) == len(cases)
@@ -567,17 +756,26 @@ def _agreement_problems(answer, expect):
     if expect["status"] != "ok":
         return problems
     if answer["constraints_used"] != expect["constraints_used"]:
-        problems.append(f"constraints_used {answer['constraints_used']} != "
-                        f"{expect['constraints_used']}")
+        problems.append(
+            f"constraints_used {answer['constraints_used']} != {expect['constraints_used']}"
+        )
     if len(answer["pwm"]) != len(expect["pwm"]) or any(
-            abs(a - b) > 1 for a, b in zip(answer["pwm"], expect["pwm"])):
+        abs(a - b) > 1 for a, b in zip(answer["pwm"], expect["pwm"])
+    ):
         problems.append(f"pwm {answer['pwm']} vs {expect['pwm']}")
     lam, lam_ref = np.asarray(answer["lambda"], float), np.asarray(expect["lambda"], float)
     if lam.shape != lam_ref.shape or not (
-            np.linalg.norm(lam - lam_ref) <= 1e-6 * np.linalg.norm(lam_ref)):
-        problems.append("lambda off by %.3g relative (max |lambda| %.3g)" % (
-            np.linalg.norm(lam - lam_ref) / np.linalg.norm(lam_ref)
-            if lam.shape == lam_ref.shape else math.inf, np.max(np.abs(lam))))
+        np.linalg.norm(lam - lam_ref) <= 1e-6 * np.linalg.norm(lam_ref)
+    ):
+        problems.append(
+            "lambda off by %.3g relative (max |lambda| %.3g)"
+            % (
+                np.linalg.norm(lam - lam_ref) / np.linalg.norm(lam_ref)
+                if lam.shape == lam_ref.shape
+                else math.inf,
+                np.max(np.abs(lam)),
+            )
+        )
     if answer["relevant"] != expect["relevant"]:
         problems.append(f"relevant {answer['relevant']} != {expect['relevant']}")
     if not abs(answer["error_deg"] - expect["error_deg"]) <= 1e-6:
@@ -627,13 +825,19 @@ def test_known_answers_float_pwm(known_answers):
         if max(abs(a - b) for a, b in zip(answer["pwm"], expect["pwm"])) <= 1:
             within += 1
         else:
-            off.append(f"{name}: {answer['pwm']} vs {expect['pwm']} (rounding the inputs "
-                       f"to float moves the contacts by {_float_input_distortion(case):.2g} "
-                       "of the hand's size)")
+            off.append(
+                f"{name}: {answer['pwm']} vs {expect['pwm']} (rounding the inputs "
+                f"to float moves the contacts by {_float_input_distortion(case):.2g} "
+                "of the hand's size)"
+            )
     share = within / n_ok if n_ok else 0.0
-    print(f"\nfloat: PWM within 1 count on {within}/{n_ok} ok cases ({100 * share:.2f} %); "
-          f"refused as imprecise: {len(refused)} ({', '.join(refused)})")
+    print(
+        f"\nfloat: PWM within 1 count on {within}/{n_ok} ok cases ({100 * share:.2f} %); "
+        f"refused as imprecise: {len(refused)} ({', '.join(refused)})"
+    )
     assert len(refused) <= 6, refused  # only the 1e6-offset cases
     assert not status_mismatch, status_mismatch
-    assert share >= 0.999, (f"float PWM within 1 count on {within}/{n_ok} = "
-                            f"{100 * share:.2f} % < 99.9 %; off: " + "; ".join(off))
+    assert share >= 0.999, (
+        f"float PWM within 1 count on {within}/{n_ok} = "
+        f"{100 * share:.2f} % < 99.9 %; off: " + "; ".join(off)
+    )

@@ -9,8 +9,9 @@ import pytest
 from graspguide.study import sources as src
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
-HEAD = "t_s,qw,qx,qy,qz," + ",".join(f"{n}_{a}" for n in ("thumb", "index", "middle")
-                                     for a in "xyz")
+HEAD = "t_s,qw,qx,qy,qz," + ",".join(
+    f"{n}_{a}" for n in ("thumb", "index", "middle") for a in "xyz"
+)
 
 
 def replay(tmp_path, scale, rows=3, bad_row=None):
@@ -24,7 +25,7 @@ def replay(tmp_path, scale, rows=3, bad_row=None):
 
 
 def test_replay_in_millimetres_read_as_metres_names_the_line_and_the_fix(tmp_path):
-    path = replay(tmp_path, 1000.0, bad_row=2)          # rows 0, 1 in metres, row 2 in mm
+    path = replay(tmp_path, 1000.0, bad_row=2)  # rows 0, 1 in metres, row 2 in mm
     with pytest.raises(src.SourceError) as e:
         src.open_source("replay:" + path)
     msg = str(e.value)
@@ -47,15 +48,14 @@ def test_replay_of_a_hand_of_no_unit_says_to_check(tmp_path):
 
 class _Tracker(src.TrackerAdapter):
     name, rate_hz = "lab-tracker", 100.0
-    convention = src.TRACKER_PRESETS["optitrack"]      # declares metres
+    convention = src.TRACKER_PRESETS["optitrack"]  # declares metres
 
     def __init__(self, scale):
         self.scale = scale
 
     def raw_samples(self):
         for i in range(3):
-            yield i / 100.0, (0.0, 0.0, 0.0, 1.0), [[v * self.scale for v in c]
-                                                     for c in HAND3]
+            yield i / 100.0, (0.0, 0.0, 0.0, 1.0), [[v * self.scale for v in c] for c in HAND3]
 
 
 def test_adapter_with_contacts_in_another_unit_than_declared():

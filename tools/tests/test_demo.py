@@ -14,15 +14,13 @@ import subprocess
 import sys
 import time
 
-import pytest
-
 from conftest import subprocess_env
 
 from graspguide.link import client as dv
-from graspguide.study import study_protocol as pf
-from graspguide.study import runner as rn
 from graspguide.link import codec
 from graspguide.link import messages as m
+from graspguide.study import runner as rn
+from graspguide.study import study_protocol as pf
 
 TINY = """
 [study]
@@ -67,8 +65,19 @@ def tiny_protocol(tmp_path, timeout=15.0):
 
 
 def demo_cmd(protocol, out, *extra):
-    return [sys.executable, "-m", "graspguide", "demo", "--protocol", protocol, "--out",
-            str(out), "--participants", "2", *extra]
+    return [
+        sys.executable,
+        "-m",
+        "graspguide",
+        "demo",
+        "--protocol",
+        protocol,
+        "--out",
+        str(out),
+        "--participants",
+        "2",
+        *extra,
+    ]
 
 
 def records(path):
@@ -76,8 +85,17 @@ def records(path):
         return [json.loads(line) for line in f]
 
 
-KEYS = ("trial_index", "session", "modality", "wrench_id", "success", "completion_s",
-        "first_entry_s", "final_error_deg", "poses")
+KEYS = (
+    "trial_index",
+    "session",
+    "modality",
+    "wrench_id",
+    "success",
+    "completion_s",
+    "first_entry_s",
+    "final_error_deg",
+    "poses",
+)
 
 
 def outcome(out, pid):
@@ -90,8 +108,13 @@ def outcome(out, pid):
 def test_demo_prints_tables_and_writes_figure(tmp_path):
     protocol, proto = tiny_protocol(tmp_path)
     out = tmp_path / "study"
-    p = subprocess.run(demo_cmd(protocol, out, "--jobs", "2"), env=subprocess_env(),
-                       capture_output=True, text=True, timeout=120)
+    p = subprocess.run(
+        demo_cmd(protocol, out, "--jobs", "2"),
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert p.returncode == 0, p.stdout + p.stderr
     assert "SIMULATED" in p.stdout
     assert "Table I" in p.stdout and "Table II" in p.stdout
@@ -105,8 +128,9 @@ def test_demo_prints_tables_and_writes_figure(tmp_path):
         assert [r["trial_index"] for r in recs] == list(range(1, planned + 1))
         assert all(r["simulated"] for r in recs)
     # a completed study run again is only analysed again
-    p2 = subprocess.run(demo_cmd(protocol, out), env=subprocess_env(), capture_output=True,
-                        text=True, timeout=120)
+    p2 = subprocess.run(
+        demo_cmd(protocol, out), env=subprocess_env(), capture_output=True, text=True, timeout=120
+    )
     assert p2.returncode == 0, p2.stderr
     assert "is complete" in p2.stdout and "analysing it again" in p2.stdout
     assert "Table I" in p2.stdout
@@ -118,9 +142,14 @@ def test_demo_killed_mid_study_resumes_every_trial_exactly_once(tmp_path):
     out = tmp_path / "study"
     planned = len(pf.plan(proto, "U1"))
     trials = out / "U1" / "trials.jsonl"
-    proc = subprocess.Popen(demo_cmd(protocol, out, "--jobs", "1"), env=subprocess_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        demo_cmd(protocol, out, "--jobs", "1"),
+        env=subprocess_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
@@ -130,7 +159,7 @@ def test_demo_killed_mid_study_resumes_every_trial_exactly_once(tmp_path):
             time.sleep(0.01)
         else:
             raise AssertionError("no trial completed within 60 s")
-        os.killpg(proc.pid, signal.SIGKILL)      # the demo, its runners, their devices
+        os.killpg(proc.pid, signal.SIGKILL)  # the demo, its runners, their devices
         proc.wait(timeout=10)
     finally:
         if proc.poll() is None:
@@ -139,35 +168,58 @@ def test_demo_killed_mid_study_resumes_every_trial_exactly_once(tmp_path):
     killed = trials.read_bytes()
     n_killed = killed.count(b"\n")
     assert 2 <= n_killed < planned
-    assert not (out / "U2" / "trials.jsonl").exists() or \
-        (out / "U2" / "trials.jsonl").read_bytes().count(b"\n") < planned
-    p = subprocess.run(demo_cmd(protocol, out), env=subprocess_env(), capture_output=True,
-                       text=True, timeout=120)
+    assert (
+        not (out / "U2" / "trials.jsonl").exists()
+        or (out / "U2" / "trials.jsonl").read_bytes().count(b"\n") < planned
+    )
+    p = subprocess.run(
+        demo_cmd(protocol, out), env=subprocess_env(), capture_output=True, text=True, timeout=120
+    )
     assert p.returncode == 0, p.stdout + p.stderr
     assert "resuming" in p.stdout and "Table I" in p.stdout
-    assert trials.read_bytes().startswith(killed)          # nothing rewritten
+    assert trials.read_bytes().startswith(killed)  # nothing rewritten
     for pid in ("U1", "U2"):
         idx = [r["trial_index"] for r in records(out / pid / "trials.jsonl")]
         assert sorted(idx) == list(range(1, planned + 1)) and len(set(idx)) == len(idx)
-        assert sorted(os.listdir(out / pid / "frames")) == \
-            [f"trial-{i:04d}.csv" for i in range(1, planned + 1)]
+        assert sorted(os.listdir(out / pid / "frames")) == [
+            f"trial-{i:04d}.csv" for i in range(1, planned + 1)
+        ]
     # ... and gives what an uninterrupted study gives
     once = tmp_path / "once"
-    p = subprocess.run(demo_cmd(protocol, once), env=subprocess_env(), capture_output=True,
-                       text=True, timeout=120)
+    p = subprocess.run(
+        demo_cmd(protocol, once), env=subprocess_env(), capture_output=True, text=True, timeout=120
+    )
     assert p.returncode == 0, p.stderr
     for pid in ("U1", "U2"):
         assert outcome(out, pid) == outcome(once, pid)
 
 
 def test_demo_usage_errors(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "graspguide", "demo", "--protocol",
-                        str(tmp_path / "none.toml"), "--out", str(tmp_path / "o")],
-                       env=subprocess_env(), capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "graspguide",
+            "demo",
+            "--protocol",
+            str(tmp_path / "none.toml"),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == 2 and "graspguide demo: error:" in p.stderr
     protocol, _ = tiny_protocol(tmp_path)
-    p = subprocess.run(demo_cmd(protocol, tmp_path / "o", "--source", "synthetic"),
-                       env=subprocess_env(), capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        demo_cmd(protocol, tmp_path / "o", "--source", "synthetic"),
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == 2 and "virtual participant" in p.stderr
 
 
@@ -180,9 +232,17 @@ def _run(protocol, out, pid, pipeline):
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)
         source = rn.open_runner_source("participant", protocol, pid)
-        runner = rn.StudyRunner(protocol, pid, str(out), source, client, True,
-                                progress=rn.Progress(out=io.StringIO(), tty=False),
-                                pipeline=pipeline, err=io.StringIO())
+        runner = rn.StudyRunner(
+            protocol,
+            pid,
+            str(out),
+            source,
+            client,
+            True,
+            progress=rn.Progress(out=io.StringIO(), tty=False),
+            pipeline=pipeline,
+            err=io.StringIO(),
+        )
         window = runner._window(True)
         runner.run()
     return runner, window
@@ -193,19 +253,24 @@ def test_pipelined_and_lockstep_runs_give_identical_trials(tmp_path):
     lock, w_lock = _run(protocol, tmp_path / "lock", "U2", pipeline=1)
     pipe, w_pipe = _run(protocol, tmp_path / "pipe", "U2", pipeline=None)
     assert w_lock == 1
-    assert w_pipe == 20          # reaction time 0.21 s at 100 Hz: 21 - 1 poses in flight
+    assert w_pipe == 20  # reaction time 0.21 s at 100 Hz: 21 - 1 poses in flight
     assert pipe.pipeline_fallbacks == 0
     strip = ("wall_s", "recorded_at")
-    a = [{k: v for k, v in r.items() if k not in strip}
-         for r in records(tmp_path / "lock" / "U2" / "trials.jsonl")]
-    b = [{k: v for k, v in r.items() if k not in strip}
-         for r in records(tmp_path / "pipe" / "U2" / "trials.jsonl")]
+    a = [
+        {k: v for k, v in r.items() if k not in strip}
+        for r in records(tmp_path / "lock" / "U2" / "trials.jsonl")
+    ]
+    b = [
+        {k: v for k, v in r.items() if k not in strip}
+        for r in records(tmp_path / "pipe" / "U2" / "trials.jsonl")
+    ]
     assert a == b and len(a) == len(pf.plan(protocol, "U2"))
     assert any(r["success"] for r in a) or any(not r["success"] for r in a)
     frames = sorted(os.listdir(tmp_path / "lock" / "U2" / "frames"))
-    for name in frames:                              # every frame, byte for byte
-        assert (tmp_path / "lock" / "U2" / "frames" / name).read_bytes() == \
-            (tmp_path / "pipe" / "U2" / "frames" / name).read_bytes(), name
+    for name in frames:  # every frame, byte for byte
+        assert (tmp_path / "lock" / "U2" / "frames" / name).read_bytes() == (
+            tmp_path / "pipe" / "U2" / "frames" / name
+        ).read_bytes(), name
 
 
 def test_pipeline_window_only_for_the_virtual_participant():
@@ -213,10 +278,8 @@ def test_pipeline_window_only_for_the_virtual_participant():
 
     vp = VirtualParticipant.from_spec("", 1)
     assert rn.pipeline_window(vp, 100.0) == 20
-    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.05", 1),
-                              100.0) == 4
-    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.015", 1),
-                              100.0) == 1
+    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.05", 1), 100.0) == 4
+    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.015", 1), 100.0) == 1
     assert rn.pipeline_window(object(), 100.0) == 1
 
 
@@ -228,10 +291,10 @@ def test_fast_pose_encoding_matches_the_reference():
     specials = [0.0, -0.0, 1.0, float("inf"), float("nan"), 1e-45, 3.4e38]
     for _ in range(3000):
         q = [rnd.choice(specials + [rnd.uniform(-2, 2)] * 4) for _ in range(4)]
-        seq, t = rnd.randrange(65536), rnd.randrange(2 ** 32)
+        seq, t = rnd.randrange(65536), rnd.randrange(2**32)
         ref = codec.encode_message(m.Pose(host_time_us=t, quat_wxyz=tuple(q)), seq)
         assert dv.encode_pose_fast(seq, t, q) == ref
-    assert dv.encode_pose_fast(1, 0, [1e300, 0, 0, 0]) is None    # generic path: +inf
+    assert dv.encode_pose_fast(1, 0, [1e300, 0, 0, 0]) is None  # generic path: +inf
 
 
 class _Chunks:
@@ -259,28 +322,39 @@ def test_fast_frame_path_matches_the_byte_wise_parser(monkeypatch):
     for i in range(300):
         kind = rnd.random()
         if kind < 0.6:
-            msg = m.Telemetry(host_time_us=rnd.randrange(2 ** 32), error_deg=rnd.uniform(0, 90),
-                              alpha=rnd.uniform(0, 200),
-                              pwm=tuple(rnd.randrange(256) for _ in range(4)),
-                              flags=rnd.choice([0, 2, 3]), iterations=rnd.randrange(256))
+            msg = m.Telemetry(
+                host_time_us=rnd.randrange(2**32),
+                error_deg=rnd.uniform(0, 90),
+                alpha=rnd.uniform(0, 200),
+                pwm=tuple(rnd.randrange(256) for _ in range(4)),
+                flags=rnd.choice([0, 2, 3]),
+                iterations=rnd.randrange(256),
+            )
             wire = codec.encode_message(msg, seq.next())
         elif kind < 0.75:
-            wire = codec.encode_message(m.TrialResult(trial_id=i, success=True,
-                                                        completion_s=1.5), seq.next())
-        elif kind < 0.85:                                         # a bad enum value
-            raw = bytearray(codec.cobs_decode(
-                codec.encode_message(m.Telemetry(host_time_us=i), seq.next())[:-1]))
-            raw[4 + 17] = 200                                     # solver_status
+            wire = codec.encode_message(
+                m.TrialResult(trial_id=i, success=True, completion_s=1.5), seq.next()
+            )
+        elif kind < 0.85:  # a bad enum value
+            raw = bytearray(
+                codec.cobs_decode(
+                    codec.encode_message(m.Telemetry(host_time_us=i), seq.next())[:-1]
+                )
+            )
+            raw[4 + 17] = 200  # solver_status
             body = bytes(raw[:-2])
             raw[-2:] = struct.pack("<H", codec.crc16(body))
             wire = codec.cobs_encode(bytes(raw)) + b"\0"
-        elif kind < 0.95:                                         # a corrupted byte
+        elif kind < 0.95:  # a corrupted byte
             wire = bytearray(codec.encode_message(m.Telemetry(host_time_us=i), seq.next()))
             wire[rnd.randrange(len(wire) - 1)] ^= 1 << rnd.randrange(8)
-            wire = bytes(wire).replace(b"\0", b"\1", wire.count(0) - 1) \
-                if wire.count(0) > 1 else bytes(wire)
+            wire = (
+                bytes(wire).replace(b"\0", b"\1", wire.count(0) - 1)
+                if wire.count(0) > 1
+                else bytes(wire)
+            )
         else:
-            wire = b"\0\0"                                        # idle delimiters
+            wire = b"\0\0"  # idle delimiters
         frames.append(wire)
     stream = b"".join(frames)
     cuts = sorted(rnd.sample(range(1, len(stream)), 120))
@@ -289,8 +363,11 @@ def test_fast_frame_path_matches_the_byte_wise_parser(monkeypatch):
     def drain(client):
         for _ in range(len(chunks)):
             client._pump(0.0)
-        return ([(it.seq, it.message) for it in client._inbox], client.counters(),
-                client.parse_counts)
+        return (
+            [(it.seq, it.message) for it in client._inbox],
+            client.counters(),
+            client.parse_counts,
+        )
 
     fast = drain(dv.DeviceClient(_Chunks(chunks), send_idle_delimiter=False))
     monkeypatch.setattr(dv.DeviceClient, "_fast_frame", lambda self, enc, now: False)

@@ -12,8 +12,9 @@ import tomllib
 import pytest
 
 from graspguide.link import client as gd
+from graspguide.link import codec
+from graspguide.link import messages as m
 from graspguide.link import transport as gt
-from graspguide.link import codec, messages as m
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCHEMA = os.path.join(_TOOLS, "protocol", "messages.toml")
@@ -66,9 +67,16 @@ def telemetry_for(msg: m.Pose, **kw) -> m.Telemetry:
 def good_device(msg, seq):
     """A well-behaved device: ACKs, HELLO_REPLY, TELEMETRY, STATUS."""
     if isinstance(msg, m.Hello):
-        return [m.HelloReply(request_seq=seq, protocol_version=m.PROTOCOL_VERSION,
-                             firmware_version=(0, 1, 0), board="fake", scalar=4,
-                             max_contacts=4)]
+        return [
+            m.HelloReply(
+                request_seq=seq,
+                protocol_version=m.PROTOCOL_VERSION,
+                firmware_version=(0, 1, 0),
+                board="fake",
+                scalar=4,
+                max_contacts=4,
+            )
+        ]
     if isinstance(msg, m.Pose):
         return [telemetry_for(msg)]
     if isinstance(msg, m.GetStatus):
@@ -122,8 +130,8 @@ def test_every_write_of_frames_starts_with_a_delimiter():
     c.hello()
     c.set_scene(HAND3)
     c.start_trial(1, WRENCH)
-    c.pose(5, (1, 0, 0, 0))                                # the fast path
-    c.pose(6, (1, 0, 0, 0), contacts=HAND3)                # the generic path
+    c.pose(5, (1, 0, 0, 0))  # the fast path
+    c.pose(6, (1, 0, 0, 0), contacts=HAND3)  # the generic path
     c.pose_batch([(7, (1, 0, 0, 0)), (8, (1, 0, 0, 0))])
     c.stream([(9, (1, 0, 0, 0)), (10, (1, 0, 0, 0))], window=2)
     c.status()
@@ -173,8 +181,9 @@ def test_error_meanings_are_the_schema_text():
     assert set(gd.ERROR_MEANINGS) == {c.name.lower() for c in m.ErrorCode}
 
 
-@pytest.mark.parametrize("code", [c for c in m.ErrorCode if c != m.ErrorCode.OK],
-                         ids=lambda c: c.name.lower())
+@pytest.mark.parametrize(
+    "code", [c for c in m.ErrorCode if c != m.ErrorCode.OK], ids=lambda c: c.name.lower()
+)
 def test_every_error_code_maps_to_a_device_error(code):
     c = client_for(lambda msg, seq: [m.Error(request_seq=seq, code=code, detail=2)])
     with pytest.raises(gd.DeviceError) as info:
@@ -207,17 +216,26 @@ def test_bad_config_names_the_field_and_its_range():
 
     names = [f.name for f in m.SetScene.FIELDS]
     for key, r in _core.TRIAL_LIMITS.items():
-        c = client_for(lambda msg, seq, i=names.index(key): [
-            m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG, detail=i)])
+        index = names.index(key)
+        c = client_for(
+            lambda msg, seq, i=index: [
+                m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG, detail=i)
+            ]
+        )
         with pytest.raises(gd.DeviceError) as info:
             c.set_scene(HAND3)
         text = str(info.value)
         assert f"field '{key}' (index {names.index(key)})" in text, text
-        assert f"{r['min']:g}, {r['max']:g}]" in text and ("(" if r["min_exclusive"] else "[") \
-            + f"{r['min']:g}," in text, text
+        assert (
+            f"{r['min']:g}, {r['max']:g}]" in text
+            and ("(" if r["min_exclusive"] else "[") + f"{r['min']:g}," in text
+        ), text
     # an index that is no trial field (a device that does not name it) is not guessed
-    c = client_for(lambda msg, seq: [m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG,
-                                             detail=names.index("policy"))])
+    c = client_for(
+        lambda msg, seq: [
+            m.Error(request_seq=seq, code=m.ErrorCode.BAD_CONFIG, detail=names.index("policy"))
+        ]
+    )
     with pytest.raises(gd.DeviceError) as info:
         c.set_scene(HAND3)
     assert "field" not in str(info.value) and "threshold, hold or timeout" in str(info.value)
@@ -226,8 +244,9 @@ def test_bad_config_names_the_field_and_its_range():
 def test_telemetry_status_raises_only_when_asked():
     def fails(msg, seq):
         if isinstance(msg, m.Pose):
-            return [m.Telemetry(host_time_us=msg.host_time_us,
-                                solver_status=m.ErrorCode.RANK_DEFICIENT)]
+            return [
+                m.Telemetry(host_time_us=msg.host_time_us, solver_status=m.ErrorCode.RANK_DEFICIENT)
+            ]
         return good_device(msg, seq)
 
     c = client_for(fails)
@@ -270,12 +289,20 @@ def test_garbage_only_suggests_the_baud_rate():
 def test_answer_after_garbage_and_stale_answers():
     """Noise, a frame with a bad CRC, an answer to an old request, an unknown device id:
     all counted or kept, and the real answer still found."""
+
     def noisy(msg, seq):
         raw = bytes([m.PROTOCOL_VERSION, m.Ack.MSG_ID, 99, 0]) + m.Ack(seq).pack()
-        bad_crc = codec.cobs_encode(raw + bytes([codec.crc16(raw) & 0xFF ^ 0x55,
-                                                   codec.crc16(raw) >> 8])) + b"\x00"
-        return [b"\x13\x37\xff\x00", bad_crc, m.Ack(request_seq=(seq + 500) & 0xFFFF),
-                codec.encode_frame(0xBF, 0, b""), m.Ack(request_seq=seq)]
+        bad_crc = (
+            codec.cobs_encode(raw + bytes([codec.crc16(raw) & 0xFF ^ 0x55, codec.crc16(raw) >> 8]))
+            + b"\x00"
+        )
+        return [
+            b"\x13\x37\xff\x00",
+            bad_crc,
+            m.Ack(request_seq=(seq + 500) & 0xFFFF),
+            codec.encode_frame(0xBF, 0, b""),
+            m.Ack(request_seq=seq),
+        ]
 
     c = client_for(noisy)
     c.set_scene(HAND3)

@@ -28,10 +28,12 @@ import numpy as np
 import pytest
 from known_answer_requests import load_cases, request_lines
 
-from graspguide.core import scene_generators as scenes, solver
+from graspguide.core import scene_generators as scenes
+from graspguide.core import solver
 from graspguide.link import client as gd
+from graspguide.link import codec as framing
+from graspguide.link import messages as m
 from graspguide.link import transport as gt
-from graspguide.link import codec as framing, messages as m
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
@@ -133,9 +135,11 @@ def test_sim_starts_in_well_under_a_second(report_figure):
             times.append(sim.start_time_s)
             assert sim.alive() and sim.pty_path.startswith("/dev/")
         assert sim.exit_code == 0  # SIGTERM: motors off, clean exit
-    report_figure("sim start (spawn -> pty path)",
-                  f"median {1e3 * statistics.median(times):.1f} ms, max "
-                  f"{1e3 * max(times):.1f} ms over {len(times)} starts")
+    report_figure(
+        "sim start (spawn -> pty path)",
+        f"median {1e3 * statistics.median(times):.1f} ms, max "
+        f"{1e3 * max(times):.1f} ms over {len(times)} starts",
+    )
     assert max(times) < 0.5, times
 
 
@@ -161,16 +165,19 @@ def test_open_port_sim_is_a_transport():
 # --------------------------------------------------------------------------------------
 def test_random_scenes_stream_matches_core_float(client, report_figure):
     rng = np.random.default_rng(20261122)
-    counts = {"poses": 0, "exact": 0, "off_by_1": 0, "worse": 0, "errors_agreed": 0,
-              "scenes": 0}
+    counts = {"poses": 0, "exact": 0, "off_by_1": 0, "worse": 0, "errors_agreed": 0, "scenes": 0}
     worse = []
     t = 0
     policies, constraints = ("F", "Fperp"), ("paper", "normal", "none")
     base = scenes.random_scenes(7, 3, 30) + scenes.random_scenes(7, 4, 30)
     for i, scene in enumerate(base):
         for mode in ("C", "V"):
-            kw = dict(policy=policies[i % 2], mode=mode, constraints=constraints[i % 3],
-                      y_axis=scene["y_axis"])
+            kw = dict(
+                policy=policies[i % 2],
+                mode=mode,
+                constraints=constraints[i % 3],
+                y_axis=scene["y_axis"],
+            )
             counts["scenes"] += 1
             client.stop()
             try:
@@ -186,16 +193,18 @@ def test_random_scenes_stream_matches_core_float(client, report_figure):
                 q = scenes.random_quaternion(rng) if j else scene["orientation"]
                 moved = None
                 if j >= 8:  # POSE with moved contacts: the grasp part runs again
-                    moved = (np.asarray(scene["contacts"])
-                             + rng.uniform(-0.003, 0.003, (scene["k"], 3))).tolist()
+                    moved = (
+                        np.asarray(scene["contacts"]) + rng.uniform(-0.003, 0.003, (scene["k"], 3))
+                    ).tolist()
                 t += 10_000
                 poses.append(gd.PoseSpec(t, list(q), moved))
             res = client.stream(poses, window=8)
             assert len(res.telemetry) == len(poses) and not res.trial_results
             for p, tel in zip(poses, res.telemetry):
                 contacts = p.contacts if p.contacts is not None else scene["contacts"]
-                ref = solver.solve(contacts, scene["wrench"], orientation=p.quat,
-                                   scalar="float", **kw)
+                ref = solver.solve(
+                    contacts, scene["wrench"], orientation=p.quat, scalar="float", **kw
+                )
                 status = tel.solver_status.name.lower()
                 assert status == ref["status"], (scene["name"], status, ref["status"])
                 counts["poses"] += 1
@@ -204,7 +213,7 @@ def test_random_scenes_stream_matches_core_float(client, report_figure):
                     continue
                 if p.contacts is not None:
                     assert tel.flags & m.TELEMETRY_FLAG_GRASP_RECOMPUTED
-                got = list(tel.pwm[:scene["k"]])
+                got = list(tel.pwm[: scene["k"]])
                 diff = max(abs(a - b) for a, b in zip(got, ref["pwm"]))
                 key = "exact" if diff == 0 else "off_by_1" if diff == 1 else "worse"
                 counts[key] += 1
@@ -214,11 +223,13 @@ def test_random_scenes_stream_matches_core_float(client, report_figure):
                 assert tel.error_deg == pytest.approx(ref["error_deg"], abs=1e-3)
                 assert tel.alpha == pytest.approx(ref["alpha"], abs=1e-3)
     client.stop()
-    report_figure("random scenes: device PWM vs core float",
-                  f"{counts['scenes']} scene x mode runs, {counts['poses']} poses: "
-                  f"{counts['exact']} exact, {counts['off_by_1']} off by 1, "
-                  f"{counts['worse']} worse; {counts['errors_agreed']} errors with the "
-                  "same status")
+    report_figure(
+        "random scenes: device PWM vs core float",
+        f"{counts['scenes']} scene x mode runs, {counts['poses']} poses: "
+        f"{counts['exact']} exact, {counts['off_by_1']} off by 1, "
+        f"{counts['worse']} worse; {counts['errors_agreed']} errors with the "
+        "same status",
+    )
     assert counts["scenes"] >= 100 and counts["exact"] >= 0.99 * counts["poses"]
     assert not worse, worse
 
@@ -231,8 +242,9 @@ def test_failing_trial_runs_90_s_in_virtual_time(client, report_figure):
     client.start_trial(41, WRENCH)
     period_us = 10_000
     t0 = time.perf_counter()
-    res = client.stream(((i * period_us, (1.0, 0, 0, 0)) for i in range(10_000)),
-                        window=32)  # identity: 57 deg off, never succeeds
+    res = client.stream(
+        ((i * period_us, (1.0, 0, 0, 0)) for i in range(10_000)), window=32
+    )  # identity: 57 deg off, never succeeds
     wall = time.perf_counter() - t0
     r = res.trial_result
     assert r is not None and r.trial_id == 41
@@ -241,9 +253,10 @@ def test_failing_trial_runs_90_s_in_virtual_time(client, report_figure):
     assert len(res.telemetry) == 9001  # t = 0 .. 90 s
     assert res.telemetry[-1].pwm == (0, 0, 0, 0)  # the pose that ended it: motors off
     assert client.status().state is m.DeviceState.SCENE_SET
-    report_figure("90 s failing trial (virtual clock)",
-                  f"{wall:.2f} s wall for {len(res.telemetry)} poses, reported "
-                  f"{r.completion_s} s")
+    report_figure(
+        "90 s failing trial (virtual clock)",
+        f"{wall:.2f} s wall for {len(res.telemetry)} poses, reported {r.completion_s} s",
+    )
     assert wall < 5.0
 
 
@@ -259,8 +272,10 @@ def test_succeeding_trial_reports_the_hold(client, report_figure):
     assert abs(r.completion_s - hold) <= 0.0101, r  # within one pose period
     assert r.final_error_deg < 0.01
     assert 50 <= len(res.telemetry) <= 52
-    report_figure("succeeding trial", f"completion {r.completion_s:.3f} s for a hold of "
-                  f"{hold} s (poses every 10 ms)")
+    report_figure(
+        "succeeding trial",
+        f"completion {r.completion_s:.3f} s for a hold of {hold} s (poses every 10 ms)",
+    )
 
 
 def test_trial_result_after_single_poses_is_queued(client):
@@ -286,14 +301,14 @@ def test_frames_per_second(client, report_figure):
     rates = {}
     for window in (1, 32):
         base = 1_000_000 * window
-        res = client.stream(((base + i * 1000, quats[i % 64]) for i in range(n)),
-                            window=window)
+        res = client.stream(((base + i * 1000, quats[i % 64]) for i in range(n)), window=window)
         assert len(res.telemetry) == n and res.lost == 0
         rates[window] = res.round_trips_per_s
     client.stop()
-    report_figure("POSE -> TELEMETRY round trips over the pty (virtual clock)",
-                  f"{rates[32]:.0f} frames/s pipelined (window 32), {rates[1]:.0f} "
-                  "frames/s one at a time")
+    report_figure(
+        "POSE -> TELEMETRY round trips over the pty (virtual clock)",
+        f"{rates[32]:.0f} frames/s pipelined (window 32), {rates[1]:.0f} frames/s one at a time",
+    )
     assert rates[32] > 1000
 
 
@@ -327,9 +342,10 @@ def test_stale_stream_turns_motors_off_within_the_watchdog(tmp_path, report_figu
     last_pose, off = last_on_then_off(read_trace(trace))
     latency_ms = us_after(off, last_pose) / 1000
     host_ms = us_after(off, last_sent) / 1000
-    report_figure("watchdog: last pose -> motors off (trace)",
-                  f"{latency_ms:.2f} ms (watchdog {WATCHDOG_MS} ms; {host_ms:.2f} ms from "
-                  "the host's send)")
+    report_figure(
+        "watchdog: last pose -> motors off (trace)",
+        f"{latency_ms:.2f} ms (watchdog {WATCHDOG_MS} ms; {host_ms:.2f} ms from the host's send)",
+    )
     assert WATCHDOG_MS - 1 <= latency_ms <= WATCHDOG_MS + SLACK_MS
 
 
@@ -356,12 +372,15 @@ while True:
 def test_killed_host_turns_motors_off_within_the_watchdog(tmp_path, report_figure):
     trace = tmp_path / "motors.csv"
     with gt.SimulatedDevice(trace=str(trace)) as sim:
-        child = subprocess.Popen([sys.executable, "-c", CHILD, sim.pty_path],
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env())
+        child = subprocess.Popen(
+            [sys.executable, "-c", CHILD, sim.pty_path],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=_env(),
+        )
         try:
             ready, _, _ = select.select([child.stdout], [], [], 20)
-            assert ready and child.stdout.readline() == b"streaming\n", \
-                child.stderr.read().decode()
+            assert ready and child.stdout.readline() == b"streaming\n", child.stderr.read().decode()
             time.sleep(0.3)
             killed_at = gd.host_time_us()
             child.send_signal(signal.SIGKILL)
@@ -379,8 +398,10 @@ def test_killed_host_turns_motors_off_within_the_watchdog(tmp_path, report_figur
     last_pose, off = last_on_then_off(read_trace(trace))
     latency_ms = us_after(off, last_pose) / 1000
     kill_ms = us_after(off, killed_at) / 1000
-    report_figure("host SIGKILLed mid-stream -> motors off",
-                  f"{latency_ms:.2f} ms after its last pose, {kill_ms:.2f} ms after the kill")
+    report_figure(
+        "host SIGKILLed mid-stream -> motors off",
+        f"{latency_ms:.2f} ms after its last pose, {kill_ms:.2f} ms after the kill",
+    )
     assert latency_ms <= WATCHDOG_MS + SLACK_MS
     assert 0 < kill_ms <= WATCHDOG_MS + SLACK_MS
 
@@ -399,9 +420,11 @@ def test_stop_turns_motors_off_at_once(tmp_path, report_figure):
             c.pose(gd.host_time_us(), qa)  # no trial: nothing is rendered
     _, off = last_on_then_off(read_trace(trace))
     after_ms = us_after(off, sent) / 1000
-    report_figure("STOP -> motors off (trace)",
-                  f"{after_ms:.3f} ms after the host sent STOP (ACK after "
-                  f"{us_after(acked, sent) / 1000:.3f} ms)")
+    report_figure(
+        "STOP -> motors off (trace)",
+        f"{after_ms:.3f} ms after the host sent STOP (ACK after "
+        f"{us_after(acked, sent) / 1000:.3f} ms)",
+    )
     assert 0 <= us_after(off, sent) and us_after(acked, off) >= 0  # off before the ACK
     assert after_ms < 20
 
@@ -421,18 +444,18 @@ def test_stop_after_half_a_frame_and_a_pause_gets_through(tmp_path, pause_s):
         _start_rendering(c, qa, qb, 10)
         bad0 = c.status().bad_frames
         wire = gd.encode_pose_fast(0x7777, gd.host_time_us(), qb)
-        sim.write(wire[:len(wire) // 2])                  # raw: no delimiter after it
+        sim.write(wire[: len(wire) // 2])  # raw: no delimiter after it
         time.sleep(pause_s)
         sent = gd.host_time_us()
-        c.stop(timeout=0.5)                               # ACKed (a lost STOP times out)
+        c.stop(timeout=0.5)  # ACKed (a lost STOP times out)
         st = c.status()
         assert st.state is m.DeviceState.STOPPED
-        assert st.bad_frames - bad0 <= 1                  # the half frame at most
+        assert st.bad_frames - bad0 <= 1  # the half frame at most
         with pytest.raises(gd.DeviceError, match="not_allowed_in_state"):
-            c.pose(gd.host_time_us(), qa)                 # no trial: nothing is rendered
+            c.pose(gd.host_time_us(), qa)  # no trial: nothing is rendered
     rows = read_trace(trace)
     _, off = last_on_then_off(rows)
-    assert not any(rows[-1][1]) and us_after(off, sent) >= 0   # off, and not before STOP
+    assert not any(rows[-1][1]) and us_after(off, sent) >= 0  # off, and not before STOP
 
 
 # --------------------------------------------------------------------------------------
@@ -445,10 +468,12 @@ def test_corrupted_bytes_are_counted_and_the_link_recovers(client):
     bad_crc[-3] ^= 0x01 if bad_crc[-3] != 0x01 else 0x03  # a data byte, never 0x00
     scene = framing.encode_message(m.SetScene(contacts=HAND3 + [[0.0, 0.045, 0.0]]), 0x4321)
     noise = bytes(b % 255 + 1 for b in np.random.default_rng(5).integers(0, 255, 40))
-    garbage = [noise + b"\x00",              # not a frame (COBS or CRC)
-               bytes(bad_crc),               # CRC mismatch
-               b"\x05" * 300 + b"\x00",      # too long
-               scene[:40] + b"\x00"]         # a frame cut short
+    garbage = [
+        noise + b"\x00",  # not a frame (COBS or CRC)
+        bytes(bad_crc),  # CRC mismatch
+        b"\x05" * 300 + b"\x00",  # too long
+        scene[:40] + b"\x00",
+    ]  # a frame cut short
     for chunk in garbage:
         client.transport.write(chunk)
         assert client.hello().board == "sim-posix"  # answered right after each
@@ -488,8 +513,9 @@ def test_refusals_map_to_device_errors(client):
 # The command line
 # --------------------------------------------------------------------------------------
 def run_cli(args, data=b"", timeout=120):
-    return subprocess.run(CLI + list(args), input=data, capture_output=True, timeout=timeout,
-                          env=_env(), cwd=_ROOT)
+    return subprocess.run(
+        CLI + list(args), input=data, capture_output=True, timeout=timeout, env=_env(), cwd=_ROOT
+    )
 
 
 def _solve(lines, *args):
@@ -508,8 +534,11 @@ def _agree(core, dev):
     if core["ok"] != dev["ok"]:
         return [f"ok {dev['ok']} != core {core['ok']} ({core.get('error') or dev.get('error')})"]
     if not core["ok"]:
-        return [] if (core["error"], core["message"]) == (dev["error"], dev["message"]) else \
-            [f"error {dev['error']} != core {core['error']}"]
+        return (
+            []
+            if (core["error"], core["message"]) == (dev["error"], dev["message"])
+            else [f"error {dev['error']} != core {core['error']}"]
+        )
     problems = []
     if list(dev) != DEVICE_KEYS:
         problems.append(f"keys {list(dev)}")
@@ -562,11 +591,13 @@ def test_cli_device_engine_agrees_on_the_known_answers(report_figure):
                 order_diffs.append(f"{case['name']}: core {c['error']}, device {d['error']}")
             else:
                 err_problems.append((case["name"], problems))
-    report_figure("known answers: graspguide solve device vs core float",
-                  f"{ok_cases} ok cases: {agree_ok} agree, {both_refused} refused by both "
-                  f"(imprecise_contacts), {len(ok_problems)} differ; {err_cases} error cases: "
-                  f"{agree_err} same code, {len(order_diffs)} multi-fault cases differ by the "
-                  f"order of checks ({'; '.join(order_diffs)})")
+    report_figure(
+        "known answers: graspguide solve device vs core float",
+        f"{ok_cases} ok cases: {agree_ok} agree, {both_refused} refused by both "
+        f"(imprecise_contacts), {len(ok_problems)} differ; {err_cases} error cases: "
+        f"{agree_err} same code, {len(order_diffs)} multi-fault cases differ by the "
+        f"order of checks ({'; '.join(order_diffs)})",
+    )
     assert ok_cases == sum(c["expect"]["status"] == "ok" for c in cases) and ok_cases > 400
     assert agree_ok + both_refused == ok_cases, ok_problems[:5]
     assert both_refused <= 6
@@ -596,12 +627,14 @@ def test_cli_device_engine_answers_bad_requests_like_the_core():
 
 
 def test_cli_solve_device_usage_errors():
-    for args in (["solve", "--engine", "device"],
-                 ["solve", "--port", "sim"],
-                 ["solve", "--engine", "device", "--port", "sim", "--scalar", "double"],
-                 ["solve", "--engine", "device", "--port", "sim", "--decomposition", "svd"],
-                 ["solve", "--engine", "device", "--port", "sim", "--max-iterations", "3"],
-                 ["info"]):
+    for args in (
+        ["solve", "--engine", "device"],
+        ["solve", "--port", "sim"],
+        ["solve", "--engine", "device", "--port", "sim", "--scalar", "double"],
+        ["solve", "--engine", "device", "--port", "sim", "--decomposition", "svd"],
+        ["solve", "--engine", "device", "--port", "sim", "--max-iterations", "3"],
+        ["info"],
+    ):
         proc = run_cli(args)
         assert proc.returncode == 2, args
         assert proc.stdout == b"" and b"--" in proc.stderr
@@ -612,8 +645,9 @@ def test_cli_missing_port_and_missing_sim_say_what_to_do():
     assert proc.returncode == 1 and b"graspguide ports" in proc.stderr
     env = _env()
     env[gt.SIM_ENV] = "/nonexistent/program"
-    proc = subprocess.run(CLI + ["info", "--port", "sim"], capture_output=True, env=env,
-                          cwd=_ROOT, timeout=60)
+    proc = subprocess.run(
+        CLI + ["info", "--port", "sim"], capture_output=True, env=env, cwd=_ROOT, timeout=60
+    )
     assert proc.returncode == 1 and b"pio run -e sim" in proc.stderr
 
 
@@ -621,16 +655,25 @@ def test_cli_info_and_ports():
     proc = run_cli(["info", "--port", "sim"])
     assert proc.returncode == 0, proc.stderr.decode()
     text = proc.stdout.decode()
-    for word in ("board:", "sim-posix", "protocol:", "scalar:", "float", "state:",
-                 "bad frames:", "stale events:"):
+    for word in (
+        "board:",
+        "sim-posix",
+        "protocol:",
+        "scalar:",
+        "float",
+        "state:",
+        "bad frames:",
+        "stale events:",
+    ):
         assert word in text, word
     proc = run_cli(["info", "--port", "sim", "--json"])
     data = json.loads(proc.stdout)
     assert data["board"] == "sim-posix" and data["protocol_version"] == m.PROTOCOL_VERSION
     assert data["bad_frames"] == 0 and data["state"] == "idle"
     proc = run_cli(["ports"])
-    assert proc.returncode == 0 and any(ln.split()[0] == "sim"
-                                        for ln in proc.stdout.decode().splitlines())
+    assert proc.returncode == 0 and any(
+        ln.split()[0] == "sim" for ln in proc.stdout.decode().splitlines()
+    )
     proc = run_cli(["ports", "--json"])
     rows = [json.loads(x) for x in proc.stdout.decode().splitlines()]
     assert rows[-1]["device"] == "sim" and rows[-1]["hwid"].endswith("program")
@@ -641,9 +684,14 @@ def test_cli_link_failure_mid_stream_keeps_earlier_answers():
     next request gets a link_error line, and the exit status is 1."""
     good = json.dumps({"contacts": HAND3, "wrench": WRENCH})
     sim = gt.SimulatedDevice().start()
-    proc = subprocess.Popen(CLI + ["solve", "--engine", "device", "--port", sim.pty_path],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=_env(), cwd=_ROOT)
+    proc = subprocess.Popen(
+        CLI + ["solve", "--engine", "device", "--port", sim.pty_path],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=_env(),
+        cwd=_ROOT,
+    )
     try:
         proc.stdin.write(good.encode() + b"\n")
         proc.stdin.flush()

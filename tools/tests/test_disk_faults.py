@@ -19,7 +19,6 @@ import sys
 import textwrap
 
 import pytest
-
 from conftest import subprocess_env
 from test_runner import TESTS_DIR, small_protocol
 
@@ -53,8 +52,13 @@ FILES = {"trials": "trials.jsonl", "results": "results.jsonl", "poses": "poses.c
 
 def _write_until_fault(kind, folder, limit=0):
     target = str(folder / FILES[kind]) if kind == "trials" else str(folder)
-    p = subprocess.run([sys.executable, "-c", WRITER, kind, target, str(limit)],
-                       capture_output=True, text=True, env=subprocess_env(), timeout=60)
+    p = subprocess.run(
+        [sys.executable, "-c", WRITER, kind, target, str(limit)],
+        capture_output=True,
+        text=True,
+        env=subprocess_env(),
+        timeout=60,
+    )
     assert p.returncode == 0, p.stderr
     return json.loads(p.stdout), str(folder / FILES[kind])
 
@@ -74,7 +78,7 @@ def _whole_records(kind, path, written):
 
 @pytest.mark.parametrize("kind", list(FILES))
 def test_file_size_limit_cuts_no_record(tmp_path, kind):
-    limit = 5000 + 123                       # inside a record: a short write, then EFBIG
+    limit = 5000 + 123  # inside a record: a short write, then EFBIG
     out, path = _write_until_fault(kind, tmp_path, limit)
     assert out["written"] >= 5 and out["error"], out
     name, message = out["error"]
@@ -86,11 +90,13 @@ def test_file_size_limit_cuts_no_record(tmp_path, kind):
 
 
 def _mount(where, options):
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)], capture_output=True, text=True
+    )
     if r.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs ({r.stderr.strip() or r.returncode}): needs root "
-                    "and mount(8)")
+        pytest.skip(
+            f"cannot mount a tmpfs ({r.stderr.strip() or r.returncode}): needs root and mount(8)"
+        )
 
 
 @pytest.fixture
@@ -136,18 +142,40 @@ def _trial(path, out, limit=0):
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
 
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR            # the test source (test_runner.AligningHand)
-    env["PYTHONDONTWRITEBYTECODE"] = "1"     # no .pyc write against the limit
-    cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol", path, "--participant",
-           "U2", "--port", "sim", "--source", "plugin:test_runner:AligningHand:speed=1e6",
-           "--out", str(out)]
-    return subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120,
-                          preexec_fn=limited if limit else None)
+    env["PYTHONPATH"] = TESTS_DIR  # the test source (test_runner.AligningHand)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"  # no .pyc write against the limit
+    cmd = [
+        sys.executable,
+        "-m",
+        "graspguide",
+        "trial",
+        "--protocol",
+        path,
+        "--participant",
+        "U2",
+        "--port",
+        "sim",
+        "--source",
+        "plugin:test_runner:AligningHand:speed=1e6",
+        "--out",
+        str(out),
+    ]
+    return subprocess.run(
+        cmd,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        preexec_fn=limited if limit else None,
+    )
 
 
 def _sizes(folder):
-    return {os.path.join(d, n): os.path.getsize(os.path.join(d, n))
-            for d, _, names in os.walk(folder) for n in names}
+    return {
+        os.path.join(d, n): os.path.getsize(os.path.join(d, n))
+        for d, _, names in os.walk(folder)
+        for n in names
+    }
 
 
 def test_trial_on_a_size_limit_stops_with_one_line_and_resumes(tmp_path):
@@ -158,8 +186,9 @@ def test_trial_on_a_size_limit_stops_with_one_line_and_resumes(tmp_path):
     lines = ref_trials.read_bytes().splitlines(keepends=True)
     # A resumed study whose trials.jsonl is already larger than any other file the run
     # writes, with a limit inside its next record: that record is the one refused.
-    biggest_other = max(s for p, s in _sizes(tmp_path / "ref").items()
-                        if not p.endswith("trials.jsonl"))
+    biggest_other = max(
+        s for p, s in _sizes(tmp_path / "ref").items() if not p.endswith("trials.jsonl")
+    )
     n = next(i for i in range(1, len(lines)) if len(b"".join(lines[:i])) > biggest_other)
     prefix = b"".join(lines[:n])
     limit = len(prefix) + len(lines[n]) // 2
@@ -171,10 +200,11 @@ def test_trial_on_a_size_limit_stops_with_one_line_and_resumes(tmp_path):
     assert p.returncode == 1, (p.stdout, p.stderr)
     err = p.stderr.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
-    assert err[0].startswith(f"graspguide trial: error: cannot write {trials}: the file "
-                             "reached a size limit"), err
+    assert err[0].startswith(
+        f"graspguide trial: error: cannot write {trials}: the file reached a size limit"
+    ), err
     assert "completed trials are kept" in err[0]
-    assert trials.read_bytes() == prefix            # the refused record left nothing
+    assert trials.read_bytes() == prefix  # the refused record left nothing
     with open(out / "U2" / "runs.jsonl", encoding="utf-8") as f:
         assert json.loads(f.read().splitlines()[-1])["outcome"] == "error"
     # the same command without the limit completes the study as one run would have
@@ -192,11 +222,10 @@ def test_trial_into_a_read_only_folder_says_so_in_one_line(tmp_path):
     ro.mkdir()
     _mount(ro, "size=1m")
     try:
-        done = _trial(path, ro / "study")                 # a study begun earlier
+        done = _trial(path, ro / "study")  # a study begun earlier
         assert done.returncode == 0, done.stderr
         before = _sizes(ro)
-        r = subprocess.run(["mount", "-o", "remount,ro", str(ro)], capture_output=True,
-                           text=True)
+        r = subprocess.run(["mount", "-o", "remount,ro", str(ro)], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
         p = _trial(path, ro / "study")
         assert p.returncode == 1, (p.stdout, p.stderr)
@@ -212,6 +241,7 @@ def test_trial_into_a_read_only_folder_says_so_in_one_line(tmp_path):
 def test_stream_log_on_a_size_limit_stops_with_one_line(tmp_path):
     """`graspguide stream --log` whose telemetry.csv hits a size limit: once a traceback
     (and a second one from writing the end record); now one line, exit 1, whole rows."""
+
     def limited():  # pragma: no cover - runs in the child
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, resource.RLIM_INFINITY))
@@ -220,17 +250,36 @@ def test_stream_log_on_a_size_limit_stops_with_one_line(tmp_path):
     env = subprocess_env()
     env["PYTHONDONTWRITEBYTECODE"] = "1"
     folder = tmp_path / "session"
-    p = subprocess.run([sys.executable, "-m", "graspguide", "stream", "--port", "sim",
-                        "--virtual-clock", "--scene", scene, "--wrench", "0.3,-1.2,-0.8",
-                        "--source", "synthetic:rate=240,duration=60,seed=0",
-                        "--log", str(folder)],
-                       capture_output=True, text=True, env=env, timeout=120,
-                       preexec_fn=limited)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "graspguide",
+            "stream",
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            scene,
+            "--wrench",
+            "0.3,-1.2,-0.8",
+            "--source",
+            "synthetic:rate=240,duration=60,seed=0",
+            "--log",
+            str(folder),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        preexec_fn=limited,
+    )
     assert p.returncode == 1, (p.stdout, p.stderr)
     err = [line for line in p.stderr.splitlines() if line.strip()]
     assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
-    assert err[0].startswith("graspguide stream: error: cannot write ") and \
-        "size limit" in err[0], err
+    assert (
+        err[0].startswith("graspguide stream: error: cannot write ") and "size limit" in err[0]
+    ), err
     for name in ("poses.csv", "telemetry.csv"):
         data = (folder / name).read_bytes()
-        assert data.endswith(b"\n"), name       # no cut row
+        assert data.endswith(b"\n"), name  # no cut row

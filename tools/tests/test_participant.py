@@ -13,8 +13,8 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import subprocess_env
+
 from graspguide.core import _core
 from graspguide.study import scene_file as gs
 from graspguide.study.participant import (
@@ -26,8 +26,7 @@ from graspguide.study.participant import (
     quaternion_angle_deg,
 )
 
-EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "examples")
+EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
 SCENE4 = gs.load_scene(os.path.join(EXAMPLES, "scene_paper_4.toml"))
 CONTACTS4 = [list(c) for c in SCENE4.contacts]
 Y_AXIS = list(SCENE4.y_axis)
@@ -49,23 +48,40 @@ def _wrenches(n: int, seed: int):
     return out
 
 
-def closed_loop(wrench, mode="V", policy="F", seed=0, spec="participant",
-                contacts=CONTACTS4, start=IDENTITY, timeout_s=TIMEOUT_S, record=False):
+def closed_loop(
+    wrench,
+    mode="V",
+    policy="F",
+    seed=0,
+    spec="participant",
+    contacts=CONTACTS4,
+    start=IDENTITY,
+    timeout_s=TIMEOUT_S,
+    record=False,
+):
     """The core as the device: PWM from the current orientation, fed to the next step.
 
     Returns (success, time_s, poses) with the trial rule of docs/algorithm.md step 7
     (error <= 3 deg held 0.5 s, 90 s timeout)."""
     vp = VirtualParticipant.from_spec(spec, seed)
-    vp.begin_trial(contacts=contacts, y_axis=Y_AXIS, wrench=wrench, policy=policy,
-                   mode=mode, start_quat=start)
+    vp.begin_trial(
+        contacts=contacts, y_axis=Y_AXIS, wrench=wrench, policy=policy, mode=mode, start_quat=start
+    )
     q = start
     entry = None
     poses = []
     n = int(round(timeout_s * vp.rate_hz))
     for i in range(n + 1):
         t = i / vp.rate_hz
-        res = _core.solve(contacts=contacts, wrench=wrench, policy=policy, mode=mode,
-                          constraints="paper", orientation=list(q), y_axis=Y_AXIS)
+        res = _core.solve(
+            contacts=contacts,
+            wrench=wrench,
+            policy=policy,
+            mode=mode,
+            constraints="paper",
+            orientation=list(q),
+            y_axis=Y_AXIS,
+        )
         assert res["status"] == "ok", res["status"]
         if res["error_deg"] <= THRESHOLD_DEG:
             entry = t if entry is None else entry
@@ -91,8 +107,14 @@ def open_loop(vp, pwm, seconds, t0=0.0):
 
 def new_participant(spec="participant", seed=1, mode="V", policy="F", wrench=None):
     vp = VirtualParticipant.from_spec(spec, seed)
-    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=wrench or [0, 0, -1, 0, 0, 0],
-                   policy=policy, mode=mode, start_quat=IDENTITY)
+    vp.begin_trial(
+        contacts=CONTACTS4,
+        y_axis=Y_AXIS,
+        wrench=wrench or [0, 0, -1, 0, 0, 0],
+        policy=policy,
+        mode=mode,
+        start_quat=IDENTITY,
+    )
     return vp
 
 
@@ -128,8 +150,15 @@ def test_wrench_is_not_used_for_decisions():
         runs = []
         for wrench in ([0, 0, -1, 0, 0, 0], [1, 0, 0, 0, 0.1, 0]):
             vp = VirtualParticipant.from_spec("participant", 1)
-            vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=wrench, policy="F",
-                           mode=mode, start_quat=IDENTITY, noise_seed=9)
+            vp.begin_trial(
+                contacts=CONTACTS4,
+                y_axis=Y_AXIS,
+                wrench=wrench,
+                policy="F",
+                mode=mode,
+                start_quat=IDENTITY,
+                noise_seed=9,
+            )
             runs.append(open_loop(vp, pwm, 6.0))
         assert runs[0] == runs[1]
         assert quaternion_angle_deg(runs[0][-1][1], IDENTITY) > 5.0
@@ -141,8 +170,9 @@ def test_trial_reproducible_whatever_ran_before():
     w1, w2 = _wrenches(2, 5)
 
     def run(vp, w):
-        vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=w, policy="F", mode="V",
-                       start_quat=IDENTITY)
+        vp.begin_trial(
+            contacts=CONTACTS4, y_axis=Y_AXIS, wrench=w, policy="F", mode="V", start_quat=IDENTITY
+        )
         return open_loop(vp, [150, 0, 120, 90], 3.0)
 
     fresh = run(VirtualParticipant.from_spec("participant", 3), w2)
@@ -164,7 +194,7 @@ def test_erm_lag_reaches_63_percent_after_tau(tau):
         speed = vp.motor_speeds()[0]
         assert vp.motor_speeds()[1:] == [0.0, 0.0, 0.0]
         if crossed is None and speed >= (1 - math.exp(-1)) * target - 1e-9:
-            crossed = t + dt          # the first sample's PWM acts over the preceding dt
+            crossed = t + dt  # the first sample's PWM acts over the preceding dt
     assert crossed == pytest.approx(tau, abs=dt)
     assert vp.motor_speeds()[0] == pytest.approx(target, rel=1e-3)
     # And back down (stop) with the same lag.
@@ -180,22 +210,23 @@ def test_erm_lag_reaches_63_percent_after_tau(tau):
 
 
 @pytest.mark.parametrize("mode", ["C", "V"])
-@pytest.mark.parametrize("spec,tremor", [("participant:tremor_amplitude_deg=0", False),
-                                         ("participant", True)])
+@pytest.mark.parametrize(
+    "spec,tremor", [("participant:tremor_amplitude_deg=0", False), ("participant", True)]
+)
 def test_no_rotation_before_reaction_time(spec, tremor, mode):
     vp = new_participant(spec=spec, mode=mode)
     rt = vp.params.reaction_time_s
-    silent = open_loop(vp, [0, 0, 0, 0], 1.0)                 # no cue for 1 s
+    silent = open_loop(vp, [0, 0, 0, 0], 1.0)  # no cue for 1 s
     cue_t = 1.0
     cued = open_loop(vp, [200, 0, 150, 100], 4.0, t0=cue_t)
     allowance = 2 * vp.params.tremor_amplitude_deg + 1e-9
-    for t, q in silent + [p for p in cued if p[0] < cue_t + rt]:
+    for _t, q in silent + [p for p in cued if p[0] < cue_t + rt]:
         angle = quaternion_angle_deg(q, IDENTITY)
         if tremor:
             assert angle <= allowance
         else:
             assert angle == 0.0
-    if tremor:   # the tremor is there, and of the right size
+    if tremor:  # the tremor is there, and of the right size
         assert max(quaternion_angle_deg(q, IDENTITY) for _, q in silent) > 0.2 * allowance
     # ... and the hand does turn afterwards.
     assert max(quaternion_angle_deg(q, IDENTITY) for _, q in cued) > 10.0
@@ -212,19 +243,24 @@ def test_angular_speed_is_bounded():
             for (t0, q0, _), (t1, q1, _) in zip(poses, poses[1:]):
                 peak = max(peak, quaternion_angle_deg(q0, q1) / (t1 - t0))
     assert peak <= bound * (1 + 1e-9)
-    assert peak > 0.5 * p.peak_speed_deg_s      # the bound is actually approached
+    assert peak > 0.5 * p.peak_speed_deg_s  # the bound is actually approached
 
 
 def test_speed_bound_follows_the_parameter():
-    _, _, poses = closed_loop(_wrenches(1, 3)[0], seed=5, timeout_s=10.0, record=True,
-                              spec="participant:peak_speed_deg_s=30,tremor_amplitude_deg=0")
+    _, _, poses = closed_loop(
+        _wrenches(1, 3)[0],
+        seed=5,
+        timeout_s=10.0,
+        record=True,
+        spec="participant:peak_speed_deg_s=30,tremor_amplitude_deg=0",
+    )
     speeds = [quaternion_angle_deg(a[1], b[1]) / (b[0] - a[0]) for a, b in zip(poses, poses[1:])]
     assert max(speeds) <= 30.0 * (1 + 1e-9)
     assert max(speeds) > 15.0
 
 
 def _steady(vp, pwm):
-    open_loop(vp, pwm, 1.5)            # 25 tau: the ERM state equals the PWM to ~1e-11
+    open_loop(vp, pwm, 1.5)  # 25 tau: the ERM state equals the PWM to ~1e-11
     return vp.motor_speeds()
 
 
@@ -233,8 +269,8 @@ def _scaled(pwm, c):
 
 
 def test_mode_c_ignores_magnitude_mode_v_uses_it():
-    base = [170, 0, 130, 90]               # above-floor strengths 100, 0, 60, 20
-    half = _scaled(base, 0.5)              # 120, 0, 100, 80: same relative strengths
+    base = [170, 0, 130, 90]  # above-floor strengths 100, 0, 60, 20
+    half = _scaled(base, 0.5)  # 120, 0, 100, 80: same relative strengths
     assert half == [120, 0, 100, 80]
     noise = np.array([0.3, -1.2, 0.8, 0.1])
     for mode in ("C", "V"):
@@ -243,19 +279,30 @@ def test_mode_c_ignores_magnitude_mode_v_uses_it():
         vp = new_participant(mode=mode)
         d_base = vp.felt_direction(s_base, noise)
         d_half = vp.felt_direction(s_half, noise)
-        assert np.allclose(d_base, d_half, atol=1e-9)     # direction: relative strengths only
+        assert np.allclose(d_base, d_half, atol=1e-9)  # direction: relative strengths only
         if mode == "C":
-            assert vp.felt_distance_deg(s_base) is None   # no magnitude at all in C
+            assert vp.felt_distance_deg(s_base) is None  # no magnitude at all in C
         else:
             far, near = vp.felt_distance_deg(s_base), vp.felt_distance_deg(s_half)
-            assert far == pytest.approx(2 * math.degrees(math.asin(
-                math.sqrt(100 ** 2 + 60 ** 2 + 20 ** 2) / 185)), rel=1e-6)
-            assert near < 0.6 * far                        # V: weaker means closer
+            assert far == pytest.approx(
+                2 * math.degrees(math.asin(math.sqrt(100**2 + 60**2 + 20**2) / 185)), rel=1e-6
+            )
+            assert near < 0.6 * far  # V: weaker means closer
     # Which motors vibrate matters in both modes.
     vp = new_participant(mode="C")
     other = vp.felt_direction(_steady(new_participant(mode="C"), [0, 170, 130, 90]))
-    assert math.degrees(math.acos(float(np.clip(other @ vp.felt_direction(
-        _steady(new_participant(mode="C"), base)), -1, 1)))) > 20.0
+    assert (
+        math.degrees(
+            math.acos(
+                float(
+                    np.clip(
+                        other @ vp.felt_direction(_steady(new_participant(mode="C"), base)), -1, 1
+                    )
+                )
+            )
+        )
+        > 20.0
+    )
 
 
 def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
@@ -280,8 +327,15 @@ def test_mode_c_first_move_ignores_magnitude_mode_v_does_not():
 
 def _c_run(pwm, mode="C", spec="participant:erm_tau_s=0.0001", seconds=20.0, seed=4):
     vp = VirtualParticipant.from_spec(spec, seed)
-    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0],
-                   policy="F", mode=mode, start_quat=IDENTITY, noise_seed=21)
+    vp.begin_trial(
+        contacts=CONTACTS4,
+        y_axis=Y_AXIS,
+        wrench=[0, 0, -1, 0, 0, 0],
+        policy="F",
+        mode=mode,
+        start_quat=IDENTITY,
+        noise_seed=21,
+    )
     return [q for _, q in open_loop(vp, pwm, seconds)]
 
 
@@ -295,17 +349,15 @@ def test_mode_c_every_decision_ignores_magnitude(scale):
     same scaling changes the trajectory."""
     base = [170, 0, 130, 90]
     scaled = _scaled(base, scale)
-    assert [v - PWM_FLOOR for v in scaled if v] == [scale * (v - PWM_FLOOR)
-                                                     for v in base if v]
-    for spec in ("participant:erm_tau_s=0.0001,weber_frac=0",
-                 "participant:erm_tau_s=0.0001"):
+    assert [v - PWM_FLOOR for v in scaled if v] == [scale * (v - PWM_FLOOR) for v in base if v]
+    for spec in ("participant:erm_tau_s=0.0001,weber_frac=0", "participant:erm_tau_s=0.0001"):
         a = _c_run(base, spec=spec)
         b = _c_run(scaled, spec=spec)
         assert len(a) == len(b) == 2000
         assert max(quaternion_angle_deg(x, y) for x, y in zip(a, b)) < 1e-4
-        assert quaternion_angle_deg(a[-1], IDENTITY) > 5.0       # it did move and search
+        assert quaternion_angle_deg(a[-1], IDENTITY) > 5.0  # it did move and search
         if spec.endswith("weber_frac=0"):
-            assert a == b                                         # exactly, without noise
+            assert a == b  # exactly, without noise
     v_a = _c_run(base, mode="V")
     v_b = _c_run(scaled, mode="V")
     assert max(quaternion_angle_deg(x, y) for x, y in zip(v_a, v_b)) > 1.0
@@ -324,19 +376,26 @@ def test_mode_c_search_is_systematic_and_widens():
     sqrt(3) x 2/3 x the task threshold, and widens its search ring by ring."""
     spec = "participant:tremor_amplitude_deg=0,motor_noise_frac=0,weber_frac=0"
     vp = VirtualParticipant.from_spec(spec, 3)
-    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0],
-                   policy="F", mode="C", start_quat=IDENTITY, noise_seed=5)
+    vp.begin_trial(
+        contacts=CONTACTS4,
+        y_axis=Y_AXIS,
+        wrench=[0, 0, -1, 0, 0, 0],
+        policy="F",
+        mode="C",
+        start_quat=IDENTITY,
+        noise_seed=5,
+    )
     poses = open_loop(vp, [170, 0, 130, 90], 60.0)
     # Poses where the hand is still for at least 0.3 s: the candidates tried.
     still, run = [], []
-    for (t0, q0), (t1, q1) in zip(poses, poses[1:]):
+    for (_t0, q0), (t1, q1) in zip(poses, poses[1:]):
         if quaternion_angle_deg(q0, q1) < 1e-9:
             run.append(t1)
         else:
             if run and run[-1] - run[0] >= 0.3:
                 still.append((run[0], run[-1], q0))
             run = []
-    still = still[1:]                  # (the start pose, before the first movement)
+    still = still[1:]  # (the start pose, before the first movement)
     assert len(still) >= 40
     dwell = vp.c_dwell_s()
     assert dwell == pytest.approx(0.5 + 3 * 0.06 + 0.21)
@@ -346,8 +405,8 @@ def test_mode_c_search_is_systematic_and_widens():
     spacing = math.sqrt(3) * 2.0 / 3.0 * vp.params.task_threshold_deg
     sep = np.degrees(np.arccos(np.clip(dirs @ dirs.T, -1, 1)))
     np.fill_diagonal(sep, 180.0)
-    assert sep.min() >= 0.95 * spacing                   # never the same candidate twice
-    assert sep.min(axis=1).max() <= 1.05 * spacing       # ... and neighbours on the grid
+    assert sep.min() >= 0.95 * spacing  # never the same candidate twice
+    assert sep.min(axis=1).max() <= 1.05 * spacing  # ... and neighbours on the grid
     dist = sep[0].copy()
     dist[0] = 0.0
     # Ring by ring: the first candidates are near the first estimate, later ones farther
@@ -365,34 +424,46 @@ def test_mode_c_converges_with_the_core_when_the_estimate_is_near(report_figure)
     near, far = [], []
     for policy in ("F", "Fperp"):
         for i, w in enumerate(_wrenches(10, 77)):
-            res = _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode="C",
-                              constraints="paper", orientation=list(IDENTITY), y_axis=Y_AXIS)
+            res = _core.solve(
+                contacts=CONTACTS4,
+                wrench=w,
+                policy=policy,
+                mode="C",
+                constraints="paper",
+                orientation=list(IDENTITY),
+                y_axis=Y_AXIS,
+            )
             vp = new_participant(mode="C", policy=policy)
             d = vp.felt_direction([float(v) for v in res["pwm"]])
             f = np.array(w[:3]) / np.linalg.norm(w[:3])
             err = math.degrees(math.acos(float(np.clip(d @ f, -1, 1))))
             ok, t = closed_loop(w, mode="C", policy=policy, seed=300 + i)[:2]
             (near if err <= 10.0 else far).append((policy, i, round(err, 1), ok, t))
-    report_figure("participant closed loop C (4 contacts, 10 wrenches x F/Fperp)",
-                  f"estimate within 10 deg: {sum(r[3] for r in near)}/{len(near)} reached; "
-                  f"farther: {sum(r[3] for r in far)}/{len(far)}")
+    report_figure(
+        "participant closed loop C (4 contacts, 10 wrenches x F/Fperp)",
+        f"estimate within 10 deg: {sum(r[3] for r in near)}/{len(near)} reached; "
+        f"farther: {sum(r[3] for r in far)}/{len(far)}",
+    )
     assert len(near) >= 6, near
     assert all(r[3] for r in near), near
 
 
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("spec,words", [
-    ("participant:bogus=1", ["unknown participant parameter", "reaction_time_s"]),
-    ("participant:reaction_time_s=abc", ["not a number"]),
-    ("participant:reaction_time_s=-0.1", ["reaction_time_s", "> 0"]),
-    ("participant:erm_tau_s=nan", ["erm_tau_s", "finite"]),
-    ("participant:weber_frac=1.5", ["weber_frac", "< 1"]),
-    ("participant:rate_hz", ["not key=value"]),
-    ("participant:", ["no key=value"]),
-    ("human", ["'human' is not key=value", "participant:key=value"]),
-    ("rate_hz=abc", ["not a number"]),
-    ("participant:rate_hz=100,rate_hz=50", ["given twice"]),
-])
+@pytest.mark.parametrize(
+    "spec,words",
+    [
+        ("participant:bogus=1", ["unknown participant parameter", "reaction_time_s"]),
+        ("participant:reaction_time_s=abc", ["not a number"]),
+        ("participant:reaction_time_s=-0.1", ["reaction_time_s", "> 0"]),
+        ("participant:erm_tau_s=nan", ["erm_tau_s", "finite"]),
+        ("participant:weber_frac=1.5", ["weber_frac", "< 1"]),
+        ("participant:rate_hz", ["not key=value"]),
+        ("participant:", ["no key=value"]),
+        ("human", ["'human' is not key=value", "participant:key=value"]),
+        ("rate_hz=abc", ["not a number"]),
+        ("participant:rate_hz=100,rate_hz=50", ["given twice"]),
+    ],
+)
 def test_bad_spec_says_what_to_fix(spec, words):
     with pytest.raises(ValueError) as e:
         VirtualParticipant.from_spec(spec, 0)
@@ -400,15 +471,18 @@ def test_bad_spec_says_what_to_fix(spec, words):
         assert w in str(e.value)
 
 
-@pytest.mark.parametrize("pwm,words", [
-    ([float("nan"), 0, 0, 0], ["finite"]),
-    ([0, 0, 0], ["4 values"]),
-    ([0, 0, 0, 0, 0], ["4 values"]),
-    ([0, 0, 300, 0], ["0..255"]),
-    ([0, -1, 0, 0], ["0..255"]),
-    (["a", 0, 0, 0], ["numbers"]),
-    ("1234", ["numbers"]),
-])
+@pytest.mark.parametrize(
+    "pwm,words",
+    [
+        ([float("nan"), 0, 0, 0], ["finite"]),
+        ([0, 0, 0], ["4 values"]),
+        ([0, 0, 0, 0, 0], ["4 values"]),
+        ([0, 0, 300, 0], ["0..255"]),
+        ([0, -1, 0, 0], ["0..255"]),
+        (["a", 0, 0, 0], ["numbers"]),
+        ("1234", ["numbers"]),
+    ],
+)
 def test_bad_pwm_is_a_clear_error(pwm, words):
     vp = new_participant()
     with pytest.raises(ValueError) as e:
@@ -421,11 +495,23 @@ def test_bad_trial_inputs():
     vp = VirtualParticipant.from_spec("participant", 0)
     with pytest.raises(RuntimeError):
         vp.step(0.0, [0, 0, 0, 0])
-    good = dict(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=[0, 0, -1, 0, 0, 0], policy="F",
-                mode="V", start_quat=IDENTITY)
-    for key, bad in (("policy", "G"), ("mode", "X"), ("contacts", [[0, 0, 0]] * 2),
-                     ("wrench", [0, 0, 1]), ("wrench", [0, 0, float("inf"), 0, 0, 0]),
-                     ("start_quat", [0, 0, 0, 0]), ("y_axis", [0, 0, 0])):
+    good = dict(
+        contacts=CONTACTS4,
+        y_axis=Y_AXIS,
+        wrench=[0, 0, -1, 0, 0, 0],
+        policy="F",
+        mode="V",
+        start_quat=IDENTITY,
+    )
+    for key, bad in (
+        ("policy", "G"),
+        ("mode", "X"),
+        ("contacts", [[0, 0, 0]] * 2),
+        ("wrench", [0, 0, 1]),
+        ("wrench", [0, 0, float("inf"), 0, 0, 0]),
+        ("start_quat", [0, 0, 0, 0]),
+        ("y_axis", [0, 0, 0]),
+    ):
         with pytest.raises(ValueError):
             vp.begin_trial(**{**good, key: bad})
     vp.begin_trial(**good)
@@ -447,9 +533,11 @@ def test_closed_loop_with_the_core_reaches_threshold_in_mode_v(report_figure):
     for policy in ("F", "Fperp"):
         rows = [results[policy, i] for i in range(8)]
         ok = [t for s, t in rows if s]
-        report_figure(f"participant closed loop V {policy} (4 contacts, 8 wrenches)",
-                      f"{len(ok)}/8 reached 3 deg; mean time of successes "
-                      f"{np.mean(ok):.1f} s, max {max(ok):.1f} s")
+        report_figure(
+            f"participant closed loop V {policy} (4 contacts, 8 wrenches)",
+            f"{len(ok)}/8 reached 3 deg; mean time of successes "
+            f"{np.mean(ok):.1f} s, max {max(ok):.1f} s",
+        )
         assert len(ok) >= 6, rows
 
 
@@ -462,9 +550,11 @@ def test_closed_loop_mode_c_runs_and_is_slower_than_v(report_figure):
             s, t = closed_loop(w, mode=mode, policy="F", seed=200 + i)[:2]
             times[mode].append(t)
             succ[mode] += s
-    report_figure("participant closed loop C vs V F (4 contacts, 4 wrenches)",
-                  f"C {succ['C']}/4 mean {np.mean(times['C']):.1f} s; "
-                  f"V {succ['V']}/4 mean {np.mean(times['V']):.1f} s (90 s = timeout)")
+    report_figure(
+        "participant closed loop C vs V F (4 contacts, 4 wrenches)",
+        f"C {succ['C']}/4 mean {np.mean(times['C']):.1f} s; "
+        f"V {succ['V']}/4 mean {np.mean(times['V']):.1f} s (90 s = timeout)",
+    )
     assert np.mean(times["V"]) <= np.mean(times["C"])
 
 
@@ -478,57 +568,227 @@ def test_closed_loop_mode_c_runs_and_is_slower_than_v(report_figure):
 #: graspguide/participant.py); every PWM and every success time of the record before it
 #: (the feel/act refactor's, commit 7d0f0cc) was unchanged, and every pose within 1.2e-15.
 GOLDEN = {
-    '0-C-F': ('c1f0c1047a59616219ca4555025727df9fec01ef71c76e23882245ff86384d6c', [
-        2921.680283061083, -233.84544062095756, -597.9269443089323, -147.84173309182958,
-        43842.9694243593, -3485.844137758541, -8775.953744751345, -2864.5159589292102]),
-    '0-C-Fperp': ('c1f0c1047a59616219ca4555025727df9fec01ef71c76e23882245ff86384d6c', [
-        2941.859582959702, -142.21146520617546, -527.0012892587928, -95.35648926305191,
-        44272.313735365016, -1542.773857565761, -7357.096792071608, -1814.6945242981722]),
-    '0-V-F': ('af983e3f0d614e6205906ce61639e7c827a273548dc48ad8c2487466fd3978f7', [
-        2943.152656530029, -91.83530609098388, -545.9268347878302, -27.874593656058906,
-        44088.33217282471, -860.0297898315754, -8686.721437507187, -665.6702621393674]),
-    '0-V-Fperp': ('101295a282a882ce6f422e69778839664c3e462efb056e6c459277b9c555668a', [
-        2923.8859772085284, -125.76692779640317, -642.1640107668414, 7.42558865731238,
-        43795.36366268908, -2238.7859734507147, -9947.637342286049, 259.63895058778223]),
-    '1-C-F': ('71c63845ba700764d03d1c3763846232ba9458dec910ae086a557c5bdd91df84', [
-        2457.699710165514, -646.3343040146129, 1547.5603636374367, -75.4524558427826,
-        36094.524518684164, -9676.303090791023, 24899.548996715494, -1093.1577226196546]),
-    '1-C-Fperp': ('71c63845ba700764d03d1c3763846232ba9458dec910ae086a557c5bdd91df84', [
-        2349.083512491711, -1021.6981411660407, 1490.987651243216, 115.16183966019271,
-        34752.653085170896, -15020.931570510169, 24032.299982939698, 2550.6890726160523]),
-    '1-V-F': ('4c30258542af46f92aa4a56670ec4360ddb6ed020bea131b2e1bc701c71f4f17', [
-        2426.0039559667603, -910.7386865237305, 1422.065050563835, 192.898799385966,
-        35319.06997600115, -14001.711539028003, 23450.63101280225, 3267.6647015731814]),
-    '1-V-Fperp': ('15f289a29eab98d18cb08870607e3116a2a053a4f6945449eb14c606dc247f36', [
-        2305.938731909387, -797.3881415513015, 1685.5026952754438, 27.053611498651126,
-        33600.77977475874, -13226.206227108456, 26588.36664282723, 33.52764047278874]),
-    '2-C-F': ('7cfc92e4f8f2f5a0fc9cc6f1ea25926feffea735cce12c40d949d34ad3d281ab', [
-        2488.5426428277965, -1268.3032938782594, -1038.9352927279606, -87.45420941861425,
-        36747.51087394398, -20172.601425956494, -16148.798300575945, -1478.5533959445693]),
-    '2-C-Fperp': ('b9dcd918218979f63a3b7ee516c6e69076bc56f4bb21544b0d7f51f37827cf49', [
-        2479.2652030077106, -1046.1684035976805, -1243.2754376435796, 300.25844687607196,
-        36690.62425218959, -16419.31068271756, -19422.188605092564, 5031.065464274622]),
-    '2-V-F': ('d219034524686bcdb48a464cc865fb5c25f06bbb7094635b9c7df38527889c15', [
-        2669.4042391783582, -934.4870912470001, -913.3183846321833, -266.3758860271123,
-        39602.073629200495, -14809.850629370683, -14518.512272383174, -3903.766066326364]),
-    '2-V-Fperp': ('5cad303be00dcba4c26ba6ded4929c5cd4e4155517d273527adcbaba4bea0d19', [
-        2543.633670451169, -1020.229428745742, -1142.1247247525164, 204.89129246244124,
-        37763.22680373978, -15591.455869076312, -18399.9718255206, 2822.4311053756246]),
-    '3-C-F': ('d0b4f35bbc430af7bf9b7b944e5701cc019179302ffaa2f3f2433d21c9acfa7d', [
-        2065.3190709561122, -702.5985991356177, -1994.7886994368937, 8.819927199854236,
-        30285.167490075142, -11087.646026335267, -31239.155630541612, 397.13910460691903]),
-    '3-C-Fperp': ('5b746a7846d4058a1481183845a646d4aa9d29deab6c84d87590f80fdfb521ca', [
-        1995.787772013563, -1633.4411318514346, -1428.41032102818, 200.4718292340986,
-        29041.591919268252, -25476.646955300224, -22582.928291654072, 3717.673517781019]),
-    '3-V-F': ('eaae71f6647bdbf7d43bd5da733c7b4ae64390a6bc38a9962149990354d7fc68', [
-        150.59195549368144, -2085.738183474357, -1661.8503532257464, -558.3509964263068,
-        -950.9508993818409, -33338.21045573265, -26161.48068827986, -11469.092737512237]),
-    '3-V-Fperp': ('04bfe65cbf610d47a0e272d4c351348395c59ae1f132b59146353bd72f760cfa', [
-        1120.098392098442, -346.55224439663647, -1921.6198811234447, -869.2587999532326,
-        10398.8394426586, 355.6594156794632, -36056.80382919915, -14612.37537731988]),
-    'slow-rt': ('0835109498a67d3ecc06a5ff97dc3f10ed79ddaa629001a59fce3aaffd6a288b', [
-        2272.4040625615858, 1587.7334996123982, -1010.290035213729, -62.089687793977504,
-        33456.04901690092, 25439.078544985165, -14956.31476864929, -1882.7275124884948]),
+    "0-C-F": (
+        "c1f0c1047a59616219ca4555025727df9fec01ef71c76e23882245ff86384d6c",
+        [
+            2921.680283061083,
+            -233.84544062095756,
+            -597.9269443089323,
+            -147.84173309182958,
+            43842.9694243593,
+            -3485.844137758541,
+            -8775.953744751345,
+            -2864.5159589292102,
+        ],
+    ),
+    "0-C-Fperp": (
+        "c1f0c1047a59616219ca4555025727df9fec01ef71c76e23882245ff86384d6c",
+        [
+            2941.859582959702,
+            -142.21146520617546,
+            -527.0012892587928,
+            -95.35648926305191,
+            44272.313735365016,
+            -1542.773857565761,
+            -7357.096792071608,
+            -1814.6945242981722,
+        ],
+    ),
+    "0-V-F": (
+        "af983e3f0d614e6205906ce61639e7c827a273548dc48ad8c2487466fd3978f7",
+        [
+            2943.152656530029,
+            -91.83530609098388,
+            -545.9268347878302,
+            -27.874593656058906,
+            44088.33217282471,
+            -860.0297898315754,
+            -8686.721437507187,
+            -665.6702621393674,
+        ],
+    ),
+    "0-V-Fperp": (
+        "101295a282a882ce6f422e69778839664c3e462efb056e6c459277b9c555668a",
+        [
+            2923.8859772085284,
+            -125.76692779640317,
+            -642.1640107668414,
+            7.42558865731238,
+            43795.36366268908,
+            -2238.7859734507147,
+            -9947.637342286049,
+            259.63895058778223,
+        ],
+    ),
+    "1-C-F": (
+        "71c63845ba700764d03d1c3763846232ba9458dec910ae086a557c5bdd91df84",
+        [
+            2457.699710165514,
+            -646.3343040146129,
+            1547.5603636374367,
+            -75.4524558427826,
+            36094.524518684164,
+            -9676.303090791023,
+            24899.548996715494,
+            -1093.1577226196546,
+        ],
+    ),
+    "1-C-Fperp": (
+        "71c63845ba700764d03d1c3763846232ba9458dec910ae086a557c5bdd91df84",
+        [
+            2349.083512491711,
+            -1021.6981411660407,
+            1490.987651243216,
+            115.16183966019271,
+            34752.653085170896,
+            -15020.931570510169,
+            24032.299982939698,
+            2550.6890726160523,
+        ],
+    ),
+    "1-V-F": (
+        "4c30258542af46f92aa4a56670ec4360ddb6ed020bea131b2e1bc701c71f4f17",
+        [
+            2426.0039559667603,
+            -910.7386865237305,
+            1422.065050563835,
+            192.898799385966,
+            35319.06997600115,
+            -14001.711539028003,
+            23450.63101280225,
+            3267.6647015731814,
+        ],
+    ),
+    "1-V-Fperp": (
+        "15f289a29eab98d18cb08870607e3116a2a053a4f6945449eb14c606dc247f36",
+        [
+            2305.938731909387,
+            -797.3881415513015,
+            1685.5026952754438,
+            27.053611498651126,
+            33600.77977475874,
+            -13226.206227108456,
+            26588.36664282723,
+            33.52764047278874,
+        ],
+    ),
+    "2-C-F": (
+        "7cfc92e4f8f2f5a0fc9cc6f1ea25926feffea735cce12c40d949d34ad3d281ab",
+        [
+            2488.5426428277965,
+            -1268.3032938782594,
+            -1038.9352927279606,
+            -87.45420941861425,
+            36747.51087394398,
+            -20172.601425956494,
+            -16148.798300575945,
+            -1478.5533959445693,
+        ],
+    ),
+    "2-C-Fperp": (
+        "b9dcd918218979f63a3b7ee516c6e69076bc56f4bb21544b0d7f51f37827cf49",
+        [
+            2479.2652030077106,
+            -1046.1684035976805,
+            -1243.2754376435796,
+            300.25844687607196,
+            36690.62425218959,
+            -16419.31068271756,
+            -19422.188605092564,
+            5031.065464274622,
+        ],
+    ),
+    "2-V-F": (
+        "d219034524686bcdb48a464cc865fb5c25f06bbb7094635b9c7df38527889c15",
+        [
+            2669.4042391783582,
+            -934.4870912470001,
+            -913.3183846321833,
+            -266.3758860271123,
+            39602.073629200495,
+            -14809.850629370683,
+            -14518.512272383174,
+            -3903.766066326364,
+        ],
+    ),
+    "2-V-Fperp": (
+        "5cad303be00dcba4c26ba6ded4929c5cd4e4155517d273527adcbaba4bea0d19",
+        [
+            2543.633670451169,
+            -1020.229428745742,
+            -1142.1247247525164,
+            204.89129246244124,
+            37763.22680373978,
+            -15591.455869076312,
+            -18399.9718255206,
+            2822.4311053756246,
+        ],
+    ),
+    "3-C-F": (
+        "d0b4f35bbc430af7bf9b7b944e5701cc019179302ffaa2f3f2433d21c9acfa7d",
+        [
+            2065.3190709561122,
+            -702.5985991356177,
+            -1994.7886994368937,
+            8.819927199854236,
+            30285.167490075142,
+            -11087.646026335267,
+            -31239.155630541612,
+            397.13910460691903,
+        ],
+    ),
+    "3-C-Fperp": (
+        "5b746a7846d4058a1481183845a646d4aa9d29deab6c84d87590f80fdfb521ca",
+        [
+            1995.787772013563,
+            -1633.4411318514346,
+            -1428.41032102818,
+            200.4718292340986,
+            29041.591919268252,
+            -25476.646955300224,
+            -22582.928291654072,
+            3717.673517781019,
+        ],
+    ),
+    "3-V-F": (
+        "eaae71f6647bdbf7d43bd5da733c7b4ae64390a6bc38a9962149990354d7fc68",
+        [
+            150.59195549368144,
+            -2085.738183474357,
+            -1661.8503532257464,
+            -558.3509964263068,
+            -950.9508993818409,
+            -33338.21045573265,
+            -26161.48068827986,
+            -11469.092737512237,
+        ],
+    ),
+    "3-V-Fperp": (
+        "04bfe65cbf610d47a0e272d4c351348395c59ae1f132b59146353bd72f760cfa",
+        [
+            1120.098392098442,
+            -346.55224439663647,
+            -1921.6198811234447,
+            -869.2587999532326,
+            10398.8394426586,
+            355.6594156794632,
+            -36056.80382919915,
+            -14612.37537731988,
+        ],
+    ),
+    "slow-rt": (
+        "0835109498a67d3ecc06a5ff97dc3f10ed79ddaa629001a59fce3aaffd6a288b",
+        [
+            2272.4040625615858,
+            1587.7334996123982,
+            -1010.290035213729,
+            -62.089687793977504,
+            33456.04901690092,
+            25439.078544985165,
+            -14956.31476864929,
+            -1882.7275124884948,
+        ],
+    ),
 }
 
 #: The poses are plain IEEE arithmetic apart from libm's sin/cos/exp/atan2, whose last bit
@@ -546,15 +806,28 @@ def _golden_run(w, mode, policy, seed, spec="participant", timeout=30.0):
     import hashlib
 
     vp = VirtualParticipant.from_spec(spec, seed)
-    vp.begin_trial(contacts=CONTACTS4, y_axis=Y_AXIS, wrench=w, policy=policy, mode=mode,
-                   start_quat=(1.0, 0, 0, 0))
+    vp.begin_trial(
+        contacts=CONTACTS4,
+        y_axis=Y_AXIS,
+        wrench=w,
+        policy=policy,
+        mode=mode,
+        start_quat=(1.0, 0, 0, 0),
+    )
     q = (1.0, 0.0, 0.0, 0.0)
     h = hashlib.sha256()
     sums = [0.0] * 8
     for i in range(int(round(timeout * vp.rate_hz)) + 1):
         t = i / vp.rate_hz
-        res = _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode=mode,
-                          constraints="paper", orientation=list(q), y_axis=Y_AXIS)
+        res = _core.solve(
+            contacts=CONTACTS4,
+            wrench=w,
+            policy=policy,
+            mode=mode,
+            constraints="paper",
+            orientation=list(q),
+            y_axis=Y_AXIS,
+        )
         q = vp.step(t, res["pwm"])
         h.update(bytes(res["pwm"]))
         for k in range(4):
@@ -569,8 +842,9 @@ def _golden_runs(spec="participant"):
         for mode in ("C", "V"):
             for policy in ("F", "Fperp"):
                 got[f"{i}-{mode}-{policy}"] = _golden_run(w, mode, policy, 100 + i, spec)
-    got["slow-rt"] = _golden_run(_wrenches(1, 5)[0], "V", "F", 9,
-                                 "participant:reaction_time_s=0.35,erm_tau_s=0.03")
+    got["slow-rt"] = _golden_run(
+        _wrenches(1, 5)[0], "V", "F", 9, "participant:reaction_time_s=0.35,erm_tau_s=0.03"
+    )
     return got
 
 
@@ -616,16 +890,23 @@ def test_trajectories_do_not_depend_on_the_openblas_kernel():
     when numpy loads, hence the two fresh interpreters. (The old numpy path failed this
     on a SkylakeX CPU.)"""
     # The child imports this module and the same graspguide as this process.
-    paths = [os.path.dirname(os.path.abspath(__file__)),
-             os.path.dirname(os.path.dirname(os.path.abspath(_core.__file__)))]
+    paths = [
+        os.path.dirname(os.path.abspath(__file__)),
+        os.path.dirname(os.path.dirname(os.path.abspath(_core.__file__))),
+    ]
     digests = {}
     for kernel in (None, "Prescott"):
         env = subprocess_env()
         env.pop("OPENBLAS_CORETYPE", None)
         if kernel:
             env["OPENBLAS_CORETYPE"] = kernel
-        out = subprocess.run([sys.executable, "-c", _KERNEL_PROBE, *paths], env=env,
-                             capture_output=True, text=True, timeout=300)
+        out = subprocess.run(
+            [sys.executable, "-c", _KERNEL_PROBE, *paths],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert out.returncode == 0, out.stderr
         digests[kernel] = out.stdout.strip()
     assert len(digests[None]) == 64 and digests[None] == digests["Prescott"]
@@ -634,9 +915,17 @@ def test_trajectories_do_not_depend_on_the_openblas_kernel():
 def _lockstep_vs_pipelined(w, mode, policy, seed, spec, lead, n):
     """The core as the device; lockstep step() against act() running `lead` poses ahead
     of feel() (the device's answers arrive `lead` poses late)."""
+
     def pwm_of(q):
-        return _core.solve(contacts=CONTACTS4, wrench=w, policy=policy, mode=mode,
-                           constraints="paper", orientation=list(q), y_axis=Y_AXIS)["pwm"]
+        return _core.solve(
+            contacts=CONTACTS4,
+            wrench=w,
+            policy=policy,
+            mode=mode,
+            constraints="paper",
+            orientation=list(q),
+            y_axis=Y_AXIS,
+        )["pwm"]
 
     a = new_participant(spec, seed, mode, policy, w)
     lock = [a.step(0.0, [0, 0, 0, 0])]
@@ -662,7 +951,7 @@ def test_act_ahead_of_feel_equals_lockstep_bit_for_bit(mode):
             lead = VirtualParticipant.from_spec(spec, 0).max_lead(100.0)
             lock, pipe = _lockstep_vs_pipelined(w, mode, "F", 40 + i, spec, lead, 1500)
             assert pipe == lock
-            assert len({q for q in lock}) > 100      # it moved
+            assert len({q for q in lock}) > 100  # it moved
 
 
 def test_act_depends_only_on_pwm_felt_a_reaction_time_earlier():
@@ -681,8 +970,8 @@ def test_act_depends_only_on_pwm_felt_a_reaction_time_earlier():
                 q = [vp.step(0.0, [0, 0, 0, 0])]
                 q += [vp.step((m + 1) / 100.0, list(pwm[m])) for m in range(599)]
                 out.append(q)
-            unchanged = c + 21        # t_c < t_j - 0.21 s needs j > c + 21
-            assert out[0][:unchanged + 1] == out[1][:unchanged + 1], (mode, c)
+            unchanged = c + 21  # t_c < t_j - 0.21 s needs j > c + 21
+            assert out[0][: unchanged + 1] == out[1][: unchanged + 1], (mode, c)
             changed_somewhere |= out[0] != out[1]
     assert changed_somewhere
 
@@ -704,21 +993,26 @@ def test_act_too_far_ahead_of_feel_is_refused():
 def test_feel_checks_its_input_once_with_a_clear_error():
     vp = new_participant()
     vp.act(0.0)
-    for pwm, words in (([0, 0, float("nan"), 0], "finite"), ([0, 0, 0], "4 values"),
-                       ([0, 0, 0, 0, 0], "4 values"), ([0, 0, 256, 0], "0..255"),
-                       ([True, 0, 0, 0], "numbers"), ("abcd", "numbers")):
+    for pwm, words in (
+        ([0, 0, float("nan"), 0], "finite"),
+        ([0, 0, 0], "4 values"),
+        ([0, 0, 0, 0, 0], "4 values"),
+        ([0, 0, 256, 0], "0..255"),
+        ([True, 0, 0, 0], "numbers"),
+        ("abcd", "numbers"),
+    ):
         with pytest.raises(ValueError, match=words):
             vp.feel(0.0, pwm)
     with pytest.raises(ValueError, match="oldest pose"):
-        vp.feel(0.01, [0, 0, 0, 0])                   # no act at 0.01
-    vp.feel(0.0, (10, 20.0, np.int64(3), np.float32(4)))   # any numbers: slow path
+        vp.feel(0.01, [0, 0, 0, 0])  # no act at 0.01
+    vp.feel(0.0, (10, 20.0, np.int64(3), np.float32(4)))  # any numbers: slow path
     with pytest.raises(ValueError, match="oldest pose"):
-        vp.feel(0.0, [0, 0, 0, 0])                    # felt twice
+        vp.feel(0.0, [0, 0, 0, 0])  # felt twice
     vp.act(0.01)
     vp.act(0.02)
     with pytest.raises(RuntimeError, match="feel"):
-        vp.step(0.03, [0, 0, 0, 0])                   # two poses not felt: ambiguous
+        vp.step(0.03, [0, 0, 0, 0])  # two poses not felt: ambiguous
     vp.feel(0.01, [0, 0, 0, 0])
-    vp.step(0.03, [0, 0, 0, 0])                       # feel(0.02, ..) + act(0.03)
+    vp.step(0.03, [0, 0, 0, 0])  # feel(0.02, ..) + act(0.03)
     with pytest.raises(ValueError, match="backwards"):
         vp.act(0.025)

@@ -54,6 +54,7 @@ def golden_wire(index: int) -> bytes:
 def random_value(spec: M.FieldSpec, rng: random.Random):
     """A random wire-valid value of a field (floats: random float32 bit patterns, no NaN,
     since NaN != NaN)."""
+
     def one():
         if spec.kind == "f32":
             while True:
@@ -125,8 +126,9 @@ def test_cobs_round_trips_random_data():
     rng = random.Random(SEED)
     for _ in range(500):
         density = rng.random()
-        data = bytes(0 if rng.random() < density else rng.randint(1, 255)
-                     for _ in range(rng.randint(0, 700)))
+        data = bytes(
+            0 if rng.random() < density else rng.randint(1, 255) for _ in range(rng.randint(0, 700))
+        )
         assert cobs_decode(cobs_encode(data)) == data
 
 
@@ -144,7 +146,9 @@ def test_error_codes_mirror_the_core_status(core):
     assert [c.name.lower() for c in core_codes] == list(core.STATUS_NAMES)
     assert [int(c) for c in core_codes] == list(range(len(core.STATUS_NAMES)))
     assert M.ErrorCode.IMPRECISE_CONTACTS == 6
-    assert all(c >= M.LINK_ERROR_BASE for c in M.ErrorCode if c.name.lower() not in core.STATUS_NAMES)
+    assert all(
+        c >= M.LINK_ERROR_BASE for c in M.ErrorCode if c.name.lower() not in core.STATUS_NAMES
+    )
 
 
 def test_scene_enums_mirror_the_core(core):
@@ -192,7 +196,13 @@ def test_every_message_round_trips(cls):
 
 def test_defaults_are_the_schema_defaults():
     s = M.SetScene()
-    assert (s.k, s.y_axis, s.threshold_deg, s.hold_s, s.timeout_s) == (3, (0.0, 1.0, 0.0), 3.0, 0.5, 90.0)
+    assert (s.k, s.y_axis, s.threshold_deg, s.hold_s, s.timeout_s) == (
+        3,
+        (0.0, 1.0, 0.0),
+        3.0,
+        0.5,
+        90.0,
+    )
     assert s.constraints is M.ConstraintModel.PAPER
     assert M.Pose().quat_wxyz == (1.0, 0.0, 0.0, 0.0)
     assert M.Hello().protocol_version == M.PROTOCOL_VERSION
@@ -206,10 +216,20 @@ def test_values_are_stored_as_the_wire_carries_them():
     assert M.SetScene(constraints=1).constraints is M.ConstraintModel.NORMAL
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"k": 256}, {"k": -1}, {"k": 3.0}, {"contacts": [[0.0] * 3] * 3}, {"y_axis": "abc"},
-    {"constraints": 3}, {"policy": "F"}, {"threshold_deg": 1e39}, {"hold_s": True},
-])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"k": 256},
+        {"k": -1},
+        {"k": 3.0},
+        {"contacts": [[0.0] * 3] * 3},
+        {"y_axis": "abc"},
+        {"constraints": 3},
+        {"policy": "F"},
+        {"threshold_deg": 1e39},
+        {"hold_s": True},
+    ],
+)
 def test_bad_values_are_refused_when_building(kwargs):
     with pytest.raises(gp.FieldValueError):
         M.SetScene(**kwargs)
@@ -299,10 +319,16 @@ def test_resync_after_a_truncated_frame():
 def test_resync_after_an_oversized_frame():
     good = golden_wire(0)
     for n in (MAX_RAW_FRAME_SIZE + 2, 254, 255, 1000):
-        assert events(FrameParser(), b"\x42" * n + b"\0" + good) == [ParseEvent.TOO_LONG, ParseEvent.FRAME]
+        assert events(FrameParser(), b"\x42" * n + b"\0" + good) == [
+            ParseEvent.TOO_LONG,
+            ParseEvent.FRAME,
+        ]
     raw = bytes([M.PROTOCOL_VERSION, 0x02, 1, 0]) + b"\x5a" * (M.MAX_PAYLOAD_SIZE + 1)
     raw += struct.pack("<H", crc16(raw))
-    assert events(FrameParser(), cobs_encode(raw) + b"\0" + good) == [ParseEvent.TOO_LONG, ParseEvent.FRAME]
+    assert events(FrameParser(), cobs_encode(raw) + b"\0" + good) == [
+        ParseEvent.TOO_LONG,
+        ParseEvent.FRAME,
+    ]
     with pytest.raises(gp.TooLongError):
         decode_frame(cobs_encode(raw) + b"\0")
 
@@ -319,15 +345,18 @@ def test_every_flipped_bit_is_caught():
                 assert ParseEvent.FRAME not in got[:-1] and got[-1] is ParseEvent.FRAME
 
 
-@pytest.mark.parametrize("version,msg_id,payload,event,error", [
-    (2, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
-    (0, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
-    (1, 0x3F, b"\x01", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
-    (1, 0xFF, b"", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
-    (1, 0x01, b"", ParseEvent.BAD_LENGTH, gp.BadLengthError),
-    (1, 0x01, b"\x01\x02", ParseEvent.BAD_LENGTH, gp.BadLengthError),
-    (1, 0x05, b"\x00", ParseEvent.BAD_LENGTH, gp.BadLengthError),
-])
+@pytest.mark.parametrize(
+    "version,msg_id,payload,event,error",
+    [
+        (2, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
+        (0, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
+        (1, 0x3F, b"\x01", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
+        (1, 0xFF, b"", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
+        (1, 0x01, b"", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+        (1, 0x01, b"\x01\x02", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+        (1, 0x05, b"\x00", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+    ],
+)
 def test_header_errors_keep_a_trusted_header(version, msg_id, payload, event, error):
     wire = encode_frame(msg_id, 77, payload, version=version)
     p = FrameParser()
@@ -355,7 +384,10 @@ def test_too_short_bad_cobs_and_counters():
     bad_crc = bytearray(golden_wire(5))
     bad_crc[-2] ^= 1
     assert events(p, golden_wire(0) + bytes(bad_crc) + golden_wire(2)) == [
-        ParseEvent.FRAME, ParseEvent.BAD_CRC, ParseEvent.FRAME]
+        ParseEvent.FRAME,
+        ParseEvent.BAD_CRC,
+        ParseEvent.FRAME,
+    ]
     assert p.good_frames == 2 and p.counts[ParseEvent.BAD_CRC] == 1
     p.feed(golden_wire(1)[:10])
     p.discard_partial()
@@ -386,11 +418,13 @@ def test_recovers_every_frame_from_random_streams():
     sent, got = [], []
     for _ in range(1500):
         zero_rate = 0.1 if rng.random() < 0.25 else 0.005
-        garbage = bytes(0 if rng.random() < zero_rate else rng.randint(0, 255)
-                        for _ in range(rng.randint(0, 95)))
+        garbage = bytes(
+            0 if rng.random() < zero_rate else rng.randint(0, 255)
+            for _ in range(rng.randint(0, 95))
+        )
         if rng.random() < 0.25:
             w = encode_message(random_message(rng.choice(classes), rng), rng.randint(0, 0xFFFF))
-            garbage += w[:rng.randint(0, len(w) - 2)]
+            garbage += w[: rng.randint(0, len(w) - 2)]
         stream = garbage + b"\0"
         for _ in range(rng.randint(1, 3)):
             msg, seq = random_message(rng.choice(classes), rng), rng.randint(0, 0xFFFF)
@@ -410,10 +444,15 @@ def test_generated_code_is_up_to_date():
 
 def test_stale_generated_code_fails_the_check(tmp_path):
     """--check must notice a hand edit of any output: run it on a copy of the tree."""
-    rel = ["tools/scripts/gen_protocol.py", "tools/protocol/messages.toml",
-           "lib/graspguide_link/src/graspguide_link/messages.h",
-           "tools/graspguide/link/messages.py", "test/data/golden_frames.json",
-           "test/data/golden_frames.h", "docs/protocol.md"]
+    rel = [
+        "tools/scripts/gen_protocol.py",
+        "tools/protocol/messages.toml",
+        "lib/graspguide_link/src/graspguide_link/messages.h",
+        "tools/graspguide/link/messages.py",
+        "test/data/golden_frames.json",
+        "test/data/golden_frames.h",
+        "docs/protocol.md",
+    ]
     for r in rel:
         os.makedirs(tmp_path / os.path.dirname(r), exist_ok=True)
         shutil.copy(os.path.join(REPO_ROOT, r), tmp_path / r)
@@ -433,5 +472,6 @@ def test_stale_generated_code_fails_the_check(tmp_path):
 def test_the_installed_package_has_the_current_protocol_code():
     for name in ("messages.py", "codec.py", "errors.py", "__init__.py"):
         installed = os.path.join(os.path.dirname(gp.__file__), name)
-        assert filecmp.cmp(installed, os.path.join(TOOLS_DIR, "graspguide", "link", name),
-                           shallow=False), f"{name}: run tools/bootstrap.sh to reinstall ./tools"
+        assert filecmp.cmp(
+            installed, os.path.join(TOOLS_DIR, "graspguide", "link", name), shallow=False
+        ), f"{name}: run tools/bootstrap.sh to reinstall ./tools"

@@ -8,7 +8,6 @@ import itertools
 import os
 
 import pytest
-
 from conftest import REPO_ROOT
 
 from graspguide.core import _core
@@ -53,7 +52,8 @@ def test_paper_protocol_values(paper):
     for k in (3, 4):
         scene = load_scene(os.path.join(REPO_ROOT, "tools", "examples", f"scene_paper_{k}.toml"))
         assert [x for c in paper.hands[k] for x in c] == pytest.approx(
-            [x for c in scene.contacts for x in c])
+            [x for c in scene.contacts for x in c]
+        )
     assert paper.sessions_per_participant == 8
 
 
@@ -67,11 +67,18 @@ def test_config_hash_is_stable_and_sensitive(paper):
 
 def _core_motors(protocol, k, policy, wrench):
     """The rule, straight from the binding: mode C, at the start orientation, PWM > 0."""
-    r = _core.solve(contacts=[list(c) for c in protocol.hands[k]], wrench=list(wrench),
-                    policy=policy, mode="C", constraints=protocol.constraints,
-                    orientation=list(protocol.start_quat), y_axis=list(protocol.y_axis),
-                    scalar="double", decomposition="qr",
-                    max_iterations=_core.kDefaultMaxIterations)
+    r = _core.solve(
+        contacts=[list(c) for c in protocol.hands[k]],
+        wrench=list(wrench),
+        policy=policy,
+        mode="C",
+        constraints=protocol.constraints,
+        orientation=list(protocol.start_quat),
+        y_axis=list(protocol.y_axis),
+        scalar="double",
+        decomposition="qr",
+        max_iterations=_core.kDefaultMaxIterations,
+    )
     assert r["status"] == "ok"
     return sum(1 for p in r["pwm"] if p > 0)
 
@@ -112,36 +119,63 @@ def test_split_with_policy_F_is_refused_with_the_reason():
 # --------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("old,new,needles", [
-    ("[familiarization]", "[familiarisation]", ["[familiarisation]", "unknown table"]),
-    ("seed = 2019", "seed = 2019\nsed = 1", ["[study] sed", "unknown key", "seed"]),
-    ("seed = 2019\n", "", ["[study] seed", "missing"]),
-    ("threshold_deg = 3.0", "threshold_deg = 181", ["[trial] threshold_deg", "[0, 180]"]),
-    ("threshold_deg = 3.0", 'threshold_deg = "3"', ["[trial] threshold_deg", "number"]),
-    ("hold_s = 0.5", "hold_s = 95.0", ["[trial] hold_s", "must not exceed timeout_s"]),
-    ("start_quat = [1.0, 0.0, 0.0, 0.0]", "start_quat = [1.0, 1.0, 0.0, 0.0]",
-     ["[trial] start_quat", "unit quaternion"]),
-    ('constraints = "paper"', 'constraints = "strict"', ["[trial] constraints", "'paper'"]),
-    ('units = "m"', 'units = "cm"', ["[hand] units", "'mm'"]),
-    ('modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]', 'modalities = ["F+C", "F+X"]',
-     ["[conditions] modalities", "'Fperp+V'"]),
-    ('modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]', 'modalities = ["F+C", "F+C"]',
-     ["[conditions] modalities", "twice"]),
-    ("contact_counts = [3, 4]", "contact_counts = [3, 5]", ["[conditions] contact_counts"]),
-    ('modality_order = "balanced_latin_square"', 'modality_order = "latin"',
-     ["[conditions] modality_order", "balanced_latin_square"]),
-    ("single_motor = 5", "single_motor = 13", ["[wrenches] single_motor", "0..12"]),
-    ("count = 12", "count = 0", ["[wrenches] count"]),
-    ("start_error_deg = [20.0, 120.0]", "start_error_deg = [2.0, 120.0]",
-     ["[wrenches] start_error_deg", "threshold_deg"]),
-    ("start_error_deg = [20.0, 120.0]", "start_error_deg = [120.0, 20.0]",
-     ["[wrenches] start_error_deg", "min < max"]),
-    ("middle = [-0.010, 0.100, 0.040]\n\n[hand.k4]", "\n[hand.k4]",
-     ["[hand.k3]", "missing middle"]),
-    ("palm   = [0.0, 0.045, 0.0]", "pinky = [0.0, 0.045, 0.0]", ["[hand.k4] pinky",
-                                                                 "unknown contact"]),
-    ("trials = 4", "trials = -1", ["[familiarization] trials"]),
-])
+@pytest.mark.parametrize(
+    "old,new,needles",
+    [
+        ("[familiarization]", "[familiarisation]", ["[familiarisation]", "unknown table"]),
+        ("seed = 2019", "seed = 2019\nsed = 1", ["[study] sed", "unknown key", "seed"]),
+        ("seed = 2019\n", "", ["[study] seed", "missing"]),
+        ("threshold_deg = 3.0", "threshold_deg = 181", ["[trial] threshold_deg", "[0, 180]"]),
+        ("threshold_deg = 3.0", 'threshold_deg = "3"', ["[trial] threshold_deg", "number"]),
+        ("hold_s = 0.5", "hold_s = 95.0", ["[trial] hold_s", "must not exceed timeout_s"]),
+        (
+            "start_quat = [1.0, 0.0, 0.0, 0.0]",
+            "start_quat = [1.0, 1.0, 0.0, 0.0]",
+            ["[trial] start_quat", "unit quaternion"],
+        ),
+        ('constraints = "paper"', 'constraints = "strict"', ["[trial] constraints", "'paper'"]),
+        ('units = "m"', 'units = "cm"', ["[hand] units", "'mm'"]),
+        (
+            'modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]',
+            'modalities = ["F+C", "F+X"]',
+            ["[conditions] modalities", "'Fperp+V'"],
+        ),
+        (
+            'modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]',
+            'modalities = ["F+C", "F+C"]',
+            ["[conditions] modalities", "twice"],
+        ),
+        ("contact_counts = [3, 4]", "contact_counts = [3, 5]", ["[conditions] contact_counts"]),
+        (
+            'modality_order = "balanced_latin_square"',
+            'modality_order = "latin"',
+            ["[conditions] modality_order", "balanced_latin_square"],
+        ),
+        ("single_motor = 5", "single_motor = 13", ["[wrenches] single_motor", "0..12"]),
+        ("count = 12", "count = 0", ["[wrenches] count"]),
+        (
+            "start_error_deg = [20.0, 120.0]",
+            "start_error_deg = [2.0, 120.0]",
+            ["[wrenches] start_error_deg", "threshold_deg"],
+        ),
+        (
+            "start_error_deg = [20.0, 120.0]",
+            "start_error_deg = [120.0, 20.0]",
+            ["[wrenches] start_error_deg", "min < max"],
+        ),
+        (
+            "middle = [-0.010, 0.100, 0.040]\n\n[hand.k4]",
+            "\n[hand.k4]",
+            ["[hand.k3]", "missing middle"],
+        ),
+        (
+            "palm   = [0.0, 0.045, 0.0]",
+            "pinky = [0.0, 0.045, 0.0]",
+            ["[hand.k4] pinky", "unknown contact"],
+        ),
+        ("trials = 4", "trials = -1", ["[familiarization] trials"]),
+    ],
+)
 def test_validation_errors_name_the_key(old, new, needles):
     with pytest.raises(pf.ProtocolFileError) as e:
         pf.loads_protocol(edited(old, new), "my.toml")
@@ -171,8 +205,15 @@ def _trial_cases():
     for key, r in _core.TRIAL_LIMITS.items():
         low = "(" if r["min_exclusive"] else "["
         below = r["min"] if r["min_exclusive"] else r["min"] - 0.5
-        out.append(("trial", key, repr(below), repr(r["max"] + 0.5),
-                    f"{low}{r['min']:g}, {r['max']:g}] {units[key]}"))
+        out.append(
+            (
+                "trial",
+                key,
+                repr(below),
+                repr(r["max"] + 0.5),
+                f"{low}{r['min']:g}, {r['max']:g}] {units[key]}",
+            )
+        )
     return out
 
 
@@ -197,11 +238,15 @@ def _range_params():
     for table, key, below, above, accepted in RANGE_CASES:
         ident = f"{table}.{key}"
         is_list = key == "start_error_deg"
-        bad = {"below": below, "above": above,
-               "nan": "[nan, 120.0]" if is_list else "nan",
-               "inf": "[20.0, inf]" if is_list else "inf",
-               "-inf": None if is_list else "-inf",
-               "string": '"12"', "bool": "true"}
+        bad = {
+            "below": below,
+            "above": above,
+            "nan": "[nan, 120.0]" if is_list else "nan",
+            "inf": "[20.0, inf]" if is_list else "inf",
+            "-inf": None if is_list else "-inf",
+            "string": '"12"',
+            "bool": "true",
+        }
         for case, literal in bad.items():
             if literal is not None:
                 yield pytest.param(table, key, literal, accepted, id=f"{ident}-{case}")
@@ -219,19 +264,28 @@ def test_every_number_is_range_checked_and_named(table, key, literal, accepted):
         assert accepted in msg, msg
 
 
-@pytest.mark.parametrize("table,key,value", [
-    ("trial", "threshold_deg", 0.0), ("trial", "threshold_deg", 19.0),
-    ("trial", "hold_s", 0.0), ("trial", "timeout_s", 1800.0), ("trial", "hold_s", 90.0),
-    ("study", "pose_rate_hz", 5.0), ("study", "pose_rate_hz", 2000.0),
-    ("familiarization", "duration_s", 0.0), ("familiarization", "duration_s", 3600.0),
-])
+@pytest.mark.parametrize(
+    "table,key,value",
+    [
+        ("trial", "threshold_deg", 0.0),
+        ("trial", "threshold_deg", 19.0),
+        ("trial", "hold_s", 0.0),
+        ("trial", "timeout_s", 1800.0),
+        ("trial", "hold_s", 90.0),
+        ("study", "pose_rate_hz", 5.0),
+        ("study", "pose_rate_hz", 2000.0),
+        ("familiarization", "duration_s", 0.0),
+        ("familiarization", "duration_s", 3600.0),
+    ],
+)
 def test_range_ends_are_accepted(table, key, value):
     p = pf.loads_protocol(set_key(table, key, repr(value)))
     assert p.to_dict()[table][key] == value
 
 
-@pytest.mark.parametrize("key,value", [("timeout_s", "9.3e12"), ("hold_s", "1e13"),
-                                       ("timeout_s", "1e30")])
+@pytest.mark.parametrize(
+    "key,value", [("timeout_s", "9.3e12"), ("hold_s", "1e13"), ("timeout_s", "1e30")]
+)
 def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
     """timeout_s = 9.3e12 and hold_s = 1e13 were accepted and overflowed the core's int64
     microseconds (an instant failure or an unearned success)."""
@@ -251,17 +305,30 @@ def test_trial_ranges_are_the_cores_not_a_copy(monkeypatch):
         pf.loads_protocol(paper_text())
 
 
-@pytest.mark.parametrize("units,scale,needles", [
-    ("m", 1000.0, ["[hand.k3]", "contacts span 77.9", "looks like millimetres",
-                   '[hand] units = "mm"']),
-    ("mm", 1.0, ["[hand.k3]", "contacts span 0.0779", "looks like metres",
-                 '[hand] units = "m"']),
-    ("m", 100.0, ["[hand.k3]", "looks like centimetres", "millimetres (x 10)"]),
-])
+@pytest.mark.parametrize(
+    "units,scale,needles",
+    [
+        (
+            "m",
+            1000.0,
+            ["[hand.k3]", "contacts span 77.9", "looks like millimetres", '[hand] units = "mm"'],
+        ),
+        (
+            "mm",
+            1.0,
+            ["[hand.k3]", "contacts span 0.0779", "looks like metres", '[hand] units = "m"'],
+        ),
+        ("m", 100.0, ["[hand.k3]", "looks like centimetres", "millimetres (x 10)"]),
+    ],
+)
 def test_contacts_in_another_unit_than_stated_are_refused(units, scale, needles):
     text = edited('units = "m"', f'units = "{units}"')
-    for row in ("[0.045, 0.045, 0.035]", "[0.015, 0.095, 0.040]", "[-0.010, 0.100, 0.040]",
-                "[0.0, 0.045, 0.0]"):
+    for row in (
+        "[0.045, 0.045, 0.035]",
+        "[0.015, 0.095, 0.040]",
+        "[-0.010, 0.100, 0.040]",
+        "[0.0, 0.045, 0.0]",
+    ):
         values = [float(x) * scale for x in row.strip("[]").split(",")]
         text = text.replace(row, "[" + ", ".join(repr(v) for v in values) + "]")
     with pytest.raises(pf.ProtocolFileError) as e:
@@ -272,14 +339,20 @@ def test_contacts_in_another_unit_than_stated_are_refused(units, scale, needles)
 
 def test_the_same_hand_in_millimetres_loads_to_the_same_metres(paper):
     text = edited('units = "m"', 'units = "mm"')
-    for row in ("[0.045, 0.045, 0.035]", "[0.015, 0.095, 0.040]", "[-0.010, 0.100, 0.040]",
-                "[0.0, 0.045, 0.0]"):
-        text = text.replace(row, "[" + ", ".join(
-            f"{float(x) * 1000:.1f}" for x in row.strip("[]").split(",")) + "]")
+    for row in (
+        "[0.045, 0.045, 0.035]",
+        "[0.015, 0.095, 0.040]",
+        "[-0.010, 0.100, 0.040]",
+        "[0.0, 0.045, 0.0]",
+    ):
+        text = text.replace(
+            row, "[" + ", ".join(f"{float(x) * 1000:.1f}" for x in row.strip("[]").split(",")) + "]"
+        )
     p = pf.loads_protocol(text)
     for k in (3, 4):
         assert [x for c in p.hands[k] for x in c] == pytest.approx(
-            [x for c in paper.hands[k] for x in c], abs=1e-15)
+            [x for c in paper.hands[k] for x in c], abs=1e-15
+        )
 
 
 def test_a_moment_in_newton_millimetres_is_refused():
@@ -336,8 +409,7 @@ def test_balanced_latin_square(n):
         column = [row[pos] for row in rows]
         assert all(column.count(c) == len(rows) // n for c in range(n))
     pairs = [(row[i], row[i + 1]) for row in rows for i in range(n - 1)]
-    assert all(pairs.count(p) == len(rows) // n
-               for p in itertools.permutations(range(n), 2))
+    assert all(pairs.count(p) == len(rows) // n for p in itertools.permutations(range(n), 2))
 
 
 def test_plan_is_deterministic(paper, paper_wrenches):
@@ -353,14 +425,14 @@ def test_plan_structure(paper, paper_wrenches):
     trials = pf.plan(paper, "U3")
     fam = [t for t in trials if t.familiarization]
     assert len(fam) == 4 and all(t.session == 0 for t in fam)
-    assert trials[:4] == fam                       # familiarization first
+    assert trials[:4] == fam  # familiarization first
     assert {t.modality for t in fam} == set(paper.modalities)
     by_session = {}
     for t in trials[4:]:
         by_session.setdefault(t.session, []).append(t)
     assert sorted(by_session) == list(range(1, 9))
     seen = set()
-    for s, ts in by_session.items():
+    for ts in by_session.values():
         assert sorted(t.wrench_id for t in ts) == [w.id for w in paper_wrenches]
         assert len({(t.k, t.modality) for t in ts}) == 1
         seen.add((ts[0].k, ts[0].modality))
@@ -369,7 +441,7 @@ def test_plan_structure(paper, paper_wrenches):
             w = next(w for w in paper_wrenches if w.id == t.wrench_id)
             assert t.single_motor == w.single_motor[f"k{t.k}/{t.policy}"]
             assert t.wrench_class == w.wrench_class
-    assert len(seen) == 8                          # every condition once
+    assert len(seen) == 8  # every condition once
     # the wrench order is shuffled per session
     orders = {tuple(t.wrench_id for t in ts) for ts in by_session.values()}
     assert len(orders) > 1
@@ -379,12 +451,11 @@ def test_counterbalancing_over_4_participants(paper):
     ids = ["U1", "U2", "U3", "U4"]
     orders = {pid: pf.session_order(paper, pid) for pid in ids}
     for block in (0, 1):
-        positions = [[s.modality for s in orders[pid][4 * block: 4 * block + 4]]
-                     for pid in ids]
+        positions = [[s.modality for s in orders[pid][4 * block : 4 * block + 4]] for pid in ids]
         for pos in range(4):
             assert sorted(row[pos] for row in positions) == sorted(paper.modalities)
     firsts = [orders[pid][0].k for pid in ids]
-    assert firsts == [3, 4, 3, 4]                  # alternating contact-count order
+    assert firsts == [3, 4, 3, 4]  # alternating contact-count order
     # each participant: one k block, then the other
     for pid in ids:
         ks = [s.k for s in orders[pid]]
@@ -396,19 +467,22 @@ def test_counterbalancing_over_8_participants(paper):
     for n in range(1, 9):
         o = pf.session_order(paper, f"U{n}")
         combos.add((tuple(s.modality for s in o[:4]), o[0].k))
-    assert len(combos) == 8                        # every row with both contact orders
+    assert len(combos) == 8  # every row with both contact orders
 
 
 def test_fixed_and_random_orders():
-    fixed = pf.loads_protocol(edited('modality_order = "balanced_latin_square"',
-                                     'modality_order = "fixed"').replace(
-        'contact_order = "alternate"', 'contact_order = "fixed"'))
+    fixed = pf.loads_protocol(
+        edited('modality_order = "balanced_latin_square"', 'modality_order = "fixed"').replace(
+            'contact_order = "alternate"', 'contact_order = "fixed"'
+        )
+    )
     for pid in ("U1", "U2"):
         o = pf.session_order(fixed, pid)
-        assert [(s.k, s.modality) for s in o] == [(k, m) for k in (3, 4)
-                                                  for m in fixed.modalities]
-    rnd = pf.loads_protocol(edited('modality_order = "balanced_latin_square"',
-                                   'modality_order = "random"'))
+        assert [(s.k, s.modality) for s in o] == [(k, m) for k in (3, 4) for m in fixed.modalities]
+    rnd = pf.loads_protocol(
+        edited('modality_order = "balanced_latin_square"', 'modality_order = "random"')
+    )
     assert pf.session_order(rnd, "U1") == pf.session_order(rnd, "U1")
-    assert {tuple(s.modality for s in pf.session_order(rnd, f"U{n}")) for n in range(1, 9)} \
-        != {tuple(rnd.modalities)}
+    assert {tuple(s.modality for s in pf.session_order(rnd, f"U{n}")) for n in range(1, 9)} != {
+        tuple(rnd.modalities)
+    }

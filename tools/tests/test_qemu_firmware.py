@@ -36,25 +36,34 @@ import numpy as np
 import pytest
 from known_answer_requests import load_cases, request_lines
 
-from graspguide.core import _core, scene_generators as scenes, solver
+from graspguide.core import _core, solver
+from graspguide.core import scene_generators as scenes
 from graspguide.link import client as gd
-from graspguide.link import transport as gt
 from graspguide.link import messages as m
+from graspguide.link import transport as gt
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 ELF = os.environ.get("GRASPGUIDE_M4F_FIRMWARE") or os.path.join(
-    _ROOT, ".pio", "build", "m4f_firmware", "firmware.elf")
+    _ROOT, ".pio", "build", "m4f_firmware", "firmware.elf"
+)
 QEMU = shutil.which("qemu-system-arm")
 BOARD = "qemu-mps2-an386"
 
 pytestmark = [
-    pytest.mark.skipif(QEMU is None, reason="qemu-system-arm is not installed (as root: "
-                       "tools/install-arm.sh installs it with the ARM toolchain)"),
-    pytest.mark.skipif(not os.path.isfile(ELF), reason=(
-        f"the QEMU firmware {ELF} is not built: `pio run -e m4f_firmware` (needs "
-        "arm-none-eabi-g++ from tools/install-arm.sh; tools/run-tests.sh does both)")),
+    pytest.mark.skipif(
+        QEMU is None,
+        reason="qemu-system-arm is not installed (as root: "
+        "tools/install-arm.sh installs it with the ARM toolchain)",
+    ),
+    pytest.mark.skipif(
+        not os.path.isfile(ELF),
+        reason=(
+            f"the QEMU firmware {ELF} is not built: `pio run -e m4f_firmware` (needs "
+            "arm-none-eabi-g++ from tools/install-arm.sh; tools/run-tests.sh does both)"
+        ),
+    ),
 ]
 
 # QEMU polls a pty nobody has open once a second; the first answer must outlast that.
@@ -66,10 +75,16 @@ WATCHDOG_MS = m.POSE_WATCHDOG_MS
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HAND4 = HAND3 + [[0.0, 0.045, 0.0]]
 SCENES = {
-    "k3_F_V": dict(contacts=HAND3, wrench=[0.3, -1.2, -0.8, 0, 0, 0], policy="F", mode="V",
-                   constraints="paper"),
-    "k4_Fperp_V": dict(contacts=HAND4, wrench=[0.4, -1.0, 0.3, 0.02, 0, -0.01],
-                       policy="Fperp", mode="V", constraints="paper"),
+    "k3_F_V": dict(
+        contacts=HAND3, wrench=[0.3, -1.2, -0.8, 0, 0, 0], policy="F", mode="V", constraints="paper"
+    ),
+    "k4_Fperp_V": dict(
+        contacts=HAND4,
+        wrench=[0.4, -1.0, 0.3, 0.02, 0, -0.01],
+        policy="Fperp",
+        mode="V",
+        constraints="paper",
+    ),
 }
 POSES_PER_SCENE = 40
 # The longest trial a scene may ask for (the core's range): nothing times out mid-test.
@@ -143,18 +158,36 @@ class QemuBoard:
     def __init__(self, workdir: str):
         self.qmp_path = os.path.join(workdir, "qmp.sock")
         self.stderr = tempfile.TemporaryFile()
-        self.command = [QEMU, "-M", "mps2-an386", "-nographic", "-monitor", "none",
-                        "-serial", "pty", "-qmp", f"unix:{self.qmp_path},server=on,wait=off",
-                        "-kernel", ELF]
-        self.process = subprocess.Popen(self.command, stdin=subprocess.DEVNULL,
-                                        stdout=subprocess.PIPE, stderr=self.stderr)
+        self.command = [
+            QEMU,
+            "-M",
+            "mps2-an386",
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            "pty",
+            "-qmp",
+            f"unix:{self.qmp_path},server=on,wait=off",
+            "-kernel",
+            ELF,
+        ]
+        self.process = subprocess.Popen(
+            self.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self.stderr
+        )
         self.qmp = None
         try:
             self.pty_path = self._pty_line()
             self.qmp = Qmp(self.qmp_path, START_TIMEOUT)
-            self.symbols = {name: _firmware_symbol(name) for name in (
-                "m4f_pwm_ccr", "m4f_uart_rx_dropped", "m4f_uart_tx_frames_dropped",
-                "m4f_stack_peak")}
+            self.symbols = {
+                name: _firmware_symbol(name)
+                for name in (
+                    "m4f_pwm_ccr",
+                    "m4f_uart_rx_dropped",
+                    "m4f_uart_tx_frames_dropped",
+                    "m4f_stack_peak",
+                )
+            }
         except BaseException:
             self.close()
             raise
@@ -167,17 +200,18 @@ class QemuBoard:
         while True:
             for line in buf.split(b"\n")[:-1]:
                 if line.startswith(prefix):
-                    return line[len(prefix):].split(b" ")[0].decode()
+                    return line[len(prefix) :].split(b" ")[0].decode()
             left = deadline - time.monotonic()
             if left <= 0:
-                raise TimeoutError(f"no pty line from {' '.join(self.command)} in "
-                                   f"{START_TIMEOUT} s; stdout {buf!r}; {self._stderr()}")
+                raise TimeoutError(
+                    f"no pty line from {' '.join(self.command)} in "
+                    f"{START_TIMEOUT} s; stdout {buf!r}; {self._stderr()}"
+                )
             ready, _, _ = select.select([fd], [], [], left)
             if ready:
                 chunk = os.read(fd, 4096)
                 if not chunk:
-                    raise RuntimeError(f"qemu exited with {self.process.wait()}: "
-                                       f"{self._stderr()}")
+                    raise RuntimeError(f"qemu exited with {self.process.wait()}: {self._stderr()}")
                 buf += chunk
 
     def _stderr(self) -> str:
@@ -189,8 +223,7 @@ class QemuBoard:
         fd, path = tempfile.mkstemp(suffix=".bin")
         os.close(fd)
         try:
-            self.qmp.execute("pmemsave", val=self.symbols[symbol], size=4 * count,
-                             filename=path)
+            self.qmp.execute("pmemsave", val=self.symbols[symbol], size=4 * count, filename=path)
             with open(path, "rb") as f:
                 return struct.unpack(f"<{count}I", f.read())
         finally:
@@ -233,9 +266,10 @@ def link(board, report_figure):
     try:
         t0 = time.perf_counter()
         client.hello(timeout=FIRST_ANSWER_TIMEOUT)
-        report_figure("QEMU firmware: first answer after opening the pty",
-                      f"{1e3 * (time.perf_counter() - t0):.0f} ms (QEMU polls an unopened "
-                      "pty once a second)")
+        report_figure(
+            "QEMU firmware: first answer after opening the pty",
+            f"{1e3 * (time.perf_counter() - t0):.0f} ms (QEMU polls an unopened pty once a second)",
+        )
         yield client
     finally:
         transport.close()
@@ -279,13 +313,13 @@ def test_pose_pwm_equals_the_core_in_float(client, board, name, report_figure):
         q = list(scenes.random_quaternion(rng))
         contacts = None
         if i >= POSES_PER_SCENE - 4:  # moved contacts: the grasp part runs on the target
-            contacts = (np.asarray(sc["contacts"])
-                        + rng.uniform(-0.003, 0.003, (k, 3))).tolist()
+            contacts = (np.asarray(sc["contacts"]) + rng.uniform(-0.003, 0.003, (k, 3))).tolist()
         t0 = time.perf_counter()
         tel = client.pose(i * 10_000, q, contacts)
         round_trips.append(time.perf_counter() - t0)
-        ref = solver.solve(contacts or sc["contacts"], sc["wrench"], orientation=q,
-                           scalar="float", **kw)
+        ref = solver.solve(
+            contacts or sc["contacts"], sc["wrench"], orientation=q, scalar="float", **kw
+        )
         where = (name, i, q)
         assert tel.solver_status.name.lower() == ref["status"] == "ok", where
         got = list(tel.pwm[:k])
@@ -302,11 +336,13 @@ def test_pose_pwm_equals_the_core_in_float(client, board, name, report_figure):
             registers_checked += 1
     client.stop()
     rt = sorted(1e3 * x for x in round_trips)
-    report_figure(f"QEMU firmware {name}: POSE -> TELEMETRY round trip",
-                  f"median {statistics.median(rt):.2f} ms, p90 {rt[int(0.9 * len(rt))]:.2f} "
-                  f"ms, max {rt[-1]:.2f} ms over {len(rt)} poses one at a time; PWM vs "
-                  f"core float: {diffs.count(0)} exact, {diffs.count(1)} off by 1; "
-                  f"{registers_checked} register reads equal")
+    report_figure(
+        f"QEMU firmware {name}: POSE -> TELEMETRY round trip",
+        f"median {statistics.median(rt):.2f} ms, p90 {rt[int(0.9 * len(rt))]:.2f} "
+        f"ms, max {rt[-1]:.2f} ms over {len(rt)} poses one at a time; PWM vs "
+        f"core float: {diffs.count(0)} exact, {diffs.count(1)} off by 1; "
+        f"{registers_checked} register reads equal",
+    )
 
 
 def test_pipelined_stream_matches_the_core(client, board, report_figure):
@@ -324,16 +360,21 @@ def test_pipelined_stream_matches_the_core(client, board, report_figure):
         assert max(abs(a - b) for a, b in zip(tel.pwm[:3], ref["pwm"])) <= 1, (q, tel, ref)
     assert client.device_frames_lost == 0 and client.host_bad_frames == 0
     assert board.uart_losses() == (0, 0)
-    report_figure("QEMU firmware: pipelined POSE stream (window 8)",
-                  f"{res.round_trips_per_s:.0f} round trips/s over {len(quats)} poses")
+    report_figure(
+        "QEMU firmware: pipelined POSE stream (window 8)",
+        f"{res.round_trips_per_s:.0f} round trips/s over {len(quats)} poses",
+    )
 
 
 def _render(client, board):
     """A running trial whose last TELEMETRY turned motors on; returns when that POSE was
     sent (time.monotonic())."""
     sc = SCENES["k3_F_V"]
-    client.set_scene(sc["contacts"], timeout_s=LONGEST_TRIAL_S,
-                     **{k: sc[k] for k in ("policy", "mode", "constraints")})
+    client.set_scene(
+        sc["contacts"],
+        timeout_s=LONGEST_TRIAL_S,
+        **{k: sc[k] for k in ("policy", "mode", "constraints")},
+    )
     client.start_trial(11, sc["wrench"])
     sent = time.monotonic()
     tel = client.pose(gd.host_time_us(), [0.9394, 0.1125, 0.2250, -0.2312])
@@ -368,8 +409,10 @@ def test_watchdog_turns_the_motors_off_when_poses_stop(client, board, report_fig
     st = client.status()
     assert st.stale_events == stale0 + 1 and st.state is m.DeviceState.TRIAL_RUNNING
     client.stop()
-    report_figure("QEMU firmware: watchdog, last POSE -> motor registers off",
-                  f"{1e3 * off_after:.0f} ms (watchdog {WATCHDOG_MS} ms)")
+    report_figure(
+        "QEMU firmware: watchdog, last POSE -> motor registers off",
+        f"{1e3 * off_after:.0f} ms (watchdog {WATCHDOG_MS} ms)",
+    )
     # Never early: the firmware's SysTick clock follows QEMU's virtual clock, which runs
     # in step with the host's (never ahead). Late by the round trip, the register polling
     # and scheduling on a busy host.
@@ -382,8 +425,10 @@ def test_stack_and_uart_after_the_session(board, report_figure):
     frame lost in the UART's rings."""
     time.sleep(0.15)
     (peak,) = board.words("m4f_stack_peak")
-    report_figure("QEMU firmware: stack high-water mark (painted)",
-                  f"{peak} bytes after the session, of 8192 reserved by src/m4f/link.ld")
+    report_figure(
+        "QEMU firmware: stack high-water mark (painted)",
+        f"{peak} bytes after the session, of 8192 reserved by src/m4f/link.ld",
+    )
     assert 0 < peak < 8192
     assert board.uart_losses() == (0, 0)
 
@@ -404,14 +449,20 @@ def test_cli_solve_engine_device_agrees_with_core_float(tmp_path, report_figure)
     b = QemuBoard(str(tmp_path))
     try:
         t0 = time.perf_counter()
-        dev = subprocess.run(cli + ["--engine", "device", "--port", b.pty_path, "--timeout",
-                                    str(FIRST_ANSWER_TIMEOUT)],
-                             input=data, capture_output=True, env=env, timeout=300)
+        dev = subprocess.run(
+            cli
+            + ["--engine", "device", "--port", b.pty_path, "--timeout", str(FIRST_ANSWER_TIMEOUT)],
+            input=data,
+            capture_output=True,
+            env=env,
+            timeout=300,
+        )
         wall = time.perf_counter() - t0
     finally:
         b.close()
-    core = subprocess.run(cli + ["--scalar", "float"], input=data, capture_output=True,
-                          env=env, timeout=300)
+    core = subprocess.run(
+        cli + ["--scalar", "float"], input=data, capture_output=True, env=env, timeout=300
+    )
     dev_out = [json.loads(x) for x in dev.stdout.decode().splitlines()]
     core_out = [json.loads(x) for x in core.stdout.decode().splitlines()]
     assert len(dev_out) == len(core_out) == len(lines), dev.stderr.decode()[-2000:]
@@ -433,15 +484,19 @@ def test_cli_solve_engine_device_agrees_with_core_float(tmp_path, report_figure)
                     order_diffs += 1
                 else:
                     problems.append((name, d["error"], c["error"]))
-        elif (max(abs(a - b) for a, b in zip(d["pwm"], c["pwm"])) > 1
-              or d["constraints_used"] != c["constraints_used"]
-              or abs(d["error_deg"] - c["error_deg"]) > 1e-3):
+        elif (
+            max(abs(a - b) for a, b in zip(d["pwm"], c["pwm"])) > 1
+            or d["constraints_used"] != c["constraints_used"]
+            or abs(d["error_deg"] - c["error_deg"]) > 1e-3
+        ):
             problems.append((name, d, c))
         else:
             agree += 1
-    report_figure("QEMU firmware: graspguide solve --engine device vs --scalar float",
-                  f"{len(lines)} requests in {wall:.1f} s: {agree} ok and within 1 count, "
-                  f"{both_refused} refused by both, {order_diffs} multi-fault cases differ by "
-                  f"the order of checks, {len(problems)} disagree")
+    report_figure(
+        "QEMU firmware: graspguide solve --engine device vs --scalar float",
+        f"{len(lines)} requests in {wall:.1f} s: {agree} ok and within 1 count, "
+        f"{both_refused} refused by both, {order_diffs} multi-fault cases differ by "
+        f"the order of checks, {len(problems)} disagree",
+    )
     assert not problems, problems[:5]
     assert both_refused <= 6 and agree > 400

@@ -27,8 +27,9 @@ def _random(k, n, seed=99):
 
 
 def _solve(sc, **kw):
-    return ref.solve(sc["contacts"], sc["wrench"], orientation=sc["orientation"],
-                     y_axis=sc["y_axis"], **kw)
+    return ref.solve(
+        sc["contacts"], sc["wrench"], orientation=sc["orientation"], y_axis=sc["y_axis"], **kw
+    )
 
 
 def _system(sc):
@@ -51,10 +52,14 @@ def _rot(axis, angle):
 def _qmul(p, q):
     w1, x1, y1, z1 = p
     w2, x2, y2, z2 = q
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 @pytest.mark.parametrize("k", [3, 4])
@@ -94,13 +99,19 @@ def lb_of(S, k):
 def _feasible_points(G, w_l, S, n, rng, box):
     """Vertices of {G lam = -w_L, lam_S >= 0, |lam| <= box} for random objectives."""
     from scipy.optimize import linprog
+
     m = G.shape[1]
     lb = np.full(m, -box)
     lb[S] = 0.0
     pts = []
     for _ in range(n):
-        res = linprog(rng.standard_normal(m), A_eq=G, b_eq=-w_l,
-                      bounds=list(zip(lb, np.full(m, box))), method="highs")
+        res = linprog(
+            rng.standard_normal(m),
+            A_eq=G,
+            b_eq=-w_l,
+            bounds=list(zip(lb, np.full(m, box))),
+            method="highs",
+        )
         if res.status == 0:
             pts.append(res.x)
     return pts
@@ -112,6 +123,7 @@ def test_qp_optimum_is_the_projection(k, model):
     """Variational inequality <lam_des - lam*, p - lam*> <= 0 over feasible points p,
     and agreement with SLSQP."""
     from scipy.optimize import minimize
+
     rng = np.random.default_rng(5)
     checked = slsqp_ok = 0
     for sc in _random(k, 12, seed=123):
@@ -130,12 +142,21 @@ def test_qp_optimum_is_the_projection(k, model):
         # SLSQP from lam_des (an independent start). On the paper model the feasible set
         # is often a single point (no interior), where SLSQP's line search may give up;
         # there the variational inequality above is the check.
-        sol = minimize(lambda x: 0.5 * np.sum((x - lam_des) ** 2), lam_des.copy(),
-                       jac=lambda x: x - lam_des, method="SLSQP",
-                       bounds=list(zip(lb_of(S, k), [np.inf] * (3 * k))),
-                       constraints=[{"type": "eq", "fun": lambda x: G @ x + w_l,
-                                     "jac": lambda x: G}],
-                       options={"ftol": 1e-15, "maxiter": 1000})
+        sol = minimize(
+            lambda x, lam_des=lam_des: 0.5 * np.sum((x - lam_des) ** 2),
+            lam_des.copy(),
+            jac=lambda x, lam_des=lam_des: x - lam_des,
+            method="SLSQP",
+            bounds=list(zip(lb_of(S, k), [np.inf] * (3 * k))),
+            constraints=[
+                {
+                    "type": "eq",
+                    "fun": lambda x, G=G, w_l=w_l: G @ x + w_l,
+                    "jac": lambda x, G=G: G,
+                }
+            ],
+            options={"ftol": 1e-15, "maxiter": 1000},
+        )
         if sol.success:
             slsqp_ok += 1
             assert np.linalg.norm(sol.x - lam) <= 1e-5 * (1 + np.linalg.norm(lam))
@@ -170,8 +191,9 @@ def _same_output(a, b, level_tol=1e-9):
 @pytest.mark.parametrize("k", [3, 4])
 def test_scale_invariance(k):
     for i, sc in enumerate(_random(k, 20, seed=11)):
-        policy, mode, model = [("F", "C", "paper"), ("Fperp", "V", "normal"),
-                               ("F", "V", "none")][i % 3]
+        policy, mode, model = [("F", "C", "paper"), ("Fperp", "V", "normal"), ("F", "V", "none")][
+            i % 3
+        ]
         scaled = dict(sc)
         scaled["contacts"] = (np.asarray(sc["contacts"]) * 1000).tolist()
         w = np.asarray(sc["wrench"])
@@ -186,8 +208,9 @@ def test_scale_invariance(k):
 def test_rotation_invariance(k):
     rng = np.random.default_rng(3)
     for i, sc in enumerate(_random(k, 20, seed=13)):
-        policy, mode, model = [("F", "V", "paper"), ("Fperp", "C", "normal"),
-                               ("F", "V", "none")][i % 3]
+        policy, mode, model = [("F", "V", "paper"), ("Fperp", "C", "normal"), ("F", "V", "none")][
+            i % 3
+        ]
         axis, angle = rng.standard_normal(3), rng.uniform(0, math.pi)
         Q = _rot(axis, angle)
         a_unit = axis / np.linalg.norm(axis)
@@ -213,8 +236,7 @@ def test_scaled_quaternion_equals_unit():
         q = np.asarray(sc["orientation"])
         for mode in ("C", "V"):
             a = _solve(sc, mode=mode)
-            b = ref.solve(sc["contacts"], sc["wrench"], mode=mode,
-                          orientation=(3.7 * q).tolist())
+            b = ref.solve(sc["contacts"], sc["wrench"], mode=mode, orientation=(3.7 * q).tolist())
             _same_output(a, b)
             assert abs(a["alpha"] - b["alpha"]) < 1e-9
 
@@ -229,15 +251,14 @@ def test_extreme_scenes_statuses():
         for key, want in case.get("expect", {}).items():
             got = res["relevant"][0] if key == "relevant0" else res[key]
             assert got == pytest.approx(want, abs=1e-9), (case["name"], key)
-    for name, (case, res) in by_name.items():
+    for case, res in by_name.values():
         if "same_as" in case:
             _same_output(res, by_name[case["same_as"]][1], level_tol=1e-8)
 
 
 def test_pwm_rounding_and_off_threshold():
     assert ref.round_half_away(70.5) == 71 and ref.round_half_away(70.49) == 70
-    assert ref.pwm_from_levels(np.array([1.0, 1e-3, -0.5, 0.0011]), "C", 0.0) == \
-        [255, 0, 163, 70]
+    assert ref.pwm_from_levels(np.array([1.0, 1e-3, -0.5, 0.0011]), "C", 0.0) == [255, 0, 163, 70]
     assert ref.pwm_from_levels(np.array([1.0, 0.5]), "V", 0.0) == [70, 70]
 
 
@@ -262,11 +283,15 @@ def test_known_answers_reproduce():
         data = json.load(fh)
     assert data["tolerances"]["kFeasRelTol"] == ref.kFeasRelTol
     for case in data["cases"]:
-        res = ref.solve(_decode(case["contacts"]), _decode(case["wrench"]),
-                        policy=case["policy"], mode=case["mode"],
-                        constraints=case["constraints"],
-                        orientation=_decode(case["orientation"]),
-                        y_axis=_decode(case["y_axis"]))
+        res = ref.solve(
+            _decode(case["contacts"]),
+            _decode(case["wrench"]),
+            policy=case["policy"],
+            mode=case["mode"],
+            constraints=case["constraints"],
+            orientation=_decode(case["orientation"]),
+            y_axis=_decode(case["y_axis"]),
+        )
         e = case["expect"]
         name = case["name"]
         assert res["status"] == e["status"], name

@@ -15,12 +15,11 @@ import time
 
 import numpy as np
 import pytest
-
 from conftest import subprocess_env
 
 from graspguide.cli import app as cli
-from graspguide.study import study_protocol as pf
 from graspguide.study import runner as rn
+from graspguide.study import study_protocol as pf
 from graspguide.study.sources import aligned_quaternion, quat_angle_deg, slerp
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
@@ -34,18 +33,24 @@ TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 class AligningHand:
     SIMULATED = True
 
-    def __init__(self, rate_hz: float = 100.0, speed_deg_s: float = 120.0,
-                 delay_s: float = 0.0, fail_at: int = 0, fail_with: str = ""):
+    def __init__(
+        self,
+        rate_hz: float = 100.0,
+        speed_deg_s: float = 120.0,
+        delay_s: float = 0.0,
+        fail_at: int = 0,
+        fail_with: str = "",
+    ):
         self.rate_hz = rate_hz
         self.speed = speed_deg_s
         self.delay = delay_s
-        self.fail_at = fail_at          # raise at this many steps (over all trials)
+        self.fail_at = fail_at  # raise at this many steps (over all trials)
         self.fail_with = fail_with
         self.steps = 0
         self.trials = 0
 
     @classmethod
-    def from_spec(cls, spec: str, seed: int) -> "AligningHand":
+    def from_spec(cls, spec: str, seed: int) -> AligningHand:
         kw = {}
         names = {"rate": "rate_hz", "speed": "speed_deg_s", "delay": "delay_s"}
         for item in filter(None, spec.split(",")):
@@ -129,9 +134,11 @@ class RecordingClient:
     def __getattr__(self, name):
         attr = getattr(self._c, name)
         if name in ("hello", "set_scene", "start_trial", "stop"):
+
             def wrapped(*a, **kw):
                 self.calls.append(name)
                 return attr(*a, **kw)
+
             return wrapped
         return attr
 
@@ -144,13 +151,24 @@ def sim():
         yield dev
 
 
-def make_runner(protocol, out, source_model, client, participant="U1", tlx=None, ask=None,
-                path="small.toml"):
+def make_runner(
+    protocol, out, source_model, client, participant="U1", tlx=None, ask=None, path="small.toml"
+):
     out_text = io.StringIO()
     err = io.StringIO()
-    runner = rn.StudyRunner(protocol, participant, str(out), rn.ClosedLoopSource(
-        source_model, "plugin:test_runner:AligningHand"), client, virtual_clock=True, tlx=tlx,
-        ask=ask, progress=rn.Progress(out=out_text, tty=False), protocol_file=path, err=err)
+    runner = rn.StudyRunner(
+        protocol,
+        participant,
+        str(out),
+        rn.ClosedLoopSource(source_model, "plugin:test_runner:AligningHand"),
+        client,
+        virtual_clock=True,
+        tlx=tlx,
+        ask=ask,
+        progress=rn.Progress(out=out_text, tty=False),
+        protocol_file=path,
+        err=err,
+    )
     return runner, out_text, err
 
 
@@ -169,25 +187,38 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
     client = RecordingClient(DeviceClient(sim))
     out = tmp_path / "out"
     # the source's own rate (50 Hz) gives way to the protocol's pose rate (100 Hz)
-    runner, text, err = make_runner(protocol, out, AligningHand(rate_hz=50.0), client,
-                                    path=path)
+    runner, text, err = make_runner(protocol, out, AligningHand(rate_hz=50.0), client, path=path)
     t0 = time.monotonic()
     result = runner.run()
     elapsed = time.monotonic() - t0
     plan = pf.plan(protocol, "U1")
     assert len(plan) == 1 + 4 * 2
-    assert result == {"participant": "U1", "planned": 9, "ran": 9, "skipped": 0,
-                      "completed": 9}
+    assert result == {"participant": "U1", "planned": 9, "ran": 9, "skipped": 0, "completed": 9}
     recs = lines(out / "U1" / "trials.jsonl")
     assert [r["trial_index"] for r in recs] == list(range(1, 10))
     for r, t in zip(recs, plan):
         for key in rn.TRIAL_FIELDS:
             assert key in r, key
         assert r["participant"] == "U1" and r["simulated"] is True
-        assert (r["session"], r["k"], r["policy"], r["mode"], r["modality"], r["wrench_id"],
-                r["single_motor"], r["familiarization"]) == (
-            t.session, t.k, t.policy, t.mode, t.modality, t.wrench_id, t.single_motor,
-            t.familiarization)
+        assert (
+            r["session"],
+            r["k"],
+            r["policy"],
+            r["mode"],
+            r["modality"],
+            r["wrench_id"],
+            r["single_motor"],
+            r["familiarization"],
+        ) == (
+            t.session,
+            t.k,
+            t.policy,
+            t.mode,
+            t.modality,
+            t.wrench_id,
+            t.single_motor,
+            t.familiarization,
+        )
         assert r["modality"] == f"{r['policy']}+{r['mode']}"
         assert r["wrench"] == list(t.wrench) and len(r["wrench"]) == 6
         assert r["success"] is True and 0.5 <= r["completion_s"] < 20.0
@@ -210,8 +241,7 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
     assert [t["session"] for t in tlx] == [1, 2, 3, 4]
     for t in tlx:
         assert t["scales"] is None and t["simulated"] is True
-        assert set(t) >= {"participant", "simulated", "session", "k", "modality", "mode",
-                          "scales"}
+        assert set(t) >= {"participant", "simulated", "session", "k", "modality", "mode", "scales"}
     study = json.load(open(out / "study.json"))
     assert study["config_hash"] == protocol.config_hash
     assert study["protocol"] == protocol.to_dict()
@@ -245,8 +275,15 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
     source = rn.open_runner_source(f"replay:{replay}", protocol, "U1")
     assert source.simulated and not source.closed_loop
     out = tmp_path / "out"
-    runner = rn.StudyRunner(protocol, "U1", str(out), source, DeviceClient(sim), True,
-                            progress=rn.Progress(out=io.StringIO(), tty=False))
+    runner = rn.StudyRunner(
+        protocol,
+        "U1",
+        str(out),
+        source,
+        DeviceClient(sim),
+        True,
+        progress=rn.Progress(out=io.StringIO(), tty=False),
+    )
     runner.run()
     recs = lines(out / "U1" / "trials.jsonl")
     assert len(recs) == 8
@@ -258,14 +295,28 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
 # Resume: SIGTERM, SIGKILL, damaged last line
 # --------------------------------------------------------------------------------------
 def _trial_cmd(path, out, extra=(), delay=0.002):
-    return [sys.executable, "-m", "graspguide", "trial", "--protocol", path, "--participant",
-            "U2", "--port", "sim", "--source",
-            f"plugin:test_runner:AligningHand:delay={delay}", "--out", str(out), *extra]
+    return [
+        sys.executable,
+        "-m",
+        "graspguide",
+        "trial",
+        "--protocol",
+        path,
+        "--participant",
+        "U2",
+        "--port",
+        "sim",
+        "--source",
+        f"plugin:test_runner:AligningHand:delay={delay}",
+        "--out",
+        str(out),
+        *extra,
+    ]
 
 
 def _env():
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR      # the test source; graspguide stays the installed one
+    env["PYTHONPATH"] = TESTS_DIR  # the test source; graspguide stays the installed one
     return env
 
 
@@ -288,8 +339,14 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     planned = len(pf.plan(protocol, "U2"))
     assert planned == 13
     # 1) SIGTERM: handled like Ctrl-C (STOP, exit 130, the run's end logged)
-    p = subprocess.Popen(_trial_cmd(path, out), env=_env(), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    p = subprocess.Popen(
+        _trial_cmd(path, out),
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         _wait_lines(trials, 2, p)
         p.send_signal(signal.SIGTERM)
@@ -302,12 +359,18 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     assert "interrupted" in stderr and "run the same command again" in stderr
     assert lines(out / "U2" / "runs.jsonl")[-1]["outcome"] == "interrupted"
     # 2) SIGKILL the runner mid-trial (its simulator, in a session of its own, dies with it)
-    p = subprocess.Popen(_trial_cmd(path, out), env=_env(), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    p = subprocess.Popen(
+        _trial_cmd(path, out),
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         before = trials.read_bytes().count(b"\n")
         _wait_lines(trials, before + 3, p)
-        time.sleep(0.05)                           # into the next trial
+        time.sleep(0.05)  # into the next trial
         os.killpg(p.pid, signal.SIGKILL)
         p.wait(timeout=10)
     finally:
@@ -319,12 +382,13 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     n_killed = killed_bytes.count(b"\n")
     assert 5 <= n_killed < planned
     # 3) the same command again completes the study
-    p = subprocess.run(_trial_cmd(path, out), env=_env(), capture_output=True, text=True,
-                       timeout=60)
+    p = subprocess.run(
+        _trial_cmd(path, out), env=_env(), capture_output=True, text=True, timeout=60
+    )
     assert p.returncode == 0, p.stderr
     assert f"resuming U2: {n_killed} of {planned}" in p.stdout
     final = trials.read_bytes()
-    assert final.startswith(killed_bytes)          # append-only: nothing rewritten
+    assert final.startswith(killed_bytes)  # append-only: nothing rewritten
     recs = lines(trials)
     assert sorted(r["trial_index"] for r in recs) == list(range(1, planned + 1))
     assert [r["trial_index"] for r in recs] == list(range(1, planned + 1))
@@ -337,11 +401,15 @@ def test_kill_mid_study_and_resume_every_trial_exactly_once(tmp_path):
     assert len(starts) == 3 and starts[-1]["completed_before"] == n_killed
     assert runs[-1]["outcome"] == "complete"
     # the interrupted study gives what an uninterrupted one gives
-    p = subprocess.run(_trial_cmd(path, tmp_path / "once", delay=0), env=_env(),
-                       capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        _trial_cmd(path, tmp_path / "once", delay=0),
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == 0, p.stderr
-    keys = ("trial_index", "success", "completion_s", "first_entry_s", "final_error_deg",
-            "poses")
+    keys = ("trial_index", "success", "completion_s", "first_entry_s", "final_error_deg", "poses")
     once = lines(tmp_path / "once" / "U2" / "trials.jsonl")
     assert [[r[k] for k in keys] for r in recs] == [[r[k] for k in keys] for r in once]
 
@@ -355,16 +423,15 @@ def test_half_written_last_line_is_reported_and_rerun(tmp_path, sim):
     runner.run()
     trials = out / "U1" / "trials.jsonl"
     data = trials.read_bytes()
-    cut = data[:-40]                               # the last line loses its end
+    cut = data[:-40]  # the last line loses its end
     trials.write_bytes(cut)
-    good = cut[:cut.rindex(b"\n") + 1]
-    runner, text, err = make_runner(protocol, out, AligningHand(), DeviceClient(sim),
-                                    path=path)
+    good = cut[: cut.rindex(b"\n") + 1]
+    runner, text, err = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
     assert runner.run()["ran"] == 1
     assert "half-written" in err.getvalue() and "trials.jsonl.damaged-" in err.getvalue()
     aside = [n for n in os.listdir(out / "U1") if n.startswith("trials.jsonl.damaged-")]
     assert len(aside) == 1
-    assert (out / "U1" / aside[0]).read_bytes() == cut[len(good):]
+    assert (out / "U1" / aside[0]).read_bytes() == cut[len(good) :]
     recs = lines(trials)
     assert sorted(r["trial_index"] for r in recs) == list(range(1, 9))
     assert trials.read_bytes().startswith(good)
@@ -431,27 +498,45 @@ def test_tlx_from_file(tmp_path, sim):
         assert t["scales"] == {"MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": s.session}
 
 
-@pytest.mark.parametrize("row,needle", [
-    (_good_tlx(1, MD=0), "MD (Mental Demand) must be in 1..21, got 0"),
-    (_good_tlx(1, FR=22), "FR (Frustration) must be in 1..21, got 22"),
-    (_good_tlx(1, EF=5.5), "EF (Effort) must be an integer 1..21, got 5.5"),
-    (_good_tlx(1, PE="4"), "PE (Performance) must be an integer"),
-    (_good_tlx(1, TD=True), "TD (Temporal Demand) must be an integer"),
-    ({"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6}, "missing FR"),
-    (_good_tlx(1, XX=3), "unknown key 'XX'"),
-    (_good_tlx(9), "session must be one of this participant's sessions 1..4"),
-    (_good_tlx(1, participant="U7"), "participant 'U7' is not 'U1'"),
-    (_good_tlx(1, modality="Fperp+V"), "the file says 'Fperp+V'"),
-])
+@pytest.mark.parametrize(
+    "row,needle",
+    [
+        (_good_tlx(1, MD=0), "MD (Mental Demand) must be in 1..21, got 0"),
+        (_good_tlx(1, FR=22), "FR (Frustration) must be in 1..21, got 22"),
+        (_good_tlx(1, EF=5.5), "EF (Effort) must be an integer 1..21, got 5.5"),
+        (_good_tlx(1, PE="4"), "PE (Performance) must be an integer"),
+        (_good_tlx(1, TD=True), "TD (Temporal Demand) must be an integer"),
+        ({"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6}, "missing FR"),
+        (_good_tlx(1, XX=3), "unknown key 'XX'"),
+        (_good_tlx(9), "session must be one of this participant's sessions 1..4"),
+        (_good_tlx(1, participant="U7"), "participant 'U7' is not 'U1'"),
+        (_good_tlx(1, modality="Fperp+V"), "the file says 'Fperp+V'"),
+    ],
+)
 def test_bad_tlx_values_rejected_with_a_message(tmp_path, capsys, row, needle):
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     tlx = _tlx_file(tmp_path, [row])
-    code = cli.main(["trial", "--protocol", path, "--participant", "U1", "--port", "sim",
-                     "--source", "synthetic", "--out", str(tmp_path / "out"), "--tlx", tlx])
+    code = cli.main(
+        [
+            "trial",
+            "--protocol",
+            path,
+            "--participant",
+            "U1",
+            "--port",
+            "sim",
+            "--source",
+            "synthetic",
+            "--out",
+            str(tmp_path / "out"),
+            "--tlx",
+            tlx,
+        ]
+    )
     err = capsys.readouterr().err
     assert code == cli.EXIT_USAGE
     assert f"--tlx {tlx}:1: " in err and needle in err, err
-    assert not (tmp_path / "out").exists()        # refused before any trial
+    assert not (tmp_path / "out").exists()  # refused before any trial
 
 
 def test_tlx_asked_interactively_with_retries(tmp_path, sim):
@@ -491,8 +576,7 @@ def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
         runner.run()
     assert len(lines(out / "U1" / "trials.jsonl")) == 1
     assert not (out / "U1" / "tlx.jsonl").exists()
-    runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim),
-                               ask=lambda p: "10")
+    runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), ask=lambda p: "10")
     assert runner.run()["ran"] == 3
     assert [t["session"] for t in lines(out / "U1" / "tlx.jsonl")] == [1, 2, 3, 4]
 
@@ -500,8 +584,7 @@ def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
 # --------------------------------------------------------------------------------------
 # STOP on the way out
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("how,exc", [("interrupt", KeyboardInterrupt),
-                                     ("error", RuntimeError)])
+@pytest.mark.parametrize("how,exc", [("interrupt", KeyboardInterrupt), ("error", RuntimeError)])
 def test_stop_sent_on_exit(tmp_path, sim, how, exc):
     from graspguide.link.client import DeviceClient
     from graspguide.link.messages import DeviceState
@@ -518,15 +601,17 @@ def test_stop_sent_on_exit(tmp_path, sim, how, exc):
         orig(**kw)
         if model.trials == 2:
             model.fail_at = model.steps + 20
+
     model.begin_trial = begin
     with pytest.raises(exc):
         runner.run()
     assert client.calls[-1] == "stop"
     assert client.calls.count("start_trial") == 2
-    assert client._c.status().state == DeviceState.STOPPED   # the trial is not running
+    assert client._c.status().state == DeviceState.STOPPED  # the trial is not running
     assert len(lines(out / "U1" / "trials.jsonl")) == 1
     assert lines(out / "U1" / "runs.jsonl")[-1]["outcome"] == (
-        "interrupted" if how == "interrupt" else "error")
+        "interrupted" if how == "interrupt" else "error"
+    )
     assert not (out / "U1" / "frames" / "trial-0002.csv").exists()
 
 
@@ -537,11 +622,29 @@ def test_cli_usage_errors(tmp_path, capsys):
     assert "participant id 'Ux'" in capsys.readouterr().err
     assert cli.main(base + ["--participant", "U1", "--source", "bogus"]) == 2
     assert "unknown --source 'bogus'" in capsys.readouterr().err
-    assert cli.main(["trial", "--protocol", str(tmp_path / "no.toml"), "--participant", "U1",
-                     "--port", "sim", "--source", "synthetic"]) == 2
+    assert (
+        cli.main(
+            [
+                "trial",
+                "--protocol",
+                str(tmp_path / "no.toml"),
+                "--participant",
+                "U1",
+                "--port",
+                "sim",
+                "--source",
+                "synthetic",
+            ]
+        )
+        == 2
+    )
     assert "cannot read the protocol file" in capsys.readouterr().err
-    assert cli.main(base + ["--participant", "U1", "--source",
-                            "plugin:test_runner:AligningHand:warp=9"]) == 2
+    assert (
+        cli.main(
+            base + ["--participant", "U1", "--source", "plugin:test_runner:AligningHand:warp=9"]
+        )
+        == 2
+    )
     assert "unknown option 'warp'" in capsys.readouterr().err
 
 
@@ -555,20 +658,29 @@ def test_real_time_run_on_the_device_clock(tmp_path):
     from graspguide.link.transport import SimulatedDevice
 
     path = tmp_path / "rt.toml"
-    path.write_text(SMALL.format(timeout=5.0, fam=0).replace(
-        "contact_counts = [3]", 'contact_counts = [3]\nmodalities = ["F+V"]').replace(
-        "single_motor = 1", "single_motor = 0").replace("count = 2", "count = 1"))
+    path.write_text(
+        SMALL.format(timeout=5.0, fam=0)
+        .replace("contact_counts = [3]", 'contact_counts = [3]\nmodalities = ["F+V"]')
+        .replace("single_motor = 1", "single_motor = 0")
+        .replace("count = 2", "count = 1")
+    )
     protocol = pf.load_protocol(str(path))
     out = tmp_path / "out"
     text = io.StringIO()
     with SimulatedDevice(virtual_clock=False, start=True) as dev:
-        runner = rn.StudyRunner(protocol, "U1", str(out), rn.ClosedLoopSource(
-            AligningHand(speed_deg_s=240.0), "test"), DeviceClient(dev), virtual_clock=False,
-            progress=rn.Progress(out=text, tty=False, period_s=0.2))
+        runner = rn.StudyRunner(
+            protocol,
+            "U1",
+            str(out),
+            rn.ClosedLoopSource(AligningHand(speed_deg_s=240.0), "test"),
+            DeviceClient(dev),
+            virtual_clock=False,
+            progress=rn.Progress(out=text, tty=False, period_s=0.2),
+        )
         runner.run()
     (rec,) = lines(out / "U1" / "trials.jsonl")
     assert rec["success"] is True
-    assert rec["wall_s"] >= 0.9 * rec["completion_s"]            # paced in real time
+    assert rec["wall_s"] >= 0.9 * rec["completion_s"]  # paced in real time
     with open(out / "U1" / "frames" / "trial-0001.csv") as f:
         rows = [r.split(",") for r in f.read().splitlines()[1:]]
     times = [int(r[1]) for r in rows]
@@ -580,8 +692,21 @@ def test_real_time_run_on_the_device_clock(tmp_path):
 def test_terminal_progress_line():
     buf = io.StringIO()
     view = rn.Progress(out=buf, tty=True)
-    trial = pf.PlannedTrial(3, "U1", 1, 2, 4, "Fperp", "V", "Fperp+V", "W05",
-                            (0.0, 0.0, -1.0, 0, 0, 0), False, "multi", False)
+    trial = pf.PlannedTrial(
+        3,
+        "U1",
+        1,
+        2,
+        4,
+        "Fperp",
+        "V",
+        "Fperp+V",
+        "W05",
+        (0.0, 0.0, -1.0, 0, 0, 0),
+        False,
+        "multi",
+        False,
+    )
     view.trial_start(trial, 100, 8)
     view.frame(1.25, 12.5, [0, 120, 80, 70], real_time=False)
     view.trial_end({"success": True, "completion_s": 4.5, "final_error_deg": 1.25})
@@ -608,6 +733,7 @@ def test_device_lost_mid_trial_keeps_the_link_error(tmp_path):
                 dev.process.kill()
                 dev.process.wait()
             return orig(t_s, pwm)
+
         model.step = step
         client = DeviceClient(dev, timeout=0.3)
         runner, _, err = make_runner(protocol, out, model, client)

@@ -1,4 +1,5 @@
-"""scene.toml loader (graspguide.study.scene_file): examples, units, defaults, errors, stable hash."""
+"""scene.toml loader (graspguide.study.scene_file): examples, units, defaults, errors,
+stable hash."""
 
 from __future__ import annotations
 
@@ -9,8 +10,7 @@ import pytest
 from graspguide.core import _core
 from graspguide.study import scene_file as gs
 
-EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "examples")
+EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
 MIN3 = """
 [scene]
 units = "m"
@@ -56,11 +56,13 @@ thumb = [45.0, 45.0, 35.0]
 units = "mm"
 """
     t = gs.loads_scene(full)
-    assert t.contacts == s.contacts        # mm / 1000 is correctly rounded: exactly equal
+    assert t.contacts == s.contacts  # mm / 1000 is correctly rounded: exactly equal
     assert t.config_hash() == s.config_hash()
     assert len(s.config_hash()) == 64 and s.config_hash() == gs.loads_scene(MIN3).config_hash()
-    assert gs.loads_scene(MIN3.replace('units = "m"', 'units = "m"\n') ).config_hash() == \
-        s.config_hash()
+    assert (
+        gs.loads_scene(MIN3.replace('units = "m"', 'units = "m"\n')).config_hash()
+        == s.config_hash()
+    )
     changed = gs.loads_scene(MIN3 + 'policy = "Fperp"\n')
     assert changed.config_hash() != s.config_hash()
 
@@ -72,21 +74,24 @@ def test_hash_is_stable_known_value():
     assert s.config_hash() == gs.config_hash(s.to_dict())
 
 
-@pytest.mark.parametrize("text, words", [
-    (MIN3.replace('units = "m"', 'units = "cm"'), ["units", "'m'", "'mm'"]),
-    (MIN3.replace('[scene]\nunits = "m"', "[scene]"), ["units is missing"]),
-    (MIN3 + "ring = [0, 0, 0]\n", ["unknown key 'ring'", "[contacts]"]),
-    (MIN3 + "[extra]\nx = 1\n", ["unknown table [extra]"]),
-    (MIN3.replace("middle = [-0.010, 0.100, 0.040]", ""), ["missing middle"]),
-    (MIN3.replace("[0.045, 0.045, 0.035]", "[0.045, 0.045]"), ["thumb", "3 numbers"]),
-    (MIN3.replace("[0.045, 0.045, 0.035]", '"0.045"'), ["thumb", "3 numbers"]),
-    (MIN3 + 'mode = "X"\n', ["mode", "'C'", "'V'"]),
-    (MIN3 + "y_axis = [0, 0, 0]\n", ["y_axis", "zero"]),
-    (MIN3 + "[trial]\nhold_s = \"long\"\n", ["[trial] hold_s", "number"]),
-    (MIN3 + "[trial]\ntimeout_s = -1\n", ["[trial] timeout_s", "(0, 1800] seconds"]),
-    (MIN3 + "[trial]\nthreshold = 3\n", ["unknown key 'threshold'", "threshold_deg"]),
-    ("[scene\n", ["not valid TOML"]),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (MIN3.replace('units = "m"', 'units = "cm"'), ["units", "'m'", "'mm'"]),
+        (MIN3.replace('[scene]\nunits = "m"', "[scene]"), ["units is missing"]),
+        (MIN3 + "ring = [0, 0, 0]\n", ["unknown key 'ring'", "[contacts]"]),
+        (MIN3 + "[extra]\nx = 1\n", ["unknown table [extra]"]),
+        (MIN3.replace("middle = [-0.010, 0.100, 0.040]", ""), ["missing middle"]),
+        (MIN3.replace("[0.045, 0.045, 0.035]", "[0.045, 0.045]"), ["thumb", "3 numbers"]),
+        (MIN3.replace("[0.045, 0.045, 0.035]", '"0.045"'), ["thumb", "3 numbers"]),
+        (MIN3 + 'mode = "X"\n', ["mode", "'C'", "'V'"]),
+        (MIN3 + "y_axis = [0, 0, 0]\n", ["y_axis", "zero"]),
+        (MIN3 + '[trial]\nhold_s = "long"\n', ["[trial] hold_s", "number"]),
+        (MIN3 + "[trial]\ntimeout_s = -1\n", ["[trial] timeout_s", "(0, 1800] seconds"]),
+        (MIN3 + "[trial]\nthreshold = 3\n", ["unknown key 'threshold'", "threshold_deg"]),
+        ("[scene\n", ["not valid TOML"]),
+    ],
+)
 def test_errors_name_file_key_and_fix(tmp_path, text, words):
     path = tmp_path / "bad.toml"
     path.write_text(text)
@@ -109,12 +114,18 @@ def test_missing_file():
 def _trial_params():
     units = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "seconds"}
     for key, r in _core.TRIAL_LIMITS.items():
-        accepted = (f"{'(' if r['min_exclusive'] else '['}{r['min']:g}, {r['max']:g}] "
-                    f"{units[key]}")
+        accepted = f"{'(' if r['min_exclusive'] else '['}{r['min']:g}, {r['max']:g}] {units[key]}"
         below = r["min"] if r["min_exclusive"] else r["min"] - 1e-3
-        for case, literal in (("below", repr(below)), ("above", repr(r["max"] + 1e-3)),
-                              ("nan", "nan"), ("inf", "inf"), ("-inf", "-inf"),
-                              ("string", '"3"'), ("bool", "true"), ("list", "[3.0]")):
+        for case, literal in (
+            ("below", repr(below)),
+            ("above", repr(r["max"] + 1e-3)),
+            ("nan", "nan"),
+            ("inf", "inf"),
+            ("-inf", "-inf"),
+            ("string", '"3"'),
+            ("bool", "true"),
+            ("list", "[3.0]"),
+        ):
             yield pytest.param(key, literal, accepted, id=f"{key}-{case}")
 
 
@@ -129,8 +140,10 @@ def test_trial_fields_out_of_the_cores_range_are_refused(tmp_path, key, literal,
     assert accepted in msg, msg
 
 
-@pytest.mark.parametrize("key,value", [("timeout_s", "9.3e12"), ("hold_s", "1e13"),
-                                       ("timeout_s", "1e30"), ("hold_s", "9.3e12")])
+@pytest.mark.parametrize(
+    "key,value",
+    [("timeout_s", "9.3e12"), ("hold_s", "1e13"), ("timeout_s", "1e30"), ("hold_s", "9.3e12")],
+)
 def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
     """Accepted before and sent in SET_SCENE: the core's int64 microseconds overflowed
     (an instant failure with completion -9.2e12 s, or a success without the hold)."""
@@ -140,11 +153,16 @@ def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
 
 def test_trial_range_ends_and_hold_up_to_the_timeout():
     lim = _core.TRIAL_LIMITS
-    s = gs.loads_scene(MIN3 + f"[trial]\nthreshold_deg = {lim['threshold_deg']['min']!r}\n"
-                       f"hold_s = {lim['hold_s']['max']!r}\ntimeout_s = "
-                       f"{lim['timeout_s']['max']!r}\n")
+    s = gs.loads_scene(
+        MIN3 + f"[trial]\nthreshold_deg = {lim['threshold_deg']['min']!r}\n"
+        f"hold_s = {lim['hold_s']['max']!r}\ntimeout_s = "
+        f"{lim['timeout_s']['max']!r}\n"
+    )
     assert (s.threshold_deg, s.hold_s, s.timeout_s) == (
-        lim["threshold_deg"]["min"], lim["hold_s"]["max"], lim["timeout_s"]["max"])
+        lim["threshold_deg"]["min"],
+        lim["hold_s"]["max"],
+        lim["timeout_s"]["max"],
+    )
     assert gs.loads_scene(MIN3 + "[trial]\nhold_s = 20\ntimeout_s = 20\n").hold_s == 20.0
     with pytest.raises(gs.SceneError, match=r"\[trial\] hold_s must not exceed timeout_s"):
         gs.loads_scene(MIN3 + "[trial]\nhold_s = 20.5\ntimeout_s = 20\n")
@@ -154,22 +172,34 @@ def test_trial_range_ends_and_hold_up_to_the_timeout():
 # Units: contacts must span like a hand in the stated unit
 # --------------------------------------------------------------------------------------
 def _scaled(units: str, factor: float) -> str:
-    rows = {"thumb": (0.045, 0.045, 0.035), "index": (0.015, 0.095, 0.040),
-            "middle": (-0.010, 0.100, 0.040)}
-    body = "".join(f"{n} = [{', '.join(repr(x * factor) for x in v)}]\n"
-                   for n, v in rows.items())
+    rows = {
+        "thumb": (0.045, 0.045, 0.035),
+        "index": (0.015, 0.095, 0.040),
+        "middle": (-0.010, 0.100, 0.040),
+    }
+    body = "".join(f"{n} = [{', '.join(repr(x * factor) for x in v)}]\n" for n, v in rows.items())
     return f'[scene]\nunits = "{units}"\n[contacts]\n' + body
 
 
-@pytest.mark.parametrize("units,factor,needles", [
-    ("m", 1000.0, ["[contacts]", "contacts span 77.9", "looks like millimetres",
-                   'set [scene] units = "mm"']),
-    ("mm", 1.0, ["contacts span 0.0779", "mm", "looks like metres",
-                 'set [scene] units = "m"']),
-    ("m", 100.0, ["looks like centimetres", "millimetres (x 10)"]),
-    ("m", 1e-5, ["contacts span 7.79", "5 mm to 0.5 m", "check the contact positions"]),
-    ("m", 20.0, ["contacts span 1.55", "5 mm to 0.5 m"]),
-])
+@pytest.mark.parametrize(
+    "units,factor,needles",
+    [
+        (
+            "m",
+            1000.0,
+            [
+                "[contacts]",
+                "contacts span 77.9",
+                "looks like millimetres",
+                'set [scene] units = "mm"',
+            ],
+        ),
+        ("mm", 1.0, ["contacts span 0.0779", "mm", "looks like metres", 'set [scene] units = "m"']),
+        ("m", 100.0, ["looks like centimetres", "millimetres (x 10)"]),
+        ("m", 1e-5, ["contacts span 7.79", "5 mm to 0.5 m", "check the contact positions"]),
+        ("m", 20.0, ["contacts span 1.55", "5 mm to 0.5 m"]),
+    ],
+)
 def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor, needles):
     with pytest.raises(gs.SceneError) as e:
         gs.loads_scene(_scaled(units, factor), "hand.toml")
@@ -179,7 +209,7 @@ def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor
         assert n in msg, (n, msg)
 
 
-@pytest.mark.parametrize("factor", [0.07, 1.0, 6.0])   # spans of 5.5 mm, 78 mm, 0.47 m
+@pytest.mark.parametrize("factor", [0.07, 1.0, 6.0])  # spans of 5.5 mm, 78 mm, 0.47 m
 def test_hands_from_5_mm_to_half_a_metre_load(factor):
     s = gs.loads_scene(_scaled("m", factor))
     assert gs.HAND_SPAN_M[0] <= gs.hand_span(s.contacts) <= gs.HAND_SPAN_M[1]
@@ -188,10 +218,10 @@ def test_hands_from_5_mm_to_half_a_metre_load(factor):
 
 
 def test_moment_unit_check_catches_newton_millimetres():
-    hand = gs.loads_scene(MIN3).contacts            # metres, span 78 mm
-    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None    # 5 mm lever
-    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None      # 9 spans
-    msg = gs.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])                # 5 N mm as N m
+    hand = gs.loads_scene(MIN3).contacts  # metres, span 78 mm
+    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None  # 5 mm lever
+    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None  # 9 spans
+    msg = gs.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])  # 5 N mm as N m
     assert "looks like N mm" in msg and "divide by 1000" in msg
     assert "check the moment" in gs.moment_unit_problem(hand, [1, 0, 0, 5000, 0, 0])
-    assert gs.moment_unit_problem(hand, [0, 0, 0, 5, 0, 0]) is None       # the core's zero_force
+    assert gs.moment_unit_problem(hand, [0, 0, 0, 5, 0, 0]) is None  # the core's zero_force

@@ -11,8 +11,8 @@ import subprocess
 import sys
 import textwrap
 
-from graspguide.study import records as sl
 from graspguide.link import messages as m
+from graspguide.study import records as sl
 
 
 def test_files_and_formats(tmp_path):
@@ -26,8 +26,15 @@ def test_files_and_formats(tmp_path):
         log.result(m.TrialResult(trial_id=7, success=True, completion_s=1.5))
     assert json.load(open(os.path.join(folder, "device.json")))["board"] == "sim"
     poses = list(csv.reader(open(os.path.join(folder, "poses.csv"))))
-    assert poses[0] == sl.POSE_COLUMNS and poses[1][1:] == ["123", "0.5", "1.0", "0.0", "0.0",
-                                                            "0.0", "0"]
+    assert poses[0] == sl.POSE_COLUMNS and poses[1][1:] == [
+        "123",
+        "0.5",
+        "1.0",
+        "0.0",
+        "0.0",
+        "0.0",
+        "0",
+    ]
     tel = list(csv.DictReader(open(os.path.join(folder, "telemetry.csv"))))
     assert tel[0]["error_deg"] == "4.5" and tel[0]["pwm2"] == "3"
     assert tel[0]["solver_status"] == "ok" and tel[0]["constraints_used"] == "paper"
@@ -61,8 +68,9 @@ def test_sigkill_mid_stream_loses_nothing_written(tmp_path):
     folder = str(tmp_path / "killed")
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
-    p = subprocess.Popen([sys.executable, "-c", WRITER, folder], stdout=subprocess.PIPE,
-                         text=True, env=env)
+    p = subprocess.Popen(
+        [sys.executable, "-c", WRITER, folder], stdout=subprocess.PIPE, text=True, env=env
+    )
     try:
         last = -1
         for line in p.stdout:

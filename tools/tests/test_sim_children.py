@@ -16,7 +16,6 @@ import textwrap
 import time
 
 import pytest
-
 from conftest import REPO_ROOT, subprocess_env
 
 from graspguide.link import transport as gt
@@ -89,15 +88,19 @@ def test_sigkilled_host_leaves_no_simulator(tmp_path, which, report_figure):
         with open(binary, "w") as f:
             f.write(STAND_IN.format(python=sys.executable))
         os.chmod(binary, 0o755)
-    host = subprocess.Popen([sys.executable, "-c", HOST, binary], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=subprocess_env())
+    host = subprocess.Popen(
+        [sys.executable, "-c", HOST, binary],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=subprocess_env(),
+    )
     try:
         line = host.stdout.readline()
         assert line.strip().isdigit(), host.stderr.read()
         sim_pid = int(line)
         assert _alive(sim_pid)
-        with open(f"/proc/{sim_pid}/stat") as f:   # its own session and process group
+        with open(f"/proc/{sim_pid}/stat") as f:  # its own session and process group
             fields = f.read().rsplit(") ", 1)[1].split()
         assert int(fields[2]) == int(fields[3]) == sim_pid != os.getpgid(host.pid)
         host.send_signal(signal.SIGKILL)
@@ -132,18 +135,38 @@ def test_interrupted_trial_stops_cleanly_and_leaves_no_simulator(tmp_path, how):
     reached the simulator too, which exited before the host's STOP: "STOP failed: the
     simulated device exited ..." twice."""
     out = tmp_path / "study"
-    cmd = [sys.executable, "-m", "graspguide", "trial", "--protocol", PAPER,
-           "--participant", "U1", "--port", "sim", "--source", "participant", "--out",
-           str(out)]
-    p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=subprocess_env(),
-                         start_new_session=True, cwd=REPO_ROOT)
+    cmd = [
+        sys.executable,
+        "-m",
+        "graspguide",
+        "trial",
+        "--protocol",
+        PAPER,
+        "--participant",
+        "U1",
+        "--port",
+        "sim",
+        "--source",
+        "participant",
+        "--out",
+        str(out),
+    ]
+    p = subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=subprocess_env(),
+        start_new_session=True,
+        cwd=REPO_ROOT,
+    )
     try:
         _wait_trials(str(out / "U1" / "trials.jsonl"), 2, p)
         sims = _children(p.pid, gt.find_sim_binary())
         assert len(sims) == 1, sims
         if how == "ctrl-c":
-            os.killpg(p.pid, signal.SIGINT)      # as the terminal does
+            os.killpg(p.pid, signal.SIGINT)  # as the terminal does
         else:
             p.send_signal(signal.SIGTERM)
         _, stderr = p.communicate(timeout=30)

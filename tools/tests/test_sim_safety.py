@@ -12,12 +12,12 @@ import sys
 import time
 
 from graspguide.link import client as gd
-from graspguide.link import transport as gt
 from graspguide.link import messages as m
+from graspguide.link import transport as gt
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]
-TILTED = (0.9394, 0.1125, 0.2250, -0.2312)   # far from aligned: the motors are on
+TILTED = (0.9394, 0.1125, 0.2250, -0.2312)  # far from aligned: the motors are on
 WATCHDOG_MS = m.POSE_WATCHDOG_MS
 
 
@@ -41,8 +41,8 @@ def test_virtual_clock_watchdog_fires_while_other_traffic_flows(report_figure):
         last_pose = _rendering(c)
         fired_after_ms = None
         while time.monotonic() - last_pose < 3.0:
-            sim.write(b"\x00" * 8)           # idle line
-            st = c.status()                  # and requests that are not POSEs
+            sim.write(b"\x00" * 8)  # idle line
+            st = c.status()  # and requests that are not POSEs
             if st.stale_events > stale0:
                 fired_after_ms = (time.monotonic() - last_pose) * 1000
                 break
@@ -51,8 +51,10 @@ def test_virtual_clock_watchdog_fires_while_other_traffic_flows(report_figure):
         # The trial itself goes on: the next POSE drives the motors again.
         assert c.status().state is m.DeviceState.TRIAL_RUNNING
         assert any(c.pose(1_060_000, TILTED).pwm)
-    report_figure("virtual-clock watchdog: last POSE -> stale (wall, GET_STATUS flowing)",
-                  f"{fired_after_ms:.1f} ms (watchdog {WATCHDOG_MS} ms)")
+    report_figure(
+        "virtual-clock watchdog: last POSE -> stale (wall, GET_STATUS flowing)",
+        f"{fired_after_ms:.1f} ms (watchdog {WATCHDOG_MS} ms)",
+    )
     assert WATCHDOG_MS <= fired_after_ms <= WATCHDOG_MS + 100
 
 
@@ -66,7 +68,7 @@ def test_virtual_clock_trial_of_a_silent_host_ends_in_real_time():
         waited = time.monotonic() - last_pose
         assert res.trial_id == 3 and not res.success
         assert abs(res.completion_s - 1.0) < 1e-6
-        assert 1.5 <= waited <= 4.0, waited   # 1 s timeout + 1 s slack, from the first POSE
+        assert 1.5 <= waited <= 4.0, waited  # 1 s timeout + 1 s slack, from the first POSE
         st = c.status()
         assert st.state is m.DeviceState.SCENE_SET
 
@@ -92,8 +94,9 @@ def _alive(pid: int) -> bool:
 def test_simulator_exits_when_its_parent_is_killed(report_figure):
     """Once, 39 simulators piled up after their hosts were SIGKILLed."""
     binary = gt.find_sim_binary(None)
-    parent = subprocess.Popen([sys.executable, "-c", PARENT, binary], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE)
+    parent = subprocess.Popen(
+        [sys.executable, "-c", PARENT, binary], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+    )
     try:
         first = parent.stdout.readline().decode().split()
         assert len(first) == 3 and first[1] == "GRASPGUIDE_SIM_PTY", first

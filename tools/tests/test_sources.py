@@ -59,7 +59,7 @@ def test_swapped_quaternion_order_is_caught():
 
 
 def test_swapped_up_axis_is_caught():
-    wrong = src.TrackerConvention("m", "z", "right", "xyzw")   # OptiTrack taken as z-up
+    wrong = src.TrackerConvention("m", "z", "right", "xyzw")  # OptiTrack taken as z-up
     about_up = CASES["optitrack"][0]
     assert src.quat_angle_deg(wrong.quaternion(about_up), world([0, 0, 1])) > 1.0
     assert wrong.position(CASES["optitrack"][2]) != pytest.approx([0, 0, 1.0])
@@ -87,10 +87,12 @@ def write(tmp_path, text, name="poses.csv"):
 
 
 def test_replay_reads_quaternions_and_contacts(tmp_path):
-    head = "t_s,qw,qx,qy,qz," + ",".join(f"{n}_{a}" for n in ("thumb", "index", "middle")
-                                         for a in "xyz")
-    rows = [f"{10 + i * 0.01},1,0,0,0," + ",".join(str(v) for c in HAND3 for v in c)
-            for i in range(5)]
+    head = "t_s,qw,qx,qy,qz," + ",".join(
+        f"{n}_{a}" for n in ("thumb", "index", "middle") for a in "xyz"
+    )
+    rows = [
+        f"{10 + i * 0.01},1,0,0,0," + ",".join(str(v) for c in HAND3 for v in c) for i in range(5)
+    ]
     s = src.open_source("replay:" + write(tmp_path, "\n".join([head] + rows) + "\n"))
     got = list(s)
     assert len(got) == 5 and got[0][0] == 0.0 and got[1][0] == pytest.approx(0.01)
@@ -103,16 +105,19 @@ def test_replay_without_contacts(tmp_path):
     assert [x[2] for x in s] == [None, None]
 
 
-@pytest.mark.parametrize("text, where, words", [
-    ("", "", "empty file"),
-    ("t,qw,qx,qy,qz\n0,1,0,0,0\n", ":1:", "header must start"),
-    ("t_s,qw,qx,qy,qz,thumb_x\n0,1,0,0,0,1\n", ":1:", "contact columns"),
-    ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,0\n", ":3:", "4 values"),
-    ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,zero,0\n", ":3:", "not a number: 'zero'"),
-    ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0,1,0,0,0\n", ":3:", "must increase"),
-    ("t_s,qw,qx,qy,qz\n0,2,0,0,0\n", ":2:", "unit length"),
-    ("t_s,qw,qx,qy,qz\n", "", "no samples"),
-])
+@pytest.mark.parametrize(
+    "text, where, words",
+    [
+        ("", "", "empty file"),
+        ("t,qw,qx,qy,qz\n0,1,0,0,0\n", ":1:", "header must start"),
+        ("t_s,qw,qx,qy,qz,thumb_x\n0,1,0,0,0,1\n", ":1:", "contact columns"),
+        ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,0\n", ":3:", "4 values"),
+        ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,zero,0\n", ":3:", "not a number: 'zero'"),
+        ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0,1,0,0,0\n", ":3:", "must increase"),
+        ("t_s,qw,qx,qy,qz\n0,2,0,0,0\n", ":2:", "unit length"),
+        ("t_s,qw,qx,qy,qz\n", "", "no samples"),
+    ],
+)
 def test_replay_errors_name_the_line(tmp_path, text, where, words):
     path = write(tmp_path, text)
     with pytest.raises(src.SourceError) as e:
@@ -134,38 +139,51 @@ def test_synthetic_converges_to_aligned_orientation():
     s = src.SyntheticSource(rate=50, duration=6, seed=1).aim(HAND3, WRENCH)
     samples = list(s)
     err = [solver.solve(HAND3, WRENCH, orientation=list(q))["error_deg"] for _, q, _ in samples]
-    assert 39 < err[0] < 81     # starts 40..80 degrees off (plus tremor)
+    assert 39 < err[0] < 81  # starts 40..80 degrees off (plus tremor)
     tail = [e for (t, _, _), e in zip(samples, err) if t >= 0.65 * 6]
-    assert max(tail) < 2.0      # holds below the paper's 3 degree threshold
+    assert max(tail) < 2.0  # holds below the paper's 3 degree threshold
     # smooth: no jump of more than a few degrees between samples at 50 Hz
     steps = [src.quat_angle_deg(a[1], b[1]) for a, b in zip(samples, samples[1:])]
     assert max(steps) < 5
 
 
-@pytest.mark.parametrize("spec, words", [
-    ("synthetic:rate=0", "rate"), ("synthetic:speed=3", "bad option"),
-    ("synthetic:seed=x", "seed must be a number"), ("tracker", "unknown source"),
-    ("replay:", "replay needs a file"),
-])
+@pytest.mark.parametrize(
+    "spec, words",
+    [
+        ("synthetic:rate=0", "rate"),
+        ("synthetic:speed=3", "bad option"),
+        ("synthetic:seed=x", "seed must be a number"),
+        ("tracker", "unknown source"),
+        ("replay:", "replay needs a file"),
+    ],
+)
 def test_bad_specs(spec, words):
     with pytest.raises(src.SourceError, match=words):
         src.open_source(spec)
 
 
 # ---- tracker exports and live adapters --------------------------------------------------
-VICON_HEAD = "t_s,qw,qx,qy,qz," + ",".join(f"{n}_{a}" for n in ("thumb", "index", "middle")
-                                            for a in "xyz")
+VICON_HEAD = "t_s,qw,qx,qy,qz," + ",".join(
+    f"{n}_{a}" for n in ("thumb", "index", "middle") for a in "xyz"
+)
 
 
 def vicon_row(t, q_xyzw):
     # the columns keep their names; the values are Vicon's: x,y,z,w order and millimetres
-    return f"{t}," + ",".join(str(v) for v in q_xyzw) + "," + ",".join(
-        str(1000 * v) for c in HAND3 for v in c)
+    return (
+        f"{t},"
+        + ",".join(str(v) for v in q_xyzw)
+        + ","
+        + ",".join(str(1000 * v) for c in HAND3 for v in c)
+    )
 
 
 def test_replay_with_tracker_converts_a_raw_export(tmp_path):
-    path = write(tmp_path, "\n".join([VICON_HEAD, vicon_row(0, CASES["vicon"][0]),
-                                      vicon_row(0.01, CASES["vicon"][1])]) + "\n")
+    path = write(
+        tmp_path,
+        "\n".join([VICON_HEAD, vicon_row(0, CASES["vicon"][0]), vicon_row(0.01, CASES["vicon"][1])])
+        + "\n",
+    )
     got = list(src.open_source("replay:" + path, tracker="vicon"))
     assert src.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
     assert src.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
@@ -223,6 +241,7 @@ def test_adapter_rejects_non_finite_samples():
 def test_plugin_source_loads_an_adapter_class(monkeypatch):
     import sys
     import types
+
     module = types.ModuleType("lab_tracker_for_test")
     module.Hand = _FakeOptiTrack
     module.NotAnAdapter = dict

@@ -29,20 +29,39 @@ def run(args, timeout=60):
 @pytest.mark.parametrize("scene_file", [SCENE3, SCENE4])
 def test_synthetic_trial_succeeds_and_log_is_consistent(tmp_path, scene_file):
     folder = tmp_path / "session"
-    p = run(["--port", "sim", "--virtual-clock", "--scene", scene_file, "--wrench", WRENCH,
-             "--source", "synthetic:rate=240,duration=10,seed=0", "--log", str(folder),
-             "--trial-id", "17"])
+    p = run(
+        [
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            scene_file,
+            "--wrench",
+            WRENCH,
+            "--source",
+            "synthetic:rate=240,duration=10,seed=0",
+            "--log",
+            str(folder),
+            "--trial-id",
+            "17",
+        ]
+    )
     assert p.returncode == 0, p.stderr
     assert "trial 17: success" in p.stdout, p.stdout
-    assert "error=" in p.stdout          # plain periodic status lines (stdout not a TTY)
-    assert sorted(os.listdir(folder)) == ["config.json", "device.json", "poses.csv",
-                                          "results.jsonl", "scene.json", "telemetry.csv"]
+    assert "error=" in p.stdout  # plain periodic status lines (stdout not a TTY)
+    assert sorted(os.listdir(folder)) == [
+        "config.json",
+        "device.json",
+        "poses.csv",
+        "results.jsonl",
+        "scene.json",
+        "telemetry.csv",
+    ]
     scene = json.load(open(folder / "scene.json"))
     config = json.load(open(folder / "config.json"))
     device = json.load(open(folder / "device.json"))
     assert scene == gs.load_scene(scene_file).to_dict() == config["scene"]
-    assert config["config_hash"] == gs.config_hash({"scene": scene,
-                                                    "wrench": config["wrench"]})
+    assert config["config_hash"] == gs.config_hash({"scene": scene, "wrench": config["wrench"]})
     assert config["wrench"] == [0.3, -1.2, -0.8, 0.0, 0.0, 0.0] and config["trial_id"] == 17
     assert device["protocol_version"] >= 1 and device["max_contacts"] >= scene["k"]
     poses = list(csv.DictReader(open(folder / "poses.csv")))
@@ -56,7 +75,7 @@ def test_synthetic_trial_succeeds_and_log_is_consistent(tmp_path, scene_file):
     assert trial["trial_id"] == 17 and trial["success"] is True
     assert trial["final_error_deg"] < 3.0 and trial["completion_s"] < 10.0
     assert float(tel[-1]["error_deg"]) == pytest.approx(trial["final_error_deg"], abs=1e-6)
-    assert [tel[-1][f"pwm{i}"] for i in range(4)] == ["0"] * 4   # ended: motors off
+    assert [tel[-1][f"pwm{i}"] for i in range(4)] == ["0"] * 4  # ended: motors off
     assert end["event"] == "end" and end["exit_code"] == 0 and end["sent"] == len(poses)
     # the trial ended before the source did (10 s at 240 Hz)
     assert len(poses) < 2401
@@ -64,18 +83,41 @@ def test_synthetic_trial_succeeds_and_log_is_consistent(tmp_path, scene_file):
 
 def test_negative_wrench_runs_a_trial():
     """`--wrench -1,0,0` was read by argparse as an option ("expected one argument")."""
-    p = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", "-1,0,-0.5",
-             "--source", "synthetic:rate=240,duration=10,seed=0"])
+    p = run(
+        [
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            SCENE3,
+            "--wrench",
+            "-1,0,-0.5",
+            "--source",
+            "synthetic:rate=240,duration=10,seed=0",
+        ]
+    )
     assert p.returncode == 0, p.stderr
     assert "trial 1: success" in p.stdout, p.stdout
 
 
 def test_source_ending_first_stops_and_exits_0(tmp_path):
-    csv_path = tmp_path / "identity.csv"   # identity: 57 degrees off, never succeeds
-    csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i * 0.01},1,0,0,0\n"
-                                                       for i in range(101)))
-    p = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
-             "--source", f"replay:{csv_path}", "--log", str(tmp_path / "log")])
+    csv_path = tmp_path / "identity.csv"  # identity: 57 degrees off, never succeeds
+    csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i * 0.01},1,0,0,0\n" for i in range(101)))
+    p = run(
+        [
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            SCENE3,
+            "--wrench",
+            WRENCH,
+            "--source",
+            f"replay:{csv_path}",
+            "--log",
+            str(tmp_path / "log"),
+        ]
+    )
     assert p.returncode == 0, p.stderr
     assert "no trial result: the source ended first (101 poses sent" in p.stdout
     tmp_path = tmp_path / "log"
@@ -87,63 +129,161 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     """The synthetic hand written as an OptiTrack export (y up, x,y,z,w): streamed with
     --tracker optitrack it succeeds; streamed as if it were world data it cannot."""
     from graspguide.study import sources
+
     scene = gs.load_scene(SCENE3)
     hand = sources.open_source("synthetic:rate=100,duration=6,seed=3")
-    hand.aim(scene.contacts, [0.3, -1.2, -0.8, 0, 0, 0], scene.policy, scene.constraints,
-             scene.y_axis)
+    hand.aim(
+        scene.contacts, [0.3, -1.2, -0.8, 0, 0, 0], scene.policy, scene.constraints, scene.y_axis
+    )
     m = sources.TRACKER_PRESETS["optitrack"].matrix
     rows = []
     for t, q, _ in hand:
         w, x, y, z = sources.matrix_to_quat(m.T @ sources.quat_to_matrix(q) @ m)
-        rows.append(f"{t:.6f},{x:.17g},{y:.17g},{z:.17g},{w:.17g}\n")   # OptiTrack: x,y,z,w
+        rows.append(f"{t:.6f},{x:.17g},{y:.17g},{z:.17g},{w:.17g}\n")  # OptiTrack: x,y,z,w
     assert len(rows) == 601
     csv_path = tmp_path / "optitrack.csv"
     csv_path.write_text("t_s,qw,qx,qy,qz\n" + "".join(rows))
-    ok = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
-              "--source", f"replay:{csv_path}", "--tracker", "optitrack"])
+    ok = run(
+        [
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            SCENE3,
+            "--wrench",
+            WRENCH,
+            "--source",
+            f"replay:{csv_path}",
+            "--tracker",
+            "optitrack",
+        ]
+    )
     assert ok.returncode == 0, ok.stderr
     assert "trial 1: success" in ok.stdout, ok.stdout
-    raw = run(["--port", "sim", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
-               "--source", f"replay:{csv_path}"])
+    raw = run(
+        [
+            "--port",
+            "sim",
+            "--virtual-clock",
+            "--scene",
+            SCENE3,
+            "--wrench",
+            WRENCH,
+            "--source",
+            f"replay:{csv_path}",
+        ]
+    )
     assert raw.returncode == 0, raw.stderr
     assert "success" not in raw.stdout, raw.stdout
 
 
 def test_run_stream_then_stop_leaves_device_idle():
     from graspguide.cli import app as cli
-    from graspguide.link import client as gd, transport as gt
-    from graspguide.study import sources
+    from graspguide.link import client as gd
     from graspguide.link import messages as m
+    from graspguide.link import transport as gt
+    from graspguide.study import sources
 
     scene = gs.load_scene(SCENE3)
     src = sources.open_source("synthetic:rate=100,duration=0.5")
     with gt.SimulatedDevice(virtual_clock=True) as sim:
         client = gd.DeviceClient(sim, timeout=2.0)
         client.hello()
-        summary = cli.run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src,
-                                 virtual_clock=True)
+        summary = cli.run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src, virtual_clock=True)
         assert summary["trial_result"] is None and summary["sent"] == 51
         assert client.status().state is m.DeviceState.TRIAL_RUNNING
         client.stop()
         assert client.status().state is m.DeviceState.STOPPED
 
 
-@pytest.mark.parametrize("args, code, words", [
-    (["--port", "sim", "--scene", "/nonexistent.toml", "--wrench", WRENCH, "--source",
-      "synthetic"], 2, "cannot read the scene file"),
-    (["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "bogus"], 2,
-     "unknown source"),
-    (["--port", "/dev/graspguide-no-such-port", "--scene", SCENE3, "--wrench", WRENCH,
-      "--source", "synthetic"], 1, "error"),
-    (["--port", "/dev/ttyS0", "--virtual-clock", "--scene", SCENE3, "--wrench", WRENCH,
-      "--source", "synthetic"], 2, "--virtual-clock is for --port sim"),
-    (["--port", "sim", "--scene", SCENE3, "--wrench", "1,2", "--source", "synthetic"], 2,
-     "3 or 6"),
-    (["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "synthetic",
-      "--tracker", "vicon"], 2, "only applies to replay"),
-    (["--port", "sim", "--scene", SCENE3, "--wrench", "-0.3,-1.2,-0.8,5,0,-2", "--source",
-      "synthetic"], 2, "looks like N mm"),
-])
+@pytest.mark.parametrize(
+    "args, code, words",
+    [
+        (
+            [
+                "--port",
+                "sim",
+                "--scene",
+                "/nonexistent.toml",
+                "--wrench",
+                WRENCH,
+                "--source",
+                "synthetic",
+            ],
+            2,
+            "cannot read the scene file",
+        ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH, "--source", "bogus"],
+            2,
+            "unknown source",
+        ),
+        (
+            [
+                "--port",
+                "/dev/graspguide-no-such-port",
+                "--scene",
+                SCENE3,
+                "--wrench",
+                WRENCH,
+                "--source",
+                "synthetic",
+            ],
+            1,
+            "error",
+        ),
+        (
+            [
+                "--port",
+                "/dev/ttyS0",
+                "--virtual-clock",
+                "--scene",
+                SCENE3,
+                "--wrench",
+                WRENCH,
+                "--source",
+                "synthetic",
+            ],
+            2,
+            "--virtual-clock is for --port sim",
+        ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", "1,2", "--source", "synthetic"],
+            2,
+            "3 or 6",
+        ),
+        (
+            [
+                "--port",
+                "sim",
+                "--scene",
+                SCENE3,
+                "--wrench",
+                WRENCH,
+                "--source",
+                "synthetic",
+                "--tracker",
+                "vicon",
+            ],
+            2,
+            "only applies to replay",
+        ),
+        (
+            [
+                "--port",
+                "sim",
+                "--scene",
+                SCENE3,
+                "--wrench",
+                "-0.3,-1.2,-0.8,5,0,-2",
+                "--source",
+                "synthetic",
+            ],
+            2,
+            "looks like N mm",
+        ),
+    ],
+)
 def test_errors_and_exit_codes(args, code, words):
     p = run(args)
     assert p.returncode == code, (p.returncode, p.stderr)
@@ -157,12 +297,27 @@ def test_ctrl_c_stops_and_keeps_the_log(tmp_path):
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
     folder = tmp_path / "log"
-    p = subprocess.Popen(CLI + ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH,
-                                "--source", "synthetic:rate=100,duration=30", "--log",
-                                str(folder)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = subprocess.Popen(
+        CLI
+        + [
+            "--port",
+            "sim",
+            "--scene",
+            SCENE3,
+            "--wrench",
+            WRENCH,
+            "--source",
+            "synthetic:rate=100,duration=30",
+            "--log",
+            str(folder),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
-        assert p.stdout.readline().startswith("t=")   # streaming in real time
+        assert p.stdout.readline().startswith("t=")  # streaming in real time
         time.sleep(0.3)
         p.send_signal(signal.SIGINT)
         out, err = p.communicate(timeout=10)
@@ -185,13 +340,29 @@ def _start_streaming(port, folder, extra=()):
 
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
-    p = subprocess.Popen(CLI + ["--port", port, "--scene", SCENE3, "--wrench", WRENCH,
-                                "--source", "synthetic:rate=100,duration=30", "--log",
-                                str(folder), *extra],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = subprocess.Popen(
+        CLI
+        + [
+            "--port",
+            port,
+            "--scene",
+            SCENE3,
+            "--wrench",
+            WRENCH,
+            "--source",
+            "synthetic:rate=100,duration=30",
+            "--log",
+            str(folder),
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
         line = p.stdout.readline()
-        assert line.startswith("t="), (line, p.poll())   # streaming in real time
+        assert line.startswith("t="), (line, p.poll())  # streaming in real time
     except BaseException:
         p.kill()
         p.wait()
@@ -234,8 +405,9 @@ def test_sigterm_stop_reaches_the_device(tmp_path):
     and its motor trace ends with every motor off, which only STOP can do."""
     import signal
 
-    from graspguide.link import client as gd, transport as gt
+    from graspguide.link import client as gd
     from graspguide.link import messages as m
+    from graspguide.link import transport as gt
 
     trace = tmp_path / "motors.csv"
     with gt.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:

@@ -32,8 +32,23 @@ def _no_pythonpath(monkeypatch):
 
 
 def _sweep(out, *extra):
-    return sw.main(["--protocol", PAPER, "--participants", "1", "--wrenches", "1",
-                    "--contacts", "3", "--out", str(out), "--jobs", "2", *extra])
+    return sw.main(
+        [
+            "--protocol",
+            PAPER,
+            "--participants",
+            "1",
+            "--wrenches",
+            "1",
+            "--contacts",
+            "3",
+            "--out",
+            str(out),
+            "--jobs",
+            "2",
+            *extra,
+        ]
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -41,8 +56,7 @@ def _sweep(out, *extra):
 # --------------------------------------------------------------------------------------
 def test_tiny_sweep_end_to_end_and_resume(tmp_path, capsys):
     out = tmp_path / "sweep"
-    code = _sweep(out, "--thresholds", "3,10", "--rates", "30,100",
-                  "--modalities", "F+C,F+V")
+    code = _sweep(out, "--thresholds", "3,10", "--rates", "30,100", "--modalities", "F+C,F+V")
     printed = capsys.readouterr().out
     assert code == 0, printed
     assert "SIMULATED" in printed
@@ -63,7 +77,7 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, capsys):
         assert set(p["modalities"]) == {"F+C", "F+V"}
         assert set(p["modes"]) == {"C", "V"}
         assert set(p["modes_by_contacts"]) == {"k3/C", "k3/V"}
-        assert p["modes_by_contacts"]["k3/V"] == p["modalities"]["F+V"]   # k = 3 only
+        assert p["modes_by_contacts"]["k3/V"] == p["modalities"]["F+V"]  # k = 3 only
         assert "participant:" in p["source"]
         assert f"task_threshold_deg={p['threshold_deg']:g}" in p["source"]
         assert f"rate_hz={p['pose_rate_hz']:g}" in p["source"]
@@ -76,7 +90,7 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, capsys):
                 assert 0.0 < s["success_completion_median_s"] < data["timeout_s"]
             else:
                 assert s["success_completion_median_s"] is None
-                assert s["completion_mean_s"] == data["timeout_s"]   # failures count 90 s
+                assert s["completion_mean_s"] == data["timeout_s"]  # failures count 90 s
             assert s["poses"] > 0
         assert p["all"]["trials"] == data["trials_per_point"] == 2
     # every point's trials are the runner's, marked simulated
@@ -87,12 +101,12 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, capsys):
     png = (out / "sweep.png").read_bytes()
     assert png[:8] == PNG_MAGIC and len(png) > 10_000
     import matplotlib.image as mpimg
+
     img = mpimg.imread(str(out / "sweep.png"))
     assert img.shape[0] > 400 and img.shape[1] > 600
 
     # a second run resumes: nothing left to run, the same figures
-    code = _sweep(out, "--thresholds", "3,10", "--rates", "30,100",
-                  "--modalities", "F+C,F+V")
+    code = _sweep(out, "--thresholds", "3,10", "--rates", "30,100", "--modalities", "F+C,F+V")
     printed = capsys.readouterr().out
     assert code == 0
     assert "0 runner processes to run" in printed
@@ -113,8 +127,19 @@ def test_larger_threshold_never_makes_the_same_trajectory_take_longer(tmp_path, 
     larger threshold include those below a smaller one, so the completion time can only
     shrink and a success stays a success."""
     out = tmp_path / "mono"
-    code = _sweep(out, "--thresholds", "1,3,10", "--rates", "100", "--wrenches", "2",
-                  "--modalities", "F+V", "--source", "synthetic")
+    code = _sweep(
+        out,
+        "--thresholds",
+        "1,3,10",
+        "--rates",
+        "100",
+        "--wrenches",
+        "2",
+        "--modalities",
+        "F+V",
+        "--source",
+        "synthetic",
+    )
     capsys.readouterr()
     assert code == 0
     data = json.loads((out / "sweep.json").read_text())
@@ -131,16 +156,14 @@ def test_larger_threshold_never_makes_the_same_trajectory_take_longer(tmp_path, 
             b = recs[large][idx]
             assert b["wrench_id"] == a["wrench_id"]
             # the same trajectory: identical poses up to the shorter trial's end
-            pa = _pose_rows(out / pts[small]["folder"] / "U1" / "frames" /
-                            f"trial-{idx:04d}.csv")
-            pb = _pose_rows(out / pts[large]["folder"] / "U1" / "frames" /
-                            f"trial-{idx:04d}.csv")
+            pa = _pose_rows(out / pts[small]["folder"] / "U1" / "frames" / f"trial-{idx:04d}.csv")
+            pb = _pose_rows(out / pts[large]["folder"] / "U1" / "frames" / f"trial-{idx:04d}.csv")
             n = min(len(pa), len(pb))
             assert n > 10 and pa[:n] == pb[:n]
             assert b["completion_s"] <= a["completion_s"] + 1e-9
             assert b["success"] or not a["success"]
             strictly += b["completion_s"] < a["completion_s"] - 1e-6
-    assert strictly >= 1          # and the threshold does matter
+    assert strictly >= 1  # and the threshold does matter
     tp = data["threshold_pairs"]["all"]
     assert tp["pairs"] == 4 and tp["larger_threshold_took_longer"] == 0
 
@@ -148,19 +171,22 @@ def test_larger_threshold_never_makes_the_same_trajectory_take_longer(tmp_path, 
 # --------------------------------------------------------------------------------------
 # Bad arguments
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("args, words", [
-    (["--thresholds", "0,3"], ["--thresholds", "> 0"]),
-    (["--thresholds", "-2"], ["--thresholds", "out of range"]),
-    (["--thresholds", "3,abc"], ["--thresholds", "not a number"]),
-    (["--thresholds", "3,,5"], ["--thresholds", "comma-separated"]),
-    (["--rates", "0"], ["--rates", "> 0"]),
-    (["--rates", "100,-30"], ["--rates", "out of range"]),
-    (["--modalities", "F+X"], ["unknown modality", "F+X", "Fperp+V"]),
-    (["--modalities", "W"], ["unknown modality", "'W'"]),
-    (["--contacts", "5"], ["--contacts"]),
-    (["--thresholds", "25"], ["threshold 25", "start error"]),
-    (["--source", "participant:nonsense=1"], ["unknown participant parameter"]),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--thresholds", "0,3"], ["--thresholds", "> 0"]),
+        (["--thresholds", "-2"], ["--thresholds", "out of range"]),
+        (["--thresholds", "3,abc"], ["--thresholds", "not a number"]),
+        (["--thresholds", "3,,5"], ["--thresholds", "comma-separated"]),
+        (["--rates", "0"], ["--rates", "> 0"]),
+        (["--rates", "100,-30"], ["--rates", "out of range"]),
+        (["--modalities", "F+X"], ["unknown modality", "F+X", "Fperp+V"]),
+        (["--modalities", "W"], ["unknown modality", "'W'"]),
+        (["--contacts", "5"], ["--contacts"]),
+        (["--thresholds", "25"], ["threshold 25", "start error"]),
+        (["--source", "participant:nonsense=1"], ["unknown participant parameter"]),
+    ],
+)
 def test_bad_arguments_give_a_clear_error(tmp_path, capsys, args, words):
     code = sw.main(["--protocol", PAPER, "--out", str(tmp_path / "x"), *args])
     err = capsys.readouterr().err
@@ -212,17 +238,23 @@ def test_derived_protocol_keeps_geometry_and_seed_and_round_trips(tmp_path):
 
 def test_point_source_tells_the_participant_the_point():
     pt = sw.Point(5.0, 60.0, ("threshold",))
-    assert sw.point_source("participant", pt, 0.5) == \
-        "participant:task_threshold_deg=5,task_hold_s=0.5,rate_hz=60"
-    assert sw.point_source("participant:task_threshold_deg=3,weber_frac=0.3", pt, 0.5) == \
-        "participant:task_threshold_deg=3,weber_frac=0.3,task_hold_s=0.5,rate_hz=60"
+    assert (
+        sw.point_source("participant", pt, 0.5)
+        == "participant:task_threshold_deg=5,task_hold_s=0.5,rate_hz=60"
+    )
+    assert (
+        sw.point_source("participant:task_threshold_deg=3,weber_frac=0.3", pt, 0.5)
+        == "participant:task_threshold_deg=3,weber_frac=0.3,task_hold_s=0.5,rate_hz=60"
+    )
     assert sw.point_source("synthetic", pt, 0.5) == "synthetic"
 
 
 def test_summarize_counts_failures_as_the_timeout():
-    recs = [{"success": True, "completion_s": 10.0, "final_error_deg": 1.0, "poses": 5},
-            {"success": True, "completion_s": 20.0, "final_error_deg": 1.0, "poses": 5},
-            {"success": False, "completion_s": 90.0, "final_error_deg": 9.0, "poses": 5}]
+    recs = [
+        {"success": True, "completion_s": 10.0, "final_error_deg": 1.0, "poses": 5},
+        {"success": True, "completion_s": 20.0, "final_error_deg": 1.0, "poses": 5},
+        {"success": False, "completion_s": 90.0, "final_error_deg": 9.0, "poses": 5},
+    ]
     s = sw.summarize(recs)
     assert s["successes"] == 2 and s["success_rate"] == pytest.approx(2 / 3, abs=1e-4)
     assert s["completion_median_s"] == 20.0
@@ -235,8 +267,26 @@ def test_register_adds_the_subcommand():
     parser = argparse.ArgumentParser(prog="graspguide")
     sub = parser.add_subparsers(dest="command")
     sw.register(sub)
-    args = parser.parse_args(["sweep", "--thresholds", "1,2", "--rates", "50",
-                              "--participants", "3", "--wrenches", "2", "--jobs", "1"])
+    args = parser.parse_args(
+        [
+            "sweep",
+            "--thresholds",
+            "1,2",
+            "--rates",
+            "50",
+            "--participants",
+            "3",
+            "--wrenches",
+            "2",
+            "--jobs",
+            "1",
+        ]
+    )
     assert args.handler is sw.run
-    assert (args.thresholds, args.rates, args.participants, args.wrenches, args.jobs) == \
-        ("1,2", "50", 3, 2, 1)
+    assert (args.thresholds, args.rates, args.participants, args.wrenches, args.jobs) == (
+        "1,2",
+        "50",
+        3,
+        2,
+        1,
+    )

@@ -5,7 +5,8 @@ Instances (:func:`make_instances`): per contact count k, ``--instances`` seeded 
 hands (:func:`graspguide.core.scene_generators.random_scenes`) and the paper's hand
 (``scenes.nominal_contacts``, the contacts of ``tools/examples/scene_paper_{3,4}.toml``)
 under the 26 unit-force directions of a cube's faces, edges and corners plus the named
-nominal-hand cases of :func:`graspguide.core.scene_generators.extreme_scenes` that are expected to be ok.
+nominal-hand cases of :func:`graspguide.core.scene_generators.extreme_scenes` that are
+expected to be ok.
 Every scene is run twice: constraint model ``paper`` with policy F, mode C, and ``normal``
 with Fperp, mode V. The float64 reference (:func:`graspguide.core.reference.solve`: SVD and
 exhaustive active-set enumeration) answers every instance once.
@@ -56,12 +57,14 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 import numpy as np
 
-from graspguide.core import _core, reference, scene_generators as scenes
+from graspguide.core import _core, reference
+from graspguide.core import scene_generators as scenes
 
 SCHEMA = "graspguide-bench/1"
 
@@ -81,8 +84,9 @@ LOOSE_FEAS_REL = 1e-6
 
 # OSQP settings: tight tolerances and solution polishing, so that its accuracy is judged
 # at its best (its defaults, 1e-3, would fail VIOLATION_TOL on most instances).
-OSQP_SETTINGS = dict(eps_abs=1e-9, eps_rel=1e-9, polishing=True, warm_starting=True,
-                     verbose=False, max_iter=20000)
+OSQP_SETTINGS = dict(
+    eps_abs=1e-9, eps_rel=1e-9, polishing=True, warm_starting=True, verbose=False, max_iter=20000
+)
 SLSQP_OPTIONS = dict(ftol=1e-12, maxiter=200)
 
 RUNS = (("paper", "F", "C"), ("normal", "Fperp", "V"))
@@ -99,24 +103,24 @@ class BenchError(RuntimeError):
 @dataclass
 class Instance:
     name: str
-    group: str                 # "random" | "paper"
+    group: str  # "random" | "paper"
     k: int
-    contacts: List[List[float]]
-    wrench: List[float]
-    y_axis: List[float]
-    orientation: List[float]
+    contacts: list[list[float]]
+    wrench: list[float]
+    y_axis: list[float]
+    orientation: list[float]
     constraints: str
     policy: str
     mode: str
-    ref: Dict[str, Any] = field(default_factory=dict)   # reference.solve's answer
+    ref: dict[str, Any] = field(default_factory=dict)  # reference.solve's answer
     # float64 QP data (None unless the reference status is ok)
-    G: Optional[np.ndarray] = None
-    w_l: Optional[np.ndarray] = None
-    lam0: Optional[np.ndarray] = None
-    lam_des: Optional[np.ndarray] = None
-    N: Optional[np.ndarray] = None
-    xi_u: Optional[np.ndarray] = None
-    qp: Dict[str, Tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # model -> (A, b)
+    G: np.ndarray | None = None
+    w_l: np.ndarray | None = None
+    lam0: np.ndarray | None = None
+    lam_des: np.ndarray | None = None
+    N: np.ndarray | None = None
+    xi_u: np.ndarray | None = None
+    qp: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # model -> (A, b)
 
     @property
     def ok(self) -> bool:
@@ -127,7 +131,7 @@ class Instance:
         return float(np.linalg.norm(self.lam0))
 
 
-def _cube_directions() -> List[np.ndarray]:
+def _cube_directions() -> list[np.ndarray]:
     """The 26 directions from a cube's centre to its faces, edges and corners."""
     out = []
     for x in (-1, 0, 1):
@@ -139,22 +143,35 @@ def _cube_directions() -> List[np.ndarray]:
     return out
 
 
-def paper_scenes(k: int) -> List[Dict[str, Any]]:
+def paper_scenes(k: int) -> list[dict[str, Any]]:
     """The paper's hand (scene_paper_{k}.toml) under the cube's 26 force directions, and
     the named nominal-hand cases of scenes.extreme_scenes() that are expected to be ok."""
     hand = scenes.nominal_contacts(k)
     tilt = scenes.random_quaternion(np.random.default_rng([2024, k]))
     out = []
     for i, d in enumerate(_cube_directions()):
-        out.append({"name": f"paper_k{k}_dir{i:02d}", "k": k,
-                    "contacts": hand.tolist(), "wrench": [*d.tolist(), 0.0, 0.0, 0.0],
-                    "y_axis": list(scenes.DEFAULT_Y_AXIS),
-                    "orientation": [float(v) for v in tilt]})
+        out.append(
+            {
+                "name": f"paper_k{k}_dir{i:02d}",
+                "k": k,
+                "contacts": hand.tolist(),
+                "wrench": [*d.tolist(), 0.0, 0.0, 0.0],
+                "y_axis": list(scenes.DEFAULT_Y_AXIS),
+                "orientation": [float(v) for v in tilt],
+            }
+        )
     for case in scenes.extreme_scenes():
-        if (case.get("expect_status") == "ok" and case["k"] == k
-                and np.array_equal(np.asarray(case["contacts"]), hand)):
-            out.append({key: case[key] for key in
-                        ("name", "k", "contacts", "wrench", "y_axis", "orientation")})
+        if (
+            case.get("expect_status") == "ok"
+            and case["k"] == k
+            and np.array_equal(np.asarray(case["contacts"]), hand)
+        ):
+            out.append(
+                {
+                    key: case[key]
+                    for key in ("name", "k", "contacts", "wrench", "y_axis", "orientation")
+                }
+            )
     return out
 
 
@@ -180,13 +197,14 @@ def _qp_data(inst: Instance) -> None:
         inst.qp[model] = (np.ascontiguousarray(inst.N[S, :]), -inst.lam0[S])
 
 
-def make_instances(count: int, seed: int, ks: Sequence[int],
-                   progress: Optional[Callable[[str], None]] = None) -> List[Instance]:
+def make_instances(
+    count: int, seed: int, ks: Sequence[int], progress: Callable[[str], None] | None = None
+) -> list[Instance]:
     """Random hands and paper scenes for each k, each with both runs, with the reference
     answer and the QP data attached."""
     if count < 0:
         raise BenchError("the number of random instances must be >= 0")
-    out: List[Instance] = []
+    out: list[Instance] = []
     for k in ks:
         if k not in (3, 4):
             raise BenchError(f"k must be 3 or 4, got {k}")
@@ -194,28 +212,42 @@ def make_instances(count: int, seed: int, ks: Sequence[int],
         for group, scs in groups:
             for sc in scs:
                 for model, policy, mode in RUNS:
-                    inst = Instance(name=f"{sc['name']}/{model}", group=group, k=k,
-                                    contacts=[list(map(float, c)) for c in sc["contacts"]],
-                                    wrench=list(map(float, sc["wrench"])),
-                                    y_axis=list(map(float, sc["y_axis"])),
-                                    orientation=list(map(float, sc["orientation"])),
-                                    constraints=model, policy=policy, mode=mode)
-                    inst.ref = reference.solve(inst.contacts, inst.wrench, policy, mode, model,
-                                               inst.orientation, inst.y_axis,
-                                               compute_margins=False)
+                    inst = Instance(
+                        name=f"{sc['name']}/{model}",
+                        group=group,
+                        k=k,
+                        contacts=[list(map(float, c)) for c in sc["contacts"]],
+                        wrench=list(map(float, sc["wrench"])),
+                        y_axis=list(map(float, sc["y_axis"])),
+                        orientation=list(map(float, sc["orientation"])),
+                        constraints=model,
+                        policy=policy,
+                        mode=mode,
+                    )
+                    inst.ref = reference.solve(
+                        inst.contacts,
+                        inst.wrench,
+                        policy,
+                        mode,
+                        model,
+                        inst.orientation,
+                        inst.y_axis,
+                        compute_margins=False,
+                    )
                     if inst.ok:
                         _qp_data(inst)
                     out.append(inst)
         if progress:
-            progress(f"k={k}: {sum(1 for i in out if i.k == k)} instances with their "
-                     f"float64 reference")
+            progress(
+                f"k={k}: {sum(1 for i in out if i.k == k)} instances with their float64 reference"
+            )
     return out
 
 
 # --------------------------------------------------------------------------------------
 # Accuracy against the reference
 # --------------------------------------------------------------------------------------
-def reference_pwm(inst: Instance, lam: np.ndarray) -> Optional[List[int]]:
+def reference_pwm(inst: Instance, lam: np.ndarray) -> list[int] | None:
     """PWM of lambda through the reference's motor mapping (policy, mode, alpha)."""
     m = reference.motor_levels(lam, inst.policy)
     n = float(np.linalg.norm(m))
@@ -227,19 +259,24 @@ def reference_pwm(inst: Instance, lam: np.ndarray) -> Optional[List[int]]:
 @dataclass
 class Outcome:
     """One solver's answer on one instance: a status, the model it used, lambda, PWM."""
-    status: str                       # "ok" or what went wrong (a core status, an error)
+
+    status: str  # "ok" or what went wrong (a core status, an error)
     used: str = ""
-    lam: Optional[np.ndarray] = None
-    pwm: Optional[List[int]] = None
+    lam: np.ndarray | None = None
+    pwm: list[int] | None = None
 
 
-def judge(inst: Instance, out: Outcome, scalar: str = "double") -> Dict[str, Any]:
+def judge(inst: Instance, out: Outcome, scalar: str = "double") -> dict[str, Any]:
     """Compare one outcome with the reference. `failure` is None or the reason: the
     solver's own error, a constraint model other than the reference's (a wrong
     feasibility verdict), a violation above VIOLATION_TOL, a status other than the
     reference's, or a missing PWM."""
-    rec: Dict[str, Any] = {"instance": inst.name, "status": out.status, "used": out.used,
-                           "failure": None}
+    rec: dict[str, Any] = {
+        "instance": inst.name,
+        "status": out.status,
+        "used": out.used,
+        "failure": None,
+    }
     if not inst.ok:  # a frame that must fail: it must fail with the reference's status
         if out.status != inst.ref["status"]:
             rec["failure"] = f"status {out.status}, reference {inst.ref['status']}"
@@ -257,8 +294,9 @@ def judge(inst: Instance, out: Outcome, scalar: str = "double") -> Dict[str, Any
     rec["violation_rel"] = viol
     rec["objective_gap_rel"] = (j - j_ref) / max(j_ref, 1e-300)
     rec["lambda_err_rel"] = float(np.linalg.norm(lam - lam_ref) / np.linalg.norm(lam_ref))
-    rec["equilibrium_residual_rel"] = float(np.linalg.norm(inst.G @ lam + inst.w_l)
-                                            / np.linalg.norm(inst.w_l))
+    rec["equilibrium_residual_rel"] = float(
+        np.linalg.norm(inst.G @ lam + inst.w_l) / np.linalg.norm(inst.w_l)
+    )
     pwm = out.pwm if out.pwm is not None else reference_pwm(inst, lam)
     if pwm is None:
         rec["failure"] = "nothing_to_display"
@@ -273,13 +311,14 @@ def judge(inst: Instance, out: Outcome, scalar: str = "double") -> Dict[str, Any
     return rec
 
 
-def summarize_accuracy(records: List[Dict[str, Any]]) -> Dict[str, Any]:
+def summarize_accuracy(records: list[dict[str, Any]]) -> dict[str, Any]:
     def collect(key):
         return [r[key] for r in records if key in r and r[key] is not None]
 
-    failures = [{"instance": r["instance"], "reason": r["failure"]}
-                for r in records if r["failure"]]
-    reasons: Dict[str, int] = {}
+    failures = [
+        {"instance": r["instance"], "reason": r["failure"]} for r in records if r["failure"]
+    ]
+    reasons: dict[str, int] = {}
     for f in failures:
         key = f["reason"].split(":")[0]
         reasons[key] = reasons.get(key, 0) + 1
@@ -293,15 +332,17 @@ def summarize_accuracy(records: List[Dict[str, Any]]) -> Dict[str, Any]:
         "compared_pwm": len(diffs),
         "pwm_mismatch": sum(1 for d in diffs if d > 0),
         "pwm_mismatch_over_1": sum(1 for d in diffs if d > 1),
-        "pwm_mismatches_over_1": [{"instance": r["instance"], "pwm_diff": r["pwm_diff"]}
-                                  for r in records if r.get("pwm_diff", 0) > 1],
+        "pwm_mismatches_over_1": [
+            {"instance": r["instance"], "pwm_diff": r["pwm_diff"]}
+            for r in records
+            if r.get("pwm_diff", 0) > 1
+        ],
         "max_pwm_diff": max(diffs) if diffs else None,
         "max_violation_rel": max(collect("violation_rel"), default=None),
         "max_objective_gap_rel": max(gaps, default=None),
         "median_objective_gap_rel": float(np.median(gaps)) if gaps else None,
         "max_lambda_err_rel": max(collect("lambda_err_rel"), default=None),
-        "max_equilibrium_residual_rel": max(collect("equilibrium_residual_rel"),
-                                            default=None),
+        "max_equilibrium_residual_rel": max(collect("equilibrium_residual_rel"), default=None),
     }
 
 
@@ -310,27 +351,36 @@ def summarize_accuracy(records: List[Dict[str, Any]]) -> Dict[str, Any]:
 # verdict "optimal", "infeasible" or an error text, and internal None or a tuple of the
 # solver's own times in ns.
 # --------------------------------------------------------------------------------------
-DAQP_EXITFLAGS = {2: "soft optimal", 1: "optimal", -1: "infeasible", -2: "cycling",
-                  -3: "unbounded", -4: "iteration limit", -5: "nonconvex",
-                  -6: "overdetermined initial active set"}
+DAQP_EXITFLAGS = {
+    2: "soft optimal",
+    1: "optimal",
+    -1: "infeasible",
+    -2: "cycling",
+    -3: "unbounded",
+    -4: "iteration limit",
+    -5: "nonconvex",
+    -6: "overdetermined initial active set",
+}
 
 
 class DaqpSolver:
     """daqp.solve, the one-shot call (H = I is factorised in its setup)."""
+
     name = "daqp"
 
     def __init__(self):
         import daqp
+
         self._daqp = daqp
         self.version = getattr(daqp, "__version__", None) or _dist_version("daqp")
 
     def solve(self, xi_u, A, b):
         n, m = xi_u.size, b.size
-        x, _, flag, info = self._daqp.solve(np.eye(n), -xi_u, A, np.full(m, 1e30), b,
-                                            np.zeros(m, dtype=np.int32))
+        x, _, flag, info = self._daqp.solve(
+            np.eye(n), -xi_u, A, np.full(m, 1e30), b, np.zeros(m, dtype=np.int32)
+        )
         # DAQP's own clocks, in seconds: (solve, setup + solve).
-        internal = (info["solve_time"] * 1e9,
-                    (info["setup_time"] + info["solve_time"]) * 1e9)
+        internal = (info["solve_time"] * 1e9, (info["setup_time"] + info["solve_time"]) * 1e9)
         if flag in (1, 2):
             return "optimal", np.asarray(x, dtype=np.float64), internal
         if flag == -1:
@@ -343,6 +393,7 @@ class QuadprogSolver:
 
     def __init__(self):
         import quadprog
+
         self._solve_qp = quadprog.solve_qp
         self.version = _dist_version("quadprog")
 
@@ -360,15 +411,17 @@ class OsqpSolver:
     """One OSQP problem per shape (variables, rows), set up once and then only updated
     (q, l, u and the values of A, whose sparsity pattern is kept dense), warm-started
     from whatever it solved last."""
+
     name = "osqp"
 
     def __init__(self):
         import osqp
         import scipy.sparse as sp
+
         self._osqp = osqp
         self._sp = sp
         self.version = getattr(osqp, "__version__", None) or _dist_version("osqp")
-        self.problems: Dict[Tuple[int, int], Any] = {}
+        self.problems: dict[tuple[int, int], Any] = {}
         self.setups = 0
         self.updates = 0
         self.last_iterations = 0
@@ -385,8 +438,9 @@ class OsqpSolver:
         prob = self.problems.get((n, m))
         if prob is None:
             prob = self._osqp.OSQP()
-            prob.setup(self._sp.csc_matrix(np.eye(n)), -xi_u, self._dense_csc(A), b, upper,
-                       **OSQP_SETTINGS)
+            prob.setup(
+                self._sp.csc_matrix(np.eye(n)), -xi_u, self._dense_csc(A), b, upper, **OSQP_SETTINGS
+            )
             self.problems[(n, m)] = prob
             self.setups += 1
         else:
@@ -409,39 +463,44 @@ class SlsqpSolver:
     """scipy.optimize.minimize(method='SLSQP') with analytic gradients, started at xi_u;
     anything but success counts as 'infeasible' and moves to the next model, as a user's
     fallback chain would do (a wrong verdict then shows as a wrong model)."""
+
     name = "scipy-slsqp"
 
     def __init__(self):
         import scipy
         from scipy.optimize import minimize
+
         self._minimize = minimize
         self.version = scipy.__version__
 
     def solve(self, xi_u, A, b):
         res = self._minimize(
-            lambda x: 0.5 * float((x - xi_u) @ (x - xi_u)), xi_u.copy(),
-            jac=lambda x: x - xi_u, method="SLSQP",
+            lambda x: 0.5 * float((x - xi_u) @ (x - xi_u)),
+            xi_u.copy(),
+            jac=lambda x: x - xi_u,
+            method="SLSQP",
             constraints=[{"type": "ineq", "fun": lambda x: A @ x - b, "jac": lambda x: A}],
-            options=SLSQP_OPTIONS)
+            options=SLSQP_OPTIONS,
+        )
         if res.success:
             return "optimal", np.asarray(res.x, dtype=np.float64), None
         return "infeasible", None, None
 
 
-def _dist_version(name: str) -> Optional[str]:
+def _dist_version(name: str) -> str | None:
     try:
         from importlib.metadata import version
+
         return version(name)
     except Exception:  # noqa: BLE001 - a version is only informational
         return None
 
 
-def solve_chain(solver, inst: Instance
-                ) -> Tuple[Outcome, float, Optional[Tuple[float, ...]]]:
+def solve_chain(solver, inst: Instance) -> tuple[Outcome, float, tuple[float, ...] | None]:
     """The fallback chain with one peer solver: (outcome, wall ns of the solver calls,
     the solver's own times summed over its calls, or None)."""
     wall = 0.0
-    internal: Optional[Tuple[float, ...]] = ()
+    internal: tuple[float, ...] | None = ()
     for model in CHAIN[inst.constraints]:
         if model == "none":  # no constraints: the unconstrained optimum, no solver call
             lam = inst.lam0 + inst.N @ inst.xi_u
@@ -454,8 +513,9 @@ def solve_chain(solver, inst: Instance
             verdict, xi, t_int = f"{type(e).__name__}: {e}", None, None
         wall += time.perf_counter_ns() - t0
         if internal is not None and t_int is not None:
-            internal = tuple(t_int) if not internal else tuple(
-                a + b for a, b in zip(internal, t_int))
+            internal = (
+                tuple(t_int) if not internal else tuple(a + b for a, b in zip(internal, t_int))
+            )
         else:
             internal = None
         if verdict == "infeasible":
@@ -508,19 +568,22 @@ def _percentile(values: Sequence[float], q: float) -> float:
 @dataclass
 class Series:
     """The samples of one timed quantity, per pass."""
-    label: str                 # e.g. "C++ loop", "internal solve_time", "Python call"
-    passes: List[List[float]] = field(default_factory=list)
 
-    def add(self, samples: List[float]) -> None:
+    label: str  # e.g. "C++ loop", "internal solve_time", "Python call"
+    passes: list[list[float]] = field(default_factory=list)
+
+    def add(self, samples: list[float]) -> None:
         self.passes.append([float(s) for s in samples])
 
-    def spreads(self) -> Tuple[float, float]:
+    def spreads(self) -> tuple[float, float]:
         meds = [float(np.median(p)) for p in self.passes if p]
         p99s = [_percentile(p, 99) for p in self.passes if p]
         if len(meds) < 2:
             return 0.0, 0.0
-        return ((max(meds) - min(meds)) / max(min(meds), 1e-12),
-                (max(p99s) - min(p99s)) / max(min(p99s), 1e-12))
+        return (
+            (max(meds) - min(meds)) / max(min(meds), 1e-12),
+            (max(p99s) - min(p99s)) / max(min(p99s), 1e-12),
+        )
 
     def stable(self) -> bool:
         if not any(self.passes):
@@ -528,7 +591,7 @@ class Series:
         med, p99 = self.spreads()
         return med <= MEDIAN_SPREAD_MAX and p99 <= P99_SPREAD_MAX
 
-    def summary(self) -> Dict[str, Any]:
+    def summary(self) -> dict[str, Any]:
         pooled = [s for p in self.passes for s in p]
         med, p99 = self.spreads()
         if not pooled:
@@ -552,17 +615,18 @@ class Series:
 @dataclass
 class Config:
     """One benchmarked configuration on one k: run_pass() adds one pass to every series."""
+
     name: str
-    group: str                 # frame | fixed | py-call | qp | py-pipeline
+    group: str  # frame | fixed | py-call | qp | py-pipeline
     solver: str
     k: int
     scalar: str
-    settings: Dict[str, Any]
-    run: Callable[["Config"], None]
-    instances: List[Instance]
-    series: Dict[str, Series] = field(default_factory=dict)
-    outcomes: Optional[List[Outcome]] = None
-    extra: Dict[str, Any] = field(default_factory=dict)
+    settings: dict[str, Any]
+    run: Callable[[Config], None]
+    instances: list[Instance]
+    series: dict[str, Series] = field(default_factory=dict)
+    outcomes: list[Outcome] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def serie(self, key: str, label: str) -> Series:
         if key not in self.series:
@@ -572,52 +636,87 @@ class Config:
     def stable(self) -> bool:
         return all(s.stable() for s in self.series.values())
 
-    def result(self) -> Dict[str, Any]:
-        records = [judge(inst, out, self.scalar)
-                   for inst, out in zip(self.instances, self.outcomes or [])]
-        return {"name": self.name, "group": self.group, "solver": self.solver, "k": self.k,
-                "scalar": self.scalar, "settings": self.settings,
-                "timing": {key: s.summary() for key, s in self.series.items()},
-                "accuracy": summarize_accuracy(records), **self.extra}
+    def result(self) -> dict[str, Any]:
+        records = [
+            judge(inst, out, self.scalar) for inst, out in zip(self.instances, self.outcomes or [])
+        ]
+        return {
+            "name": self.name,
+            "group": self.group,
+            "solver": self.solver,
+            "k": self.k,
+            "scalar": self.scalar,
+            "settings": self.settings,
+            "timing": {key: s.summary() for key, s in self.series.items()},
+            "accuracy": summarize_accuracy(records),
+            **self.extra,
+        }
 
 
-def _frame_args(insts: List[Instance]):
-    return ([i.contacts for i in insts], [i.wrench for i in insts],
-            [i.orientation for i in insts], [i.y_axis for i in insts],
-            [i.policy for i in insts], [i.mode for i in insts],
-            [i.constraints for i in insts])
+def _frame_args(insts: list[Instance]):
+    return (
+        [i.contacts for i in insts],
+        [i.wrench for i in insts],
+        [i.orientation for i in insts],
+        [i.y_axis for i in insts],
+        [i.policy for i in insts],
+        [i.mode for i in insts],
+        [i.constraints for i in insts],
+    )
 
 
-def _outcomes_from_core(res: Dict[str, Any]) -> List[Outcome]:
-    return [Outcome(st, used, None if lam is None else np.asarray(lam), list(pwm))
-            for st, used, lam, pwm in zip(res["status"], res["constraints_used"],
-                                          res["lambda"], res["pwm"])]
+def _outcomes_from_core(res: dict[str, Any]) -> list[Outcome]:
+    return [
+        Outcome(st, used, None if lam is None else np.asarray(lam), list(pwm))
+        for st, used, lam, pwm in zip(
+            res["status"], res["constraints_used"], res["lambda"], res["pwm"]
+        )
+    ]
 
 
-def _flatten(ns: List[List[float]]) -> List[float]:
+def _flatten(ns: list[list[float]]) -> list[float]:
     return [v for per in ns for v in per]
 
 
-def cxx_frame_config(name, insts, k, scalar, decomposition, warm, max_iterations,
-                     fixed, reps, batches) -> Config:
+def cxx_frame_config(
+    name, insts, k, scalar, decomposition, warm, max_iterations, fixed, reps, batches
+) -> Config:
     def run(cfg: Config) -> None:
-        res = _core.time_frames(*_frame_args(insts), scalar=scalar,
-                                decomposition=decomposition, warm_start=warm,
-                                max_iterations=max_iterations, fixed_posture=fixed,
-                                reps=reps, batches=batches, warmup=4)
+        res = _core.time_frames(
+            *_frame_args(insts),
+            scalar=scalar,
+            decomposition=decomposition,
+            warm_start=warm,
+            max_iterations=max_iterations,
+            fixed_posture=fixed,
+            reps=reps,
+            batches=batches,
+            warmup=4,
+        )
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
         cfg.outcomes = _outcomes_from_core(res)
         cfg.extra["recomputed_per_instance"] = sorted(set(res["recomputed"]))
         cfg.extra["frames_per_instance"] = res["frames_per_instance"]
 
-    return Config(name, "fixed" if fixed else "frame", "graspguide", k, scalar,
-                  {"decomposition": decomposition, "warm_start": warm,
-                   "max_iterations": max_iterations, "reps": reps, "batches": batches},
-                  run, insts)
+    return Config(
+        name,
+        "fixed" if fixed else "frame",
+        "graspguide",
+        k,
+        scalar,
+        {
+            "decomposition": decomposition,
+            "warm_start": warm,
+            "max_iterations": max_iterations,
+            "reps": reps,
+            "batches": batches,
+        },
+        run,
+        insts,
+    )
 
 
-STAGES = ("contact_frames", "grasp_matrix", "decomposition", "relevance", "qp",
-          "levels_pwm")
+STAGES = ("contact_frames", "grasp_matrix", "decomposition", "relevance", "qp", "levels_pwm")
 
 
 def cxx_stages_config(name, insts, k, scalar, decomposition, reps, batches) -> Config:
@@ -625,47 +724,78 @@ def cxx_stages_config(name, insts, k, scalar, decomposition, reps, batches) -> C
     ok = [i for i in insts if i.ok]
 
     def run(cfg: Config) -> None:
-        res = _core.time_stages(*_frame_args(ok), scalar=scalar, decomposition=decomposition,
-                                reps=reps, batches=batches, warmup=4)
+        res = _core.time_stages(
+            *_frame_args(ok),
+            scalar=scalar,
+            decomposition=decomposition,
+            reps=reps,
+            batches=batches,
+            warmup=4,
+        )
         for stage in STAGES:
-            cfg.serie(stage, f"stage {stage}").add(
-                [v for d in res for v in d.get(stage, [])])
+            cfg.serie(stage, f"stage {stage}").add([v for d in res for v in d.get(stage, [])])
         cfg.extra["instances_timed"] = sum(1 for d in res if d)
 
-    return Config(name, "stages", "graspguide", k, scalar,
-                  {"decomposition": decomposition, "qp_warm_start": False, "reps": reps,
-                   "batches": batches}, run, ok)
+    return Config(
+        name,
+        "stages",
+        "graspguide",
+        k,
+        scalar,
+        {"decomposition": decomposition, "qp_warm_start": False, "reps": reps, "batches": batches},
+        run,
+        ok,
+    )
 
 
-def _qp_args(insts: List[Instance]):
-    return ([i.lam0.tolist() for i in insts], [i.N.flatten().tolist() for i in insts],
-            [i.lam_des.tolist() for i in insts], [i.constraints for i in insts])
+def _qp_args(insts: list[Instance]):
+    return (
+        [i.lam0.tolist() for i in insts],
+        [i.N.flatten().tolist() for i in insts],
+        [i.lam_des.tolist() for i in insts],
+        [i.constraints for i in insts],
+    )
 
 
 def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) -> Config:
     args = _qp_args(insts)
 
     def run(cfg: Config) -> None:
-        res = _core.time_qp(*args, scalar=scalar, warm_start=warm,
-                            violation_rel=violation_rel, reps=reps, batches=batches, warmup=4)
+        res = _core.time_qp(
+            *args,
+            scalar=scalar,
+            warm_start=warm,
+            violation_rel=violation_rel,
+            reps=reps,
+            batches=batches,
+            warmup=4,
+        )
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
-        cfg.outcomes = [Outcome(st, used, None if lam is None else np.asarray(lam))
-                        for st, used, lam in zip(res["status"], res["constraints_used"],
-                                                 res["lambda"])]
+        cfg.outcomes = [
+            Outcome(st, used, None if lam is None else np.asarray(lam))
+            for st, used, lam in zip(res["status"], res["constraints_used"], res["lambda"])
+        ]
 
-    return Config(name, "qp", "graspguide", k, scalar,
-                  {"warm_start": warm, "feas_rel": violation_rel or None, "reps": reps,
-                   "batches": batches}, run, insts)
+    return Config(
+        name,
+        "qp",
+        "graspguide",
+        k,
+        scalar,
+        {"warm_start": warm, "feas_rel": violation_rel or None, "reps": reps, "batches": batches},
+        run,
+        insts,
+    )
 
 
 def py_guidance_config(name, insts, k, calls) -> Config:
     """The existing stateful binding, one Python call per frame (set_contacts + update)."""
+
     def run(cfg: Config) -> None:
         samples, outcomes = [], []
         g = _core.Guidance()
         for inst in insts:
-            st = g.set_scene(inst.contacts, inst.policy, inst.mode, inst.constraints,
-                             inst.y_axis)
+            st = g.set_scene(inst.contacts, inst.policy, inst.mode, inst.constraints, inst.y_axis)
             if st == "ok":
                 st = g.set_wrench(inst.wrench)
             if st != "ok":
@@ -683,36 +813,74 @@ def py_guidance_config(name, insts, k, calls) -> Config:
             g.update(q)
             g.set_contacts(inst.contacts)
             d = g.update(q)
-            outcomes.append(Outcome(d["status"], d["constraints_used"],
-                                    None if d["lambda"] is None else np.asarray(d["lambda"]),
-                                    d["pwm"]))
+            outcomes.append(
+                Outcome(
+                    d["status"],
+                    d["constraints_used"],
+                    None if d["lambda"] is None else np.asarray(d["lambda"]),
+                    d["pwm"],
+                )
+            )
         cfg.serie("py", "Python call").add(samples)
         cfg.outcomes = outcomes
 
-    return Config(name, "py-call", "graspguide", k, "double",
-                  {"decomposition": "qr", "warm_start": False, "calls": calls,
-                   "binding": "_core.Guidance set_contacts + update"}, run, insts)
+    return Config(
+        name,
+        "py-call",
+        "graspguide",
+        k,
+        "double",
+        {
+            "decomposition": "qr",
+            "warm_start": False,
+            "calls": calls,
+            "binding": "_core.Guidance set_contacts + update",
+        },
+        run,
+        insts,
+    )
 
 
 def py_solve_config(name, insts, k, scalar, calls) -> Config:
     """The existing one-shot binding (_core.solve: scene, wrench and pose in one call)."""
+
     def run(cfg: Config) -> None:
         samples, outcomes = [], []
         for inst in insts:
             for _ in range(calls):
                 t0 = time.perf_counter_ns()
-                d = _core.solve(inst.contacts, inst.wrench, inst.policy, inst.mode,
-                                inst.constraints, inst.orientation, inst.y_axis, scalar)
+                d = _core.solve(
+                    inst.contacts,
+                    inst.wrench,
+                    inst.policy,
+                    inst.mode,
+                    inst.constraints,
+                    inst.orientation,
+                    inst.y_axis,
+                    scalar,
+                )
                 samples.append(time.perf_counter_ns() - t0)
-            outcomes.append(Outcome(d["status"], d["constraints_used"],
-                                    None if d["lambda"] is None else np.asarray(d["lambda"]),
-                                    d["pwm"]))
+            outcomes.append(
+                Outcome(
+                    d["status"],
+                    d["constraints_used"],
+                    None if d["lambda"] is None else np.asarray(d["lambda"]),
+                    d["pwm"],
+                )
+            )
         cfg.serie("py", "Python call").add(samples)
         cfg.outcomes = outcomes
 
-    return Config(name, "py-call", "graspguide", k, scalar,
-                  {"decomposition": "qr", "warm_start": False, "calls": calls,
-                   "binding": "_core.solve"}, run, insts)
+    return Config(
+        name,
+        "py-call",
+        "graspguide",
+        k,
+        scalar,
+        {"decomposition": "qr", "warm_start": False, "calls": calls, "binding": "_core.solve"},
+        run,
+        insts,
+    )
 
 
 def peer_config(solver, insts, k, calls) -> Config:
@@ -739,7 +907,7 @@ def peer_config(solver, insts, k, calls) -> Config:
             cfg.extra["osqp_updates"] = solver.updates
             cfg.extra["osqp_problems"] = sorted([list(s) for s in solver.problems])
 
-    settings: Dict[str, Any] = {"calls": calls, "version": solver.version}
+    settings: dict[str, Any] = {"calls": calls, "version": solver.version}
     if isinstance(solver, OsqpSolver):
         settings.update(OSQP_SETTINGS)
     if isinstance(solver, SlsqpSolver):
@@ -761,9 +929,16 @@ def pipeline_config(slsqp, insts, k) -> Config:
         cfg.serie("py", "Python call").add(samples)
         cfg.outcomes = outcomes
 
-    return Config("numpy+scipy frame", "py-pipeline", "numpy+scipy", k, "double",
-                  {"qp": "SLSQP", "null_space": "scipy.linalg.null_space",
-                   "pinv": "numpy.linalg.pinv"}, run, insts)
+    return Config(
+        "numpy+scipy frame",
+        "py-pipeline",
+        "numpy+scipy",
+        k,
+        "double",
+        {"qp": "SLSQP", "null_space": "scipy.linalg.null_space", "pinv": "numpy.linalg.pinv"},
+        run,
+        insts,
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -773,63 +948,115 @@ def pipeline_config(slsqp, insts, k) -> Config:
 class Options:
     instances: int = 200
     seed: int = 1
-    ks: Tuple[int, ...] = (3, 4)
+    ks: tuple[int, ...] = (3, 4)
     quick: bool = False
     min_passes: int = 3
     max_passes: int = 8
-    solvers: Tuple[str, ...] = ("daqp", "quadprog", "osqp", "scipy-slsqp")
+    solvers: tuple[str, ...] = ("daqp", "quadprog", "osqp", "scipy-slsqp")
 
 
-def build_configs(insts: List[Instance], opts: Options) -> List[Config]:
+def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
     quick = opts.quick
     reps, batches = (8, 2) if quick else (16, 3)
     qp_reps = 16 if quick else 32
     calls = 2 if quick else 3
-    configs: List[Config] = []
+    configs: list[Config] = []
     for k in opts.ks:
         frames = [i for i in insts if i.k == k]
         qps = [i for i in frames if i.ok]
         for scalar in ("double", "float"):
             for dec in ("qr", "svd"):
                 for warm in (True, False):
-                    configs.append(cxx_frame_config(
-                        f"frame {scalar} {dec} {'warm' if warm else 'cold'}", frames, k,
-                        scalar, dec, warm, _core.kDefaultMaxIterations, False, reps, batches))
-        configs.append(cxx_frame_config(
-            f"frame double qr cold max_it={LIMITED_ITERATIONS}", frames, k, "double", "qr",
-            False, LIMITED_ITERATIONS, False, reps, batches))
+                    configs.append(
+                        cxx_frame_config(
+                            f"frame {scalar} {dec} {'warm' if warm else 'cold'}",
+                            frames,
+                            k,
+                            scalar,
+                            dec,
+                            warm,
+                            _core.kDefaultMaxIterations,
+                            False,
+                            reps,
+                            batches,
+                        )
+                    )
+        configs.append(
+            cxx_frame_config(
+                f"frame double qr cold max_it={LIMITED_ITERATIONS}",
+                frames,
+                k,
+                "double",
+                "qr",
+                False,
+                LIMITED_ITERATIONS,
+                False,
+                reps,
+                batches,
+            )
+        )
         for scalar in ("double", "float"):
-            configs.append(cxx_frame_config(f"fixed posture {scalar}", frames, k, scalar,
-                                            "qr", True, _core.kDefaultMaxIterations, True,
-                                            reps * 8, batches))
+            configs.append(
+                cxx_frame_config(
+                    f"fixed posture {scalar}",
+                    frames,
+                    k,
+                    scalar,
+                    "qr",
+                    True,
+                    _core.kDefaultMaxIterations,
+                    True,
+                    reps * 8,
+                    batches,
+                )
+            )
         for scalar in ("double", "float"):
             for dec in ("qr", "svd"):
-                configs.append(cxx_stages_config(f"stages {scalar} {dec}", frames, k, scalar,
-                                                 dec, reps, batches))
+                configs.append(
+                    cxx_stages_config(
+                        f"stages {scalar} {dec}", frames, k, scalar, dec, reps, batches
+                    )
+                )
         configs.append(py_guidance_config("py Guidance double", frames, k, calls))
         for scalar in ("double", "float"):
             configs.append(py_solve_config(f"py solve {scalar}", frames, k, scalar, calls))
-        configs.append(cxx_qp_config("QP double cold", qps, k, "double", False, 0.0,
-                                     qp_reps, batches))
-        configs.append(cxx_qp_config("QP double warm", qps, k, "double", True, 0.0,
-                                     qp_reps, batches))
-        configs.append(cxx_qp_config("QP float cold", qps, k, "float", False, 0.0,
-                                     qp_reps, batches))
-        configs.append(cxx_qp_config(f"QP double cold feas={LOOSE_FEAS_REL:g}", qps, k,
-                                     "double", False, LOOSE_FEAS_REL, qp_reps, batches))
+        configs.append(
+            cxx_qp_config("QP double cold", qps, k, "double", False, 0.0, qp_reps, batches)
+        )
+        configs.append(
+            cxx_qp_config("QP double warm", qps, k, "double", True, 0.0, qp_reps, batches)
+        )
+        configs.append(
+            cxx_qp_config("QP float cold", qps, k, "float", False, 0.0, qp_reps, batches)
+        )
+        configs.append(
+            cxx_qp_config(
+                f"QP double cold feas={LOOSE_FEAS_REL:g}",
+                qps,
+                k,
+                "double",
+                False,
+                LOOSE_FEAS_REL,
+                qp_reps,
+                batches,
+            )
+        )
         # Fresh solver objects per k: OSQP's problems (one per shape) live in its object.
         peers = make_peers(opts.solvers)
         for name in opts.solvers:
-            configs.append(peer_config(peers[name], qps, k,
-                                       1 if name == "scipy-slsqp" else calls))
+            configs.append(peer_config(peers[name], qps, k, 1 if name == "scipy-slsqp" else calls))
         if "scipy-slsqp" in peers:
             configs.append(pipeline_config(peers["scipy-slsqp"], qps, k))
     return configs
 
 
-def make_peers(names: Sequence[str]) -> Dict[str, Any]:
-    makers = {"daqp": DaqpSolver, "quadprog": QuadprogSolver, "osqp": OsqpSolver,
-              "scipy-slsqp": SlsqpSolver}
+def make_peers(names: Sequence[str]) -> dict[str, Any]:
+    makers = {
+        "daqp": DaqpSolver,
+        "quadprog": QuadprogSolver,
+        "osqp": OsqpSolver,
+        "scipy-slsqp": SlsqpSolver,
+    }
     peers = {}
     for n in names:
         if n not in makers:
@@ -839,12 +1066,14 @@ def make_peers(names: Sequence[str]) -> Dict[str, Any]:
         except ImportError as e:
             raise BenchError(
                 f"solver {n!r} is not installed ({e}); install the bench extra: "
-                f"pip install -r tools/requirements-dev.txt (or ./tools[bench])") from None
+                f"pip install -r tools/requirements-dev.txt (or ./tools[bench])"
+            ) from None
     return peers
 
 
-def run_passes(configs: List[Config], opts: Options,
-               progress: Optional[Callable[[str], None]] = None) -> None:
+def run_passes(
+    configs: list[Config], opts: Options, progress: Callable[[str], None] | None = None
+) -> None:
     """min_passes round-robin passes over every config, then more passes for the
     configs that are not stable, up to max_passes."""
     for p in range(opts.max_passes):
@@ -886,7 +1115,7 @@ def _quiet_stdout(active: bool):
         os.close(devnull)
 
 
-def machine_info(peers: Dict[str, Any]) -> Dict[str, Any]:
+def machine_info(peers: dict[str, Any]) -> dict[str, Any]:
     cpu = None
     try:
         with open("/proc/cpuinfo") as f:
@@ -897,41 +1126,59 @@ def machine_info(peers: Dict[str, Any]) -> Dict[str, Any]:
     except OSError:
         pass
     import scipy
-    return {"platform": platform.platform(), "python": platform.python_version(),
-            "cpu": cpu, "cpus": os.cpu_count(),
-            "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-            "numpy": np.__version__, "scipy": scipy.__version__,
-            "solvers": {n: s.version for n, s in peers.items()}}
+
+    return {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu": cpu,
+        "cpus": os.cpu_count(),
+        "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "solvers": {n: s.version for n, s in peers.items()},
+    }
 
 
-def goal(results: List[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
+def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
     """Host, k=4, double: this project's median full frame (the shipped settings: QR,
     cold start, default iteration cap) vs DAQP's median internal solve_time for the QP
     alone on the same instances (ratio <= 1: the goal is met). Also: the fastest double
     frame variant, and DAQP's setup + solve."""
-    frame = next((r for r in results if r["k"] == 4 and r["name"] == "frame double qr cold"),
-                 None)
+    frame = next((r for r in results if r["k"] == 4 and r["name"] == "frame double qr cold"), None)
     daqp = next((r for r in results if r["k"] == 4 and r["solver"] == "daqp"), None)
     if frame is None or daqp is None:
         return None
-    variants = [r for r in results if r["k"] == 4 and r["group"] == "frame"
-                and r["scalar"] == "double"
-                and r["settings"]["max_iterations"] == _core.kDefaultMaxIterations]
+    variants = [
+        r
+        for r in results
+        if r["k"] == 4
+        and r["group"] == "frame"
+        and r["scalar"] == "double"
+        and r["settings"]["max_iterations"] == _core.kDefaultMaxIterations
+    ]
     best = min(variants, key=lambda r: r["timing"]["cxx"]["median_ns"])
     f = frame["timing"]["cxx"]["median_ns"]
     d = daqp["timing"]["internal"]["median_ns"]
     ds = daqp["timing"]["internal_setup"]["median_ns"]
     b = best["timing"]["cxx"]["median_ns"]
-    return {"description": "k=4, double: median full frame (frame double qr cold, C++ "
-                           "loop) / DAQP median internal solve_time for the QP alone",
-            "frame_median_ns": f, "daqp_solve_median_ns": d,
-            "daqp_setup_solve_median_ns": ds, "ratio": f / d, "ratio_vs_setup_solve": f / ds,
-            "met": f <= d, "fastest_frame": best["name"], "fastest_frame_median_ns": b,
-            "fastest_ratio": b / d}
+    return {
+        "description": "k=4, double: median full frame (frame double qr cold, C++ "
+        "loop) / DAQP median internal solve_time for the QP alone",
+        "frame_median_ns": f,
+        "daqp_solve_median_ns": d,
+        "daqp_setup_solve_median_ns": ds,
+        "ratio": f / d,
+        "ratio_vs_setup_solve": f / ds,
+        "met": f <= d,
+        "fastest_frame": best["name"],
+        "fastest_frame_median_ns": b,
+        "fastest_ratio": b / d,
+    }
 
 
-def run_configs(opts: Options, progress: Optional[Callable[[str], None]] = None
-                ) -> Tuple[List[Instance], List[Config]]:
+def run_configs(
+    opts: Options, progress: Callable[[str], None] | None = None
+) -> tuple[list[Instance], list[Config]]:
     """Instances with their reference, and every config measured (the report's inputs)."""
     if opts.min_passes < 1 or opts.max_passes < opts.min_passes:
         raise BenchError("need 1 <= min_passes <= max_passes")
@@ -942,27 +1189,39 @@ def run_configs(opts: Options, progress: Optional[Callable[[str], None]] = None
     return insts, configs
 
 
-def report(opts: Options, insts: List[Instance], configs: List[Config],
-           elapsed_s: float) -> Dict[str, Any]:
+def report(
+    opts: Options, insts: list[Instance], configs: list[Config], elapsed_s: float
+) -> dict[str, Any]:
     results = [c.result() for c in configs]
     counts = {}
     for k in opts.ks:
         ks = [i for i in insts if i.k == k]
         counts[f"k{k}"] = {
-            "frames": len(ks), "qp": sum(1 for i in ks if i.ok),
+            "frames": len(ks),
+            "qp": sum(1 for i in ks if i.ok),
             "random": sum(1 for i in ks if i.group == "random"),
             "paper": sum(1 for i in ks if i.group == "paper"),
-            "reference_models_used": {m: sum(1 for i in ks if i.ok and
-                                             i.ref["constraints_used"] == m)
-                                      for m in ("paper", "normal", "none")},
-            "reference_not_ok": sum(1 for i in ks if not i.ok)}
+            "reference_models_used": {
+                m: sum(1 for i in ks if i.ok and i.ref["constraints_used"] == m)
+                for m in ("paper", "normal", "none")
+            },
+            "reference_not_ok": sum(1 for i in ks if not i.ok),
+        }
     return {
         "schema": SCHEMA,
-        "settings": {"instances": opts.instances, "seed": opts.seed, "k": list(opts.ks),
-                     "quick": opts.quick, "min_passes": opts.min_passes,
-                     "max_passes": opts.max_passes, "solvers": list(opts.solvers),
-                     "median_spread_max": MEDIAN_SPREAD_MAX, "p99_spread_max": P99_SPREAD_MAX,
-                     "violation_tol": VIOLATION_TOL, "runs": [list(r) for r in RUNS]},
+        "settings": {
+            "instances": opts.instances,
+            "seed": opts.seed,
+            "k": list(opts.ks),
+            "quick": opts.quick,
+            "min_passes": opts.min_passes,
+            "max_passes": opts.max_passes,
+            "solvers": list(opts.solvers),
+            "median_spread_max": MEDIAN_SPREAD_MAX,
+            "p99_spread_max": P99_SPREAD_MAX,
+            "violation_tol": VIOLATION_TOL,
+            "runs": [list(r) for r in RUNS],
+        },
         "machine": machine_info({n: s for n, s in make_peers(opts.solvers).items()}),
         "instances": counts,
         "results": results,
@@ -971,8 +1230,7 @@ def report(opts: Options, insts: List[Instance], configs: List[Config],
     }
 
 
-def run_bench(opts: Options, progress: Optional[Callable[[str], None]] = None
-              ) -> Dict[str, Any]:
+def run_bench(opts: Options, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     t0 = time.perf_counter()
     insts, configs = run_configs(opts, progress)
     return report(opts, insts, configs, time.perf_counter() - t0)
@@ -981,7 +1239,7 @@ def run_bench(opts: Options, progress: Optional[Callable[[str], None]] = None
 # --------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------
-def _fmt_ns(v: Optional[float]) -> str:
+def _fmt_ns(v: float | None) -> str:
     if v is None:
         return "-"
     if v >= 1e6:
@@ -991,13 +1249,12 @@ def _fmt_ns(v: Optional[float]) -> str:
     return f"{v:.0f}"
 
 
-def _fmt_e(v: Optional[float]) -> str:
+def _fmt_e(v: float | None) -> str:
     return "-" if v is None else ("0" if v == 0 else f"{v:.0e}")
 
 
-def format_table(report: Dict[str, Any]) -> str:
-    head = ("config", "time", "median", "p99", "pass", "fail", "viol", "gap", "PWM!=",
-            "dPWM")
+def format_table(report: dict[str, Any]) -> str:
+    head = ("config", "time", "median", "p99", "pass", "fail", "viol", "gap", "PWM!=", "dPWM")
     rows = []
     for n, k in enumerate(report["settings"]["k"]):
         if n:
@@ -1005,24 +1262,35 @@ def format_table(report: Dict[str, Any]) -> str:
         rows.append((f"k={k}",) + ("",) * (len(head) - 1))
         for r in (x for x in report["results"] if x["k"] == k):
             a = r["accuracy"]
-            for key, t in r["timing"].items():
+            for t in r["timing"].values():
                 passes = f"{t.get('passes', 0)}{'' if t.get('stable', True) else '!'}"
-                timing = (r["name"], t["label"], _fmt_ns(t.get("median_ns")),
-                          _fmt_ns(t.get("p99_ns")), passes)
+                timing = (
+                    r["name"],
+                    t["label"],
+                    _fmt_ns(t.get("median_ns")),
+                    _fmt_ns(t.get("p99_ns")),
+                    passes,
+                )
                 if not a["instances"]:  # stage timings: no answer to judge
                     rows.append(timing + ("-",) * 5)
                     continue
-                rows.append(timing + (
-                    f"{a['failures']}/{a['instances']}", _fmt_e(a["max_violation_rel"]),
-                    _fmt_e(a["max_objective_gap_rel"]),
-                    f"{a['pwm_mismatch']}/{a['compared_pwm']}",
-                    "-" if a["max_pwm_diff"] is None else str(a["max_pwm_diff"])))
+                rows.append(
+                    timing
+                    + (
+                        f"{a['failures']}/{a['instances']}",
+                        _fmt_e(a["max_violation_rel"]),
+                        _fmt_e(a["max_objective_gap_rel"]),
+                        f"{a['pwm_mismatch']}/{a['compared_pwm']}",
+                        "-" if a["max_pwm_diff"] is None else str(a["max_pwm_diff"]),
+                    )
+                )
     widths = [max(len(h), *(len(x[i]) for x in rows if x)) for i, h in enumerate(head)]
     line = "  ".join("-" * w for w in widths)
 
     def fmt(row):
-        return "  ".join(c.ljust(w) if i < 2 else c.rjust(w)
-                         for i, (c, w) in enumerate(zip(row, widths)))
+        return "  ".join(
+            c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))
+        )
 
     out = [fmt(head), line]
     for row in rows:
@@ -1030,16 +1298,22 @@ def format_table(report: Dict[str, Any]) -> str:
     g = report.get("goal")
     if g:
         out.append("")
-        out.append(f"goal (k=4, double): full frame median {_fmt_ns(g['frame_median_ns'])} ns"
-                   f" vs DAQP QP-alone internal solve_time median "
-                   f"{_fmt_ns(g['daqp_solve_median_ns'])} ns: ratio {g['ratio']:.2f} "
-                   f"({'met' if g['met'] else 'NOT met'}); vs DAQP setup+solve "
-                   f"{_fmt_ns(g['daqp_setup_solve_median_ns'])} ns: ratio "
-                   f"{g['ratio_vs_setup_solve']:.2f}; fastest frame variant "
-                   f"({g['fastest_frame']}) {_fmt_ns(g['fastest_frame_median_ns'])} ns: "
-                   f"ratio {g['fastest_ratio']:.2f}")
-    unstable = [f"{r['name']} (k={r['k']}) {t['label']}" for r in report["results"]
-                for t in r["timing"].values() if not t.get("stable", True)]
+        out.append(
+            f"goal (k=4, double): full frame median {_fmt_ns(g['frame_median_ns'])} ns"
+            f" vs DAQP QP-alone internal solve_time median "
+            f"{_fmt_ns(g['daqp_solve_median_ns'])} ns: ratio {g['ratio']:.2f} "
+            f"({'met' if g['met'] else 'NOT met'}); vs DAQP setup+solve "
+            f"{_fmt_ns(g['daqp_setup_solve_median_ns'])} ns: ratio "
+            f"{g['ratio_vs_setup_solve']:.2f}; fastest frame variant "
+            f"({g['fastest_frame']}) {_fmt_ns(g['fastest_frame_median_ns'])} ns: "
+            f"ratio {g['fastest_ratio']:.2f}"
+        )
+    unstable = [
+        f"{r['name']} (k={r['k']}) {t['label']}"
+        for r in report["results"]
+        for t in r["timing"].values()
+        if not t.get("stable", True)
+    ]
     if unstable:
         out.append("still noisy after the last pass (marked !): " + "; ".join(unstable))
     out.append(f"times in ns unless marked; {report['elapsed_s']:.0f} s in all")
@@ -1059,7 +1333,7 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
-def write_json(report: Dict[str, Any], path: str) -> None:
+def write_json(report: dict[str, Any], path: str) -> None:
     tmp = f"{path}.tmp"
     with open(tmp, "w") as f:
         json.dump(_jsonable(report), f, indent=1, allow_nan=False)
@@ -1083,13 +1357,20 @@ def options_from_args(args) -> Options:
     if max_passes < 1:
         raise BenchError(f"--max-passes must be >= 1, got {max_passes}")
     solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())
-    return Options(instances=instances, seed=args.seed, ks=ks, quick=quick,
-                   min_passes=min(2 if quick else 3, max_passes), max_passes=max_passes,
-                   solvers=solvers)
+    return Options(
+        instances=instances,
+        seed=args.seed,
+        ks=ks,
+        quick=quick,
+        min_passes=min(2 if quick else 3, max_passes),
+        max_passes=max_passes,
+        solvers=solvers,
+    )
 
 
 def main_args(args) -> int:
     """`graspguide bench`: 0 on success, 2 for bad options or a missing solver."""
+
     def progress(msg: str) -> None:
         print(f"bench: {msg}", file=sys.stderr, flush=True)
 

@@ -20,7 +20,8 @@ import re
 import signal
 import sys
 import time
-from typing import Any, BinaryIO, Dict, Iterator, Optional, TextIO, Tuple, Union
+from collections.abc import Iterator
+from typing import Any, BinaryIO, TextIO
 
 from graspguide import __version__
 from graspguide.link.transport import DEFAULT_BAUDRATE, SIM_PORT, LinkError
@@ -112,8 +113,7 @@ class _LineTooLong:
         self.size = size
 
 
-def _read_lines(stream: BinaryIO, limit: int = MAX_LINE_BYTES
-                ) -> Iterator[Union[bytes, _LineTooLong]]:
+def _read_lines(stream: BinaryIO, limit: int = MAX_LINE_BYTES) -> Iterator[bytes | _LineTooLong]:
     """Lines of a binary stream (the last one may lack its newline). A line longer than
     ``limit`` bytes is read to its end and yielded as _LineTooLong."""
     while True:
@@ -132,7 +132,7 @@ def _read_lines(stream: BinaryIO, limit: int = MAX_LINE_BYTES
         yield line
 
 
-def _parse_int(text: str) -> Union[int, float]:
+def _parse_int(text: str) -> int | float:
     try:
         return int(text)
     except ValueError:  # beyond Python's int-string digit limit: a float (inf)
@@ -144,7 +144,7 @@ class _DuplicateField(ValueError):
 
 
 def _no_duplicates(pairs):
-    out: Dict[str, Any] = {}
+    out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
             raise _DuplicateField(key)
@@ -159,28 +159,33 @@ def _decode(line: bytes, number: int):
     try:
         text = line.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise RequestError("bad_json",
-                           f"line {number} is not valid UTF-8 (byte 0x{line[e.start]:02x} at "
-                           f"byte offset {e.start}); send UTF-8 encoded JSON") from None
+        raise RequestError(
+            "bad_json",
+            f"line {number} is not valid UTF-8 (byte 0x{line[e.start]:02x} at "
+            f"byte offset {e.start}); send UTF-8 encoded JSON",
+        ) from None
     try:
         return json.loads(text, parse_int=_parse_int, object_pairs_hook=_no_duplicates)
     except _DuplicateField as e:
-        raise RequestError("bad_request",
-                           f"line {number}: field {json.dumps(str(e))} is given more than "
-                           "once; give each field once") from None
+        raise RequestError(
+            "bad_request",
+            f"line {number}: field {json.dumps(str(e))} is given more than "
+            "once; give each field once",
+        ) from None
     except json.JSONDecodeError as e:
         hint = ""
         if e.msg == "Extra data":
             hint = " (exactly one JSON object per line)"
         elif text.lstrip().startswith("{") and "'" in text and '"' not in text:
             hint = " (JSON strings use double quotes)"
-        raise RequestError("bad_json",
-                           f"line {number} is not valid JSON: {e.msg} at column {e.colno}"
-                           f"{hint}") from None
+        raise RequestError(
+            "bad_json", f"line {number} is not valid JSON: {e.msg} at column {e.colno}{hint}"
+        ) from None
     except RecursionError:
-        raise RequestError("bad_json",
-                           f"line {number}: JSON nested too deeply; a request is a flat "
-                           "object of arrays") from None
+        raise RequestError(
+            "bad_json",
+            f"line {number}: JSON nested too deeply; a request is a flat object of arrays",
+        ) from None
     except ValueError as e:  # e.g. a number the float parser cannot handle
         raise RequestError("bad_json", f"line {number} is not valid JSON: {e}") from None
 
@@ -194,7 +199,7 @@ def _finite_or_none(x: Any) -> Any:
     return x
 
 
-def _success(res: Dict[str, Any]) -> Dict[str, Any]:
+def _success(res: dict[str, Any]) -> dict[str, Any]:
     return {
         "ok": True,
         "pwm": list(res["pwm"]),
@@ -209,23 +214,30 @@ def _success(res: Dict[str, Any]) -> Dict[str, Any]:
     }
 
 
-def _error(code: str, message: str) -> Dict[str, Any]:
+def _error(code: str, message: str) -> dict[str, Any]:
     return {"ok": False, "error": code, "message": message}
 
 
-def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double",
-           decomposition: str = "qr", max_iterations: Optional[int] = None,
-           engine: Optional["DeviceEngine"] = None) -> Optional[Dict[str, Any]]:
+def answer(
+    line: bytes | _LineTooLong,
+    number: int,
+    scalar: str = "double",
+    decomposition: str = "qr",
+    max_iterations: int | None = None,
+    engine: DeviceEngine | None = None,
+) -> dict[str, Any] | None:
     """The response to one input line, or None for a blank line. With ``engine`` (a
     :class:`DeviceEngine`) the device answers instead of the core."""
     from graspguide.core import solver
 
     if isinstance(line, _LineTooLong):
-        return _error("bad_json",
-                      f"line {number} is {line.size} bytes long, over the limit of "
-                      f"{MAX_LINE_BYTES}; a request is one short JSON object per line")
+        return _error(
+            "bad_json",
+            f"line {number} is {line.size} bytes long, over the limit of "
+            f"{MAX_LINE_BYTES}; a request is one short JSON object per line",
+        )
     if number == 1 and line.startswith(_BOM):
-        line = line[len(_BOM):]
+        line = line[len(_BOM) :]
     if not line.strip():
         return None
     try:
@@ -240,14 +252,19 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
     if engine is not None:
         return engine.answer(kwargs)
     try:
-        res = solver.solve(scalar=scalar, decomposition=decomposition,
-                           max_iterations=(solver.DEFAULT_MAX_ITERATIONS
-                                           if max_iterations is None else max_iterations),
-                           **kwargs)
+        res = solver.solve(
+            scalar=scalar,
+            decomposition=decomposition,
+            max_iterations=(
+                solver.DEFAULT_MAX_ITERATIONS if max_iterations is None else max_iterations
+            ),
+            **kwargs,
+        )
     except Exception as e:  # never expected: the request was checked above
-        return _error("internal_error",
-                      f"line {number}: unexpected {type(e).__name__}: {e}; please report "
-                      "this request")
+        return _error(
+            "internal_error",
+            f"line {number}: unexpected {type(e).__name__}: {e}; please report this request",
+        )
     if res["status"] != "ok":
         return _error(res["status"], solver.status_message(res["status"]))
     return _success(res)
@@ -256,7 +273,7 @@ def answer(line: Union[bytes, _LineTooLong], number: int, scalar: str = "double"
 REQUEST_UNITS = ("m", "mm", "any")
 
 
-def _pop_units(obj: Any) -> Tuple[Any, str]:
+def _pop_units(obj: Any) -> tuple[Any, str]:
     """The request without its "units" field, and that field ("m" by default)."""
     from graspguide.core.solver import RequestError
 
@@ -265,13 +282,14 @@ def _pop_units(obj: Any) -> Tuple[Any, str]:
     obj = dict(obj)
     units = obj.pop("units")
     if not isinstance(units, str) or units not in REQUEST_UNITS:
-        raise RequestError("bad_request",
-                           f'field "units" must be "m" (the default), "mm" or "any", got '
-                           f"{json.dumps(units)}")
+        raise RequestError(
+            "bad_request",
+            f'field "units" must be "m" (the default), "mm" or "any", got {json.dumps(units)}',
+        )
     return obj, units
 
 
-def _solve_unit_fix(sym: Optional[str]) -> str:
+def _solve_unit_fix(sym: str | None) -> str:
     if sym == "mm":
         return 'give metres (divide by 1000), or add "units": "mm" (moments in N mm then)'
     if sym == "cm":
@@ -281,19 +299,22 @@ def _solve_unit_fix(sym: Optional[str]) -> str:
     return 'give the contacts in metres, or in millimetres with "units": "mm"'
 
 
-def _in_metres(kw: Dict[str, Any], units: str) -> Dict[str, Any]:
+def _in_metres(kw: dict[str, Any], units: str) -> dict[str, Any]:
     """The request's solve() arguments with contacts in metres and moments in N m; a hand
     that does not span like one in the stated unit, or a moment in another length unit
     than the contacts, is a bad_request naming the likely unit. Requests the core would
     refuse anyway (a contact count other than 3 or 4, a non-finite number, all contacts
     at one point) go on to the core's own answer; "units": "any" skips the checks (the
     core uses only ratios: synthetic geometry such as its scale tests)."""
-    from graspguide.study.scene_file import hand_span, hand_span_problem, moment_unit_problem
     from graspguide.core.solver import RequestError
+    from graspguide.study.scene_file import hand_span, hand_span_problem, moment_unit_problem
 
     contacts, wrench = kw["contacts"], kw["wrench"]
-    if units == "any" or len(contacts) not in (3, 4) or not all(
-            math.isfinite(x) for x in [*(v for c in contacts for v in c), *wrench]):
+    if (
+        units == "any"
+        or len(contacts) not in (3, 4)
+        or not all(math.isfinite(x) for x in [*(v for c in contacts for v in c), *wrench])
+    ):
         return kw
     if hand_span(contacts) > 0.0:
         problem = hand_span_problem(contacts, units, _solve_unit_fix)
@@ -309,14 +330,19 @@ def _in_metres(kw: Dict[str, Any], units: str) -> Dict[str, Any]:
     return kw
 
 
-def _dumps(obj: Dict[str, Any]) -> str:
+def _dumps(obj: dict[str, Any]) -> str:
     # ASCII only, and strict JSON (no NaN): any consumer can read it.
     return json.dumps(obj, ensure_ascii=True, allow_nan=False, separators=(", ", ": "))
 
 
-def run_solve(inp: BinaryIO, out: TextIO, scalar: str = "double", decomposition: str = "qr",
-              max_iterations: Optional[int] = None,
-              engine: Optional["DeviceEngine"] = None) -> int:
+def run_solve(
+    inp: BinaryIO,
+    out: TextIO,
+    scalar: str = "double",
+    decomposition: str = "qr",
+    max_iterations: int | None = None,
+    engine: DeviceEngine | None = None,
+) -> int:
     """Answer every line of ``inp`` on ``out``; returns the number of answers."""
     count = 0
     for number, line in enumerate(_read_lines(inp), start=1):
@@ -356,7 +382,7 @@ class DeviceEngine:
         self._trial_id = 0
         client.stop()  # a trial left running by an earlier session would refuse SET_SCENE
 
-    def answer(self, kw: Dict[str, Any]) -> Dict[str, Any]:
+    def answer(self, kw: dict[str, Any]) -> dict[str, Any]:
         from graspguide.core import solver
         from graspguide.link.client import DeviceError
 
@@ -365,9 +391,13 @@ class DeviceEngine:
         k = len(kw["contacts"])
         try:
             try:
-                client.set_scene(kw["contacts"], y_axis=kw["y_axis"],
-                                 constraints=kw["constraints"], policy=kw["policy"],
-                                 mode=kw["mode"])
+                client.set_scene(
+                    kw["contacts"],
+                    y_axis=kw["y_axis"],
+                    constraints=kw["constraints"],
+                    policy=kw["policy"],
+                    mode=kw["mode"],
+                )
                 client.start_trial(self._trial_id, kw["wrench"])
                 tel = client.pose(quat=kw["orientation"])
             finally:
@@ -376,8 +406,9 @@ class DeviceEngine:
             return self._device_error(e, solver)
         status = int(tel.solver_status)
         if status != 0:
-            return self._device_error(DeviceError("POSE", None, status, 0, source="TELEMETRY"),
-                                      solver)
+            return self._device_error(
+                DeviceError("POSE", None, status, 0, source="TELEMETRY"), solver
+            )
         return {
             "ok": True,
             "pwm": [int(p) for p in tel.pwm[:k]],
@@ -388,7 +419,7 @@ class DeviceEngine:
         }
 
     @staticmethod
-    def _device_error(e, solver) -> Dict[str, Any]:
+    def _device_error(e, solver) -> dict[str, Any]:
         if e.code_name in solver.STATUS_NAMES:  # a core status: the core's message
             return _error(e.code_name, solver.status_message(e.code_name))
         return _error(e.code_name, str(e))
@@ -410,8 +441,7 @@ class ArgumentParser(argparse.ArgumentParser):
     one); the option's type then checks it. Subparsers are made of this class too."""
 
     def _parse_optional(self, arg_string):
-        if (_NEGATIVE_VALUE.fullmatch(arg_string)
-                and arg_string not in self._option_string_actions):
+        if _NEGATIVE_VALUE.fullmatch(arg_string) and arg_string not in self._option_string_actions:
             return None
         return super()._parse_optional(arg_string)
 
@@ -430,64 +460,102 @@ def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         prog="graspguide",
         description="GraspGuide host tools: hand guidance by a grasping metaphor "
-                    "(Algorithm 1 from the C++ core in lib/graspguide).",
-        epilog="Run 'graspguide COMMAND --help' for a command's options.")
+        "(Algorithm 1 from the C++ core in lib/graspguide).",
+        epilog="Run 'graspguide COMMAND --help' for a command's options.",
+    )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     solve = sub.add_parser(
-        "solve", help="answer JSON Lines requests (contacts, wrench -> PWM) with the C++ core",
-        description=SOLVE_DESCRIPTION, epilog=SOLVE_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    solve.add_argument("--scalar", choices=("double", "float"), default=None,
-                       help="precision of the core: double (default, the host) or float "
-                            "(what a microcontroller with a single-precision FPU runs; "
-                            "compare --engine device with this)")
-    solve.add_argument("--decomposition", choices=("qr", "svd"), default="qr",
-                       help="equilibrium route: column-pivoting QR (default, the firmware's) "
-                            "or Jacobi SVD (reference route)")
-    solve.add_argument("--max-iterations", type=_positive_int, default=None, metavar="N",
-                       help="cap on the QP's active-set changes (default: the core's "
-                            "kDefaultMaxIterations, 64); hitting it is the error "
-                            "qp_iteration_limit")
-    solve.add_argument("--input", "-i", metavar="FILE", default="-",
-                       help="read requests from FILE instead of stdin ('-': stdin)")
-    solve.add_argument("--output", "-o", metavar="FILE", default="-",
-                       help="write responses to FILE instead of stdout ('-': stdout)")
-    solve.add_argument("--engine", choices=("core", "device"), default="core",
-                       help="who answers: core (default, the C++ core in this process) or "
-                            "device (the board or simulated device on --port: SET_SCENE, "
-                            "START_TRIAL, one POSE, TELEMETRY, STOP per request; answers "
-                            "carry ok, pwm, constraints_used, error_deg, iterations, alpha)")
+        "solve",
+        help="answer JSON Lines requests (contacts, wrench -> PWM) with the C++ core",
+        description=SOLVE_DESCRIPTION,
+        epilog=SOLVE_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    solve.add_argument(
+        "--scalar",
+        choices=("double", "float"),
+        default=None,
+        help="precision of the core: double (default, the host) or float "
+        "(what a microcontroller with a single-precision FPU runs; "
+        "compare --engine device with this)",
+    )
+    solve.add_argument(
+        "--decomposition",
+        choices=("qr", "svd"),
+        default="qr",
+        help="equilibrium route: column-pivoting QR (default, the firmware's) "
+        "or Jacobi SVD (reference route)",
+    )
+    solve.add_argument(
+        "--max-iterations",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="cap on the QP's active-set changes (default: the core's "
+        "kDefaultMaxIterations, 64); hitting it is the error "
+        "qp_iteration_limit",
+    )
+    solve.add_argument(
+        "--input",
+        "-i",
+        metavar="FILE",
+        default="-",
+        help="read requests from FILE instead of stdin ('-': stdin)",
+    )
+    solve.add_argument(
+        "--output",
+        "-o",
+        metavar="FILE",
+        default="-",
+        help="write responses to FILE instead of stdout ('-': stdout)",
+    )
+    solve.add_argument(
+        "--engine",
+        choices=("core", "device"),
+        default="core",
+        help="who answers: core (default, the C++ core in this process) or "
+        "device (the board or simulated device on --port: SET_SCENE, "
+        "START_TRIAL, one POSE, TELEMETRY, STOP per request; answers "
+        "carry ok, pwm, constraints_used, error_deg, iterations, alpha)",
+    )
     _add_port_arguments(solve, required=False)
     solve.set_defaults(handler=_cmd_solve, command_parser=solve)
 
     ports = sub.add_parser(
-        "ports", help="list serial ports (and the simulated device 'sim')",
+        "ports",
+        help="list serial ports (and the simulated device 'sim')",
         description="List the serial ports pyserial finds, plus the pseudo-port 'sim' (the "
-                    "simulated device, started on demand by --port sim).")
+        "simulated device, started on demand by --port sim).",
+    )
     ports.add_argument("--json", action="store_true", help="one JSON object per line")
     ports.set_defaults(handler=_cmd_ports, command_parser=ports)
 
     info = sub.add_parser(
-        "info", help="identify a device: HELLO_REPLY and STATUS",
+        "info",
+        help="identify a device: HELLO_REPLY and STATUS",
         description="Ask a device who it is (HELLO -> HELLO_REPLY: protocol and firmware "
-                    "version, board, scalar, contacts, build id) and how it is (GET_STATUS "
-                    "-> STATUS: state, frames received, bad frames, stale events, last "
-                    "error).",
+        "version, board, scalar, contacts, build id) and how it is (GET_STATUS "
+        "-> STATUS: state, frames received, bad frames, stale events, last "
+        "error).",
         epilog="examples:\n  graspguide info --port sim\n"
-               "  graspguide info --port /dev/ttyACM0 --json",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        "  graspguide info --port /dev/ttyACM0 --json",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     _add_port_arguments(info, required=True)
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.set_defaults(handler=_cmd_info, command_parser=info)
     _add_stream_parser(sub)
     _add_bench_parser(sub)
     _add_trial_parser(sub)
-    from graspguide.study import analysis as _analysis, demo as _demo, sweep as _sweep
-    _analysis.register(sub)   # `graspguide analyze`: Tables I-III, statistics, Figure 4
-    _demo.add_parser(sub)     # `graspguide demo`: the paper's study end to end, simulated
-    _sweep.register(sub)      # `graspguide sweep`: threshold and pose rate vs time/success
+    from graspguide.study import analysis as _analysis
+    from graspguide.study import demo as _demo
+    from graspguide.study import sweep as _sweep
+
+    _analysis.register(sub)  # `graspguide analyze`: Tables I-III, statistics, Figure 4
+    _demo.add_parser(sub)  # `graspguide demo`: the paper's study end to end, simulated
+    _sweep.register(sub)  # `graspguide sweep`: threshold and pose rate vs time/success
     return parser
 
 
@@ -502,14 +570,29 @@ def _positive_float(text: str) -> float:
 
 
 def _add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
-    p.add_argument("--port", "-p", metavar="PORT", required=required,
-                   help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
-                        "`graspguide ports` lists them), or 'sim' to start the simulated "
-                        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM)")
-    p.add_argument("--baud", type=_positive_int, default=DEFAULT_BAUDRATE, metavar="RATE",
-                   help=f"baud rate (default {DEFAULT_BAUDRATE})")
-    p.add_argument("--timeout", type=_positive_float, default=1.0, metavar="S",
-                   help="seconds to wait for each answer of the device (default 1)")
+    p.add_argument(
+        "--port",
+        "-p",
+        metavar="PORT",
+        required=required,
+        help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
+        "`graspguide ports` lists them), or 'sim' to start the simulated "
+        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM)",
+    )
+    p.add_argument(
+        "--baud",
+        type=_positive_int,
+        default=DEFAULT_BAUDRATE,
+        metavar="RATE",
+        help=f"baud rate (default {DEFAULT_BAUDRATE})",
+    )
+    p.add_argument(
+        "--timeout",
+        type=_positive_float,
+        default=1.0,
+        metavar="S",
+        help="seconds to wait for each answer of the device (default 1)",
+    )
 
 
 @contextlib.contextmanager
@@ -556,6 +639,8 @@ def _fail(command: str, e: BaseException) -> int:
 def _cmd_ports(args) -> int:
     from graspguide.link.transport import (
         LinkError as _LinkError,
+    )
+    from graspguide.link.transport import (
         find_sim_binary,
         list_serial_ports,
     )
@@ -565,11 +650,13 @@ def _cmd_ports(args) -> int:
     except _LinkError as e:
         return _fail("ports", e)
     try:
-        sim = {"device": SIM_PORT, "description": "simulated device",
-               "hwid": find_sim_binary()}
+        sim = {"device": SIM_PORT, "description": "simulated device", "hwid": find_sim_binary()}
     except _LinkError as e:
-        sim = {"device": SIM_PORT, "description": "simulated device (not available)",
-               "hwid": str(e).replace("\n", " ")}
+        sim = {
+            "device": SIM_PORT,
+            "description": "simulated device (not available)",
+            "hwid": str(e).replace("\n", " "),
+        }
     rows = ports + [sim]
     if args.json:
         for row in rows:
@@ -638,7 +725,7 @@ def _cmd_info(args) -> int:
     return EXIT_OK
 
 
-def _open_streams(parser: argparse.ArgumentParser, args) -> Tuple[BinaryIO, TextIO]:
+def _open_streams(parser: argparse.ArgumentParser, args) -> tuple[BinaryIO, TextIO]:
     if args.input == "-":
         inp = sys.stdin.buffer
     else:
@@ -660,23 +747,25 @@ def _check_engine_options(args) -> None:
     parser = args.command_parser
     if args.engine == "core":
         if args.port is not None:
-            parser.error("--port is for --engine device (the core engine runs in this "
-                         "process); add --engine device")
+            parser.error(
+                "--port is for --engine device (the core engine runs in this "
+                "process); add --engine device"
+            )
         return
     if args.port is None:
-        parser.error("--engine device needs --port PORT (see `graspguide ports`) or "
-                     "--port sim")
+        parser.error("--engine device needs --port PORT (see `graspguide ports`) or --port sim")
     if args.scalar == "double":
-        parser.error("--engine device computes in the firmware's float; drop --scalar "
-                     "double (compare with --engine core --scalar float)")
+        parser.error(
+            "--engine device computes in the firmware's float; drop --scalar "
+            "double (compare with --engine core --scalar float)"
+        )
     if args.decomposition != "qr":
         parser.error("--engine device uses the firmware's QR route; drop --decomposition")
     if args.max_iterations is not None:
-        parser.error("--engine device uses the firmware's QP iteration cap; drop "
-                     "--max-iterations")
+        parser.error("--engine device uses the firmware's QP iteration cap; drop --max-iterations")
 
 
-@signals_interrupt()   # with --engine device: a request in flight still ends with STOP
+@signals_interrupt()  # with --engine device: a request in flight still ends with STOP
 def _cmd_solve(args) -> int:
     _check_engine_options(args)
     inp, out = _open_streams(args.command_parser, args)
@@ -695,11 +784,15 @@ def _cmd_solve(args) -> int:
                 inp.close()
             return _fail("solve", e)
     if args.input == "-" and sys.stdin.isatty() and sys.stderr.isatty():
-        print("graspguide solve: reading JSON requests, one per line (Ctrl-D to end, "
-              "--help for the format)", file=sys.stderr)
+        print(
+            "graspguide solve: reading JSON requests, one per line (Ctrl-D to end, "
+            "--help for the format)",
+            file=sys.stderr,
+        )
     try:
-        run_solve(inp, out, args.scalar or "double", args.decomposition, args.max_iterations,
-                  engine)
+        run_solve(
+            inp, out, args.scalar or "double", args.decomposition, args.max_iterations, engine
+        )
     except LinkError as e:
         return _fail("solve", e)
     except KeyboardInterrupt:
@@ -758,40 +851,75 @@ def _wrench(text: str):
         values = [float(x) for x in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"--wrench must be fx,fy,fz or fx,fy,fz,mx,my,mz (numbers), got {text!r}") from None
+            f"--wrench must be fx,fy,fz or fx,fy,fz,mx,my,mz (numbers), got {text!r}"
+        ) from None
     if len(values) not in (3, 6) or not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(
-            f"--wrench must be 3 or 6 finite numbers (fx,fy,fz[,mx,my,mz]), got {text!r}")
+            f"--wrench must be 3 or 6 finite numbers (fx,fy,fz[,mx,my,mz]), got {text!r}"
+        )
     return values + [0.0] * (6 - len(values))
 
 
 def _add_stream_parser(sub) -> None:
-    p = sub.add_parser("stream", help="run a trial: stream poses from a source to a device",
-                       description=STREAM_DESCRIPTION, epilog=STREAM_EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "stream",
+        help="run a trial: stream poses from a source to a device",
+        description=STREAM_DESCRIPTION,
+        epilog=STREAM_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     _add_port_arguments(p, required=True)
-    p.add_argument("--scene", required=True, metavar="SCENE.toml",
-                   help="scene file (tools/examples/scene_paper_3.toml shows the format)")
-    p.add_argument("--wrench", required=True, type=_wrench, metavar="FX,FY,FZ[,MX,MY,MZ]",
-                   help="the virtual object's wrench in the object frame: force in N, "
-                        "moment about the contacts' centroid in N m; negative values as "
-                        "they are: --wrench -1,0,0 (a moment of more than 10 hand spans "
-                        "times the force is refused: it looks like N mm)")
-    p.add_argument("--source", required=True, metavar="SOURCE",
-                   help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0] or "
-                        "plugin:MODULE:CLASS[:ARG]")
-    p.add_argument("--tracker", metavar="NAME", default=None,
-                   help="the replay file is a raw tracker export in this convention: "
-                        "vicon, optitrack, leap, world, or UNITS/UP/HANDEDNESS/ORDER such "
-                        "as mm/y/right/xyzw (default: already in this project's world)")
-    p.add_argument("--log", metavar="DIR", default=None,
-                   help="write the session folder DIR (scene.json, device.json, "
-                        "config.json, poses.csv, telemetry.csv, results.jsonl)")
-    p.add_argument("--trial-id", type=int, default=1, metavar="N",
-                   help="START_TRIAL trial id, 0..65535 (default 1)")
-    p.add_argument("--virtual-clock", action="store_true",
-                   help="with --port sim: the device's clock follows the poses' times, so "
-                        "the trial runs as fast as possible")
+    p.add_argument(
+        "--scene",
+        required=True,
+        metavar="SCENE.toml",
+        help="scene file (tools/examples/scene_paper_3.toml shows the format)",
+    )
+    p.add_argument(
+        "--wrench",
+        required=True,
+        type=_wrench,
+        metavar="FX,FY,FZ[,MX,MY,MZ]",
+        help="the virtual object's wrench in the object frame: force in N, "
+        "moment about the contacts' centroid in N m; negative values as "
+        "they are: --wrench -1,0,0 (a moment of more than 10 hand spans "
+        "times the force is refused: it looks like N mm)",
+    )
+    p.add_argument(
+        "--source",
+        required=True,
+        metavar="SOURCE",
+        help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0] or "
+        "plugin:MODULE:CLASS[:ARG]",
+    )
+    p.add_argument(
+        "--tracker",
+        metavar="NAME",
+        default=None,
+        help="the replay file is a raw tracker export in this convention: "
+        "vicon, optitrack, leap, world, or UNITS/UP/HANDEDNESS/ORDER such "
+        "as mm/y/right/xyzw (default: already in this project's world)",
+    )
+    p.add_argument(
+        "--log",
+        metavar="DIR",
+        default=None,
+        help="write the session folder DIR (scene.json, device.json, "
+        "config.json, poses.csv, telemetry.csv, results.jsonl)",
+    )
+    p.add_argument(
+        "--trial-id",
+        type=int,
+        default=1,
+        metavar="N",
+        help="START_TRIAL trial id, 0..65535 (default 1)",
+    )
+    p.add_argument(
+        "--virtual-clock",
+        action="store_true",
+        help="with --port sim: the device's clock follows the poses' times, so "
+        "the trial runs as fast as possible",
+    )
     p.set_defaults(handler=_cmd_stream, command_parser=p)
 
 
@@ -799,28 +927,54 @@ def _add_bench_parser(sub) -> None:
     # Arguments only: graspguide.bench (numpy, the peer solvers) is imported when the
     # command runs, so the other commands do not pay for it at start-up.
     p = sub.add_parser(
-        "bench", help="host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
-                      "scipy, with accuracy against the float64 reference",
+        "bench",
+        help="host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
+        "scipy, with accuracy against the float64 reference",
         description="Time this project's full frame (in C++ and per Python call) and its QP "
-                    "alone next to DAQP, quadprog, OSQP and scipy on the same instances, "
-                    "judge every answer against the float64 reference, print a table. "
-                    "Columns: tools/README.md, 'graspguide bench'.")
-    p.add_argument("--instances", type=int, default=None, metavar="N",
-                   help="random hands per k, 0..100000 (default 200, --quick 20); each runs "
-                        "with the paper and the normal model, next to the paper's hand scenes")
-    p.add_argument("--seed", type=int, default=1, metavar="S",
-                   help="seed of the random hands, >= 0 (default 1)")
-    p.add_argument("--k", choices=("3", "4", "both"), default="both",
-                   help="contact counts (default both)")
-    p.add_argument("--quick", action="store_true",
-                   help="fewer instances, repetitions and passes (a smoke run)")
-    p.add_argument("--json", metavar="FILE", default=None,
-                   help="also write the full report (every figure, every failure) as JSON")
-    p.add_argument("--solvers", default="daqp,quadprog,osqp,scipy-slsqp", metavar="LIST",
-                   help="peer solvers, comma-separated (default: daqp,quadprog,osqp,"
-                        "scipy-slsqp)")
-    p.add_argument("--max-passes", type=int, default=None, metavar="N",
-                   help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)")
+        "alone next to DAQP, quadprog, OSQP and scipy on the same instances, "
+        "judge every answer against the float64 reference, print a table. "
+        "Columns: tools/README.md, 'graspguide bench'.",
+    )
+    p.add_argument(
+        "--instances",
+        type=int,
+        default=None,
+        metavar="N",
+        help="random hands per k, 0..100000 (default 200, --quick 20); each runs "
+        "with the paper and the normal model, next to the paper's hand scenes",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=1,
+        metavar="S",
+        help="seed of the random hands, >= 0 (default 1)",
+    )
+    p.add_argument(
+        "--k", choices=("3", "4", "both"), default="both", help="contact counts (default both)"
+    )
+    p.add_argument(
+        "--quick", action="store_true", help="fewer instances, repetitions and passes (a smoke run)"
+    )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        default=None,
+        help="also write the full report (every figure, every failure) as JSON",
+    )
+    p.add_argument(
+        "--solvers",
+        default="daqp,quadprog,osqp,scipy-slsqp",
+        metavar="LIST",
+        help="peer solvers, comma-separated (default: daqp,quadprog,osqp,scipy-slsqp)",
+    )
+    p.add_argument(
+        "--max-passes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)",
+    )
 
     def handler(args) -> int:
         from graspguide.bench import host_bench as bench
@@ -843,6 +997,7 @@ class _StatusView:
         if self.out.isatty():
             try:
                 from rich.live import Live
+
                 self.live = Live(self._render({}), refresh_per_second=10, transient=False)
                 self.live.start()
             except ImportError:  # pragma: no cover - rich is a dependency
@@ -850,6 +1005,7 @@ class _StatusView:
 
     def _render(self, s):
         from rich.table import Table
+
         table = Table(title="graspguide stream", show_header=False, expand=False)
         table.add_row("time", f"{s.get('t_s', 0.0):7.2f} s")
         table.add_row("error", f"{s.get('error_deg', float('nan')):7.2f} deg")
@@ -871,9 +1027,12 @@ class _StatusView:
         if force or s["t_s"] >= self.next_t:
             self.next_t = s["t_s"] + self.period_s
             pwm = " ".join(f"{p:3d}" for p in s["pwm"][: self.k])
-            print(f"t={s['t_s']:7.2f}s error={s['error_deg']:7.2f}deg pwm=[{pwm}] "
-                  f"rate={s['rate_hz']:.1f}/s sent={s['sent']} dropped={s['dropped']}",
-                  file=self.out, flush=True)
+            print(
+                f"t={s['t_s']:7.2f}s error={s['error_deg']:7.2f}deg pwm=[{pwm}] "
+                f"rate={s['rate_hz']:.1f}/s sent={s['sent']} dropped={s['dropped']}",
+                file=self.out,
+                flush=True,
+            )
 
     def close(self) -> None:
         if self.live is not None:
@@ -881,8 +1040,16 @@ class _StatusView:
             self.live = None
 
 
-def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: bool = False,
-               log=None, view=None) -> Dict[str, Any]:
+def run_stream(
+    client,
+    scene,
+    wrench,
+    source,
+    trial_id: int = 1,
+    virtual_clock: bool = False,
+    log=None,
+    view=None,
+) -> dict[str, Any]:
     """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
     (paced in real time unless ``virtual_clock``), until TRIAL_RESULT or the end of the
     source. Returns a summary dict; raises LinkError. STOP is the caller's job."""
@@ -898,15 +1065,22 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
     result = None
     ended = False
     t_wall0 = time.monotonic()
-    status = {"t_s": 0.0, "error_deg": float("nan"), "pwm": [0] * 4, "rate_hz": 0.0,
-              "sent": 0, "received": 0, "dropped": 0}
+    status = {
+        "t_s": 0.0,
+        "error_deg": float("nan"),
+        "pwm": [0] * 4,
+        "rate_hz": 0.0,
+        "sent": 0,
+        "received": 0,
+        "dropped": 0,
+    }
     for t_s, quat, contacts in source:
         if not virtual_clock:
             wait = t_wall0 + t_s - time.monotonic()
             if wait > 0:
                 time.sleep(wait)
             elif period and -wait > 2 * period:
-                dropped += 1          # too late for this sample: skip it, keep the pace
+                dropped += 1  # too late for this sample: skip it, keep the pace
                 continue
             t_us = host_time_us()
         else:
@@ -934,9 +1108,15 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
                 pass
             ended = True
         elapsed = max(time.monotonic() - t_wall0, 1e-9)
-        status.update(t_s=t_s, error_deg=tel.error_deg, pwm=list(tel.pwm),
-                      rate_hz=sent / elapsed, sent=sent, received=received,
-                      dropped=dropped + client.device_frames_lost + client.host_bad_frames)
+        status.update(
+            t_s=t_s,
+            error_deg=tel.error_deg,
+            pwm=list(tel.pwm),
+            rate_hz=sent / elapsed,
+            sent=sent,
+            received=received,
+            dropped=dropped + client.device_frames_lost + client.host_bad_frames,
+        )
         if view is not None:
             view.update(status)
         if client.trial_results or ended:
@@ -950,23 +1130,29 @@ def run_stream(client, scene, wrench, source, trial_id: int = 1, virtual_clock: 
     if view is not None:
         view.update(status, force=True)
     elapsed = time.monotonic() - t_wall0
-    return {"trial_result": result, "sent": sent, "received": received,
-            "dropped": status["dropped"] if sent else dropped,
-            "late_skipped": dropped, "elapsed_s": elapsed,
-            "last_error_deg": None if last_tel is None else last_tel.error_deg}
+    return {
+        "trial_result": result,
+        "sent": sent,
+        "received": received,
+        "dropped": status["dropped"] if sent else dropped,
+        "late_skipped": dropped,
+        "elapsed_s": elapsed,
+        "last_error_deg": None if last_tel is None else last_tel.error_deg,
+    }
 
 
-@signals_interrupt()   # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
+@signals_interrupt()  # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
 def _cmd_stream(args) -> int:
+    from graspguide.link.transport import SIM_PORT as _SIM
+    from graspguide.link.transport import open_port
+    from graspguide.study.records import SessionLog
     from graspguide.study.scene_file import (
         SceneError,
         config_hash,
         load_scene,
         moment_unit_problem,
     )
-    from graspguide.study.records import SessionLog
     from graspguide.study.sources import SourceError, SyntheticSource, open_source
-    from graspguide.link.transport import SIM_PORT as _SIM, open_port
 
     parser = args.command_parser
     if args.virtual_clock and args.port != _SIM:
@@ -980,8 +1166,7 @@ def _cmd_stream(args) -> int:
             raise SceneError(f"--wrench with {args.scene}: {problem}")
         source = open_source(args.source, tracker=args.tracker)
         if isinstance(source, SyntheticSource):
-            source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints,
-                       scene.y_axis)
+            source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints, scene.y_axis)
     except (SceneError, SourceError) as e:
         print(f"graspguide stream: error: {e}", file=sys.stderr)
         return EXIT_USAGE
@@ -1002,18 +1187,24 @@ def _cmd_stream(args) -> int:
         hello = client.hello()
         config = {"scene": scene.to_dict(), "wrench": args.wrench}
         config["config_hash"] = config_hash(config)
-        config.update(source=source.describe(), source_spec=args.source, port=args.port,
-                      trial_id=args.trial_id, virtual_clock=args.virtual_clock,
-                      scene_file=args.scene)
+        config.update(
+            source=source.describe(),
+            source_spec=args.source,
+            port=args.port,
+            trial_id=args.trial_id,
+            virtual_clock=args.virtual_clock,
+            scene_file=args.scene,
+        )
         if args.log:
             log = SessionLog(args.log)
             log.scene(scene.to_dict())
             log.device(hello)
             log.config(config)
         view = _StatusView(scene.k)
-        summary = run_stream(client, scene, args.wrench, source, args.trial_id,
-                             args.virtual_clock, log, view)
-    except (LinkError, OSError) as e:   # OSError: the session log's disk (RecordWriteError)
+        summary = run_stream(
+            client, scene, args.wrench, source, args.trial_id, args.virtual_clock, log, view
+        )
+    except (LinkError, OSError) as e:  # OSError: the session log's disk (RecordWriteError)
         code = EXIT_FAILURE
         print(f"graspguide stream: error: {e}", file=sys.stderr)
         log_failed = isinstance(e, OSError) and not isinstance(e, LinkError)
@@ -1039,20 +1230,24 @@ def _cmd_stream(args) -> int:
             try:
                 log.result(end)
                 log.close()
-            except OSError as e:   # the records before stay whole (session_log)
+            except OSError as e:  # the records before stay whole (session_log)
                 if not log_failed:
                     print(f"graspguide stream: error: {e}", file=sys.stderr)
                 code = code or EXIT_FAILURE
     if summary is not None:
         r = summary["trial_result"]
         if r is None:
-            print(f"no trial result: the source ended first ({summary['sent']} poses sent, "
-                  f"last error {summary['last_error_deg']})")
+            print(
+                f"no trial result: the source ended first ({summary['sent']} poses sent, "
+                f"last error {summary['last_error_deg']})"
+            )
         else:
-            print(f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
-                  f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
-                  f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
-                  f"{summary['dropped']} dropped)")
+            print(
+                f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
+                f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
+                f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
+                f"{summary['dropped']} dropped)"
+            )
     return code
 
 
@@ -1098,34 +1293,52 @@ same command again to resume)."""
 
 
 def _add_trial_parser(sub) -> None:
-    p = sub.add_parser("trial", help="run a participant's trials of a study protocol "
-                                     "(resumable; NASA-TLX after each session)",
-                       description=TRIAL_DESCRIPTION, epilog=TRIAL_EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--protocol", required=True, metavar="FILE",
-                   help="study protocol (protocols/paper.toml; format in docs/study.md)")
-    p.add_argument("--participant", required=True, metavar="PID",
-                   help="participant id ending in a number (U1, U2, ...): picks the "
-                        "counterbalanced order")
+    p = sub.add_parser(
+        "trial",
+        help="run a participant's trials of a study protocol "
+        "(resumable; NASA-TLX after each session)",
+        description=TRIAL_DESCRIPTION,
+        epilog=TRIAL_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--protocol",
+        required=True,
+        metavar="FILE",
+        help="study protocol (protocols/paper.toml; format in docs/study.md)",
+    )
+    p.add_argument(
+        "--participant",
+        required=True,
+        metavar="PID",
+        help="participant id ending in a number (U1, U2, ...): picks the counterbalanced order",
+    )
     _add_port_arguments(p, required=True)
-    p.add_argument("--source", required=True, metavar="SOURCE",
-                   help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or "
-                        "plugin:MODULE:CLASS[:ARG]")
-    p.add_argument("--out", default="study", metavar="DIR",
-                   help="study folder (default ./study); the participant's files go to "
-                        "DIR/PID/")
-    p.add_argument("--tlx", metavar="FILE", default=None,
-                   help="NASA-TLX answers, JSON Lines, one object per session (see above)")
+    p.add_argument(
+        "--source",
+        required=True,
+        metavar="SOURCE",
+        help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or plugin:MODULE:CLASS[:ARG]",
+    )
+    p.add_argument(
+        "--out",
+        default="study",
+        metavar="DIR",
+        help="study folder (default ./study); the participant's files go to DIR/PID/",
+    )
+    p.add_argument(
+        "--tlx",
+        metavar="FILE",
+        default=None,
+        help="NASA-TLX answers, JSON Lines, one object per session (see above)",
+    )
     p.set_defaults(handler=_cmd_trial, command_parser=p)
 
 
-@signals_interrupt()   # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
+@signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def _cmd_trial(args) -> int:
-    from graspguide.study.study_protocol import (
-        ProtocolFileError,
-        load_protocol,
-        participant_number,
-    )
+    from graspguide.link.transport import SIM_PORT as _SIM
+    from graspguide.link.transport import open_port
     from graspguide.study.runner import (
         Progress,
         RunnerError,
@@ -1134,7 +1347,11 @@ def _cmd_trial(args) -> int:
         open_runner_source,
         summary_lines,
     )
-    from graspguide.link.transport import SIM_PORT as _SIM, open_port
+    from graspguide.study.study_protocol import (
+        ProtocolFileError,
+        load_protocol,
+        participant_number,
+    )
 
     def usage(message: str) -> int:
         print(f"graspguide trial: error: {message}", file=sys.stderr)
@@ -1148,8 +1365,9 @@ def _cmd_trial(args) -> int:
         if args.tlx is not None:
             from graspguide.study.study_protocol import session_order
 
-            runner_tlx = load_tlx_file(args.tlx, args.participant,
-                                       session_order(protocol, args.participant))
+            runner_tlx = load_tlx_file(
+                args.tlx, args.participant, session_order(protocol, args.participant)
+            )
     except ProtocolFileError as e:
         return usage(str(e))
     except RunnerError as e:
@@ -1169,13 +1387,24 @@ def _cmd_trial(args) -> int:
 
         client = DeviceClient(transport, timeout=args.timeout)
         try:
-            runner = StudyRunner(protocol, args.participant, args.out, source, client,
-                                 virtual_clock, tlx=runner_tlx, progress=Progress(),
-                                 protocol_file=args.protocol, port=args.port)
+            runner = StudyRunner(
+                protocol,
+                args.participant,
+                args.out,
+                source,
+                client,
+                virtual_clock,
+                tlx=runner_tlx,
+                progress=Progress(),
+                protocol_file=args.protocol,
+                port=args.port,
+            )
             result = runner.run()
-            print(f"{args.participant}: all {result['planned']} trials done ({result['ran']} "
-                  f"run now, {result['skipped']} from earlier runs); "
-                  f"{os.path.join(args.out, args.participant)}")
+            print(
+                f"{args.participant}: all {result['planned']} trials done ({result['ran']} "
+                f"run now, {result['skipped']} from earlier runs); "
+                f"{os.path.join(args.out, args.participant)}"
+            )
             for line in summary_lines(args.out, args.participant):
                 print(line)
         except ProtocolFileError as e:
@@ -1189,8 +1418,11 @@ def _cmd_trial(args) -> int:
         except KeyboardInterrupt:
             code = EXIT_INTERRUPTED
             done = "" if runner is None else f" after {runner.ran} trials"
-            print(f"\ngraspguide trial: interrupted{done}; completed trials are saved: run "
-                  "the same command again to resume", file=sys.stderr)
+            print(
+                f"\ngraspguide trial: interrupted{done}; completed trials are saved: run "
+                "the same command again to resume",
+                file=sys.stderr,
+            )
         finally:
             try:
                 client.stop()

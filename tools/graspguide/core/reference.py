@@ -20,8 +20,8 @@ lambda (3k, contact-frame [x y z] per contact: the QP optimum lambda0 + N xi bef
 normalisation), constraints_used, relevant (k bools), error_deg, alpha, fallback_mask
 (bit i: contact i used the fallback axis), margins ({model: t}, None for 'none'),
 active_set (the accepted active set, indices into lambda) and diagnostics (internal
-quantities used by the known-answer generator). Everything is float64. Works standalone (only numpy and
-scipy) so that `tools/scripts/gen_known_answers.py` can import it by adding `tools/`
+quantities used by the known-answer generator). Everything is float64. Works standalone
+(only numpy and scipy) so that `tools/scripts/gen_known_answers.py` can import it by adding `tools/`
 to ``sys.path``.
 
 Decisions where docs/algorithm.md is silent or ambiguous (see also the module-level
@@ -46,28 +46,29 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 # --------------------------------------------------------------------------------------
 # Tolerances: the float64 column of the table in docs/algorithm.md.
 # --------------------------------------------------------------------------------------
-kCoincidentRelTol = 1e-4   # ||r_i|| (or ||r_i - r_j||) <= this * L: coincident contacts
+kCoincidentRelTol = 1e-4  # ||r_i|| (or ||r_i - r_j||) <= this * L: coincident contacts
 kInputPrecisionRelTol = 1e-3  # max|C| * eps above this * L: imprecise_contacts
-kAxisParallelTol = 1e-3    # ||y_i x y_O|| below this: fallback axis
-kRankRelTol = 1e-4         # sigma_6 / sigma_1 below this: rank deficient
-kZeroForceRelTol = 1e-6    # ||f|| <= this * ||w_L||: zero force
-kRelevanceCosTol = 1e-5    # f.r_i <= this * ||f|| ||r_i||: relevant
-kTinyRel = 1e-12           # ||lam_des|| <= this * ||lam0||: lam_des left at zero
-kFeasRelTol = 1e-9         # violation allowed, relative to ||lam0||
-kDependentRelTol = 1e-9    # reference: [G; I_S'] with sigma_min/sigma_max below: dependent
-kMotorOffLevel = 1e-3      # |m_i| <= this: motor off
+kAxisParallelTol = 1e-3  # ||y_i x y_O|| below this: fallback axis
+kRankRelTol = 1e-4  # sigma_6 / sigma_1 below this: rank deficient
+kZeroForceRelTol = 1e-6  # ||f|| <= this * ||w_L||: zero force
+kRelevanceCosTol = 1e-5  # f.r_i <= this * ||f|| ||r_i||: relevant
+kTinyRel = 1e-12  # ||lam_des|| <= this * ||lam0||: lam_des left at zero
+kFeasRelTol = 1e-9  # violation allowed, relative to ||lam0||
+kDependentRelTol = 1e-9  # reference: [G; I_S'] with sigma_min/sigma_max below: dependent
+kMotorOffLevel = 1e-3  # |m_i| <= this: motor off
 kMinQuaternionNorm = 1e-6  # ||q|| below this: bad_quaternion
 
 # Reference-only tolerances (not in the doc's table).
-kMultiplierRelTol = 1e-9   # KKT multipliers >= -this * (||lam0|| + ||lam_des||)
-kLpTol = 1e-10             # HiGHS primal/dual feasibility tolerance for the margin LP
+kMultiplierRelTol = 1e-9  # KKT multipliers >= -this * (||lam0|| + ||lam_des||)
+kLpTol = 1e-10  # HiGHS primal/dual feasibility tolerance for the margin LP
 
 PWM_BASE = 70
 PWM_RANGE = 185
@@ -105,9 +106,11 @@ STATUSES = (
 MODELS = ("paper", "normal", "none")
 POLICIES = ("F", "Fperp")
 MODES = ("C", "V")
-FALLBACK_CHAIN = {"paper": ("paper", "normal", "none"),
-                  "normal": ("normal", "none"),
-                  "none": ("none",)}
+FALLBACK_CHAIN = {
+    "paper": ("paper", "normal", "none"),
+    "normal": ("normal", "none"),
+    "none": ("none",),
+}
 
 
 # --------------------------------------------------------------------------------------
@@ -140,17 +143,19 @@ def quaternion_to_matrix(q: Sequence[float]) -> np.ndarray:
     """Rotation matrix of q = [w, x, y, z] (normalised here), hand -> world."""
     q = _as_float_array(q)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 # --------------------------------------------------------------------------------------
 # Step 1: contact frames
 # --------------------------------------------------------------------------------------
-def contact_frames(contacts: np.ndarray, y_o: np.ndarray) -> Tuple[str, Optional[dict]]:
+def contact_frames(contacts: np.ndarray, y_o: np.ndarray) -> tuple[str, dict | None]:
     """Centroid, offsets and right-handed contact frames. y_o must be unit.
 
     Returns (status, frames) with frames = {O, r (k x 3), L, R (k x 3 x 3),
@@ -198,8 +203,8 @@ def grasp_matrix(frames: dict) -> np.ndarray:
     k = r.shape[0]
     G = np.zeros((6, 3 * k))
     for i in range(k):
-        G[0:3, 3 * i:3 * i + 3] = R[i]
-        G[3:6, 3 * i:3 * i + 3] = _skew(r[i] / L) @ R[i]
+        G[0:3, 3 * i : 3 * i + 3] = R[i]
+        G[3:6, 3 * i : 3 * i + 3] = _skew(r[i] / L) @ R[i]
     return G
 
 
@@ -236,7 +241,7 @@ def desired_forces(relevant: np.ndarray, lam0: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # Step 5: the QP by exhaustive active-set enumeration, and the LP margin
 # --------------------------------------------------------------------------------------
-def constrained_components(model: str, k: int) -> List[int]:
+def constrained_components(model: str, k: int) -> list[int]:
     if model == "paper":
         return list(range(3 * k))
     if model == "normal":
@@ -246,10 +251,14 @@ def constrained_components(model: str, k: int) -> List[int]:
     raise ValueError(f"unknown constraint model {model!r}")
 
 
-def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
-                      S: Sequence[int], lam0_norm: float,
-                      feas_rel_tol: float = kFeasRelTol
-                      ) -> Tuple[bool, Optional[np.ndarray], Optional[Tuple[int, ...]]]:
+def project_enumerate(
+    G: np.ndarray,
+    w_l: np.ndarray,
+    lam_des: np.ndarray,
+    S: Sequence[int],
+    lam0_norm: float,
+    feas_rel_tol: float = kFeasRelTol,
+) -> tuple[bool, np.ndarray | None, tuple[int, ...] | None]:
     """Euclidean projection of lam_des onto {G lam = -w_L, lam_S >= 0}.
 
     Tries every active subset S' of S, smallest first (lexicographic within a size),
@@ -302,14 +311,14 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
         rows = np.arange(m)[:, None]
         in_subset = np.zeros((m, n), dtype=bool)
         in_subset[rows, subsets] = True
-        free = np.nonzero(~in_subset)[1].reshape(m, nf)   # sorted complement of S'
-        G_F = np.transpose(G[:, free], (1, 0, 2))         # (m, 6, nf)
+        free = np.nonzero(~in_subset)[1].reshape(m, nf)  # sorted complement of S'
+        G_F = np.transpose(G[:, free], (1, 0, 2))  # (m, 6, nf)
         U, sig, Vt = np.linalg.svd(G_F, full_matrices=False)
         usable = sig[:, -1] > kDependentRelTol * sig[:, 0]
         lam_des_F = lam_des[free]
         r = np.einsum("mij,mj->mi", G_F, lam_des_F) + w_l
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            y = np.einsum("mji,mj->mi", U, r) / sig            # Sigma^-1 U^T r
+            y = np.einsum("mji,mj->mi", U, r) / sig  # Sigma^-1 U^T r
             lam_F = lam_des_F - np.einsum("mji,mj->mi", Vt, y)
             nu = np.einsum("mij,mj->mi", U, y / sig)
             lam = np.zeros((m, n))
@@ -324,7 +333,7 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
         # The first candidate (in lexicographic order) of full rank wins; rank-test the
         # candidates in small chunks, since the first is usually independent.
         for start in range(0, candidates.size, 8):
-            chunk = candidates[start:start + 8]
+            chunk = candidates[start : start + 8]
             full_rank = independent(subsets[chunk])
             if np.any(full_rank):
                 i = int(chunk[np.argmax(full_rank)])
@@ -332,8 +341,9 @@ def project_enumerate(G: np.ndarray, w_l: np.ndarray, lam_des: np.ndarray,
     return False, None, None
 
 
-def feasibility_margin(G: np.ndarray, w_l: np.ndarray, S: Sequence[int],
-                       lam0_norm: float) -> Optional[float]:
+def feasibility_margin(
+    G: np.ndarray, w_l: np.ndarray, S: Sequence[int], lam0_norm: float
+) -> float | None:
     """max t s.t. G lam = -w_L, lam_j >= t ||lam0|| (j in S), t <= 1 (HiGHS LP).
 
     Solved in units of ||lam0|| (lam' = lam / ||lam0||) so the LP tolerances are
@@ -355,10 +365,16 @@ def feasibility_margin(G: np.ndarray, w_l: np.ndarray, S: Sequence[int],
         A_ub[row, -1] = 1.0
     b_ub = np.zeros(len(S))
     bounds = [(None, None)] * n + [(None, 1.0)]
-    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds,
-                  method="highs",
-                  options={"primal_feasibility_tolerance": kLpTol,
-                           "dual_feasibility_tolerance": kLpTol})
+    res = linprog(
+        c,
+        A_ub=A_ub,
+        b_ub=b_ub,
+        A_eq=A_eq,
+        b_eq=b_eq,
+        bounds=bounds,
+        method="highs",
+        options={"primal_feasibility_tolerance": kLpTol, "dual_feasibility_tolerance": kLpTol},
+    )
     if res.status != 0:
         raise RuntimeError(f"margin LP failed: {res.message}")
     return float(res.x[-1])
@@ -382,7 +398,7 @@ def round_half_away(x: float) -> int:
     return int(math.copysign(math.floor(abs(x) + 0.5), x))
 
 
-def pwm_from_levels(levels: np.ndarray, mode: str, alpha: float) -> List[int]:
+def pwm_from_levels(levels: np.ndarray, mode: str, alpha: float) -> list[int]:
     out = []
     for mi in levels:
         a = abs(float(mi))
@@ -394,12 +410,11 @@ def pwm_from_levels(levels: np.ndarray, mode: str, alpha: float) -> List[int]:
     return out
 
 
-def guidance(q: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
+def guidance(q: np.ndarray, f: np.ndarray) -> tuple[float, float]:
     """(error_deg, alpha) for orientation q (hand -> world) and force f (hand frame)."""
     Rq = quaternion_to_matrix(q)
     d = Rq @ (f / np.linalg.norm(f))
-    err = math.degrees(math.atan2(float(np.linalg.norm(np.cross(d, GRAVITY))),
-                                  float(d @ GRAVITY)))
+    err = math.degrees(math.atan2(float(np.linalg.norm(np.cross(d, GRAVITY))), float(d @ GRAVITY)))
     alpha = float(np.linalg.norm(d - GRAVITY)) / 2.0 * PWM_RANGE
     return err, alpha
 
@@ -407,7 +422,7 @@ def guidance(q: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
 # --------------------------------------------------------------------------------------
 # The whole pipeline
 # --------------------------------------------------------------------------------------
-def _result(status: str, k: int, **kw) -> Dict[str, Any]:
+def _result(status: str, k: int, **kw) -> dict[str, Any]:
     out = {
         "status": status,
         "pwm": [0] * k,
@@ -434,10 +449,17 @@ def _all_finite(x: Any) -> bool:
     return bool(np.all(np.isfinite(a)))
 
 
-def solve(contacts, wrench, policy: str = "F", mode: str = "C",
-          constraints: str = "paper", orientation=(1.0, 0.0, 0.0, 0.0),
-          y_axis=(0.0, 1.0, 0.0), compute_margins: bool = True,
-          feas_rel_tol: float = kFeasRelTol) -> Dict[str, Any]:
+def solve(
+    contacts,
+    wrench,
+    policy: str = "F",
+    mode: str = "C",
+    constraints: str = "paper",
+    orientation=(1.0, 0.0, 0.0, 0.0),
+    y_axis=(0.0, 1.0, 0.0),
+    compute_margins: bool = True,
+    feas_rel_tol: float = kFeasRelTol,
+) -> dict[str, Any]:
     """Run Algorithm 1 on one scene; see the module docstring for the output keys.
 
     contacts: k x 3 (hand frame, any length unit); wrench: [fx fy fz mx my mz] in the
@@ -455,8 +477,12 @@ def solve(contacts, wrench, policy: str = "F", mode: str = "C",
     k = len(contact_list)
 
     # non_finite_input: any NaN/Inf anywhere.
-    if not (all(_all_finite(c) for c in contact_list) and _all_finite(wrench)
-            and _all_finite(y_axis) and _all_finite(orientation)):
+    if not (
+        all(_all_finite(c) for c in contact_list)
+        and _all_finite(wrench)
+        and _all_finite(y_axis)
+        and _all_finite(orientation)
+    ):
         return _result("non_finite_input", k)
     if k not in (3, 4) or any(len(c) != 3 for c in contact_list):
         return _result("bad_contact_count", k)
@@ -493,18 +519,18 @@ def solve(contacts, wrench, policy: str = "F", mode: str = "C",
     rel = relevance(f, frames["r"])
     lam_des = desired_forces(rel, lam0)
 
-    margins: Dict[str, Optional[float]] = {}
+    margins: dict[str, float | None] = {}
     if compute_margins:
         for model in MODELS:
-            margins[model] = feasibility_margin(G, w_l, constrained_components(model, k),
-                                                lam0_norm)
+            margins[model] = feasibility_margin(G, w_l, constrained_components(model, k), lam0_norm)
 
     used = None
     lam = None
     active = None
     for model in FALLBACK_CHAIN[constraints]:
         feasible, lam_m, active_m = project_enumerate(
-            G, w_l, lam_des, constrained_components(model, k), lam0_norm, feas_rel_tol)
+            G, w_l, lam_des, constrained_components(model, k), lam0_norm, feas_rel_tol
+        )
         if feasible:
             used, lam, active = model, lam_m, active_m
             break
@@ -516,32 +542,61 @@ def solve(contacts, wrench, policy: str = "F", mode: str = "C",
     diagnostics = {
         "L": frames["L"],
         "rank_ratio": rank_ratio(G),
-        "relevance_cos": [float(f @ ri / (np.linalg.norm(f) * np.linalg.norm(ri)))
-                          for ri in frames["r"]],
-        "axis_sin": [float(np.linalg.norm(np.cross(ri / np.linalg.norm(ri), y_o)))
-                     for ri in frames["r"]],
+        "relevance_cos": [
+            float(f @ ri / (np.linalg.norm(f) * np.linalg.norm(ri))) for ri in frames["r"]
+        ],
+        "axis_sin": [
+            float(np.linalg.norm(np.cross(ri / np.linalg.norm(ri), y_o))) for ri in frames["r"]
+        ],
         "lam0": [float(v) for v in lam0],
         "lam_des": [float(v) for v in lam_des],
         "model_used": used,
     }
-    common = dict(fallback_mask=mask, margins=margins, relevant=[bool(b) for b in rel],
-                  **{"lambda": [float(v) for v in lam]}, error_deg=err, alpha=alpha,
-                  active_set=active)
+    common = dict(
+        fallback_mask=mask,
+        margins=margins,
+        relevant=[bool(b) for b in rel],
+        **{"lambda": [float(v) for v in lam]},
+        error_deg=err,
+        alpha=alpha,
+        active_set=active,
+    )
     if m_norm == 0.0:
-        return _result("nothing_to_display", k, levels=[0.0] * k, diagnostics=diagnostics,
-                       **common)
+        return _result("nothing_to_display", k, levels=[0.0] * k, diagnostics=diagnostics, **common)
     levels = m / m_norm
     gain = PWM_RANGE if mode == "C" else alpha
     diagnostics["pwm_raw"] = [PWM_BASE + abs(float(v)) * gain for v in levels]
-    return _result("ok", k, levels=[float(v) for v in levels],
-                   pwm=pwm_from_levels(levels, mode, alpha), constraints_used=used,
-                   diagnostics=diagnostics, **common)
+    return _result(
+        "ok",
+        k,
+        levels=[float(v) for v in levels],
+        pwm=pwm_from_levels(levels, mode, alpha),
+        constraints_used=used,
+        diagnostics=diagnostics,
+        **common,
+    )
 
 
 __all__ = [
-    "solve", "contact_frames", "grasp_matrix", "rank_ratio", "min_norm_solution",
-    "relevance", "desired_forces", "constrained_components", "project_enumerate",
-    "feasibility_margin", "motor_levels", "pwm_from_levels", "guidance",
-    "quaternion_to_matrix", "fallback_axis", "round_half_away", "TOLERANCES", "STATUSES",
-    "MODELS", "POLICIES", "MODES",
+    "solve",
+    "contact_frames",
+    "grasp_matrix",
+    "rank_ratio",
+    "min_norm_solution",
+    "relevance",
+    "desired_forces",
+    "constrained_components",
+    "project_enumerate",
+    "feasibility_margin",
+    "motor_levels",
+    "pwm_from_levels",
+    "guidance",
+    "quaternion_to_matrix",
+    "fallback_axis",
+    "round_half_away",
+    "TOLERANCES",
+    "STATUSES",
+    "MODELS",
+    "POLICIES",
+    "MODES",
 ]

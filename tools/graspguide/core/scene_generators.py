@@ -20,7 +20,7 @@ Every random draw comes from a ``numpy.random.Generator`` (``numpy.random.defaul
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Optional
+from typing import Any
 
 import numpy as np
 
@@ -31,10 +31,10 @@ NOMINAL_CONTACTS = {
     "middle": (-0.010, 0.100, 0.040),
     "palm": (0.0, 0.045, 0.0),
 }
-PERTURBATION_M = 0.015          # each coordinate perturbed uniformly in +-this
-FORCE_RANGE_N = (0.5, 5.0)      # force magnitude, uniform
-PURE_FORCE_SHARE = 0.7          # share of scenes with zero moment
-MAX_MOMENT_NM = 0.1             # moment norm uniform in [0, this] otherwise
+PERTURBATION_M = 0.015  # each coordinate perturbed uniformly in +-this
+FORCE_RANGE_N = (0.5, 5.0)  # force magnitude, uniform
+PURE_FORCE_SHARE = 0.7  # share of scenes with zero moment
+MAX_MOMENT_NM = 0.1  # moment norm uniform in [0, this] otherwise
 DEFAULT_Y_AXIS = (0.0, 1.0, 0.0)
 IDENTITY_QUATERNION = (1.0, 0.0, 0.0, 0.0)
 
@@ -63,8 +63,9 @@ def random_quaternion(rng: np.random.Generator) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
-def _scene(name: str, contacts, wrench, y_axis=DEFAULT_Y_AXIS,
-           orientation=IDENTITY_QUATERNION) -> Dict[str, Any]:
+def _scene(
+    name: str, contacts, wrench, y_axis=DEFAULT_Y_AXIS, orientation=IDENTITY_QUATERNION
+) -> dict[str, Any]:
     contacts = [[float(c) for c in row] for row in contacts]
     return {
         "name": name,
@@ -76,7 +77,7 @@ def _scene(name: str, contacts, wrench, y_axis=DEFAULT_Y_AXIS,
     }
 
 
-def random_scene(rng: np.random.Generator, k: int, name: str = "random") -> Dict[str, Any]:
+def random_scene(rng: np.random.Generator, k: int, name: str = "random") -> dict[str, Any]:
     """A hand-like scene: nominal contacts perturbed by +-15 mm, random wrench and pose.
 
     Draw order (fixed, so seeds are stable): contact perturbations (k x 3), force
@@ -91,26 +92,33 @@ def random_scene(rng: np.random.Generator, k: int, name: str = "random") -> Dict
     m_mag = rng.uniform(0.0, MAX_MOMENT_NM)
     moment = np.zeros(3) if pure else m_dir * m_mag
     q = random_quaternion(rng)
-    return _scene(name, contacts, np.concatenate([f_dir * f_mag, moment]),
-                  DEFAULT_Y_AXIS, q)
+    return _scene(name, contacts, np.concatenate([f_dir * f_mag, moment]), DEFAULT_Y_AXIS, q)
 
 
-def random_scenes(seed: int, k: int, count: int, prefix: Optional[str] = None
-                  ) -> List[Dict[str, Any]]:
+def random_scenes(seed: int, k: int, count: int, prefix: str | None = None) -> list[dict[str, Any]]:
     """`count` scenes, scene i drawn from default_rng([seed, k, i]) (independent streams)."""
     prefix = prefix or f"random_k{k}"
-    return [random_scene(np.random.default_rng([seed, k, i]), k, f"{prefix}_{i:04d}")
-            for i in range(count)]
+    return [
+        random_scene(np.random.default_rng([seed, k, i]), k, f"{prefix}_{i:04d}")
+        for i in range(count)
+    ]
 
 
-def _case(scene: Dict[str, Any], expect_status: Optional[str], note: str,
-          runs=None, expect: Optional[dict] = None, same_as: Optional[str] = None
-          ) -> Dict[str, Any]:
+def _case(
+    scene: dict[str, Any],
+    expect_status: str | None,
+    note: str,
+    runs=None,
+    expect: dict | None = None,
+    same_as: str | None = None,
+) -> dict[str, Any]:
     scene = dict(scene)
     scene["expect_status"] = expect_status
     scene["note"] = note
-    scene["runs"] = [list(r) for r in (runs if runs is not None else
-                                       (RUN_OK if expect_status == "ok" else RUN_DEFAULT))]
+    scene["runs"] = [
+        list(r)
+        for r in (runs if runs is not None else (RUN_OK if expect_status == "ok" else RUN_DEFAULT))
+    ]
     if expect:
         scene["expect"] = dict(expect)
     if same_as:
@@ -118,16 +126,16 @@ def _case(scene: Dict[str, Any], expect_status: Optional[str], note: str,
     return scene
 
 
-def _rot_quaternion(axis, angle_rad: float) -> List[float]:
+def _rot_quaternion(axis, angle_rad: float) -> list[float]:
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     s = math.sin(angle_rad / 2)
     return [math.cos(angle_rad / 2), *(s * a)]
 
 
-def extreme_scenes() -> List[Dict[str, Any]]:
+def extreme_scenes() -> list[dict[str, Any]]:
     """Named edge cases; each notes its expected status where it is known a priori."""
-    cases: List[Dict[str, Any]] = []
+    cases: list[dict[str, Any]] = []
     add = cases.append
     nan, inf = float("nan"), float("inf")
 
@@ -144,76 +152,170 @@ def extreme_scenes() -> List[Dict[str, Any]]:
     d2 = np.array([2 * d, 4 * d, 3 * d])
     tetra = [P + d1, P + d2, P - d1 - d2]  # centroid exactly P
 
-    # ---- coincident contacts -----------------------------------------------------------
-    c = hand3.copy(); c[1] = c[0]
-    add(_case(_scene("coincident_thumb_equals_index_k3", c, pure_f), "coincident_contacts",
-              "two equal contacts (pairwise check)"))
-    c = hand4.copy(); c[1] = c[0]
-    add(_case(_scene("coincident_thumb_equals_index_k4", c, pure_f), "coincident_contacts",
-              "two equal contacts among four; the other three span a plane"))
-    c = hand4.copy(); c[2] = c[1] + np.array([1e-6, 0.0, 0.0])
-    add(_case(_scene("coincident_index_middle_1um_k4", c, pure_f), "coincident_contacts",
-              "index and middle 1 um apart (<= 1e-4 L)"))
-    add(_case(_scene("coincident_all_equal_k3", [hand3[0]] * 3, pure_f),
-              "coincident_contacts", "all contacts equal: L = 0"))
-    add(_case(_scene("coincident_palm_at_centroid_k4", tetra + [P], pure_f),
-              "coincident_contacts", "palm exactly at the centroid of all four (r_4 = 0)"))
-    add(_case(_scene("coincident_contact_at_centroid_k3",
-                     [P + d1, P - d1, P], pure_f), "coincident_contacts",
-              "third contact exactly at the midpoint = centroid (also collinear: "
-              "coincident is checked first)"))
+    # ---- coincident contacts --------------------------------------------------------------------
+    c = hand3.copy()
+    c[1] = c[0]
+    add(
+        _case(
+            _scene("coincident_thumb_equals_index_k3", c, pure_f),
+            "coincident_contacts",
+            "two equal contacts (pairwise check)",
+        )
+    )
+    c = hand4.copy()
+    c[1] = c[0]
+    add(
+        _case(
+            _scene("coincident_thumb_equals_index_k4", c, pure_f),
+            "coincident_contacts",
+            "two equal contacts among four; the other three span a plane",
+        )
+    )
+    c = hand4.copy()
+    c[2] = c[1] + np.array([1e-6, 0.0, 0.0])
+    add(
+        _case(
+            _scene("coincident_index_middle_1um_k4", c, pure_f),
+            "coincident_contacts",
+            "index and middle 1 um apart (<= 1e-4 L)",
+        )
+    )
+    add(
+        _case(
+            _scene("coincident_all_equal_k3", [hand3[0]] * 3, pure_f),
+            "coincident_contacts",
+            "all contacts equal: L = 0",
+        )
+    )
+    add(
+        _case(
+            _scene("coincident_palm_at_centroid_k4", tetra + [P], pure_f),
+            "coincident_contacts",
+            "palm exactly at the centroid of all four (r_4 = 0)",
+        )
+    )
+    add(
+        _case(
+            _scene("coincident_contact_at_centroid_k3", [P + d1, P - d1, P], pure_f),
+            "coincident_contacts",
+            "third contact exactly at the midpoint = centroid (also collinear: "
+            "coincident is checked first)",
+        )
+    )
 
-    # ---- rank -------------------------------------------------------------------------------
+    # ---- rank -----------------------------------------------------------------------------------
     u = np.array([2 * d, d, 3 * d])
-    add(_case(_scene("collinear_k3", [P, P + u, P + 3 * u], pure_f), "rank_deficient",
-              "three collinear contacts: rank 5"))
-    add(_case(_scene("collinear_k4", [P, P + u, P + 3 * u, P + 4 * u], pure_f),
-              "rank_deficient", "four collinear contacts: rank 5"))
-    c = np.array([P, P + u, P + 3 * u]); c[1] += np.array([1e-9, -2e-9, 0.0])
-    add(_case(_scene("nearly_collinear_k3", c, pure_f), "rank_deficient",
-              "middle contact 2 nm off the line: sigma_6/sigma_1 ~ 1e-7"))
+    add(
+        _case(
+            _scene("collinear_k3", [P, P + u, P + 3 * u], pure_f),
+            "rank_deficient",
+            "three collinear contacts: rank 5",
+        )
+    )
+    add(
+        _case(
+            _scene("collinear_k4", [P, P + u, P + 3 * u, P + 4 * u], pure_f),
+            "rank_deficient",
+            "four collinear contacts: rank 5",
+        )
+    )
+    c = np.array([P, P + u, P + 3 * u])
+    c[1] += np.array([1e-9, -2e-9, 0.0])
+    add(
+        _case(
+            _scene("nearly_collinear_k3", c, pure_f),
+            "rank_deficient",
+            "middle contact 2 nm off the line: sigma_6/sigma_1 ~ 1e-7",
+        )
+    )
 
-    # ---- contacts on / near the y_O axis (fallback axis) -----------------------------------
+    # ---- contacts on / near the y_O axis (fallback axis) ----------------------------------------
     on_axis = [[0.0, 8 * d, 0.0], [4 * d, -4 * d, d], [-4 * d, -4 * d, -d]]  # O = 0
-    add(_case(_scene("contact_on_y_axis_k3", on_axis, pure_f, orientation=q_tilt), "ok",
-              "r_1 = (0, a, 0) exactly parallel to y_O: fallback axis for contact 0",
-              expect={"fallback_mask": 1}))
+    add(
+        _case(
+            _scene("contact_on_y_axis_k3", on_axis, pure_f, orientation=q_tilt),
+            "ok",
+            "r_1 = (0, a, 0) exactly parallel to y_O: fallback axis for contact 0",
+            expect={"fallback_mask": 1},
+        )
+    )
     neg = [[0.0, -8 * d, 0.0], [4 * d, 4 * d, d], [-4 * d, 4 * d, -d]]
-    add(_case(_scene("contact_on_neg_y_axis_k3", neg, pure_f, orientation=q_tilt), "ok",
-              "r_1 anti-parallel to y_O: fallback axis", expect={"fallback_mask": 1}))
+    add(
+        _case(
+            _scene("contact_on_neg_y_axis_k3", neg, pure_f, orientation=q_tilt),
+            "ok",
+            "r_1 anti-parallel to y_O: fallback axis",
+            expect={"fallback_mask": 1},
+        )
+    )
     on4 = [[0.0, 8 * d, 0.0], [4 * d, -2 * d, d], [-4 * d, -2 * d, -d], [0.0, -4 * d, 0.0]]
-    add(_case(_scene("contacts_on_y_axis_k4", on4, [0.4, 0.2, -1.1, 0.0, 0.0, 0.0],
-                     orientation=q_tilt), "ok",
-              "thumb and palm both on the y_O axis (opposite sides)",
-              expect={"fallback_mask": 9}))
+    add(
+        _case(
+            _scene(
+                "contacts_on_y_axis_k4", on4, [0.4, 0.2, -1.1, 0.0, 0.0, 0.0], orientation=q_tilt
+            ),
+            "ok",
+            "thumb and palm both on the y_O axis (opposite sides)",
+            expect={"fallback_mask": 9},
+        )
+    )
     for label, sin_t, mask in (("inside", 5e-4, 1), ("outside", 2e-3, 0)):
         # Centroid exactly 0, r_1 = (a sin_t, a, 0): ||y_1 x y_O|| = sin_t / sqrt(1 + sin_t^2).
         a = 8 * d
         h = a * sin_t / 2
         cc = [[2 * h, a, 0.0], [4 * d - h, -a / 2, d], [-4 * d - h, -a / 2, -d]]
-        add(_case(_scene(f"contact_near_y_axis_{label}_tol_k3", cc, pure_f,
-                         orientation=q_tilt), "ok",
-                  f"||y_1 x y_O|| ~ {sin_t:g} ({label} kAxisParallelTol = 1e-3)",
-                  expect={"fallback_mask": mask}))
+        add(
+            _case(
+                _scene(f"contact_near_y_axis_{label}_tol_k3", cc, pure_f, orientation=q_tilt),
+                "ok",
+                f"||y_1 x y_O|| ~ {sin_t:g} ({label} kAxisParallelTol = 1e-3)",
+                expect={"fallback_mask": mask},
+            )
+        )
     onz = [[0.0, 0.0, 8 * d], [4 * d, d, -4 * d], [-4 * d, -d, -4 * d]]
-    add(_case(_scene("custom_y_axis_z_contact_on_axis", onz, pure_f, y_axis=(0.0, 0.0, 1.0),
-                     orientation=q_tilt), "ok",
-              "y_O = +z, contact 0 on it: fallback e = +x (tie with +y, first index)",
-              expect={"fallback_mask": 1}))
+    add(
+        _case(
+            _scene(
+                "custom_y_axis_z_contact_on_axis",
+                onz,
+                pure_f,
+                y_axis=(0.0, 0.0, 1.0),
+                orientation=q_tilt,
+            ),
+            "ok",
+            "y_O = +z, contact 0 on it: fallback e = +x (tie with +y, first index)",
+            expect={"fallback_mask": 1},
+        )
+    )
     diag = [[4 * d, 4 * d, 4 * d], [-4 * d, 2 * d, -2 * d], [0.0, -6 * d, -2 * d]]  # O = 0
-    add(_case(_scene("custom_y_axis_diagonal", diag, pure_f, y_axis=(1.0, 1.0, 1.0),
-                     orientation=q_tilt), "ok",
-              "y_O = (1,1,1) unnormalised, contact 0 on it: three-way tie, e = +x",
-              expect={"fallback_mask": 1}))
-    add(_case(_scene("y_axis_default_reference_k3", hand3, pure_f, orientation=q_tilt),
-              "ok", "reference for y_axis_scaled"))
-    add(_case(_scene("y_axis_scaled", hand3, pure_f, y_axis=(0.0, 2.5, 0.0),
-                     orientation=q_tilt), "ok", "y_O = (0, 2.5, 0) is normalised",
-              same_as="y_axis_default_reference_k3"))
-    add(_case(_scene("y_axis_zero", hand3, pure_f, y_axis=(0.0, 0.0, 0.0)), "bad_axis",
-              "y_O = 0"))
+    add(
+        _case(
+            _scene(
+                "custom_y_axis_diagonal", diag, pure_f, y_axis=(1.0, 1.0, 1.0), orientation=q_tilt
+            ),
+            "ok",
+            "y_O = (1,1,1) unnormalised, contact 0 on it: three-way tie, e = +x",
+            expect={"fallback_mask": 1},
+        )
+    )
+    add(
+        _case(
+            _scene("y_axis_default_reference_k3", hand3, pure_f, orientation=q_tilt),
+            "ok",
+            "reference for y_axis_scaled",
+        )
+    )
+    add(
+        _case(
+            _scene("y_axis_scaled", hand3, pure_f, y_axis=(0.0, 2.5, 0.0), orientation=q_tilt),
+            "ok",
+            "y_O = (0, 2.5, 0) is normalised",
+            same_as="y_axis_default_reference_k3",
+        )
+    )
+    add(_case(_scene("y_axis_zero", hand3, pure_f, y_axis=(0.0, 0.0, 0.0)), "bad_axis", "y_O = 0"))
 
-    # ---- units and scale ----------------------------------------------------------------------
+    # ---- units and scale ------------------------------------------------------------------------
     for k in (3, 4):
         base = random_scene(np.random.default_rng([7, k]), k, f"scale_base_k{k}")
         base["wrench"][3:] = [0.02, -0.035, 0.01]
@@ -229,50 +331,108 @@ def extreme_scenes() -> List[Dict[str, Any]]:
         for label, s, off, note in variants:
             ws = w.copy()
             ws[3:] *= s
-            add(_case(_scene(f"{label}_k{k}", C * s + off, ws, base["y_axis"],
-                             base["orientation"]), "ok", note,
-                      same_as=base["name"]))
+            add(
+                _case(
+                    _scene(f"{label}_k{k}", C * s + off, ws, base["y_axis"], base["orientation"]),
+                    "ok",
+                    note,
+                    same_as=base["name"],
+                )
+            )
 
-    # ---- wrench -----------------------------------------------------------------------------
+    # ---- wrench ---------------------------------------------------------------------------------
     add(_case(_scene("zero_wrench", hand3, [0.0] * 6), "zero_wrench", "w = 0"))
-    add(_case(_scene("zero_force_with_moment", hand3, [0, 0, 0, 0.01, -0.02, 0.0]),
-              "zero_force", "f = 0, m != 0"))
-    add(_case(_scene("tiny_force_with_moment", hand4, [1e-9, 0, 0, 0.02, 0.0, 0.01]),
-              "zero_force", "||f|| / ||w_L|| ~ 2e-9 < 1e-6"))
+    add(
+        _case(
+            _scene("zero_force_with_moment", hand3, [0, 0, 0, 0.01, -0.02, 0.0]),
+            "zero_force",
+            "f = 0, m != 0",
+        )
+    )
+    add(
+        _case(
+            _scene("tiny_force_with_moment", hand4, [1e-9, 0, 0, 0.02, 0.0, 0.01]),
+            "zero_force",
+            "||f|| / ||w_L|| ~ 2e-9 < 1e-6",
+        )
+    )
 
-    # ---- relevance boundary --------------------------------------------------------------------
+    # ---- relevance boundary ---------------------------------------------------------------------
     # r_1 = (4d, 0, 0) exactly (O = 0); f = (0, 0, 1) is exactly perpendicular to r_1.
     rb = [[4 * d, 0.0, 0.0], [-2 * d, 4 * d, d], [-2 * d, -4 * d, -d]]
-    add(_case(_scene("relevance_boundary_exact", rb, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
-                     orientation=q_tilt), "ok",
-              "f . r_1 = 0 exactly: contact 0 is relevant (<= 0 counts)",
-              expect={"relevant0": True}))
-    add(_case(_scene("relevance_boundary_inside_band", rb, [1e-7, 0.0, 1.0, 0, 0, 0],
-                     orientation=q_tilt), "ok",
-              "cos(f, r_1) = 1e-7 <= kRelevanceCosTol: relevant",
-              expect={"relevant0": True}))
-    add(_case(_scene("relevance_boundary_outside_band", rb, [1e-4, 0.0, 1.0, 0, 0, 0],
-                     orientation=q_tilt), "ok",
-              "cos(f, r_1) = 1e-4 > kRelevanceCosTol: not relevant",
-              expect={"relevant0": False}))
+    add(
+        _case(
+            _scene(
+                "relevance_boundary_exact", rb, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], orientation=q_tilt
+            ),
+            "ok",
+            "f . r_1 = 0 exactly: contact 0 is relevant (<= 0 counts)",
+            expect={"relevant0": True},
+        )
+    )
+    add(
+        _case(
+            _scene(
+                "relevance_boundary_inside_band", rb, [1e-7, 0.0, 1.0, 0, 0, 0], orientation=q_tilt
+            ),
+            "ok",
+            "cos(f, r_1) = 1e-7 <= kRelevanceCosTol: relevant",
+            expect={"relevant0": True},
+        )
+    )
+    add(
+        _case(
+            _scene(
+                "relevance_boundary_outside_band", rb, [1e-4, 0.0, 1.0, 0, 0, 0], orientation=q_tilt
+            ),
+            "ok",
+            "cos(f, r_1) = 1e-4 > kRelevanceCosTol: not relevant",
+            expect={"relevant0": False},
+        )
+    )
 
     # ---- constraint models ----------------------------------------------------------------------
-    add(_case(_scene("paper_infeasible_k3", hand3, [0, 0, -1.0, 0, 0, 0]), "ok",
-              "nominal 3-contact hand pushed along -z: paper infeasible, falls back to normal",
-              expect={"constraints_used": "normal"}))
-    add(_case(_scene("paper_infeasible_k4", hand4, [0, 1.0, 0, 0, -0.05, 0]), "ok",
-              "4-contact hand, moment about y_O of the wrong sign for lambda_ix >= 0: "
-              "paper infeasible, falls back to normal",
-              expect={"constraints_used": "normal"}))
-    add(_case(_scene("paper_feasible_interior_k4", hand4, [0, 1.0, 0, 0, 0.05, 0]), "ok",
-              "the same with the opposite moment: paper strictly feasible (margin > 0)",
-              expect={"constraints_used": "paper"}))
-    add(_case(_scene("paper_feasible_degenerate_k3", hand3, [0, -2.0, 0.5, 0, 0, 0]), "ok",
-              "pure force: every lambda_ix = 0 at the (degenerate) paper optimum",
-              expect={"constraints_used": "paper"}))
-    add(_case(_scene("paper_feasible_degenerate_k4", hand4, [0, 0, -1.0, 0, 0, 0]), "ok",
-              "pure force, 4 contacts: paper feasible on a degenerate vertex",
-              expect={"constraints_used": "paper"}))
+    add(
+        _case(
+            _scene("paper_infeasible_k3", hand3, [0, 0, -1.0, 0, 0, 0]),
+            "ok",
+            "nominal 3-contact hand pushed along -z: paper infeasible, falls back to normal",
+            expect={"constraints_used": "normal"},
+        )
+    )
+    add(
+        _case(
+            _scene("paper_infeasible_k4", hand4, [0, 1.0, 0, 0, -0.05, 0]),
+            "ok",
+            "4-contact hand, moment about y_O of the wrong sign for lambda_ix >= 0: "
+            "paper infeasible, falls back to normal",
+            expect={"constraints_used": "normal"},
+        )
+    )
+    add(
+        _case(
+            _scene("paper_feasible_interior_k4", hand4, [0, 1.0, 0, 0, 0.05, 0]),
+            "ok",
+            "the same with the opposite moment: paper strictly feasible (margin > 0)",
+            expect={"constraints_used": "paper"},
+        )
+    )
+    add(
+        _case(
+            _scene("paper_feasible_degenerate_k3", hand3, [0, -2.0, 0.5, 0, 0, 0]),
+            "ok",
+            "pure force: every lambda_ix = 0 at the (degenerate) paper optimum",
+            expect={"constraints_used": "paper"},
+        )
+    )
+    add(
+        _case(
+            _scene("paper_feasible_degenerate_k4", hand4, [0, 0, -1.0, 0, 0, 0]),
+            "ok",
+            "pure force, 4 contacts: paper feasible on a degenerate vertex",
+            expect={"constraints_used": "paper"},
+        )
+    )
 
     # ---- non-finite inputs ----------------------------------------------------------------------
     def with_value(name, field, index, value, k=3):
@@ -295,61 +455,153 @@ def extreme_scenes() -> List[Dict[str, Any]]:
         ("nan_orientation", "orientation", 0, nan),
         ("inf_orientation", "orientation", 3, inf),
     ):
-        add(_case(with_value(name, field, index, value), "non_finite_input",
-                  f"{value} in {field}"))
+        add(_case(with_value(name, field, index, value), "non_finite_input", f"{value} in {field}"))
 
-    # ---- quaternions ------------------------------------------------------------------------------
-    q_ref = _scene("quaternion_unit", hand4, [0.7, -0.4, -1.5, 0.0, 0.0, 0.0],
-                   orientation=q_tilt)
+    # ---- quaternions ----------------------------------------------------------------------------
+    q_ref = _scene("quaternion_unit", hand4, [0.7, -0.4, -1.5, 0.0, 0.0, 0.0], orientation=q_tilt)
     add(_case(q_ref, "ok", "reference for the scaled quaternions"))
     for label, s in (("scaled_3p7", 3.7), ("scaled_2e-6", 2e-6 / 1.0), ("negated", -1.0)):
-        add(_case(_scene(f"quaternion_{label}", hand4, q_ref["wrench"],
-                         orientation=[s * v for v in q_tilt]), "ok",
-                  f"orientation scaled by {s:g}: same result as the unit quaternion",
-                  same_as="quaternion_unit"))
-    add(_case(_scene("quaternion_zero", hand4, pure_f, orientation=(0.0, 0.0, 0.0, 0.0)),
-              "bad_quaternion", "q = 0"))
-    add(_case(_scene("quaternion_tiny", hand4, pure_f, orientation=(1e-7, 0.0, 0.0, 0.0)),
-              "bad_quaternion", "||q|| = 1e-7 < kMinQuaternionNorm"))
+        add(
+            _case(
+                _scene(
+                    f"quaternion_{label}",
+                    hand4,
+                    q_ref["wrench"],
+                    orientation=[s * v for v in q_tilt],
+                ),
+                "ok",
+                f"orientation scaled by {s:g}: same result as the unit quaternion",
+                same_as="quaternion_unit",
+            )
+        )
+    add(
+        _case(
+            _scene("quaternion_zero", hand4, pure_f, orientation=(0.0, 0.0, 0.0, 0.0)),
+            "bad_quaternion",
+            "q = 0",
+        )
+    )
+    add(
+        _case(
+            _scene("quaternion_tiny", hand4, pure_f, orientation=(1e-7, 0.0, 0.0, 0.0)),
+            "bad_quaternion",
+            "||q|| = 1e-7 < kMinQuaternionNorm",
+        )
+    )
 
-    # ---- guidance error / alpha ---------------------------------------------------------------------
-    add(_case(_scene("aligned_with_gravity", hand3, [0, 0, -2.0, 0, 0, 0]), "ok",
-              "R f_hat = g: error 0, alpha 0 (mode V: every active motor at 70)",
-              expect={"error_deg": 0.0}))
-    add(_case(_scene("opposite_to_gravity", hand3, [0, 0, 2.0, 0, 0, 0]), "ok",
-              "R f_hat = -g: error 180, alpha 185", expect={"error_deg": 180.0}))
-    add(_case(_scene("perpendicular_to_gravity", hand3, [1.5, 0, 0, 0, 0, 0]), "ok",
-              "R f_hat = +x: error 90", expect={"error_deg": 90.0}))
-    add(_case(_scene("rotated_into_gravity", hand3, [1.0, 0, 0, 0, 0, 0],
-                     orientation=_rot_quaternion([0, 1, 0], math.pi / 2)), "ok",
-              "hand rotated +90 deg about y takes +x to -z: error ~0"))
+    # ---- guidance error / alpha -----------------------------------------------------------------
+    add(
+        _case(
+            _scene("aligned_with_gravity", hand3, [0, 0, -2.0, 0, 0, 0]),
+            "ok",
+            "R f_hat = g: error 0, alpha 0 (mode V: every active motor at 70)",
+            expect={"error_deg": 0.0},
+        )
+    )
+    add(
+        _case(
+            _scene("opposite_to_gravity", hand3, [0, 0, 2.0, 0, 0, 0]),
+            "ok",
+            "R f_hat = -g: error 180, alpha 185",
+            expect={"error_deg": 180.0},
+        )
+    )
+    add(
+        _case(
+            _scene("perpendicular_to_gravity", hand3, [1.5, 0, 0, 0, 0, 0]),
+            "ok",
+            "R f_hat = +x: error 90",
+            expect={"error_deg": 90.0},
+        )
+    )
+    add(
+        _case(
+            _scene(
+                "rotated_into_gravity",
+                hand3,
+                [1.0, 0, 0, 0, 0, 0],
+                orientation=_rot_quaternion([0, 1, 0], math.pi / 2),
+            ),
+            "ok",
+            "hand rotated +90 deg about y takes +x to -z: error ~0",
+        )
+    )
 
-    # ---- contact count and check order --------------------------------------------------------------
-    add(_case(_scene("bad_contact_count_k2", hand3[:2], pure_f), "bad_contact_count",
-              "two contacts"))
-    add(_case(_scene("bad_contact_count_k1", hand3[:1], pure_f), "bad_contact_count",
-              "one contact"))
-    sc = _scene("order_nan_before_count", hand3[:2], pure_f); sc["wrench"][2] = nan
+    # ---- contact count and check order ----------------------------------------------------------
+    add(
+        _case(
+            _scene("bad_contact_count_k2", hand3[:2], pure_f), "bad_contact_count", "two contacts"
+        )
+    )
+    add(
+        _case(_scene("bad_contact_count_k1", hand3[:1], pure_f), "bad_contact_count", "one contact")
+    )
+    sc = _scene("order_nan_before_count", hand3[:2], pure_f)
+    sc["wrench"][2] = nan
     add(_case(sc, "non_finite_input", "NaN and k = 2: non_finite_input first"))
-    add(_case(_scene("order_count_before_axis", hand3[:2], pure_f, y_axis=(0, 0, 0)),
-              "bad_contact_count", "k = 2 and y_O = 0: bad_contact_count first"))
-    add(_case(_scene("order_axis_before_quaternion", hand3, pure_f, y_axis=(0, 0, 0),
-                     orientation=(0, 0, 0, 0)), "bad_axis",
-              "y_O = 0 and q = 0: bad_axis first"))
-    add(_case(_scene("order_quaternion_before_coincident", [hand3[0]] * 3, pure_f,
-                     orientation=(0, 0, 0, 0)), "bad_quaternion",
-              "q = 0 and coincident contacts: bad_quaternion first"))
-    add(_case(_scene("order_coincident_before_zero_wrench", [hand3[0]] * 3, [0.0] * 6),
-              "coincident_contacts", "coincident and w = 0: coincident first"))
-    add(_case(_scene("order_zero_wrench_before_rank", [P, P + u, P + 3 * u], [0.0] * 6),
-              "zero_wrench", "collinear and w = 0: zero_wrench first"))
-    add(_case(_scene("order_zero_force_before_rank", [P, P + u, P + 3 * u],
-                     [0, 0, 0, 0.01, 0, 0]), "zero_force",
-              "collinear and f = 0: zero_force first"))
+    add(
+        _case(
+            _scene("order_count_before_axis", hand3[:2], pure_f, y_axis=(0, 0, 0)),
+            "bad_contact_count",
+            "k = 2 and y_O = 0: bad_contact_count first",
+        )
+    )
+    add(
+        _case(
+            _scene(
+                "order_axis_before_quaternion",
+                hand3,
+                pure_f,
+                y_axis=(0, 0, 0),
+                orientation=(0, 0, 0, 0),
+            ),
+            "bad_axis",
+            "y_O = 0 and q = 0: bad_axis first",
+        )
+    )
+    add(
+        _case(
+            _scene(
+                "order_quaternion_before_coincident",
+                [hand3[0]] * 3,
+                pure_f,
+                orientation=(0, 0, 0, 0),
+            ),
+            "bad_quaternion",
+            "q = 0 and coincident contacts: bad_quaternion first",
+        )
+    )
+    add(
+        _case(
+            _scene("order_coincident_before_zero_wrench", [hand3[0]] * 3, [0.0] * 6),
+            "coincident_contacts",
+            "coincident and w = 0: coincident first",
+        )
+    )
+    add(
+        _case(
+            _scene("order_zero_wrench_before_rank", [P, P + u, P + 3 * u], [0.0] * 6),
+            "zero_wrench",
+            "collinear and w = 0: zero_wrench first",
+        )
+    )
+    add(
+        _case(
+            _scene("order_zero_force_before_rank", [P, P + u, P + 3 * u], [0, 0, 0, 0.01, 0, 0]),
+            "zero_force",
+            "collinear and f = 0: zero_force first",
+        )
+    )
     return cases
 
 
 __all__ = [
-    "CONTACT_ORDER", "NOMINAL_CONTACTS", "nominal_contacts", "random_unit_vector",
-    "random_quaternion", "random_scene", "random_scenes", "extreme_scenes",
+    "CONTACT_ORDER",
+    "NOMINAL_CONTACTS",
+    "nominal_contacts",
+    "random_unit_vector",
+    "random_quaternion",
+    "random_scene",
+    "random_scenes",
+    "extreme_scenes",
 ]

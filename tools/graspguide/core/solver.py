@@ -17,17 +17,18 @@ import difflib
 import json
 import math
 import numbers
-from typing import Any, Dict, List, Mapping, Sequence, Tuple
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from graspguide.core import _core
 
-STATUS_NAMES: Tuple[str, ...] = tuple(_core.STATUS_NAMES)
-POLICIES: Tuple[str, ...] = tuple(_core.POLICIES)
-MODES: Tuple[str, ...] = tuple(_core.MODES)
-CONSTRAINT_MODELS: Tuple[str, ...] = tuple(_core.CONSTRAINT_MODELS)
-DECOMPOSITIONS: Tuple[str, ...] = tuple(_core.DECOMPOSITIONS)
-SCALARS: Tuple[str, ...] = tuple(_core.SCALARS)
-TOLERANCES: Dict[str, Dict[str, float]] = dict(_core.TOLERANCES)
+STATUS_NAMES: tuple[str, ...] = tuple(_core.STATUS_NAMES)
+POLICIES: tuple[str, ...] = tuple(_core.POLICIES)
+MODES: tuple[str, ...] = tuple(_core.MODES)
+CONSTRAINT_MODELS: tuple[str, ...] = tuple(_core.CONSTRAINT_MODELS)
+DECOMPOSITIONS: tuple[str, ...] = tuple(_core.DECOMPOSITIONS)
+SCALARS: tuple[str, ...] = tuple(_core.SCALARS)
+TOLERANCES: dict[str, dict[str, float]] = dict(_core.TOLERANCES)
 PWM_MIN: int = _core.kPwmMin
 PWM_SPAN: int = _core.kPwmSpan
 MIN_CONTACTS: int = _core.kMinContacts
@@ -38,7 +39,7 @@ DEFAULT_ORIENTATION = (1.0, 0.0, 0.0, 0.0)
 DEFAULT_Y_AXIS = (0.0, 1.0, 0.0)
 
 # Fields of one command-line request and their defaults (None: required).
-REQUEST_FIELDS: Dict[str, Any] = {
+REQUEST_FIELDS: dict[str, Any] = {
     "contacts": None,
     "wrench": None,
     "policy": "F",
@@ -96,7 +97,7 @@ def _show(x: Any, limit: int = 40) -> str:
     except Exception:  # too deep, exotic objects
         text = f"<{type(x).__name__}>"
     text = text.encode("ascii", "backslashreplace").decode("ascii")
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _got(x: Any) -> str:
@@ -125,46 +126,55 @@ def _is_sequence(x: Any) -> bool:
     return isinstance(x, Sequence) or hasattr(x, "__array__")
 
 
-def _number_list(x: Any, n: int, field: str, what: str) -> List[float]:
+def _number_list(x: Any, n: int, field: str, what: str) -> list[float]:
     if not _is_sequence(x):
-        raise RequestError("bad_request",
-                           f"{field} must be an array of {n} numbers ({what}), {_got(x)}")
+        raise RequestError(
+            "bad_request", f"{field} must be an array of {n} numbers ({what}), {_got(x)}"
+        )
     try:
         items = list(x)
     except TypeError:
-        raise RequestError("bad_request", f"{field} must be an array of {n} numbers ({what}), "
-                           f"{_got(x)}") from None
+        raise RequestError(
+            "bad_request", f"{field} must be an array of {n} numbers ({what}), {_got(x)}"
+        ) from None
     if len(items) != n:
-        raise RequestError("bad_request",
-                           f"{field} must have exactly {n} numbers ({what}), got {len(items)}")
+        raise RequestError(
+            "bad_request", f"{field} must have exactly {n} numbers ({what}), got {len(items)}"
+        )
     out = []
     for i, v in enumerate(items):
         if not _is_number(v):
-            raise RequestError("bad_request",
-                               f"{field}[{i}] must be a number, {_got(v)}"
-                               " (NaN and Infinity are accepted as numbers; booleans and "
-                               "strings are not)")
+            raise RequestError(
+                "bad_request",
+                f"{field}[{i}] must be a number, {_got(v)}"
+                " (NaN and Infinity are accepted as numbers; booleans and "
+                "strings are not)",
+            )
         out.append(_to_float(v))
     return out
 
 
-def _contacts(x: Any, field: str = "contacts") -> List[List[float]]:
+def _contacts(x: Any, field: str = "contacts") -> list[list[float]]:
     """A list of [x, y, z] triples. The count is not checked here: anything but 3 or 4
     goes to the core, which answers bad_contact_count."""
     if not _is_sequence(x):
-        raise RequestError("bad_request",
-                           f"{field} must be an array of 3 or 4 [x, y, z] triples "
-                           f"(thumb, index, middle, optional palm), {_got(x)}")
+        raise RequestError(
+            "bad_request",
+            f"{field} must be an array of 3 or 4 [x, y, z] triples "
+            f"(thumb, index, middle, optional palm), {_got(x)}",
+        )
     try:
         rows = list(x)
     except TypeError:
-        raise RequestError("bad_request", f"{field} must be an array of [x, y, z] triples, "
-                           f"{_got(x)}") from None
+        raise RequestError(
+            "bad_request", f"{field} must be an array of [x, y, z] triples, {_got(x)}"
+        ) from None
     out = []
     for i, row in enumerate(rows):
         if not _is_sequence(row):
-            raise RequestError("bad_request",
-                               f"{field}[{i}] must be an [x, y, z] triple, {_got(row)}")
+            raise RequestError(
+                "bad_request", f"{field}[{i}] must be an [x, y, z] triple, {_got(row)}"
+            )
         out.append(_number_list(row, 3, f"{field}[{i}]", "x, y, z of one contact"))
     # Only the count of any extra contacts matters to the core.
     del out[_MAX_FORWARDED_CONTACTS:]
@@ -174,15 +184,13 @@ def _contacts(x: Any, field: str = "contacts") -> List[List[float]]:
 def _choice(x: Any, field: str, accepted: Sequence[str]) -> str:
     listed = ", ".join(f'"{a}"' for a in accepted)
     if not isinstance(x, str):
-        raise RequestError("bad_request",
-                           f"{field} must be a string, one of {listed}; {_got(x)}")
+        raise RequestError("bad_request", f"{field} must be a string, one of {listed}; {_got(x)}")
     if x not in accepted:
         hint = ""
         close = [a for a in accepted if a.lower() == x.lower()]
         if close:
             hint = f' (names are case-sensitive: did you mean "{close[0]}"?)'
-        raise RequestError("bad_request",
-                           f"unknown {field} {_show(x)}; accepted: {listed}{hint}")
+        raise RequestError("bad_request", f"unknown {field} {_show(x)}; accepted: {listed}{hint}")
     return x
 
 
@@ -193,8 +201,9 @@ def _max_iterations(x: Any) -> int:
     return int(max(-1, min(int(x), 2**31 - 1)))
 
 
-def _check_kwargs(contacts, wrench, policy, mode, constraints, orientation, y_axis
-                  ) -> Dict[str, Any]:
+def _check_kwargs(
+    contacts, wrench, policy, mode, constraints, orientation, y_axis
+) -> dict[str, Any]:
     return dict(
         contacts=_contacts(contacts),
         wrench=_number_list(wrench, 6, "wrench", "fx, fy, fz, mx, my, mz"),
@@ -209,10 +218,18 @@ def _check_kwargs(contacts, wrench, policy, mode, constraints, orientation, y_ax
 # --------------------------------------------------------------------------------------
 # Public API
 # --------------------------------------------------------------------------------------
-def solve(contacts, wrench, policy: str = "F", mode: str = "C",
-          constraints: str = "paper", orientation=DEFAULT_ORIENTATION,
-          y_axis=DEFAULT_Y_AXIS, scalar: str = "double", decomposition: str = "qr",
-          max_iterations: int = DEFAULT_MAX_ITERATIONS) -> Dict[str, Any]:
+def solve(
+    contacts,
+    wrench,
+    policy: str = "F",
+    mode: str = "C",
+    constraints: str = "paper",
+    orientation=DEFAULT_ORIENTATION,
+    y_axis=DEFAULT_Y_AXIS,
+    scalar: str = "double",
+    decomposition: str = "qr",
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> dict[str, Any]:
     """Run Algorithm 1 on one scene with ``graspguide::Guidance<double|float>``.
 
     contacts: 3 or 4 ``[x, y, z]`` in the hand frame (another count gives status
@@ -235,10 +252,15 @@ def solve(contacts, wrench, policy: str = "F", mode: str = "C",
     if scalar not in SCALARS:
         raise ValueError(f"unknown scalar {_show(scalar)}; accepted: {', '.join(SCALARS)}")
     if decomposition not in DECOMPOSITIONS:
-        raise ValueError(f"unknown decomposition {_show(decomposition)}; accepted: "
-                         f"{', '.join(DECOMPOSITIONS)}")
-    return _core.solve(scalar=scalar, decomposition=decomposition,
-                       max_iterations=_max_iterations(max_iterations), **kw)
+        raise ValueError(
+            f"unknown decomposition {_show(decomposition)}; accepted: {', '.join(DECOMPOSITIONS)}"
+        )
+    return _core.solve(
+        scalar=scalar,
+        decomposition=decomposition,
+        max_iterations=_max_iterations(max_iterations),
+        **kw,
+    )
 
 
 class Guidance:
@@ -257,18 +279,30 @@ class Guidance:
     def k(self) -> int:
         return self._g.k
 
-    def set_scene(self, contacts, policy: str = "F", mode: str = "C",
-                  constraints: str = "paper", y_axis=DEFAULT_Y_AXIS,
-                  decomposition: str = "qr",
-                  max_iterations: int = DEFAULT_MAX_ITERATIONS) -> str:
+    def set_scene(
+        self,
+        contacts,
+        policy: str = "F",
+        mode: str = "C",
+        constraints: str = "paper",
+        y_axis=DEFAULT_Y_AXIS,
+        decomposition: str = "qr",
+        max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    ) -> str:
         if decomposition not in DECOMPOSITIONS:
-            raise ValueError(f"unknown decomposition {_show(decomposition)}; accepted: "
-                             f"{', '.join(DECOMPOSITIONS)}")
-        return self._g.set_scene(_contacts(contacts), _choice(policy, "policy", POLICIES),
-                                 _choice(mode, "mode", MODES),
-                                 _choice(constraints, "constraints", CONSTRAINT_MODELS),
-                                 _number_list(y_axis, 3, "y_axis", "x, y, z"),
-                                 decomposition, _max_iterations(max_iterations))
+            raise ValueError(
+                f"unknown decomposition {_show(decomposition)}; accepted: "
+                f"{', '.join(DECOMPOSITIONS)}"
+            )
+        return self._g.set_scene(
+            _contacts(contacts),
+            _choice(policy, "policy", POLICIES),
+            _choice(mode, "mode", MODES),
+            _choice(constraints, "constraints", CONSTRAINT_MODELS),
+            _number_list(y_axis, 3, "y_axis", "x, y, z"),
+            decomposition,
+            _max_iterations(max_iterations),
+        )
 
     def set_wrench(self, wrench) -> str:
         return self._g.set_wrench(_number_list(wrench, 6, "wrench", "fx, fy, fz, mx, my, mz"))
@@ -276,40 +310,57 @@ class Guidance:
     def set_contacts(self, contacts) -> str:
         return self._g.set_contacts(_contacts(contacts))
 
-    def update(self, orientation=DEFAULT_ORIENTATION) -> Dict[str, Any]:
-        return self._g.update(_number_list(orientation, 4, "orientation",
-                                           "quaternion w, x, y, z"))
+    def update(self, orientation=DEFAULT_ORIENTATION) -> dict[str, Any]:
+        return self._g.update(_number_list(orientation, 4, "orientation", "quaternion w, x, y, z"))
 
 
-def parse_request(obj: Any) -> Dict[str, Any]:
+def parse_request(obj: Any) -> dict[str, Any]:
     """Check one decoded JSON request and return the keyword arguments of :func:`solve`
     (defaults filled in). Raises :class:`RequestError`."""
     if not isinstance(obj, Mapping):
-        raise RequestError("bad_json",
-                           f"a request must be a JSON object {{...}}, got {_type_name(obj)}")
+        raise RequestError(
+            "bad_json", f"a request must be a JSON object {{...}}, got {_type_name(obj)}"
+        )
     unknown = [key for key in obj if key not in REQUEST_FIELDS]
     if unknown:
         key = unknown[0]
         close = difflib.get_close_matches(str(key), list(REQUEST_FIELDS), n=1, cutoff=0.6)
         hint = f' (did you mean "{close[0]}"?)' if close else ""
-        raise RequestError("bad_request",
-                           f"unknown field {_show(key)}{hint}; accepted fields: "
-                           + ", ".join(REQUEST_FIELDS))
-    missing = [key for key, default in REQUEST_FIELDS.items()
-               if default is None and key not in obj]
+        raise RequestError(
+            "bad_request",
+            f"unknown field {_show(key)}{hint}; accepted fields: " + ", ".join(REQUEST_FIELDS),
+        )
+    missing = [key for key, default in REQUEST_FIELDS.items() if default is None and key not in obj]
     if missing:
-        raise RequestError("bad_request",
-                           "missing required field" + ("s " if len(missing) > 1 else " ")
-                           + ", ".join(f'"{m}"' for m in missing)
-                           + ' (a request needs at least "contacts": [[x, y, z], ...] and '
-                           '"wrench": [fx, fy, fz, mx, my, mz])')
+        raise RequestError(
+            "bad_request",
+            "missing required field"
+            + ("s " if len(missing) > 1 else " ")
+            + ", ".join(f'"{m}"' for m in missing)
+            + ' (a request needs at least "contacts": [[x, y, z], ...] and '
+            '"wrench": [fx, fy, fz, mx, my, mz])',
+        )
     merged = {key: obj.get(key, default) for key, default in REQUEST_FIELDS.items()}
     return _check_kwargs(**merged)
 
 
 __all__ = [
-    "solve", "Guidance", "parse_request", "RequestError", "status_message",
-    "STATUS_NAMES", "POLICIES", "MODES", "CONSTRAINT_MODELS", "DECOMPOSITIONS", "SCALARS",
-    "TOLERANCES", "PWM_MIN", "PWM_SPAN", "MIN_CONTACTS", "MAX_CONTACTS",
-    "DEFAULT_MAX_ITERATIONS", "REQUEST_FIELDS",
+    "solve",
+    "Guidance",
+    "parse_request",
+    "RequestError",
+    "status_message",
+    "STATUS_NAMES",
+    "POLICIES",
+    "MODES",
+    "CONSTRAINT_MODELS",
+    "DECOMPOSITIONS",
+    "SCALARS",
+    "TOLERANCES",
+    "PWM_MIN",
+    "PWM_SPAN",
+    "MIN_CONTACTS",
+    "MAX_CONTACTS",
+    "DEFAULT_MAX_ITERATIONS",
+    "REQUEST_FIELDS",
 ]

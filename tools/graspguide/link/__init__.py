@@ -10,13 +10,13 @@ The C++ side is ``lib/graspguide_link``; both follow ``docs/protocol.md``.
 """
 
 from graspguide.link import codec, errors, messages
-from graspguide.link.errors import *  # noqa: F401,F403
 from graspguide.link.codec import (
     Accept,
     DecodedMessage,
     Frame,
     FrameParser,
     ParseEvent,
+    SequenceCounter,
     cobs_decode,
     cobs_encode,
     crc16,
@@ -24,11 +24,29 @@ from graspguide.link.codec import (
     decode_message,
     encode_frame,
     encode_message,
-    SequenceCounter,
 )
+from graspguide.link.errors import *  # noqa: F401,F403
 from graspguide.link.messages import *  # noqa: F401,F403
 
-__all__ = (["codec", "errors", "messages", "Accept", "DecodedMessage", "Frame",
-            "FrameParser", "ParseEvent", "SequenceCounter", "cobs_decode", "cobs_encode",
-            "crc16", "decode_frame", "decode_message", "encode_frame", "encode_message"]
-           + list(errors.__all__) + list(messages.__all__))
+__all__ = (
+    [
+        "codec",
+        "errors",
+        "messages",
+        "Accept",
+        "DecodedMessage",
+        "Frame",
+        "FrameParser",
+        "ParseEvent",
+        "SequenceCounter",
+        "cobs_decode",
+        "cobs_encode",
+        "crc16",
+        "decode_frame",
+        "decode_message",
+        "encode_frame",
+        "encode_message",
+    ]
+    + list(errors.__all__)
+    + list(messages.__all__)
+)

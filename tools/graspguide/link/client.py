@@ -35,16 +35,15 @@ import math
 import struct
 import time
 from collections import deque
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Any
 
-from graspguide.link.errors import BadEnumValueError, ProtocolError
 from graspguide.link.codec import (
     CRC16_INIT,
     FRAME_OVERHEAD,
     MAX_RAW_FRAME_SIZE,
     Accept,
-    Frame,
     FrameParser,
     ParseEvent,
     SequenceCounter,
@@ -52,10 +51,12 @@ from graspguide.link.codec import (
     encode_message,
     message_of,
 )
+from graspguide.link.errors import BadEnumValueError, ProtocolError
 from graspguide.link.messages import (
     MAX_CONTACTS,
     MESSAGES,
     PROTOCOL_VERSION,
+    TELEMETRY_FLAG_TRIAL_RUNNING,
     Ack,
     ConstraintModel,
     DeviceState,
@@ -73,7 +74,6 @@ from graspguide.link.messages import (
     StartTrial,
     Status,
     Stop,
-    TELEMETRY_FLAG_TRIAL_RUNNING,
     Telemetry,
     TrialResult,
 )
@@ -86,9 +86,9 @@ from graspguide.link.transport import (
     Transport,
 )
 
-DEFAULT_TIMEOUT = 1.0      # s, per request: a board answers in a few ms at 115200 baud
-READ_CHUNK = 4096          # bytes per transport read
-POLL_INTERVAL = 0.05       # s, longest single blocking read (keeps deadlines responsive)
+DEFAULT_TIMEOUT = 1.0  # s, per request: a board answers in a few ms at 115200 baud
+READ_CHUNK = 4096  # bytes per transport read
+POLL_INTERVAL = 0.05  # s, longest single blocking read (keeps deadlines responsive)
 
 # Fast paths of the per-pose traffic (a study streams ~10^6 POSE/TELEMETRY pairs): the
 # POSE frame packed in one struct call, CRC-16/CCITT-FALSE by binascii.crc_hqx (the same
@@ -117,7 +117,7 @@ def _cobs_small(raw: bytes) -> bytes:
     return b"".join([_CODE[len(part)] + part for part in raw.split(b"\0")])
 
 
-def _uncobs_small(enc: bytes) -> Optional[bytes]:
+def _uncobs_small(enc: bytes) -> bytes | None:
     """Inverse of _cobs_small for data without zeros, or None when the reference parser
     must decide (a 0xFF code, a block running past the end)."""
     out = bytearray()
@@ -127,19 +127,19 @@ def _uncobs_small(enc: bytes) -> Optional[bytes]:
         j = i + code
         if code == 0xFF or j > n:
             return None
-        out += enc[i + 1:j]
+        out += enc[i + 1 : j]
         i = j
         if i < n:
             out.append(0)
     return bytes(out)
 
 
-_POSE_HEAD = struct.Struct("<BBHI4f")          # header, host_time_us, quat_wxyz
-_POSE_TAIL_ZEROS = 1 + 4 * 3 * MAX_CONTACTS      # has_contacts = 0, contacts all zero
+_POSE_HEAD = struct.Struct("<BBHI4f")  # header, host_time_us, quat_wxyz
+_POSE_TAIL_ZEROS = 1 + 4 * 3 * MAX_CONTACTS  # has_contacts = 0, contacts all zero
 _POSE_TAIL_COBS = b"\x01" * (_POSE_TAIL_ZEROS - 1)
 
 
-def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> Optional[bytes]:
+def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None:
     """The wire bytes of a POSE without contacts, or None when a value needs the generic
     path (a quaternion component beyond the float32 range, not a number).
 
@@ -148,19 +148,19 @@ def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> Optional[byt
     zero, then the CRC's blocks."""
     try:
         w, x, y, z = quat
-        head = _POSE_HEAD.pack(PROTOCOL_VERSION, _POSE_ID, seq, int(t_us) & 0xFFFFFFFF,
-                               w, x, y, z)
+        head = _POSE_HEAD.pack(PROTOCOL_VERSION, _POSE_ID, seq, int(t_us) & 0xFFFFFFFF, w, x, y, z)
     except (OverflowError, struct.error, TypeError, ValueError):
         return None
     crc = _CRC.pack(binascii.crc_hqx(head + _POSE_ZEROS, CRC16_INIT))
     return _cobs_small(head) + _POSE_TAIL_COBS + _cobs_small(crc) + b"\0"
 
 
-def _telemetry_fast(payload_view: bytes, offset: int) -> Optional[Telemetry]:
+def _telemetry_fast(payload_view: bytes, offset: int) -> Telemetry | None:
     """TELEMETRY from its payload without the generic field walk; None if an enum value
     is not in its set (the generic path then counts it as undecodable)."""
-    (t_us, err, alpha, p0, p1, p2, p3, used, status, iters, flags,
-     compute) = _TELEMETRY_PAYLOAD.unpack_from(payload_view, offset)
+    (t_us, err, alpha, p0, p1, p2, p3, used, status, iters, flags, compute) = (
+        _TELEMETRY_PAYLOAD.unpack_from(payload_view, offset)
+    )
     used_e = _CONSTRAINT_BY_VALUE.get(used)
     status_e = _ERRORCODE_BY_VALUE.get(status)
     if used_e is None or status_e is None:
@@ -177,9 +177,10 @@ def _telemetry_fast(payload_view: bytes, offset: int) -> Optional[Telemetry]:
     _set(tel, "compute_time_us", compute)
     return tel
 
+
 # What each ErrorCode means: the schema's text (tools/protocol/messages.toml), checked
 # against it by tools/tests/test_device_client.py so the two cannot drift.
-ERROR_MEANINGS: Dict[str, str] = {
+ERROR_MEANINGS: dict[str, str] = {
     "ok": "no error",
     "non_finite_input": "an input is NaN or infinite",
     "bad_contact_count": "k is not 3 or 4",
@@ -205,18 +206,21 @@ ERROR_MEANINGS: Dict[str, str] = {
     "not_allowed_in_state": "request refused in the device's state; detail = STATUS.state",
     "no_scene": "POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id",
     "bad_enum_value": "an enum, bool or ascii field holds an unlisted value; detail = the "
-                      "field's index",
+    "field's index",
 }
 
 # The names the core and `graspguide solve` use, and the wire enums.
 POLICY_NAMES = {"F": Policy.F, "Fperp": Policy.FPERP}
 MODE_NAMES = {"C": Mode.C, "V": Mode.V}
-CONSTRAINT_NAMES = {"paper": ConstraintModel.PAPER, "normal": ConstraintModel.NORMAL,
-                    "none": ConstraintModel.NONE}
+CONSTRAINT_NAMES = {
+    "paper": ConstraintModel.PAPER,
+    "normal": ConstraintModel.NORMAL,
+    "none": ConstraintModel.NONE,
+}
 _F32 = struct.Struct("<f")
 
 
-def code_name(code: Union[int, ErrorCode]) -> str:
+def code_name(code: int | ErrorCode) -> str:
     """The schema name of an ErrorCode value (``"coincident_contacts"``), or ``"0x.."``."""
     try:
         return ErrorCode(code).name.lower()
@@ -236,7 +240,7 @@ class ProtocolMismatch(LinkError):
     """The device speaks another protocol version (HELLO_REPLY, or ERROR bad_version, or
     frames of another version)."""
 
-    def __init__(self, message: str, device_version: Optional[int] = None):
+    def __init__(self, message: str, device_version: int | None = None):
         super().__init__(message)
         self.device_version = device_version
 
@@ -254,10 +258,16 @@ class DeviceError(LinkError):
     (the schema's text), ``request`` (the refused message's name), ``request_seq``.
     """
 
-    def __init__(self, request: str, request_seq: Optional[int], code: int, detail: int = 0,
-                 source: str = "ERROR"):
+    def __init__(
+        self,
+        request: str,
+        request_seq: int | None,
+        code: int,
+        detail: int = 0,
+        source: str = "ERROR",
+    ):
         try:
-            self.code: Union[ErrorCode, int] = ErrorCode(code)
+            self.code: ErrorCode | int = ErrorCode(code)
         except ValueError:
             self.code = int(code)
         self.code_name = code_name(code)
@@ -275,18 +285,19 @@ class DeviceError(LinkError):
                 state = DeviceState(d).name.lower()
             except ValueError:
                 state = f"state {d}"
-            hint = {"trial_running": "send STOP first",
-                    "scene_set": "send START_TRIAL first",
-                    "stopped": "send START_TRIAL first (STOP ended the trial)",
-                    "idle": "send SET_SCENE first"}.get(state, "")
+            hint = {
+                "trial_running": "send STOP first",
+                "scene_set": "send START_TRIAL first",
+                "stopped": "send START_TRIAL first (STOP ended the trial)",
+                "idle": "send SET_SCENE first",
+            }.get(state, "")
             return f"; the device is {state}" + (f": {hint}" if hint else "")
         if name == "no_scene":
             return f"; {_msg_name(d)} needs a valid SET_SCENE first"
         if name in ("unknown_id", "bad_length"):
             return f"; message {_msg_name(d)} (id 0x{d:02X})"
         if name == "bad_version":
-            return (f"; the device received protocol version {d}, it speaks "
-                    f"{PROTOCOL_VERSION}")
+            return f"; the device received protocol version {d}, it speaks {PROTOCOL_VERSION}"
         if name == "bad_enum_value":
             cls = next((c for c in MESSAGES.values() if c.NAME == self.request), None)
             if cls is not None and d < len(cls.FIELDS):
@@ -302,8 +313,9 @@ class DeviceError(LinkError):
         seq = "" if self.request_seq is None else f" (seq {self.request_seq})"
         verb = "refused" if self.source == "ERROR" else "could not solve"
         meaning = self.meaning.split("; detail = ")[0]  # the detail is spelled out below
-        return (f"device {verb} {self.request}{seq}: {self.code_name} -- {meaning}"
-                f"{self._detail_text()}")
+        return (
+            f"device {verb} {self.request}{seq}: {self.code_name} -- {meaning}{self._detail_text()}"
+        )
 
 
 def _trial_field_text(index: int) -> str:
@@ -341,7 +353,7 @@ def to_f32(x: Any) -> float:
         return math.copysign(math.inf, x)
 
 
-def _enum(value: Any, names: Dict[str, Any], enum_cls, what: str):
+def _enum(value: Any, names: dict[str, Any], enum_cls, what: str):
     if isinstance(value, enum_cls):
         return value
     if isinstance(value, str):
@@ -359,7 +371,7 @@ def _enum(value: Any, names: Dict[str, Any], enum_cls, what: str):
     raise ValueError(f"unknown {what} {value!r}; accepted: {', '.join(names)}")
 
 
-def _contact_slots(contacts: Optional[Sequence[Sequence[float]]]) -> Tuple[int, tuple]:
+def _contact_slots(contacts: Sequence[Sequence[float]] | None) -> tuple[int, tuple]:
     """(k, 4 slots of [x, y, z] float32). A count other than 3 or 4 is passed on as is
     (the device answers bad_contact_count); only the first 4 contacts fit the frame."""
     rows = [] if contacts is None else [list(r) for r in contacts]
@@ -391,22 +403,22 @@ class PoseSpec:
 
     t_us: int
     quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
-    contacts: Optional[Sequence[Sequence[float]]] = None
+    contacts: Sequence[Sequence[float]] | None = None
 
 
 @dataclass
 class StreamResult:
     """What :meth:`DeviceClient.stream` collected, in order."""
 
-    telemetry: List[Telemetry] = field(default_factory=list)
-    trial_results: List[TrialResult] = field(default_factory=list)
+    telemetry: list[Telemetry] = field(default_factory=list)
+    trial_results: list[TrialResult] = field(default_factory=list)
     sent: int = 0
     refused_after_trial_end: int = 0  # POSEs already in flight when the trial ended
-    lost: int = 0                     # POSEs whose answer never came (skipped over)
+    lost: int = 0  # POSEs whose answer never came (skipped over)
     elapsed_s: float = 0.0
 
     @property
-    def trial_result(self) -> Optional[TrialResult]:
+    def trial_result(self) -> TrialResult | None:
         return self.trial_results[0] if self.trial_results else None
 
     @property
@@ -442,23 +454,27 @@ class DeviceClient:
     :attr:`frames_received`.
     """
 
-    def __init__(self, transport: Transport, timeout: float = DEFAULT_TIMEOUT,
-                 send_idle_delimiter: bool = True):
+    def __init__(
+        self,
+        transport: Transport,
+        timeout: float = DEFAULT_TIMEOUT,
+        send_idle_delimiter: bool = True,
+    ):
         self.transport = transport
         self.timeout = float(timeout)
         self._seq = SequenceCounter()
         self._parser = FrameParser(Accept.DEVICE_TO_HOST)
-        self._inbox: Deque[_Received] = deque()
-        self.trial_results: Deque[TrialResult] = deque()
-        self.telemetry_backlog: Deque[Telemetry] = deque()
-        self.unmatched: Deque[Any] = deque()
-        self.device_info: Optional[HelloReply] = None
-        self.device_version: Optional[int] = None  # set when frames of another version came
+        self._inbox: deque[_Received] = deque()
+        self.trial_results: deque[TrialResult] = deque()
+        self.telemetry_backlog: deque[Telemetry] = deque()
+        self.unmatched: deque[Any] = deque()
+        self.device_info: HelloReply | None = None
+        self.device_version: int | None = None  # set when frames of another version came
         self.bytes_received = 0
         self.frames_received = 0
         self.undecodable_frames = 0  # CRC passed but a field value is not in its set
         self.device_frames_lost = 0
-        self._last_device_seq: Optional[int] = None
+        self._last_device_seq: int | None = None
         if send_idle_delimiter:
             self.transport.write(b"\x00")
 
@@ -466,7 +482,7 @@ class DeviceClient:
     def close(self) -> None:
         self.transport.close()
 
-    def __enter__(self) -> "DeviceClient":
+    def __enter__(self) -> DeviceClient:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -480,18 +496,21 @@ class DeviceClient:
         return self._parser.bad_frames + self.undecodable_frames
 
     @property
-    def parse_counts(self) -> Dict[str, int]:
+    def parse_counts(self) -> dict[str, int]:
         counts = {e.value: n for e, n in self._parser.counts.items()}
         counts["undecodable"] = self.undecodable_frames
         return counts
 
-    def counters(self) -> Dict[str, int]:
-        return {"bytes_received": self.bytes_received, "frames_received": self.frames_received,
-                "host_bad_frames": self.host_bad_frames,
-                "device_frames_lost": self.device_frames_lost,
-                "trial_results_queued": len(self.trial_results),
-                "unmatched": len(self.unmatched),
-                "telemetry_backlog": len(self.telemetry_backlog)}
+    def counters(self) -> dict[str, int]:
+        return {
+            "bytes_received": self.bytes_received,
+            "frames_received": self.frames_received,
+            "host_bad_frames": self.host_bad_frames,
+            "device_frames_lost": self.device_frames_lost,
+            "trial_results_queued": len(self.trial_results),
+            "unmatched": len(self.unmatched),
+            "telemetry_backlog": len(self.telemetry_backlog),
+        }
 
     # ---- receiving
     def _pump(self, timeout: float) -> int:
@@ -506,20 +525,20 @@ class DeviceClient:
         now = time.monotonic()
         parser = self._parser
         pos, n = 0, len(data)
-        if parser._started or parser._dropping:        # finish a frame begun earlier
+        if parser._started or parser._dropping:  # finish a frame begun earlier
             end = data.find(0)
             if end < 0:
                 self._push_bytes(data, now)
                 return n
-            self._push_bytes(data[:end + 1], now)
+            self._push_bytes(data[: end + 1], now)
             pos = end + 1
         while pos < n:
             end = data.find(0, pos)
             if end < 0:
-                self._push_bytes(data[pos:], now)       # a partial frame: parser state
+                self._push_bytes(data[pos:], now)  # a partial frame: parser state
                 break
             if end > pos and not self._fast_frame(data[pos:end], now):
-                self._push_bytes(data[pos:end + 1], now)
+                self._push_bytes(data[pos : end + 1], now)
             pos = end + 1
         return n
 
@@ -610,7 +629,7 @@ class DeviceClient:
         self._settle()
         return total
 
-    def _write(self, frames: Union[bytes, bytearray]) -> None:
+    def _write(self, frames: bytes | bytearray) -> None:
         """Every frame the host sends goes out here, after a 0x00: it ends whatever
         partial frame the device still holds (a write cut short by Ctrl-C, a crash or
         line noise), so a STOP after it cannot merge with those bytes and be lost. The
@@ -622,8 +641,9 @@ class DeviceClient:
         self._write(encode_message(message, seq))
         return seq
 
-    def _timeout_error(self, what: str, timeout: float, bytes_before: int, frames_before: int,
-                       bad_before: int) -> LinkError:
+    def _timeout_error(
+        self, what: str, timeout: float, bytes_before: int, frames_before: int, bad_before: int
+    ) -> LinkError:
         if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
             return self._mismatch()
         where = getattr(self.transport, "name", "the device")
@@ -632,12 +652,16 @@ class DeviceClient:
         got_frames = self.frames_received - frames_before
         got_bad = self.host_bad_frames - bad_before
         if self.bytes_received == 0:
-            msg += ("; nothing at all has been received from it: is it powered and running "
-                    "the GraspGuide firmware, and is this its port (`graspguide ports`)?")
+            msg += (
+                "; nothing at all has been received from it: is it powered and running "
+                "the GraspGuide firmware, and is this its port (`graspguide ports`)?"
+            )
         elif got_bytes and not got_frames:
-            msg += (f"; {got_bytes} bytes arrived meanwhile but no valid frame "
-                    f"({got_bad} rejected): wrong baud rate (the firmware uses 115200) or not "
-                    "a GraspGuide device?")
+            msg += (
+                f"; {got_bytes} bytes arrived meanwhile but no valid frame "
+                f"({got_bad} rejected): wrong baud rate (the firmware uses 115200) or not "
+                "a GraspGuide device?"
+            )
         elif got_frames:
             msg += f"; {got_frames} other frames arrived meanwhile (none answers it)"
         else:
@@ -649,10 +673,13 @@ class DeviceClient:
         return ProtocolMismatch(
             f"the device speaks protocol version {v}, this host {PROTOCOL_VERSION}: flash "
             "firmware built from the same schema as these host tools (or install the host "
-            "tools that match the firmware)", device_version=v)
+            "tools that match the firmware)",
+            device_version=v,
+        )
 
-    def _wait(self, match: Callable[[_Received], bool], what: str,
-              timeout: Optional[float]) -> _Received:
+    def _wait(
+        self, match: Callable[[_Received], bool], what: str, timeout: float | None
+    ) -> _Received:
         timeout = self.timeout if timeout is None else float(timeout)
         deadline = time.monotonic() + timeout
         b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
@@ -669,8 +696,13 @@ class DeviceClient:
                 raise self._timeout_error(what, timeout, b0, f0, bad0)
             self._pump(min(left, POLL_INTERVAL))
 
-    def _request(self, message, answer_type=Ack, timeout: Optional[float] = None,
-                 match: Optional[Callable[[Any], bool]] = None):
+    def _request(
+        self,
+        message,
+        answer_type=Ack,
+        timeout: float | None = None,
+        match: Callable[[Any], bool] | None = None,
+    ):
         """Send one request and return its answer (``answer_type``); ERROR raises
         DeviceError. ``match`` overrides how an answer is recognised."""
         self._pump(0.0)
@@ -696,7 +728,7 @@ class DeviceClient:
         return m
 
     # ---- requests
-    def hello(self, timeout: Optional[float] = None) -> HelloReply:
+    def hello(self, timeout: float | None = None) -> HelloReply:
         """HELLO -> HELLO_REPLY (kept in :attr:`device_info`); ProtocolMismatch if the
         device's protocol version differs from this host's."""
         reply = self._request(Hello(protocol_version=PROTOCOL_VERSION), HelloReply, timeout)
@@ -706,46 +738,70 @@ class DeviceClient:
             raise self._mismatch()
         return reply
 
-    def set_scene(self, contacts: Sequence[Sequence[float]],
-                  y_axis: Sequence[float] = (0.0, 1.0, 0.0),
-                  constraints: Union[str, ConstraintModel] = "paper",
-                  policy: Union[str, Policy] = "F", mode: Union[str, Mode] = "C",
-                  threshold_deg: float = 3.0, hold_s: float = 0.5, timeout_s: float = 90.0,
-                  timeout: Optional[float] = None) -> Ack:
+    def set_scene(
+        self,
+        contacts: Sequence[Sequence[float]],
+        y_axis: Sequence[float] = (0.0, 1.0, 0.0),
+        constraints: str | ConstraintModel = "paper",
+        policy: str | Policy = "F",
+        mode: str | Mode = "C",
+        threshold_deg: float = 3.0,
+        hold_s: float = 0.5,
+        timeout_s: float = 90.0,
+        timeout: float | None = None,
+    ) -> Ack:
         """SET_SCENE. ``contacts``: 3 or 4 [x, y, z] (another count is sent as is and the
         device answers bad_contact_count); names as in `graspguide solve` ("F"/"Fperp",
         "C"/"V", "paper"/"normal"/"none") or the wire enums. Values go on the wire as
         float32 (beyond its range: infinite)."""
         k, slots = _contact_slots(contacts)
-        msg = SetScene(k=k, contacts=slots, y_axis=_floats(y_axis, 3, "y_axis"),
-                       constraints=_enum(constraints, CONSTRAINT_NAMES, ConstraintModel,
-                                         "constraints"),
-                       policy=_enum(policy, POLICY_NAMES, Policy, "policy"),
-                       mode=_enum(mode, MODE_NAMES, Mode, "mode"),
-                       threshold_deg=to_f32(threshold_deg), hold_s=to_f32(hold_s),
-                       timeout_s=to_f32(timeout_s))
+        msg = SetScene(
+            k=k,
+            contacts=slots,
+            y_axis=_floats(y_axis, 3, "y_axis"),
+            constraints=_enum(constraints, CONSTRAINT_NAMES, ConstraintModel, "constraints"),
+            policy=_enum(policy, POLICY_NAMES, Policy, "policy"),
+            mode=_enum(mode, MODE_NAMES, Mode, "mode"),
+            threshold_deg=to_f32(threshold_deg),
+            hold_s=to_f32(hold_s),
+            timeout_s=to_f32(timeout_s),
+        )
         return self._request(msg, Ack, timeout)
 
-    def start_trial(self, trial_id: int, wrench: Sequence[float],
-                    timeout: Optional[float] = None) -> Ack:
+    def start_trial(
+        self, trial_id: int, wrench: Sequence[float], timeout: float | None = None
+    ) -> Ack:
         """START_TRIAL with the virtual object's wrench [fx, fy, fz, mx, my, mz]."""
-        return self._request(StartTrial(trial_id=int(trial_id) & 0xFFFF,
-                                        wrench=_floats(wrench, 6, "wrench")), Ack, timeout)
+        return self._request(
+            StartTrial(trial_id=int(trial_id) & 0xFFFF, wrench=_floats(wrench, 6, "wrench")),
+            Ack,
+            timeout,
+        )
 
     @staticmethod
-    def _pose_message(t_us: int, quat: Sequence[float],
-                      contacts: Optional[Sequence[Sequence[float]]]) -> Pose:
+    def _pose_message(
+        t_us: int, quat: Sequence[float], contacts: Sequence[Sequence[float]] | None
+    ) -> Pose:
         if contacts is None:
             has, slots = False, ((0.0, 0.0, 0.0),) * MAX_CONTACTS
         else:
             has = True
             _, slots = _contact_slots(contacts)
-        return Pose(host_time_us=int(t_us) & 0xFFFFFFFF, quat_wxyz=_floats(quat, 4, "quat"),
-                    has_contacts=has, contacts=slots)
+        return Pose(
+            host_time_us=int(t_us) & 0xFFFFFFFF,
+            quat_wxyz=_floats(quat, 4, "quat"),
+            has_contacts=has,
+            contacts=slots,
+        )
 
-    def pose(self, t_us: Optional[int] = None, quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
-             contacts: Optional[Sequence[Sequence[float]]] = None,
-             timeout: Optional[float] = None, check: bool = False) -> Telemetry:
+    def pose(
+        self,
+        t_us: int | None = None,
+        quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+        contacts: Sequence[Sequence[float]] | None = None,
+        timeout: float | None = None,
+        check: bool = False,
+    ) -> Telemetry:
         """POSE -> its TELEMETRY. ``t_us`` defaults to :func:`host_time_us`. A core
         failure is in ``Telemetry.solver_status`` (motors off); ``check=True`` raises it as
         DeviceError instead. A TRIAL_RESULT the pose caused lands in
@@ -759,15 +815,19 @@ class DeviceClient:
                     raise DeviceError("POSE", None, tel.solver_status, 0, source="TELEMETRY")
                 return tel
         msg = self._pose_message(t_us, quat, contacts)
-        tel = self._request(msg, Telemetry, timeout,
-                            match=lambda m: isinstance(m, Telemetry)
-                            and m.host_time_us == msg.host_time_us)
+        tel = self._request(
+            msg,
+            Telemetry,
+            timeout,
+            match=lambda m: isinstance(m, Telemetry) and m.host_time_us == msg.host_time_us,
+        )
         if check and tel.solver_status != ErrorCode.OK:
             raise DeviceError("POSE", None, tel.solver_status, 0, source="TELEMETRY")
         return tel
 
-    def _pose_fast(self, t_us: int, quat: Sequence[float],
-                   timeout: Optional[float]) -> Optional[Telemetry]:
+    def _pose_fast(
+        self, t_us: int, quat: Sequence[float], timeout: float | None
+    ) -> Telemetry | None:
         """POSE -> TELEMETRY without the generic codecs (None: use the generic path).
         Frames already read are parked first, as _request does; what arrives with the
         TELEMETRY (a TRIAL_RESULT) is parked right after it."""
@@ -790,7 +850,7 @@ class DeviceClient:
                 m = item.message
                 if type(m) is Telemetry and m.host_time_us == t_us:
                     if not m.flags & TELEMETRY_FLAG_TRIAL_RUNNING:
-                        self._pump(0.0)    # a TRIAL_RESULT right behind it, as _request
+                        self._pump(0.0)  # a TRIAL_RESULT right behind it, as _request
                     self._settle()
                     return m
                 if isinstance(m, Error) and m.request_seq == seq:
@@ -807,8 +867,9 @@ class DeviceClient:
                 raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
             self._pump(min(left, POLL_INTERVAL))
 
-    def pose_batch(self, poses: Sequence[Tuple[int, Sequence[float]]],
-                   timeout: Optional[float] = None) -> List[Any]:
+    def pose_batch(
+        self, poses: Sequence[tuple[int, Sequence[float]]], timeout: float | None = None
+    ) -> list[Any]:
         """Several POSEs (``(t_us, quat)``, no contacts) written at once, then their
         answers in order: the TELEMETRY of each, or the ERROR that refused it (e.g.
         not_allowed_in_state for the POSEs that followed the one ending a trial). The
@@ -832,7 +893,7 @@ class DeviceClient:
             self._seq.next()
         self._write(b"".join(wires))
         timeout = self.timeout if timeout is None else float(timeout)
-        out: List[Any] = []
+        out: list[Any] = []
         inbox = self._inbox
         for seq, t_us in zip(seqs, times):
             deadline = None
@@ -851,14 +912,12 @@ class DeviceClient:
                     self._park(item)
                 if answer is not None:
                     break
-                if self.device_version is not None and \
-                        self.device_version != PROTOCOL_VERSION:
+                if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
                     raise self._mismatch()
                 now = time.monotonic()
-                if deadline is None:     # the answer's wait starts when it is needed
+                if deadline is None:  # the answer's wait starts when it is needed
                     deadline = now + timeout
-                    b0, f0, bad0 = self.bytes_received, self.frames_received, \
-                        self.host_bad_frames
+                    b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
                 left = deadline - now
                 if left <= 0:
                     raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
@@ -867,11 +926,11 @@ class DeviceClient:
         self._settle()
         return out
 
-    def stop(self, timeout: Optional[float] = None) -> Ack:
+    def stop(self, timeout: float | None = None) -> Ack:
         """STOP: motors off now; a running trial ends without TRIAL_RESULT."""
         return self._request(Stop(), Ack, timeout)
 
-    def set_motors(self, pwm: Sequence[int], timeout: Optional[float] = None) -> Ack:
+    def set_motors(self, pwm: Sequence[int], timeout: float | None = None) -> Ack:
         """SET_MOTORS (bench test): up to 4 duties 0..255; the POSE watchdog switches them
         off again unless repeated."""
         pwm = [int(p) for p in pwm]
@@ -880,27 +939,30 @@ class DeviceClient:
         pwm += [0] * (MAX_CONTACTS - len(pwm))
         return self._request(SetMotors(pwm=tuple(pwm)), Ack, timeout)
 
-    def status(self, timeout: Optional[float] = None) -> Status:
+    def status(self, timeout: float | None = None) -> Status:
         """GET_STATUS -> STATUS (state, frames_received, bad_frames, stale_events,
         last_error as counted by the device)."""
-        return self._request(GetStatus(), Status, timeout,
-                             match=lambda m: isinstance(m, Status))
+        return self._request(GetStatus(), Status, timeout, match=lambda m: isinstance(m, Status))
 
-    def wait_trial_result(self, timeout: Optional[float] = None) -> TrialResult:
+    def wait_trial_result(self, timeout: float | None = None) -> TrialResult:
         """The oldest queued TRIAL_RESULT, waiting up to ``timeout`` s for one."""
         if self.trial_results:
             return self.trial_results.popleft()
         self._settle()
         if self.trial_results:
             return self.trial_results.popleft()
-        item = self._wait(lambda it: isinstance(it.message, TrialResult), "a TRIAL_RESULT",
-                          timeout)
+        item = self._wait(lambda it: isinstance(it.message, TrialResult), "a TRIAL_RESULT", timeout)
         return item.message
 
     # ---- pipelined stream
-    def stream(self, poses: Iterable[Union[PoseSpec, Tuple]], window: int = 32,
-               timeout: Optional[float] = None, overall_timeout: Optional[float] = None,
-               stop_at_trial_end: bool = True) -> StreamResult:
+    def stream(
+        self,
+        poses: Iterable[PoseSpec | tuple],
+        window: int = 32,
+        timeout: float | None = None,
+        overall_timeout: float | None = None,
+        stop_at_trial_end: bool = True,
+    ) -> StreamResult:
         """Send POSEs without waiting for each answer (at most ``window`` unanswered) and
         collect their TELEMETRY in order, and every TRIAL_RESULT.
 
@@ -918,11 +980,11 @@ class DeviceClient:
         t_start = time.monotonic()
         overall_deadline = None if overall_timeout is None else t_start + overall_timeout
         result = StreamResult()
-        outstanding: Deque[_Outstanding] = deque()
+        outstanding: deque[_Outstanding] = deque()
         it = iter(poses)
         exhausted = False
         ended = False
-        error: Optional[DeviceError] = None
+        error: DeviceError | None = None
         self._pump(0.0)
         self._settle()
         last_progress = time.monotonic()
@@ -960,8 +1022,9 @@ class DeviceClient:
                 item = self._inbox.popleft()
                 m = item.message
                 if isinstance(m, Telemetry):
-                    pos = next((i for i, o in enumerate(outstanding) if o.t_us == m.host_time_us),
-                               None)
+                    pos = next(
+                        (i for i, o in enumerate(outstanding) if o.t_us == m.host_time_us), None
+                    )
                     if pos is None:
                         self.telemetry_backlog.append(m)
                         continue
@@ -996,15 +1059,24 @@ class DeviceClient:
             if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
                 raise fail(self._mismatch())
             if overall_deadline is not None and now >= overall_deadline:
-                raise fail(LinkTimeout(
-                    f"stream not finished within its overall timeout of {overall_timeout:g} s "
-                    f"({len(result.telemetry)} TELEMETRY received, {len(outstanding)} POSEs "
-                    "unanswered)"))
+                raise fail(
+                    LinkTimeout(
+                        f"stream not finished within its overall timeout of {overall_timeout:g} s "
+                        f"({len(result.telemetry)} TELEMETRY received, {len(outstanding)} POSEs "
+                        "unanswered)"
+                    )
+                )
             left = last_progress + step - now
             if left <= 0:
-                raise fail(self._timeout_error(
-                    f"POSE (seq {outstanding[0].seq}, {len(outstanding)} unanswered)", step,
-                    b0, f0, bad0))
+                raise fail(
+                    self._timeout_error(
+                        f"POSE (seq {outstanding[0].seq}, {len(outstanding)} unanswered)",
+                        step,
+                        b0,
+                        f0,
+                        bad0,
+                    )
+                )
             if overall_deadline is not None:
                 left = min(left, overall_deadline - now)
             self._pump(min(max(left, 0.0), POLL_INTERVAL))
@@ -1023,7 +1095,7 @@ class DeviceClient:
         return result
 
 
-def telemetry_dict(tel: Telemetry, k: Optional[int] = None) -> Dict[str, Any]:
+def telemetry_dict(tel: Telemetry, k: int | None = None) -> dict[str, Any]:
     """A TELEMETRY as a JSON-friendly dict (``pwm`` cut to ``k`` motors when given)."""
     d = tel.to_dict()
     if k is not None:
@@ -1033,8 +1105,24 @@ def telemetry_dict(tel: Telemetry, k: Optional[int] = None) -> Dict[str, Any]:
 
 
 __all__ = [
-    "DeviceClient", "DeviceError", "ProtocolMismatch", "UnexpectedAnswer", "LinkError",
-    "LinkTimeout", "DeviceNotFound", "DeviceDisconnected", "SimNotBuilt", "PoseSpec",
-    "StreamResult", "ERROR_MEANINGS", "code_name", "host_time_us", "to_f32", "telemetry_dict",
-    "POLICY_NAMES", "MODE_NAMES", "CONSTRAINT_NAMES", "DEFAULT_TIMEOUT",
+    "DeviceClient",
+    "DeviceError",
+    "ProtocolMismatch",
+    "UnexpectedAnswer",
+    "LinkError",
+    "LinkTimeout",
+    "DeviceNotFound",
+    "DeviceDisconnected",
+    "SimNotBuilt",
+    "PoseSpec",
+    "StreamResult",
+    "ERROR_MEANINGS",
+    "code_name",
+    "host_time_us",
+    "to_f32",
+    "telemetry_dict",
+    "POLICY_NAMES",
+    "MODE_NAMES",
+    "CONSTRAINT_NAMES",
+    "DEFAULT_TIMEOUT",
 ]

@@ -12,7 +12,6 @@ from __future__ import annotations
 import enum
 import struct
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
 
 from graspguide.link.errors import (
     BadCobsError,
@@ -48,7 +47,7 @@ _HEADER = struct.Struct("<BBH")
 _CRC = struct.Struct("<H")
 
 
-def _crc16_table() -> Tuple[int, ...]:
+def _crc16_table() -> tuple[int, ...]:
     table = []
     for i in range(256):
         crc = i << 8
@@ -109,7 +108,7 @@ def cobs_decode(data: bytes) -> bytes:
         i += 1
         if code == 0:
             raise BadCobsError(f"0x00 at offset {i - 1} of COBS data")
-        block = data[i:i + code - 1]
+        block = data[i : i + code - 1]
         if len(block) != code - 1:
             raise BadCobsError(f"COBS block at offset {i - 1} runs past the end")
         if 0 in block:
@@ -137,9 +136,10 @@ class ParseEvent(enum.Enum):
 
 # Events after which the frame's header passed the CRC and can be answered with its seq.
 TRUSTED_HEADER_EVENTS = frozenset(
-    {ParseEvent.FRAME, ParseEvent.BAD_VERSION, ParseEvent.UNKNOWN_ID, ParseEvent.BAD_LENGTH})
+    {ParseEvent.FRAME, ParseEvent.BAD_VERSION, ParseEvent.UNKNOWN_ID, ParseEvent.BAD_LENGTH}
+)
 
-_EVENT_ERRORS: Dict[ParseEvent, type] = {
+_EVENT_ERRORS: dict[ParseEvent, type] = {
     ParseEvent.BAD_CRC: BadCrcError,
     ParseEvent.BAD_COBS: BadCobsError,
     ParseEvent.TOO_LONG: TooLongError,
@@ -172,8 +172,9 @@ class Frame:
     payload: bytes
 
 
-def encode_frame(msg_id: int, seq: int, payload: bytes = b"",
-                 version: int = PROTOCOL_VERSION) -> bytes:
+def encode_frame(
+    msg_id: int, seq: int, payload: bytes = b"", version: int = PROTOCOL_VERSION
+) -> bytes:
     """One frame on the wire, delimiter included. Any header is allowed (tests forge bad
     frames with it); TooLongError for a payload above MAX_PAYLOAD_SIZE."""
     if len(payload) > MAX_PAYLOAD_SIZE:
@@ -183,7 +184,7 @@ def encode_frame(msg_id: int, seq: int, payload: bytes = b"",
     return cobs_encode(raw) + bytes([FRAME_DELIMITER])
 
 
-def check_frame(raw: bytes, accept: Accept = Accept.ALL) -> Tuple[ParseEvent, Optional[Frame]]:
+def check_frame(raw: bytes, accept: Accept = Accept.ALL) -> tuple[ParseEvent, Frame | None]:
     """Checks one COBS-decoded frame in the C++ order: size, CRC, version, id, length.
     The frame is returned whenever its CRC passed."""
     if len(raw) < FRAME_OVERHEAD:
@@ -212,8 +213,8 @@ class FrameParser:
 
     def __init__(self, accept: Accept = Accept.ALL) -> None:
         self.accept = accept
-        self.frame: Optional[Frame] = None  # set after an event in TRUSTED_HEADER_EVENTS
-        self.counts: Dict[ParseEvent, int] = {e: 0 for e in ParseEvent if e is not ParseEvent.NONE}
+        self.frame: Frame | None = None  # set after an event in TRUSTED_HEADER_EVENTS
+        self.counts: dict[ParseEvent, int] = {e: 0 for e in ParseEvent if e is not ParseEvent.NONE}
         self._buffer = bytearray()
         self._remaining = 0  # data bytes still to come in the current COBS block
         self._zero_pending = False  # the current block stands for a zero after its data
@@ -261,7 +262,7 @@ class FrameParser:
             self._buffer.append(appended)
         return ParseEvent.NONE
 
-    def feed(self, data: bytes) -> List[Tuple[ParseEvent, Optional[Frame]]]:
+    def feed(self, data: bytes) -> list[tuple[ParseEvent, Frame | None]]:
         """Pushes every byte; returns the events other than NONE, each with the frame
         (None unless the event is in TRUSTED_HEADER_EVENTS)."""
         out = []
@@ -344,9 +345,27 @@ class SequenceCounter:
 
 
 __all__ = [
-    "FRAME_DELIMITER", "HEADER_SIZE", "CRC_SIZE", "FRAME_OVERHEAD", "MAX_RAW_FRAME_SIZE",
-    "crc16", "cobs_encode", "cobs_decode", "cobs_max_encoded_size", "ParseEvent",
-    "TRUSTED_HEADER_EVENTS", "Accept", "Frame", "encode_frame", "check_frame", "FrameParser",
-    "decode_frame", "DecodedMessage", "encode_message", "decode_message", "message_of",
-    "SequenceCounter", "FrameError",
+    "FRAME_DELIMITER",
+    "HEADER_SIZE",
+    "CRC_SIZE",
+    "FRAME_OVERHEAD",
+    "MAX_RAW_FRAME_SIZE",
+    "crc16",
+    "cobs_encode",
+    "cobs_decode",
+    "cobs_max_encoded_size",
+    "ParseEvent",
+    "TRUSTED_HEADER_EVENTS",
+    "Accept",
+    "Frame",
+    "encode_frame",
+    "check_frame",
+    "FrameParser",
+    "decode_frame",
+    "DecodedMessage",
+    "encode_message",
+    "decode_message",
+    "message_of",
+    "SequenceCounter",
+    "FrameError",
 ]

@@ -6,8 +6,6 @@ log it like the device's ERROR messages.
 
 from __future__ import annotations
 
-from typing import Optional
-
 
 class ProtocolError(Exception):
     """Base of every protocol error."""
@@ -19,7 +17,7 @@ class FrameError(ProtocolError):
     """A frame could not be decoded. ``header`` is (version, msg_id, seq) when the CRC
     passed, so the header can be trusted; None otherwise."""
 
-    def __init__(self, message: str, header: Optional[tuple] = None) -> None:
+    def __init__(self, message: str, header: tuple | None = None) -> None:
         super().__init__(message)
         self.header = header
 
@@ -77,7 +75,16 @@ class FieldValueError(ProtocolError, ValueError):
 
 
 __all__ = [
-    "ProtocolError", "FrameError", "BadCrcError", "BadCobsError", "TooLongError",
-    "TooShortError", "BadVersionError", "UnknownIdError", "BadLengthError",
-    "IncompleteFrameError", "BadEnumValueError", "FieldValueError",
+    "ProtocolError",
+    "FrameError",
+    "BadCrcError",
+    "BadCobsError",
+    "TooLongError",
+    "TooShortError",
+    "BadVersionError",
+    "UnknownIdError",
+    "BadLengthError",
+    "IncompleteFrameError",
+    "BadEnumValueError",
+    "FieldValueError",
 ]

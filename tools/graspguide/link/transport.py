@@ -29,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Callable, List, Optional, Sequence
+from collections.abc import Callable, Sequence
 
 DEFAULT_BAUDRATE = 115200
 SIM_PORT = "sim"
@@ -43,7 +43,7 @@ DEFAULT_SIM_START_TIMEOUT = 5.0
 # SIGKILL.
 DEFAULT_SIM_GRACE = 2.0
 DEFAULT_WRITE_TIMEOUT = 2.0
-PR_SET_PDEATHSIG = 1   # <sys/prctl.h>
+PR_SET_PDEATHSIG = 1  # <sys/prctl.h>
 
 
 # --------------------------------------------------------------------------------------
@@ -107,8 +107,9 @@ def _import_serial():
     try:
         import serial  # noqa: F401
     except ImportError as e:  # pragma: no cover - pyserial is a dependency
-        raise LinkError("pyserial is not installed: `pip install pyserial` (or run "
-                        "tools/bootstrap.sh)") from e
+        raise LinkError(
+            "pyserial is not installed: `pip install pyserial` (or run tools/bootstrap.sh)"
+        ) from e
     return serial
 
 
@@ -119,9 +120,14 @@ class SerialTransport(Transport):
     previous session's leftovers) are discarded at open unless ``flush_on_open=False``.
     """
 
-    def __init__(self, port: str, baudrate: int = DEFAULT_BAUDRATE,
-                 write_timeout: float = DEFAULT_WRITE_TIMEOUT, flush_on_open: bool = True,
-                 exclusive: Optional[bool] = None):
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = DEFAULT_BAUDRATE,
+        write_timeout: float = DEFAULT_WRITE_TIMEOUT,
+        flush_on_open: bool = True,
+        exclusive: bool | None = None,
+    ):
         serial = _import_serial()
         self.name = port
         self.port = port
@@ -156,15 +162,19 @@ class SerialTransport(Transport):
         if err == errno.ENOENT or "No such file" in text:
             return DeviceNotFound(
                 f"no serial port {port!r}: run `graspguide ports` to list the ports, check "
-                "the cable, or use --port sim for the simulated device")
+                "the cable, or use --port sim for the simulated device"
+            )
         if err in (errno.EACCES, errno.EPERM) or "Permission denied" in text:
             return LinkError(
                 f"permission denied opening {port}: add your user to the port's group "
                 "(usually `dialout`: sudo usermod -aG dialout $USER, then log in again) or "
-                "run as root")
+                "run as root"
+            )
         if err == errno.EBUSY or "busy" in text.lower() or "lock" in text.lower():
-            return LinkError(f"{port} is busy: another program (a serial monitor?) has it "
-                             "open; close it and retry")
+            return LinkError(
+                f"{port} is busy: another program (a serial monitor?) has it "
+                "open; close it and retry"
+            )
         return LinkError(f"cannot open {port}: {text}")
 
     @property
@@ -196,7 +206,8 @@ class SerialTransport(Transport):
         except serial.SerialTimeoutException as e:
             raise LinkTimeout(
                 f"writing {len(data)} bytes to {self.port} timed out: the device is not "
-                "reading (flow control? a stuck board?)") from e
+                "reading (flow control? a stuck board?)"
+            ) from e
         except serial.SerialException as e:
             raise DeviceDisconnected(f"{self.port} went away while writing: {e}") from e
         except OSError as e:
@@ -224,7 +235,8 @@ class SerialTransport(Transport):
                 if not data:
                     raise serial.SerialException(
                         "device reports readiness to read but returned no data (device "
-                        "disconnected or multiple access on port?)")
+                        "disconnected or multiple access on port?)"
+                    )
             else:  # pragma: no cover - Windows and URL handlers
                 deadline = time.monotonic() + timeout
                 while True:
@@ -252,11 +264,11 @@ class SerialTransport(Transport):
 # --------------------------------------------------------------------------------------
 # Simulated device
 # --------------------------------------------------------------------------------------
-def _candidate_roots() -> List[str]:
+def _candidate_roots() -> list[str]:
     """Directories that may be the repository: the working directory and its parents,
     the parent of the virtual environment (the repo keeps .venv at its top), and the
     package's own parents (a source checkout)."""
-    roots: List[str] = []
+    roots: list[str] = []
 
     def walk(start: str) -> None:
         d = os.path.abspath(start)
@@ -277,22 +289,25 @@ def _candidate_roots() -> List[str]:
     return roots
 
 
-def find_repo_root() -> Optional[str]:
+def find_repo_root() -> str | None:
     """The GraspGuide repository (a directory with platformio.ini and src/sim), or None."""
     for root in _candidate_roots():
-        if (os.path.isfile(os.path.join(root, "platformio.ini"))
-                and os.path.isdir(os.path.join(root, "src", "sim"))):
+        if os.path.isfile(os.path.join(root, "platformio.ini")) and os.path.isdir(
+            os.path.join(root, "src", "sim")
+        ):
             return root
     return None
 
 
 def sim_build_command(root: str) -> str:
     """The shell command that builds the simulated device in the repository ``root``."""
-    return (f"cd {shlex.quote(root)} && PLATFORMIO_CORE_DIR=.pio-core "
-            "PLATFORMIO_DISABLE_UPGRADE_CHECK=true .venv/bin/pio run -e sim")
+    return (
+        f"cd {shlex.quote(root)} && PLATFORMIO_CORE_DIR=.pio-core "
+        "PLATFORMIO_DISABLE_UPGRADE_CHECK=true .venv/bin/pio run -e sim"
+    )
 
 
-def find_sim_binary(path: Optional[str] = None) -> str:
+def find_sim_binary(path: str | None = None) -> str:
     """Path of the simulated device's program: ``path``, else ``$GRASPGUIDE_SIM``, else
     ``<repo>/.pio/build/sim/program``. Raises SimNotBuilt (with the build command) when it
     does not exist, DeviceNotFound when no repository can be found. Never builds."""
@@ -301,23 +316,28 @@ def find_sim_binary(path: Optional[str] = None) -> str:
         if os.path.isfile(explicit) and os.access(explicit, os.X_OK):
             return explicit
         where = "the path given" if path else f"${SIM_ENV}"
-        raise SimNotBuilt(f"simulated device {explicit!r} ({where}) does not exist or is not "
-                          f"executable; build it with `pio run -e sim` or unset {SIM_ENV}")
+        raise SimNotBuilt(
+            f"simulated device {explicit!r} ({where}) does not exist or is not "
+            f"executable; build it with `pio run -e sim` or unset {SIM_ENV}"
+        )
     root = find_repo_root()
     if root is None:
         raise DeviceNotFound(
             "cannot find the simulated device: no GraspGuide repository (platformio.ini and "
             f"src/sim/) in the working directory or its parents; run from the repository "
-            f"or set {SIM_ENV}=/path/to/.pio/build/sim/program")
+            f"or set {SIM_ENV}=/path/to/.pio/build/sim/program"
+        )
     binary = os.path.join(root, SIM_RELATIVE_PATH)
     if not (os.path.isfile(binary) and os.access(binary, os.X_OK)):
-        raise SimNotBuilt(f"the simulated device is not built ({binary} is missing); build "
-                          f"it with:\n    {sim_build_command(root)}\n(tools/bootstrap.sh "
-                          "does this too)")
+        raise SimNotBuilt(
+            f"the simulated device is not built ({binary} is missing); build "
+            f"it with:\n    {sim_build_command(root)}\n(tools/bootstrap.sh "
+            "does this too)"
+        )
     return binary
 
 
-def die_with_parent() -> Optional[Callable[[], None]]:
+def die_with_parent() -> Callable[[], None] | None:
     """A ``preexec_fn`` for ``subprocess.Popen``: the child gets SIGTERM when the process
     that started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``), so no simulated
     device or runner outlives its host. None where the call does not exist.
@@ -328,6 +348,7 @@ def die_with_parent() -> Optional[Callable[[], None]]:
         return None
     try:
         import ctypes
+
         prctl = ctypes.CDLL(None, use_errno=True).prctl
     except (OSError, AttributeError):  # pragma: no cover - no libc prctl
         return None
@@ -335,8 +356,9 @@ def die_with_parent() -> Optional[Callable[[], None]]:
 
     def preexec() -> None:  # pragma: no cover - runs in the child
         prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-        if os.getppid() != parent:   # the parent died before the call: nobody to signal
+        if os.getppid() != parent:  # the parent died before the call: nobody to signal
             os._exit(1)
+
     return preexec
 
 
@@ -354,11 +376,18 @@ class SimulatedDevice(Transport):
     After start: ``pty_path``, ``process``, ``start_time_s`` (spawn to pty line).
     """
 
-    def __init__(self, virtual_clock: bool = False, trace: Optional[str] = None,
-                 stale_ms: Optional[int] = None, binary: Optional[str] = None,
-                 start_timeout: float = DEFAULT_SIM_START_TIMEOUT,
-                 grace: float = DEFAULT_SIM_GRACE, baudrate: int = DEFAULT_BAUDRATE,
-                 extra_args: Sequence[str] = (), start: bool = False):
+    def __init__(
+        self,
+        virtual_clock: bool = False,
+        trace: str | None = None,
+        stale_ms: int | None = None,
+        binary: str | None = None,
+        start_timeout: float = DEFAULT_SIM_START_TIMEOUT,
+        grace: float = DEFAULT_SIM_GRACE,
+        baudrate: int = DEFAULT_BAUDRATE,
+        extra_args: Sequence[str] = (),
+        start: bool = False,
+    ):
         self.binary = find_sim_binary(binary)
         self.virtual_clock = virtual_clock
         self.trace = trace
@@ -367,18 +396,18 @@ class SimulatedDevice(Transport):
         self.grace = grace
         self.baudrate = baudrate
         self.extra_args = list(extra_args)
-        self.process: Optional[subprocess.Popen] = None
-        self.pty_path: Optional[str] = None
-        self.start_time_s: Optional[float] = None
-        self.exit_code: Optional[int] = None
-        self._serial: Optional[SerialTransport] = None
+        self.process: subprocess.Popen | None = None
+        self.pty_path: str | None = None
+        self.start_time_s: float | None = None
+        self.exit_code: int | None = None
+        self._serial: SerialTransport | None = None
         self._stderr = None
         self.name = "sim"
         if start:
             self.start()
 
     @property
-    def command(self) -> List[str]:
+    def command(self) -> list[str]:
         cmd = [self.binary]
         if self.virtual_clock:
             cmd.append("--virtual-clock")
@@ -388,7 +417,7 @@ class SimulatedDevice(Transport):
             cmd += ["--stale-ms", str(int(self.stale_ms))]
         return cmd + self.extra_args
 
-    def start(self) -> "SimulatedDevice":
+    def start(self) -> SimulatedDevice:
         if self.process is not None:
             return self
         self._stderr = tempfile.TemporaryFile()
@@ -396,13 +425,20 @@ class SimulatedDevice(Transport):
         try:
             # Its own session: a terminal's Ctrl-C (SIGINT to the foreground process
             # group) reaches only the host, which sends STOP before closing the device.
-            self.process = subprocess.Popen(self.command, stdin=subprocess.DEVNULL,
-                                            stdout=subprocess.PIPE, stderr=self._stderr,
-                                            close_fds=True, start_new_session=True,
-                                            preexec_fn=die_with_parent())
+            self.process = subprocess.Popen(
+                self.command,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=self._stderr,
+                close_fds=True,
+                start_new_session=True,
+                preexec_fn=die_with_parent(),
+            )
         except OSError as e:
-            raise DeviceNotFound(f"cannot start the simulated device {self.binary}: {e}; "
-                                 "rebuild it with `pio run -e sim`") from e
+            raise DeviceNotFound(
+                f"cannot start the simulated device {self.binary}: {e}; "
+                "rebuild it with `pio run -e sim`"
+            ) from e
         try:
             self.pty_path = self._read_pty_line(t0)
             self.start_time_s = time.perf_counter() - t0
@@ -424,7 +460,8 @@ class SimulatedDevice(Transport):
                 raise LinkTimeout(
                     f"the simulated device did not print its pty path within "
                     f"{self.start_timeout} s ({shlex.join(self.command)}); stderr: "
-                    f"{self._stderr_text() or '(empty)'}")
+                    f"{self._stderr_text() or '(empty)'}"
+                )
             ready, _, _ = select.select([fd], [], [], left)
             if not ready:
                 continue
@@ -433,14 +470,17 @@ class SimulatedDevice(Transport):
                 code = self.process.wait(timeout=self.grace)
                 raise DeviceNotFound(
                     f"the simulated device exited with code {code} before opening its pty "
-                    f"({shlex.join(self.command)}); stderr: {self._stderr_text() or '(empty)'}")
+                    f"({shlex.join(self.command)}); stderr: {self._stderr_text() or '(empty)'}"
+                )
             buf += chunk
         line = buf.split(b"\n", 1)[0].decode("utf-8", "replace").strip()
         if not line.startswith(SIM_READY_PREFIX):
-            raise DeviceNotFound(f"unexpected first line from the simulated device: {line!r} "
-                                 f"(expected '{SIM_READY_PREFIX}<path>'); is {self.binary} "
-                                 "the GraspGuide simulated device?")
-        return line[len(SIM_READY_PREFIX):].strip()
+            raise DeviceNotFound(
+                f"unexpected first line from the simulated device: {line!r} "
+                f"(expected '{SIM_READY_PREFIX}<path>'); is {self.binary} "
+                "the GraspGuide simulated device?"
+            )
+        return line[len(SIM_READY_PREFIX) :].strip()
 
     def _stderr_text(self) -> str:
         if self._stderr is None:
@@ -454,14 +494,17 @@ class SimulatedDevice(Transport):
     def _check_alive(self, what: str, cause: Exception) -> LinkError:
         code = None if self.process is None else self.process.poll()
         if code is not None:
-            return DeviceDisconnected(f"the simulated device exited with code {code} while "
-                                      f"{what}; stderr: {self._stderr_text() or '(empty)'}")
+            return DeviceDisconnected(
+                f"the simulated device exited with code {code} while "
+                f"{what}; stderr: {self._stderr_text() or '(empty)'}"
+            )
         return cause if isinstance(cause, LinkError) else LinkError(str(cause))
 
     def _transport(self) -> SerialTransport:
         if self._serial is None:
-            raise LinkError("the simulated device is not running: call start() or use it "
-                            "as a context manager")
+            raise LinkError(
+                "the simulated device is not running: call start() or use it as a context manager"
+            )
         return self._serial
 
     @property
@@ -511,7 +554,7 @@ class SimulatedDevice(Transport):
             self._stderr = None
         self.process = None
 
-    def __enter__(self) -> "SimulatedDevice":
+    def __enter__(self) -> SimulatedDevice:
         return self.start()
 
     def __del__(self):  # pragma: no cover - safety net for a forgotten close()
@@ -529,28 +572,41 @@ def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transpor
     binary, start_timeout), anything else opens that serial port (keyword arguments go to
     :class:`SerialTransport`). Close it (or use ``with``) when done."""
     if not port:
-        raise DeviceNotFound("no port given: use --port PATH (see `graspguide ports`) or "
-                             "--port sim")
+        raise DeviceNotFound(
+            "no port given: use --port PATH (see `graspguide ports`) or --port sim"
+        )
     if port == SIM_PORT:
         return SimulatedDevice(baudrate=baudrate, **kwargs).start()
     return SerialTransport(port, baudrate=baudrate, **kwargs)
 
 
-def list_serial_ports() -> List[dict]:
+def list_serial_ports() -> list[dict]:
     """The serial ports pyserial finds: dicts with device, description, hwid."""
     _import_serial()
     from serial.tools import list_ports
 
     out = []
     for p in sorted(list_ports.comports(), key=lambda p: p.device):
-        out.append({"device": p.device, "description": p.description or "",
-                    "hwid": p.hwid or ""})
+        out.append({"device": p.device, "description": p.description or "", "hwid": p.hwid or ""})
     return out
 
 
 __all__ = [
-    "Transport", "SerialTransport", "SimulatedDevice", "open_port", "list_serial_ports",
-    "find_sim_binary", "find_repo_root", "sim_build_command", "LinkError", "DeviceNotFound",
-    "SimNotBuilt", "DeviceDisconnected", "LinkTimeout", "DEFAULT_BAUDRATE", "SIM_PORT",
-    "SIM_ENV", "die_with_parent",
+    "Transport",
+    "SerialTransport",
+    "SimulatedDevice",
+    "open_port",
+    "list_serial_ports",
+    "find_sim_binary",
+    "find_repo_root",
+    "sim_build_command",
+    "LinkError",
+    "DeviceNotFound",
+    "SimNotBuilt",
+    "DeviceDisconnected",
+    "LinkTimeout",
+    "DEFAULT_BAUDRATE",
+    "SIM_PORT",
+    "SIM_ENV",
+    "die_with_parent",
 ]

@@ -39,29 +39,57 @@ import math
 import os
 import sys
 import warnings
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any
 
 # Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
-MODALITIES: Tuple[str, ...] = ("F+C", "Fperp+C", "F+V", "Fperp+V")
-TABLE_ORDER: Tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")
-CONTACT_COUNTS: Tuple[int, ...] = (3, 4)
+MODALITIES: tuple[str, ...] = ("F+C", "Fperp+C", "F+V", "Fperp+V")
+TABLE_ORDER: tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")
+CONTACT_COUNTS: tuple[int, ...] = (3, 4)
 # Table III column order of the paper.
-TLX_SCALES: Tuple[str, ...] = ("MD", "PD", "TD", "PE", "EF", "FR")
-TLX_NAMES = {"MD": "Mental Demand", "PD": "Physical Demand", "TD": "Temporal Demand",
-             "PE": "Performance", "EF": "Effort", "FR": "Frustration"}
+TLX_SCALES: tuple[str, ...] = ("MD", "PD", "TD", "PE", "EF", "FR")
+TLX_NAMES = {
+    "MD": "Mental Demand",
+    "PD": "Physical Demand",
+    "TD": "Temporal Demand",
+    "PE": "Performance",
+    "EF": "Effort",
+    "FR": "Frustration",
+}
 MODE_NAMES = {"C": "Constant intensity (C)", "V": "Varying intensity (V)"}
 IQR_FACTOR = 1.5
 SIMULATED_BANNER = "SIMULATED DATA — not human results"
 TRIALS_FILE = "trials.jsonl"
 TLX_FILE = "tlx.jsonl"
 # Columns of the frames load() returns.
-TRIAL_COLUMNS = ("participant", "simulated", "trial_index", "session", "k", "policy",
-                 "mode", "modality", "wrench_id", "single_motor", "success",
-                 "completion_s", "familiarization", "source")
-TLX_COLUMNS = ("participant", "simulated", "session", "k", "modality", "mode",
-               *TLX_SCALES, "source")
+TRIAL_COLUMNS = (
+    "participant",
+    "simulated",
+    "trial_index",
+    "session",
+    "k",
+    "policy",
+    "mode",
+    "modality",
+    "wrench_id",
+    "single_motor",
+    "success",
+    "completion_s",
+    "familiarization",
+    "source",
+)
+TLX_COLUMNS = (
+    "participant",
+    "simulated",
+    "session",
+    "k",
+    "modality",
+    "mode",
+    *TLX_SCALES,
+    "source",
+)
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -76,6 +104,7 @@ class AnalysisError(Exception):
 # Loading
 # ======================================================================================
 
+
 def _is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
@@ -84,7 +113,7 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def _need(rec: Dict[str, Any], key: str, where: str, check, what: str) -> Any:
+def _need(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
     if key not in rec:
         raise AnalysisError(f"{where}: missing field '{key}' ({what})")
     value = rec[key]
@@ -93,13 +122,13 @@ def _need(rec: Dict[str, Any], key: str, where: str, check, what: str) -> Any:
     return value
 
 
-def _maybe(rec: Dict[str, Any], key: str, where: str, check, what: str) -> Any:
+def _maybe(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
     if key not in rec or rec[key] is None:
         return None
     return _need(rec, key, where, check, what)
 
 
-def _read_jsonl(path: Path) -> List[Tuple[str, Dict[str, Any]]]:
+def _read_jsonl(path: Path) -> list[tuple[str, dict[str, Any]]]:
     """(``FILE:LINE``, object) for every non-blank line; a bad line is an error."""
     out = []
     try:
@@ -117,77 +146,108 @@ def _read_jsonl(path: Path) -> List[Tuple[str, Dict[str, Any]]]:
         except json.JSONDecodeError as e:
             hint = ""
             if number == len(text.splitlines()) and not text.endswith("\n"):
-                hint = ("; the last line has no newline: a write cut short, e.g. by a crash "
-                        "(running the study's participant again with graspguide trial moves "
-                        "it aside and redoes that trial)")
-            raise AnalysisError(f"{where}: malformed JSON ({e.msg} at column {e.colno})"
-                                f"{hint}") from None
+                hint = (
+                    "; the last line has no newline: a write cut short, e.g. by a crash "
+                    "(running the study's participant again with graspguide trial moves "
+                    "it aside and redoes that trial)"
+                )
+            raise AnalysisError(
+                f"{where}: malformed JSON ({e.msg} at column {e.colno}){hint}"
+            ) from None
         if not isinstance(obj, dict):
             raise AnalysisError(f"{where}: expected a JSON object, got {type(obj).__name__}")
         out.append((where, obj))
     return out
 
 
-def _record_identity(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
+def _record_identity(where: str, rec: dict[str, Any]) -> dict[str, Any]:
     """The fields every trial and TLX record carries."""
     return {
-        "participant": _need(rec, "participant", where,
-                             lambda v: isinstance(v, str) and v.strip() != "",
-                             "a non-empty string"),
-        "simulated": _need(rec, "simulated", where, lambda v: isinstance(v, bool),
-                           "true or false"),
+        "participant": _need(
+            rec,
+            "participant",
+            where,
+            lambda v: isinstance(v, str) and v.strip() != "",
+            "a non-empty string",
+        ),
+        "simulated": _need(rec, "simulated", where, lambda v: isinstance(v, bool), "true or false"),
         "session": _need(rec, "session", where, _is_int, "an integer"),
     }
 
 
-def _trial_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
+def _trial_row(where: str, rec: dict[str, Any]) -> dict[str, Any]:
     row = {
         **_record_identity(where, rec),
         "trial_index": _need(rec, "trial_index", where, _is_int, "an integer"),
         "k": _need(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
-        "modality": _need(rec, "modality", where, lambda v: v in MODALITIES,
-                          "one of " + ", ".join(MODALITIES)),
-        "success": _need(rec, "success", where, lambda v: isinstance(v, bool),
-                         "true or false"),
-        "completion_s": float(_need(rec, "completion_s", where,
-                                    lambda v: _is_number(v) and v >= 0,
-                                    "a finite number of seconds >= 0")),
-        "familiarization": _need(rec, "familiarization", where,
-                                 lambda v: isinstance(v, bool), "true or false"),
+        "modality": _need(
+            rec, "modality", where, lambda v: v in MODALITIES, "one of " + ", ".join(MODALITIES)
+        ),
+        "success": _need(rec, "success", where, lambda v: isinstance(v, bool), "true or false"),
+        "completion_s": float(
+            _need(
+                rec,
+                "completion_s",
+                where,
+                lambda v: _is_number(v) and v >= 0,
+                "a finite number of seconds >= 0",
+            )
+        ),
+        "familiarization": _need(
+            rec, "familiarization", where, lambda v: isinstance(v, bool), "true or false"
+        ),
     }
     policy, mode = row["modality"].split("+")
     got_policy = _maybe(rec, "policy", where, lambda v: v in ("F", "Fperp"), "'F' or 'Fperp'")
     got_mode = _maybe(rec, "mode", where, lambda v: v in ("C", "V"), "'C' or 'V'")
     if (got_policy or policy) != policy or (got_mode or mode) != mode:
-        raise AnalysisError(f"{where}: modality {row['modality']!r} contradicts policy "
-                            f"{got_policy!r} and mode {got_mode!r}")
+        raise AnalysisError(
+            f"{where}: modality {row['modality']!r} contradicts policy "
+            f"{got_policy!r} and mode {got_mode!r}"
+        )
     row["policy"], row["mode"] = policy, mode
     # An integer, or the protocol's name of the wrench ("W01"; "F01" in familiarization).
-    row["wrench_id"] = _maybe(rec, "wrench_id", where,
-                              lambda v: _is_int(v) or (isinstance(v, str) and v != ""),
-                              "an integer or a wrench name")
-    _maybe(rec, "wrench", where,
-           lambda v: isinstance(v, list) and len(v) == 6 and all(_is_number(x) for x in v),
-           "a list of 6 finite numbers")
-    row["single_motor"] = _maybe(rec, "single_motor", where, lambda v: isinstance(v, bool),
-                                 "true or false")
+    row["wrench_id"] = _maybe(
+        rec,
+        "wrench_id",
+        where,
+        lambda v: _is_int(v) or (isinstance(v, str) and v != ""),
+        "an integer or a wrench name",
+    )
+    _maybe(
+        rec,
+        "wrench",
+        where,
+        lambda v: isinstance(v, list) and len(v) == 6 and all(_is_number(x) for x in v),
+        "a list of 6 finite numbers",
+    )
+    row["single_motor"] = _maybe(
+        rec, "single_motor", where, lambda v: isinstance(v, bool), "true or false"
+    )
     row["source"] = where
     return row
 
 
-def _tlx_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
+def _tlx_row(where: str, rec: dict[str, Any]) -> dict[str, Any]:
     row = {
         **_record_identity(where, rec),
         "mode": _need(rec, "mode", where, lambda v: v in ("C", "V"), "'C' or 'V'"),
         "k": _maybe(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
-        "modality": _maybe(rec, "modality", where, lambda v: v in MODALITIES,
-                           "one of " + ", ".join(MODALITIES)),
+        "modality": _maybe(
+            rec, "modality", where, lambda v: v in MODALITIES, "one of " + ", ".join(MODALITIES)
+        ),
     }
     if row["modality"] is not None and row["modality"].split("+")[1] != row["mode"]:
-        raise AnalysisError(f"{where}: modality {row['modality']!r} contradicts mode "
-                            f"{row['mode']!r}")
-    scales = _need(rec, "scales", where, lambda v: v is None or isinstance(v, dict),
-                   "an object {MD, TD, PD, PE, EF, FR} (or null: no questionnaire)")
+        raise AnalysisError(
+            f"{where}: modality {row['modality']!r} contradicts mode {row['mode']!r}"
+        )
+    scales = _need(
+        rec,
+        "scales",
+        where,
+        lambda v: v is None or isinstance(v, dict),
+        "an object {MD, TD, PD, PE, EF, FR} (or null: no questionnaire)",
+    )
     if scales is None:
         # The runner logs a session of a simulated source without a --tlx file with
         # scales null: no answers were invented. Table III leaves it out and says so.
@@ -197,41 +257,50 @@ def _tlx_row(where: str, rec: Dict[str, Any]) -> Dict[str, Any]:
         return row
     for s in TLX_SCALES:
         if s not in scales:
-            raise AnalysisError(f"{where}: scales has no '{s}' ({TLX_NAMES[s]}); all six of "
-                                f"{', '.join(TLX_SCALES)} are needed")
+            raise AnalysisError(
+                f"{where}: scales has no '{s}' ({TLX_NAMES[s]}); all six of "
+                f"{', '.join(TLX_SCALES)} are needed"
+            )
         v = scales[s]
         if not (_is_int(v) or (_is_number(v) and float(v).is_integer())) or not 1 <= v <= 21:
-            raise AnalysisError(f"{where}: scales.{s} must be an integer 1..21, got "
-                                f"{json.dumps(v)}")
+            raise AnalysisError(
+                f"{where}: scales.{s} must be an integer 1..21, got {json.dumps(v)}"
+            )
         row[s] = int(v)
     row["source"] = where
     return row
 
 
-def participant_dirs(paths: Iterable[os.PathLike]) -> List[Path]:
+def participant_dirs(paths: Iterable[os.PathLike]) -> list[Path]:
     """The participant folders under the given study or participant folders, in order.
 
     A folder holding ``trials.jsonl`` or ``tlx.jsonl`` is a participant folder; otherwise
     its subfolders that hold either file are (others, such as ``analysis/``, are skipped).
     """
-    found: List[Path] = []
+    found: list[Path] = []
     seen = set()
     for p in paths:
         path = Path(p)
         if not path.exists():
             raise AnalysisError(f"{path}: no such file or folder")
         if not path.is_dir():
-            raise AnalysisError(f"{path}: not a folder (give a study folder or a participant "
-                                f"folder holding {TRIALS_FILE} and {TLX_FILE})")
+            raise AnalysisError(
+                f"{path}: not a folder (give a study folder or a participant "
+                f"folder holding {TRIALS_FILE} and {TLX_FILE})"
+            )
         if (path / TRIALS_FILE).exists() or (path / TLX_FILE).exists():
             candidates = [path]
         else:
-            candidates = sorted(c for c in path.iterdir() if c.is_dir() and (
-                (c / TRIALS_FILE).exists() or (c / TLX_FILE).exists()))
+            candidates = sorted(
+                c
+                for c in path.iterdir()
+                if c.is_dir() and ((c / TRIALS_FILE).exists() or (c / TLX_FILE).exists())
+            )
             if not candidates:
                 raise AnalysisError(
                     f"{path}: no participant data: neither {TRIALS_FILE} here nor a "
-                    f"participant folder {path}/<PID>/ holding {TRIALS_FILE} and {TLX_FILE}")
+                    f"participant folder {path}/<PID>/ holding {TRIALS_FILE} and {TLX_FILE}"
+                )
         for c in candidates:
             key = c.resolve()
             if key not in seen:
@@ -255,43 +324,60 @@ def load(paths: Iterable[os.PathLike]):
     """
     import pandas as pd
 
-    trial_rows: List[Dict[str, Any]] = []
-    tlx_rows: List[Dict[str, Any]] = []
-    owner: Dict[str, Path] = {}
-    trial_keys: Dict[Tuple[str, int, int], str] = {}
-    tlx_keys: Dict[Tuple[str, int], str] = {}
+    trial_rows: list[dict[str, Any]] = []
+    tlx_rows: list[dict[str, Any]] = []
+    owner: dict[str, Path] = {}
+    trial_keys: dict[tuple[str, int, int], str] = {}
+    tlx_keys: dict[tuple[str, int], str] = {}
     for folder in participant_dirs(paths):
         for name in (TRIALS_FILE, TLX_FILE):
             if not (folder / name).is_file():
-                raise AnalysisError(f"{folder}: missing {name} (a participant folder needs "
-                                    f"both {TRIALS_FILE} and {TLX_FILE})")
+                raise AnalysisError(
+                    f"{folder}: missing {name} (a participant folder needs "
+                    f"both {TRIALS_FILE} and {TLX_FILE})"
+                )
         here = set()
         for path, parse, key_of, what, rows, keys in (
-                (TRIALS_FILE, _trial_row, lambda r: (r["participant"], r["session"],
-                                                     r["trial_index"]),
-                 lambda r: f"trial {r['trial_index']} of session {r['session']}",
-                 trial_rows, trial_keys),
-                (TLX_FILE, _tlx_row, lambda r: (r["participant"], r["session"]),
-                 lambda r: f"NASA-TLX of session {r['session']}", tlx_rows, tlx_keys)):
+            (
+                TRIALS_FILE,
+                _trial_row,
+                lambda r: (r["participant"], r["session"], r["trial_index"]),
+                lambda r: f"trial {r['trial_index']} of session {r['session']}",
+                trial_rows,
+                trial_keys,
+            ),
+            (
+                TLX_FILE,
+                _tlx_row,
+                lambda r: (r["participant"], r["session"]),
+                lambda r: f"NASA-TLX of session {r['session']}",
+                tlx_rows,
+                tlx_keys,
+            ),
+        ):
             for where, rec in _read_jsonl(folder / path):
                 row = parse(where, rec)
                 key = key_of(row)
                 if key in keys:
-                    raise AnalysisError(f"{where}: {what(row)} of {row['participant']} is "
-                                        f"logged twice (first at {keys[key]})")
+                    raise AnalysisError(
+                        f"{where}: {what(row)} of {row['participant']} is "
+                        f"logged twice (first at {keys[key]})"
+                    )
                 keys[key] = where
                 here.add(row["participant"])
                 rows.append(row)
         for pid in here:
             if pid in owner and owner[pid] != folder:
-                raise AnalysisError(f"participant {pid} appears in two folders: "
-                                    f"{owner[pid]} and {folder}")
+                raise AnalysisError(
+                    f"participant {pid} appears in two folders: {owner[pid]} and {folder}"
+                )
             owner[pid] = folder
     trials = pd.DataFrame(trial_rows, columns=list(TRIAL_COLUMNS))
     tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS))
     if trials.empty:
-        raise AnalysisError("no trials in " + ", ".join(f"{f}/{TRIALS_FILE}" for f in
-                                                        participant_dirs(paths)))
+        raise AnalysisError(
+            "no trials in " + ", ".join(f"{f}/{TRIALS_FILE}" for f in participant_dirs(paths))
+        )
     return trials, tlx
 
 
@@ -306,7 +392,8 @@ def _analysed(trials):
 # Tables
 # ======================================================================================
 
-def _conditions(data) -> List[Tuple[int, str]]:
+
+def _conditions(data) -> list[tuple[int, str]]:
     present = set(zip(data["k"], data["modality"]))
     return [(k, m) for k in CONTACT_COUNTS for m in TABLE_ORDER if (k, m) in present]
 
@@ -321,10 +408,19 @@ def table1(trials):
         sel = data[(data["k"] == k) & (data["modality"] == m)]
         s = int(sel["success"].sum())
         n = int(len(sel))
-        rows.append({"k": k, "modality": m, "successes": s, "failures": n - s, "trials": n,
-                     "success_rate": s / n})
-    return pd.DataFrame(rows, columns=["k", "modality", "successes", "failures", "trials",
-                                       "success_rate"])
+        rows.append(
+            {
+                "k": k,
+                "modality": m,
+                "successes": s,
+                "failures": n - s,
+                "trials": n,
+                "success_rate": s / n,
+            }
+        )
+    return pd.DataFrame(
+        rows, columns=["k", "modality", "successes", "failures", "trials", "success_rate"]
+    )
 
 
 def table2(trials):
@@ -335,9 +431,15 @@ def table2(trials):
     rows = []
     for k, m in _conditions(data):
         t = data[(data["k"] == k) & (data["modality"] == m)]["completion_s"]
-        rows.append({"k": k, "modality": m, "mean_s": float(t.mean()),
-                     "sd_s": float(t.std(ddof=1)) if len(t) > 1 else math.nan,
-                     "trials": int(len(t))})
+        rows.append(
+            {
+                "k": k,
+                "modality": m,
+                "mean_s": float(t.mean()),
+                "sd_s": float(t.std(ddof=1)) if len(t) > 1 else math.nan,
+                "trials": int(len(t)),
+            }
+        )
     return pd.DataFrame(rows, columns=["k", "modality", "mean_s", "sd_s", "trials"])
 
 
@@ -353,7 +455,7 @@ def table3(tlx):
         sel = answered[answered["mode"] == mode]
         if sel.empty:
             continue
-        row: Dict[str, Any] = {"mode": mode, "sessions": int(len(sel))}
+        row: dict[str, Any] = {"mode": mode, "sessions": int(len(sel))}
         for s in TLX_SCALES:
             row[f"{s}_mean"] = float(sel[s].mean())
             row[f"{s}_sd"] = float(sel[s].std(ddof=1)) if len(sel) > 1 else math.nan
@@ -366,6 +468,7 @@ def table3(tlx):
 # Statistics
 # ======================================================================================
 
+
 def participant_means(trials):
     """Per-participant mean completion time (s) per modality, both contact counts pooled.
 
@@ -373,18 +476,20 @@ def participant_means(trials):
     any trial of a modality is an error that names both.
     """
     data = _analysed(trials)
-    wide = data.pivot_table(index="participant", columns="modality", values="completion_s",
-                            aggfunc="mean")
+    wide = data.pivot_table(
+        index="participant", columns="modality", values="completion_s", aggfunc="mean"
+    )
     wide = wide.reindex(columns=list(MODALITIES))
     missing = [(p, m) for p in wide.index for m in MODALITIES if math.isnan(wide.loc[p, m])]
     if missing:
-        by: Dict[str, List[str]] = {}
+        by: dict[str, list[str]] = {}
         for p, m in missing:
             by.setdefault(p, []).append(m)
-        detail = "; ".join(f"{p} has no trials of modality {', '.join(ms)}"
-                           for p, ms in by.items())
-        raise AnalysisError(f"{detail}: the repeated-measures analysis needs every "
-                            "participant in all four modalities (F+C, Fperp+C, F+V, Fperp+V)")
+        detail = "; ".join(f"{p} has no trials of modality {', '.join(ms)}" for p, ms in by.items())
+        raise AnalysisError(
+            f"{detail}: the repeated-measures analysis needs every "
+            "participant in all four modalities (F+C, Fperp+C, F+V, Fperp+V)"
+        )
     wide.columns.name = "modality"
     return wide
 
@@ -415,18 +520,18 @@ def boxplot_outliers(wide):
 class Statistics:
     """The paper's statistics on per-participant means (see ``paper_statistics``)."""
 
-    means: Any                     # wide DataFrame, every participant, seconds
-    outliers: List[Tuple[str, str, float]]
-    fences: Dict[str, Tuple[float, float]]
-    removed: List[str]             # participants whose whole row was removed
-    retained: Any                  # wide DataFrame, seconds, after outlier removal
-    transformed: Any               # sqrt of retained
-    normality: Any                 # DataFrame modality -> W, pval, normal
-    sphericity: Dict[str, Any]     # W, chi2, dof, pval, spher (or note)
-    anova: Dict[str, Any]          # pingouin: F, df1, df2, p, p_gg, eps, ng2, SS...
-    anova_statsmodels: Dict[str, Any]   # F, df1, df2, p
-    pairwise: Any                  # DataFrame A, B, T, dof, p_unc, p_bonf, diff_s
-    notes: List[str] = field(default_factory=list)
+    means: Any  # wide DataFrame, every participant, seconds
+    outliers: list[tuple[str, str, float]]
+    fences: dict[str, tuple[float, float]]
+    removed: list[str]  # participants whose whole row was removed
+    retained: Any  # wide DataFrame, seconds, after outlier removal
+    transformed: Any  # sqrt of retained
+    normality: Any  # DataFrame modality -> W, pval, normal
+    sphericity: dict[str, Any]  # W, chi2, dof, pval, spher (or note)
+    anova: dict[str, Any]  # pingouin: F, df1, df2, p, p_gg, eps, ng2, SS...
+    anova_statsmodels: dict[str, Any]  # F, df1, df2, p
+    pairwise: Any  # DataFrame A, B, T, dof, p_unc, p_bonf, diff_s
+    notes: list[str] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -440,22 +545,25 @@ class Statistics:
 
     def anova_line(self) -> str:
         a, sm = self.anova, self.anova_statsmodels
-        removed = (f"{len(self.removed)} removed as boxplot outliers ({', '.join(self.removed)})"
-                   if self.removed else "none removed as outliers")
+        removed = (
+            f"{len(self.removed)} removed as boxplot outliers ({', '.join(self.removed)})"
+            if self.removed
+            else "none removed as outliers"
+        )
         if a is None:
             return f"Inferential statistics not computed: {self.notes[0]}."
-        return (f"One-way repeated-measures ANOVA on sqrt(completion time), n = {self.n} "
-                f"participants ({removed}): F({a['df1']:g}, {a['df2']:g}) = {a['F']:.3f}, "
-                f"p = {_p(a['p'])}; statsmodels AnovaRM F = {sm['F']:.3f}, p = {_p(sm['p'])}")
+        return (
+            f"One-way repeated-measures ANOVA on sqrt(completion time), n = {self.n} "
+            f"participants ({removed}): F({a['df1']:g}, {a['df2']:g}) = {a['F']:.3f}, "
+            f"p = {_p(a['p'])}; statsmodels AnovaRM F = {sm['F']:.3f}, p = {_p(sm['p'])}"
+        )
 
 
 def _long(wide, value: str = "y"):
-    long = wide.reset_index().melt(id_vars="participant", var_name="modality",
-                                   value_name=value)
+    long = wide.reset_index().melt(id_vars="participant", var_name="modality", value_name=value)
     import pandas as pd
 
-    long["modality"] = pd.Categorical(long["modality"], categories=list(MODALITIES),
-                                      ordered=True)
+    long["modality"] = pd.Categorical(long["modality"], categories=list(MODALITIES), ordered=True)
     return long.sort_values(["participant", "modality"]).reset_index(drop=True)
 
 
@@ -477,7 +585,7 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     means.columns.name = "modality"
     if means.isna().any().any():
         raise AnalysisError("participant means contain missing values")
-    notes: List[str] = []
+    notes: list[str] = []
     if len(means) == 0:
         raise AnalysisError("no participant has trials of all four modalities to analyse")
     if remove_outliers:
@@ -493,27 +601,46 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
         # A pilot (or outlier removal) leaves one participant: no within-subject variance,
         # so no test; the descriptive results stand on their own.
         if removed:
-            why = (f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
-                   f"participants; after removing the boxplot outliers ({', '.join(removed)}) "
-                   f"{len(retained)} remains: analyse more participants, or keep the "
-                   "outliers (--keep-outliers)")
+            why = (
+                f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
+                f"participants; after removing the boxplot outliers ({', '.join(removed)}) "
+                f"{len(retained)} remains: analyse more participants, or keep the "
+                "outliers (--keep-outliers)"
+            )
         else:
-            why = (f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
-                   f"participants with all four modalities; this study has {len(means)} "
-                   f"({', '.join(map(str, means.index))}), e.g. a pilot: Tables I-III, the "
-                   "participant means and Figure 4 are descriptive only")
-        nan_frame = pd.DataFrame({"W": math.nan, "pval": math.nan, "normal": False},
-                                 index=pd.Index(list(MODALITIES), name="modality"))
+            why = (
+                f"the repeated-measures ANOVA and the paired t-tests need at least 2 "
+                f"participants with all four modalities; this study has {len(means)} "
+                f"({', '.join(map(str, means.index))}), e.g. a pilot: Tables I-III, the "
+                "participant means and Figure 4 are descriptive only"
+            )
+        nan_frame = pd.DataFrame(
+            {"W": math.nan, "pval": math.nan, "normal": False},
+            index=pd.Index(list(MODALITIES), name="modality"),
+        )
         return Statistics(
-            means=means, outliers=outliers, fences=fences, removed=removed,
-            retained=retained, transformed=transformed, normality=nan_frame,
-            sphericity={"W": math.nan, "chi2": math.nan,
-                        "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
-                        "pval": math.nan, "pval_second_order": math.nan, "spher": None},
-            anova=None, anova_statsmodels=None,
-            pairwise=pd.DataFrame(columns=["A", "B", "T", "dof", "p_unc", "p_bonf",
-                                           "mean_A_s", "mean_B_s", "diff_s"]),
-            notes=[why])
+            means=means,
+            outliers=outliers,
+            fences=fences,
+            removed=removed,
+            retained=retained,
+            transformed=transformed,
+            normality=nan_frame,
+            sphericity={
+                "W": math.nan,
+                "chi2": math.nan,
+                "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
+                "pval": math.nan,
+                "pval_second_order": math.nan,
+                "spher": None,
+            },
+            anova=None,
+            anova_statsmodels=None,
+            pairwise=pd.DataFrame(
+                columns=["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
+            ),
+            notes=[why],
+        )
     long = _long(transformed)
     n = len(retained)
 
@@ -524,73 +651,130 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
             normality = pg.normality(long, dv="y", group="modality", method="shapiro")
         normality = normality.reindex(list(MODALITIES))
     else:
-        normality = pd.DataFrame({"W": math.nan, "pval": math.nan, "normal": False},
-                                 index=pd.Index(list(MODALITIES), name="modality"))
-        notes.append(f"Shapiro-Wilk not computed: it needs at least 4 participants, {n} "
-                     "remain")
+        normality = pd.DataFrame(
+            {"W": math.nan, "pval": math.nan, "normal": False},
+            index=pd.Index(list(MODALITIES), name="modality"),
+        )
+        notes.append(f"Shapiro-Wilk not computed: it needs at least 4 participants, {n} remain")
 
     # Mauchly: the covariance of the k-1 = 3 differences must be of full rank: n >= 4.
     if n >= len(MODALITIES):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            sph = pg.sphericity(long, dv="y", within="modality", subject="participant",
-                                method="mauchly")
+            sph = pg.sphericity(
+                long, dv="y", within="modality", subject="participant", method="mauchly"
+            )
         # p from the chi-square approximation (what SPSS reports, and the paper: chi2(5) =
         # 10.56, p = 0.061); pingouin's p adds R's second-order term (mauchly.test).
         from scipy.stats import chi2 as _chi2
 
         p_chi2 = float(_chi2.sf(float(sph.chi2), int(sph.dof)))
-        sphericity = {"W": float(sph.W), "chi2": float(sph.chi2), "dof": int(sph.dof),
-                      "pval": p_chi2, "pval_second_order": float(sph.pval),
-                      "spher": bool(p_chi2 > 0.05)}
+        sphericity = {
+            "W": float(sph.W),
+            "chi2": float(sph.chi2),
+            "dof": int(sph.dof),
+            "pval": p_chi2,
+            "pval_second_order": float(sph.pval),
+            "spher": bool(p_chi2 > 0.05),
+        }
     else:
-        sphericity = {"W": math.nan, "chi2": math.nan, "dof": len(MODALITIES) *
-                      (len(MODALITIES) - 1) // 2 - 1, "pval": math.nan,
-                      "pval_second_order": math.nan, "spher": None}
-        notes.append(f"Mauchly's test not computed: it needs at least {len(MODALITIES)} "
-                     f"participants, {n} remain")
+        sphericity = {
+            "W": math.nan,
+            "chi2": math.nan,
+            "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
+            "pval": math.nan,
+            "pval_second_order": math.nan,
+            "spher": None,
+        }
+        notes.append(
+            f"Mauchly's test not computed: it needs at least {len(MODALITIES)} "
+            f"participants, {n} remain"
+        )
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        aov = pg.rm_anova(data=long, dv="y", within="modality", subject="participant",
-                          detailed=True, correction=True)
+        aov = pg.rm_anova(
+            data=long,
+            dv="y",
+            within="modality",
+            subject="participant",
+            detailed=True,
+            correction=True,
+        )
     r0, r1 = aov.iloc[0], aov.iloc[1]
-    anova = {"F": float(r0["F"]), "df1": float(r0["DF"]), "df2": float(r1["DF"]),
-             "p": float(r0["p_unc"]), "SS": float(r0["SS"]), "SS_error": float(r1["SS"]),
-             "MS": float(r0["MS"]), "MS_error": float(r1["MS"]),
-             "p_gg": float(r0["p_GG_corr"]) if "p_GG_corr" in aov else math.nan,
-             "eps_gg": float(r0["eps"]) if "eps" in aov else math.nan,
-             "ng2": float(r0["ng2"]) if "ng2" in aov else math.nan}
+    anova = {
+        "F": float(r0["F"]),
+        "df1": float(r0["DF"]),
+        "df2": float(r1["DF"]),
+        "p": float(r0["p_unc"]),
+        "SS": float(r0["SS"]),
+        "SS_error": float(r1["SS"]),
+        "MS": float(r0["MS"]),
+        "MS_error": float(r1["MS"]),
+        "p_gg": float(r0["p_GG_corr"]) if "p_GG_corr" in aov else math.nan,
+        "eps_gg": float(r0["eps"]) if "eps" in aov else math.nan,
+        "ng2": float(r0["ng2"]) if "ng2" in aov else math.nan,
+    }
 
     sm_data = long.assign(modality=long["modality"].astype(str))
     sm = AnovaRM(sm_data, depvar="y", subject="participant", within=["modality"]).fit()
     t = sm.anova_table.iloc[0]
-    anova_sm = {"F": float(t["F Value"]), "df1": float(t["Num DF"]),
-                "df2": float(t["Den DF"]), "p": float(t["Pr > F"])}
+    anova_sm = {
+        "F": float(t["F Value"]),
+        "df1": float(t["Num DF"]),
+        "df2": float(t["Den DF"]),
+        "p": float(t["Pr > F"]),
+    }
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        pw = pg.pairwise_tests(data=long, dv="y", within="modality", subject="participant",
-                               padjust="bonf", parametric=True)
+        pw = pg.pairwise_tests(
+            data=long,
+            dv="y",
+            within="modality",
+            subject="participant",
+            padjust="bonf",
+            parametric=True,
+        )
     rows = []
     for _, r in pw.iterrows():
         a, b = str(r["A"]), str(r["B"])
-        rows.append({"A": a, "B": b, "T": float(r["T"]), "dof": float(r["dof"]),
-                     "p_unc": float(r["p_unc"]), "p_bonf": float(r["p_corr"]),
-                     "mean_A_s": float(retained[a].mean()),
-                     "mean_B_s": float(retained[b].mean()),
-                     "diff_s": float(retained[a].mean() - retained[b].mean())})
-    pairwise = pd.DataFrame(rows, columns=["A", "B", "T", "dof", "p_unc", "p_bonf",
-                                           "mean_A_s", "mean_B_s", "diff_s"])
-    return Statistics(means=means, outliers=outliers, fences=fences, removed=removed,
-                      retained=retained, transformed=transformed, normality=normality,
-                      sphericity=sphericity, anova=anova, anova_statsmodels=anova_sm,
-                      pairwise=pairwise, notes=notes)
+        rows.append(
+            {
+                "A": a,
+                "B": b,
+                "T": float(r["T"]),
+                "dof": float(r["dof"]),
+                "p_unc": float(r["p_unc"]),
+                "p_bonf": float(r["p_corr"]),
+                "mean_A_s": float(retained[a].mean()),
+                "mean_B_s": float(retained[b].mean()),
+                "diff_s": float(retained[a].mean() - retained[b].mean()),
+            }
+        )
+    pairwise = pd.DataFrame(
+        rows, columns=["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
+    )
+    return Statistics(
+        means=means,
+        outliers=outliers,
+        fences=fences,
+        removed=removed,
+        retained=retained,
+        transformed=transformed,
+        normality=normality,
+        sphericity=sphericity,
+        anova=anova,
+        anova_statsmodels=anova_sm,
+        pairwise=pairwise,
+        notes=notes,
+    )
 
 
 # ======================================================================================
 # Figure 4
 # ======================================================================================
+
 
 def _p(p: float) -> str:
     if p != p:
@@ -600,8 +784,9 @@ def _p(p: float) -> str:
     return f"{p:.3f}"
 
 
-def figure4(stats: Statistics, out_dir: os.PathLike, simulated: bool = False,
-            stem: str = "figure4") -> List[Path]:
+def figure4(
+    stats: Statistics, out_dir: os.PathLike, simulated: bool = False, stem: str = "figure4"
+) -> list[Path]:
     """Mean +- SD per modality (retained participants' means, s) with the Bonferroni p
     of every pair above the bars; writes ``stem.png`` and ``stem.svg`` (Agg)."""
     import matplotlib
@@ -611,8 +796,7 @@ def figure4(stats: Statistics, out_dir: os.PathLike, simulated: bool = False,
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    labels = {"F+C": "F+C", "Fperp+C": "F$_\\perp$+C", "F+V": "F+V",
-              "Fperp+V": "F$_\\perp$+V"}
+    labels = {"F+C": "F+C", "Fperp+C": "F$_\\perp$+C", "F+V": "F+V", "Fperp+V": "F$_\\perp$+V"}
     means = [float(stats.retained[m].mean()) for m in MODALITIES]
     sds = [float(stats.retained[m].std(ddof=1)) if stats.n > 1 else 0.0 for m in MODALITIES]
     colors = ["#c0504d", "#e6a19f", "#4f81bd", "#a7c0de"]
@@ -625,24 +809,36 @@ def figure4(stats: Statistics, out_dir: os.PathLike, simulated: bool = False,
     step = 0.09 * top if top > 0 else 1.0
     level = top + 0.5 * step
     # Short spans first, so brackets nest.
-    pairs = sorted(stats.pairwise.itertuples(index=False),
-                   key=lambda r: (abs(MODALITIES.index(r.A) - MODALITIES.index(r.B)),
-                                  MODALITIES.index(r.A)))
+    pairs = sorted(
+        stats.pairwise.itertuples(index=False),
+        key=lambda r: (abs(MODALITIES.index(r.A) - MODALITIES.index(r.B)), MODALITIES.index(r.A)),
+    )
     for r in pairs:
         i, j = sorted((MODALITIES.index(r.A), MODALITIES.index(r.B)))
-        ax.plot([i, i, j, j], [level, level + 0.25 * step, level + 0.25 * step, level],
-                color="black", linewidth=0.8)
-        ax.text((i + j) / 2, level + 0.3 * step, f"p = {_p(r.p_bonf)}", ha="center",
-                va="bottom", fontsize=8)
+        ax.plot(
+            [i, i, j, j],
+            [level, level + 0.25 * step, level + 0.25 * step, level],
+            color="black",
+            linewidth=0.8,
+        )
+        ax.text(
+            (i + j) / 2,
+            level + 0.3 * step,
+            f"p = {_p(r.p_bonf)}",
+            ha="center",
+            va="bottom",
+            fontsize=8,
+        )
         level += step
     ax.set_ylim(0, level + 0.5 * step)
     a = stats.anova
     if a is None:
-        title = (f"n = {stats.n}: descriptive only (the tests need at least 2 "
-                 "participants)")
+        title = f"n = {stats.n}: descriptive only (the tests need at least 2 participants)"
     else:
-        title = (f"RM ANOVA F({a['df1']:g}, {a['df2']:g}) = {a['F']:.2f}, p = {_p(a['p'])}; "
-                 f"n = {stats.n}; Bonferroni p")
+        title = (
+            f"RM ANOVA F({a['df1']:g}, {a['df2']:g}) = {a['F']:.2f}, p = {_p(a['p'])}; "
+            f"n = {stats.n}; Bonferroni p"
+        )
     if simulated:
         title = SIMULATED_BANNER + "\n" + title
     ax.set_title(title, fontsize=9, color="black")
@@ -659,9 +855,9 @@ def figure4(stats: Statistics, out_dir: os.PathLike, simulated: bool = False,
 # Report
 # ======================================================================================
 
+
 def _md_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    lines = ["| " + " | ".join(header) + " |",
-             "|" + "|".join("---" for _ in header) + "|"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     for r in rows:
         lines.append("| " + " | ".join(str(c) for c in r) + " |")
     return "\n".join(lines)
@@ -672,21 +868,28 @@ def _text_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
     out = []
     for n, r in enumerate(cells):
-        out.append("  ".join(c.rjust(w) if n and i > 1 else c.ljust(w)
-                             for i, (c, w) in enumerate(zip(r, widths))).rstrip())
+        out.append(
+            "  ".join(
+                c.rjust(w) if n and i > 1 else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths))
+            ).rstrip()
+        )
         if n == 0:
             out.append("  ".join("-" * w for w in widths))
     return "\n".join(out)
 
 
 def _t1_rows(t1):
-    return [(r.k, r.modality, r.successes, r.failures, r.trials, f"{100 * r.success_rate:.0f}%")
-            for r in t1.itertuples(index=False)]
+    return [
+        (r.k, r.modality, r.successes, r.failures, r.trials, f"{100 * r.success_rate:.0f}%")
+        for r in t1.itertuples(index=False)
+    ]
 
 
 def _t2_rows(t2):
-    return [(r.k, r.modality, f"{r.mean_s:.2f}", f"{r.sd_s:.2f}", r.trials)
-            for r in t2.itertuples(index=False)]
+    return [
+        (r.k, r.modality, f"{r.mean_s:.2f}", f"{r.sd_s:.2f}", r.trials)
+        for r in t2.itertuples(index=False)
+    ]
 
 
 T1_HEADER = ("k", "modality", "successes", "failures", "trials", "rate")
@@ -701,25 +904,27 @@ class Result:
     table2: Any
     table3: Any
     stats: Statistics
-    simulated_participants: List[str]
-    participants: List[str]
+    simulated_participants: list[str]
+    participants: list[str]
     familiarization_excluded: int
-    sources: List[Path]
+    sources: list[Path]
 
     @property
     def simulated(self) -> bool:
         return bool(self.simulated_participants)
 
 
-def _banner(res: Result) -> Optional[str]:
+def _banner(res: Result) -> str | None:
     if not res.simulated:
         return None
     sims = res.simulated_participants
     if len(sims) == len(res.participants):
         who = f"all {len(sims)} participants are virtual (simulated=true)"
     else:
-        who = (f"{len(sims)} of {len(res.participants)} participants have simulated records "
-               f"({', '.join(sims)})")
+        who = (
+            f"{len(sims)} of {len(res.participants)} participants have simulated records "
+            f"({', '.join(sims)})"
+        )
     return f"{SIMULATED_BANNER}: {who}."
 
 
@@ -727,62 +932,99 @@ def _capitalized(text: str) -> str:
     return text[:1].upper() + text[1:]
 
 
-def report_markdown(res: Result, figure_names: Sequence[str] = ("figure4.png",
-                                                                  "figure4.svg")) -> str:
+def report_markdown(
+    res: Result, figure_names: Sequence[str] = ("figure4.png", "figure4.svg")
+) -> str:
     st = res.stats
-    out: List[str] = ["# GraspGuide study analysis", ""]
+    out: list[str] = ["# GraspGuide study analysis", ""]
     banner = _banner(res)
     if banner:
-        out += [f"> **{SIMULATED_BANNER}.**", ">",
-                f"> {_capitalized(banner[len(SIMULATED_BANNER) + 2:])} These numbers come "
-                "from a model of a person following the cues, not from people; do not "
-                "report them as human results.", ""]
+        out += [
+            f"> **{SIMULATED_BANNER}.**",
+            ">",
+            f"> {_capitalized(banner[len(SIMULATED_BANNER) + 2 :])} These numbers come "
+            "from a model of a person following the cues, not from people; do not "
+            "report them as human results.",
+            "",
+        ]
     n_trials = int((~res.trials["familiarization"]).sum())
-    out += [f"Sources: {', '.join(str(s) for s in res.sources)}  ",
-            f"Participants: {len(res.participants)} ({', '.join(res.participants)}); "
-            f"{n_trials} trials analysed, {res.familiarization_excluded} familiarization "
-            f"trials excluded; {len(res.tlx)} sessions with a NASA-TLX record, "
-            f"{int(res.tlx[list(TLX_SCALES)].notna().all(axis=1).sum())} answered.", ""]
+    out += [
+        f"Sources: {', '.join(str(s) for s in res.sources)}  ",
+        f"Participants: {len(res.participants)} ({', '.join(res.participants)}); "
+        f"{n_trials} trials analysed, {res.familiarization_excluded} familiarization "
+        f"trials excluded; {len(res.tlx)} sessions with a NASA-TLX record, "
+        f"{int(res.tlx[list(TLX_SCALES)].notna().all(axis=1).sum())} answered.",
+        "",
+    ]
 
-    out += ["## Table I — successfully accomplished tasks", "",
-            "A target orientation not reached within the trial's time limit (90 s in the "
-            "paper's protocol) is a failure.", "",
-            _md_table(T1_HEADER, _t1_rows(res.table1)), ""]
-    out += ["## Table II — completion time", "",
-            "Mean and standard deviation (n − 1) per condition; a failed trial counts with "
-            "its logged time (90 s).", "",
-            _md_table(T2_HEADER, _t2_rows(res.table2)), ""]
+    out += [
+        "## Table I — successfully accomplished tasks",
+        "",
+        "A target orientation not reached within the trial's time limit (90 s in the "
+        "paper's protocol) is a failure.",
+        "",
+        _md_table(T1_HEADER, _t1_rows(res.table1)),
+        "",
+    ]
+    out += [
+        "## Table II — completion time",
+        "",
+        "Mean and standard deviation (n − 1) per condition; a failed trial counts with "
+        "its logged time (90 s).",
+        "",
+        _md_table(T2_HEADER, _t2_rows(res.table2)),
+        "",
+    ]
     out += ["## Table III — NASA-TLX workload (1–21, lower is better)", ""]
     unanswered = int(res.tlx[list(TLX_SCALES)].isna().any(axis=1).sum())
     if unanswered:
-        out += [f"{unanswered} of {len(res.tlx)} sessions were logged without a questionnaire "
-                "(scales null: a simulated source without a --tlx file); they are left out.",
-                ""]
+        out += [
+            f"{unanswered} of {len(res.tlx)} sessions were logged without a questionnaire "
+            "(scales null: a simulated source without a --tlx file); they are left out.",
+            "",
+        ]
     if res.table3.empty:
         out += ["No NASA-TLX questionnaires were logged.", ""]
     else:
         header = ["modality", "", "sessions"] + list(TLX_SCALES)
         rows = []
         for r in res.table3.to_dict("records"):
-            rows.append([MODE_NAMES[r["mode"]], "mean", r["sessions"]] +
-                        [f"{r[f'{s}_mean']:.2f}" for s in TLX_SCALES])
+            rows.append(
+                [MODE_NAMES[r["mode"]], "mean", r["sessions"]]
+                + [f"{r[f'{s}_mean']:.2f}" for s in TLX_SCALES]
+            )
             rows.append(["", "SD", ""] + [f"{r[f'{s}_sd']:.2f}" for s in TLX_SCALES])
-        out += [_md_table(header, rows), "",
-                "Scales: " + ", ".join(f"{s} {TLX_NAMES[s]}" for s in TLX_SCALES) + ".", ""]
+        out += [
+            _md_table(header, rows),
+            "",
+            "Scales: " + ", ".join(f"{s} {TLX_NAMES[s]}" for s in TLX_SCALES) + ".",
+            "",
+        ]
 
-    out += ["## Statistics (completion time by feedback modality)", "",
-            "Per-participant mean completion time per modality, 3 and 4 contact points "
-            "pooled (seconds):", "",
-            _md_table(["participant"] + list(MODALITIES),
-                      [[p] + [f"{st.means.loc[p, m]:.2f}" for m in MODALITIES]
-                       for p in st.means.index]), ""]
+    out += [
+        "## Statistics (completion time by feedback modality)",
+        "",
+        "Per-participant mean completion time per modality, 3 and 4 contact points "
+        "pooled (seconds):",
+        "",
+        _md_table(
+            ["participant"] + list(MODALITIES),
+            [[p] + [f"{st.means.loc[p, m]:.2f}" for m in MODALITIES] for p in st.means.index],
+        ),
+        "",
+    ]
     if st.fences:
-        out += ["**Outliers** (boxplot rule: beyond 1.5 IQR from the box of a modality's "
-                "participant means; each removed with its paired values, i.e. the "
-                "participant's whole row):", ""]
+        out += [
+            "**Outliers** (boxplot rule: beyond 1.5 IQR from the box of a modality's "
+            "participant means; each removed with its paired values, i.e. the "
+            "participant's whole row):",
+            "",
+        ]
         if st.outliers:
-            out += [f"- {p}, {m}: {v:.2f} s (fences {st.fences[m][0]:.2f} … "
-                    f"{st.fences[m][1]:.2f} s)" for p, m, v in st.outliers]
+            out += [
+                f"- {p}, {m}: {v:.2f} s (fences {st.fences[m][0]:.2f} … {st.fences[m][1]:.2f} s)"
+                for p, m, v in st.outliers
+            ]
             out += ["", f"Removed participants: {', '.join(st.removed)}; {st.n} remain.", ""]
         else:
             out += ["- none", ""]
@@ -791,46 +1033,102 @@ def report_markdown(res: Result, figure_names: Sequence[str] = ("figure4.png",
     if not st.inferential:
         out += [f"**Inferential statistics not computed**: {st.notes[0]}.", ""]
     else:
-        out += ["Data are square-root transformed before the tests.", "",
-                "**Shapiro–Wilk** per modality (sqrt data):", "",
-                _md_table(["modality", "W", "p", "normal (p > 0.05)"],
-                          [[m, f"{st.normality.loc[m, 'W']:.4f}", _p(st.normality.loc[m, 'pval']),
-                            "yes" if st.normality.loc[m, 'normal'] else "no"]
-                           for m in MODALITIES]), ""]
+        out += [
+            "Data are square-root transformed before the tests.",
+            "",
+            "**Shapiro–Wilk** per modality (sqrt data):",
+            "",
+            _md_table(
+                ["modality", "W", "p", "normal (p > 0.05)"],
+                [
+                    [
+                        m,
+                        f"{st.normality.loc[m, 'W']:.4f}",
+                        _p(st.normality.loc[m, "pval"]),
+                        "yes" if st.normality.loc[m, "normal"] else "no",
+                    ]
+                    for m in MODALITIES
+                ],
+            ),
+            "",
+        ]
         sp = st.sphericity
         if sp["spher"] is None:
-            out += [f"**Mauchly's test of sphericity**: not computed (fewer than "
-                    f"{len(MODALITIES)} participants).", ""]
+            out += [
+                f"**Mauchly's test of sphericity**: not computed (fewer than "
+                f"{len(MODALITIES)} participants).",
+                "",
+            ]
         else:
-            out += [f"**Mauchly's test of sphericity**: W = {sp['W']:.4f}, "
-                    f"χ²({sp['dof']}) = {sp['chi2']:.3f}, p = {_p(sp['pval'])} (χ² "
-                    f"approximation, as the paper reports; with R's second-order term p = "
-                    f"{_p(sp['pval_second_order'])}) — sphericity "
-                    + ("not violated." if sp["spher"]
-                       else "violated (see the Greenhouse–Geisser p)."), ""]
+            out += [
+                f"**Mauchly's test of sphericity**: W = {sp['W']:.4f}, "
+                f"χ²({sp['dof']}) = {sp['chi2']:.3f}, p = {_p(sp['pval'])} (χ² "
+                f"approximation, as the paper reports; with R's second-order term p = "
+                f"{_p(sp['pval_second_order'])}) — sphericity "
+                + ("not violated." if sp["spher"] else "violated (see the Greenhouse–Geisser p)."),
+                "",
+            ]
         a, sm = st.anova, st.anova_statsmodels
-        out += [f"**One-way repeated-measures ANOVA** (pingouin): F({a['df1']:g}, {a['df2']:g}) = "
-                f"{a['F']:.3f}, p = {_p(a['p'])}; Greenhouse–Geisser ε = {a['eps_gg']:.3f}, "
-                f"p(GG) = {_p(a['p_gg'])}; generalized η² = {a['ng2']:.3f}.  ",
-                f"Cross-check (statsmodels AnovaRM): F = {sm['F']:.6f}, p = {sm['p']:.6g} "
-                f"(pingouin F = {a['F']:.6f}, p = {a['p']:.6g}; |ΔF| = "
-                f"{abs(a['F'] - sm['F']):.2g}).", ""]
-        out += ["**Pairwise paired t-tests**, Bonferroni-corrected (6 comparisons, "
-                "p_bonf = min(1, 6 p)); differences of the means in seconds:", "",
-                _md_table(["A", "B", "mean A [s]", "mean B [s]", "A − B [s]", "t", "df", "p",
-                           "p (Bonferroni)"],
-                          [[r.A, r.B, f"{r.mean_A_s:.2f}", f"{r.mean_B_s:.2f}", f"{r.diff_s:.2f}",
-                            f"{r.T:.3f}", f"{r.dof:g}", _p(r.p_unc), _p(r.p_bonf)]
-                           for r in st.pairwise.itertuples(index=False)]), ""]
+        out += [
+            f"**One-way repeated-measures ANOVA** (pingouin): F({a['df1']:g}, {a['df2']:g}) = "
+            f"{a['F']:.3f}, p = {_p(a['p'])}; Greenhouse–Geisser ε = {a['eps_gg']:.3f}, "
+            f"p(GG) = {_p(a['p_gg'])}; generalized η² = {a['ng2']:.3f}.  ",
+            f"Cross-check (statsmodels AnovaRM): F = {sm['F']:.6f}, p = {sm['p']:.6g} "
+            f"(pingouin F = {a['F']:.6f}, p = {a['p']:.6g}; |ΔF| = "
+            f"{abs(a['F'] - sm['F']):.2g}).",
+            "",
+        ]
+        out += [
+            "**Pairwise paired t-tests**, Bonferroni-corrected (6 comparisons, "
+            "p_bonf = min(1, 6 p)); differences of the means in seconds:",
+            "",
+            _md_table(
+                [
+                    "A",
+                    "B",
+                    "mean A [s]",
+                    "mean B [s]",
+                    "A − B [s]",
+                    "t",
+                    "df",
+                    "p",
+                    "p (Bonferroni)",
+                ],
+                [
+                    [
+                        r.A,
+                        r.B,
+                        f"{r.mean_A_s:.2f}",
+                        f"{r.mean_B_s:.2f}",
+                        f"{r.diff_s:.2f}",
+                        f"{r.T:.3f}",
+                        f"{r.dof:g}",
+                        _p(r.p_unc),
+                        _p(r.p_bonf),
+                    ]
+                    for r in st.pairwise.itertuples(index=False)
+                ],
+            ),
+            "",
+        ]
         for note in st.notes:
             out += [f"Note: {note}.", ""]
-    out += ["## Figure 4", "",
-            "Mean ± SD of the participant means per modality (after outlier removal), with "
-            "the Bonferroni-corrected p-value of every pair." if st.inferential else
-            f"The participant means per modality (n = {st.n}: no SD, no p-values).", ""]
+    out += [
+        "## Figure 4",
+        "",
+        "Mean ± SD of the participant means per modality (after outlier removal), with "
+        "the Bonferroni-corrected p-value of every pair."
+        if st.inferential
+        else f"The participant means per modality (n = {st.n}: no SD, no p-values).",
+        "",
+    ]
     if figure_names:
-        out += [f"![Figure 4]({figure_names[0]})", "",
-                "Files: " + ", ".join(f"`{n}`" for n in figure_names), ""]
+        out += [
+            f"![Figure 4]({figure_names[0]})",
+            "",
+            "Files: " + ", ".join(f"`{n}`" for n in figure_names),
+            "",
+        ]
     return "\n".join(out)
 
 
@@ -839,11 +1137,15 @@ def summary_text(res: Result) -> str:
     banner = _banner(res)
     if banner:
         lines += [f"*** {banner} ***", ""]
-    lines += ["Table I: successfully accomplished tasks",
-              _text_table(T1_HEADER, _t1_rows(res.table1)), "",
-              "Table II: completion time",
-              _text_table(T2_HEADER, _t2_rows(res.table2)), "",
-              res.stats.anova_line()]
+    lines += [
+        "Table I: successfully accomplished tasks",
+        _text_table(T1_HEADER, _t1_rows(res.table1)),
+        "",
+        "Table II: completion time",
+        _text_table(T2_HEADER, _t2_rows(res.table2)),
+        "",
+        res.stats.anova_line(),
+    ]
     return "\n".join(lines)
 
 
@@ -857,11 +1159,18 @@ def analyze(paths: Iterable[os.PathLike], remove_outliers: bool = True) -> Resul
     participants = sorted(set(trials["participant"]) | set(tlx["participant"]))
     sim = set(trials.loc[trials["simulated"].astype(bool), "participant"])
     sim |= set(tlx.loc[tlx["simulated"].astype(bool), "participant"])
-    return Result(trials=trials, tlx=tlx, table1=table1(trials), table2=table2(trials),
-                  table3=table3(tlx), stats=stats,
-                  simulated_participants=sorted(sim), participants=participants,
-                  familiarization_excluded=int(len(trials) - len(data)),
-                  sources=[Path(p) for p in paths])
+    return Result(
+        trials=trials,
+        tlx=tlx,
+        table1=table1(trials),
+        table2=table2(trials),
+        table3=table3(tlx),
+        stats=stats,
+        simulated_participants=sorted(sim),
+        participants=participants,
+        familiarization_excluded=int(len(trials) - len(data)),
+        sources=[Path(p) for p in paths],
+    )
 
 
 def default_out_dir(paths: Sequence[os.PathLike]) -> Path:
@@ -872,18 +1181,21 @@ def default_out_dir(paths: Sequence[os.PathLike]) -> Path:
     return first / "analysis"
 
 
-def write_outputs(res: Result, out_dir: os.PathLike) -> List[Path]:
+def write_outputs(res: Result, out_dir: os.PathLike) -> list[Path]:
     """report.md, figure4.png/.svg and the tables as CSV in ``out_dir``."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise AnalysisError(f"{out}: cannot create the output folder ({e.strerror or e})") \
-            from None
+        raise AnalysisError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
     figs = figure4(res.stats, out, simulated=res.simulated)
     written = list(figs)
-    tables = {"table1.csv": res.table1, "table2.csv": res.table2, "table3.csv": res.table3,
-              "pairwise.csv": res.stats.pairwise}
+    tables = {
+        "table1.csv": res.table1,
+        "table2.csv": res.table2,
+        "table3.csv": res.table3,
+        "pairwise.csv": res.stats.pairwise,
+    }
     for name, df in tables.items():
         df.to_csv(out / name, index=False)
         written.append(out / name)
@@ -924,13 +1236,21 @@ Exit status: 0 done, 1 bad or insufficient data (the message says what and where
 
 
 def _configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dirs", nargs="+", metavar="DIR",
-                   help="study folder(s) or participant folder(s)")
-    p.add_argument("--out", metavar="DIR", default=None,
-                   help="where to write report.md, figure4.png/.svg and the CSV tables "
-                        "(default: analysis/ in the first study folder)")
-    p.add_argument("--keep-outliers", action="store_true",
-                   help="do not remove boxplot outliers before the ANOVA (the paper does)")
+    p.add_argument(
+        "dirs", nargs="+", metavar="DIR", help="study folder(s) or participant folder(s)"
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help="where to write report.md, figure4.png/.svg and the CSV tables "
+        "(default: analysis/ in the first study folder)",
+    )
+    p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="do not remove boxplot outliers before the ANOVA (the paper does)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -950,19 +1270,25 @@ def run(args: argparse.Namespace) -> int:
 def register(subparsers) -> argparse.ArgumentParser:
     """Add ``analyze`` to an argparse subparsers object (handler: ``run``)."""
     p = subparsers.add_parser(
-        "analyze", help="the paper's Tables I-III, statistics and Figure 4 from study logs",
-        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+        "analyze",
+        help="the paper's Tables I-III, statistics and Figure 4 from study logs",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     _configure(p)
     p.set_defaults(handler=run, func=run, command_parser=p)
     return p
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """``graspguide analyze`` on its own: ``main(["STUDY", "--out", "DIR"])``."""
     from graspguide.cli.app import ArgumentParser
 
-    p = ArgumentParser(prog="graspguide analyze", description=DESCRIPTION,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(
+        prog="graspguide analyze",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     _configure(p)
     try:
         args = p.parse_args(argv)

@@ -23,7 +23,6 @@ import argparse
 import os
 import sys
 import time
-from typing import Dict, List, Tuple
 
 from graspguide.study.jobs import (
     EXIT_FAILURE,
@@ -33,10 +32,13 @@ from graspguide.study.jobs import (
     TrialJob,
     count_lines,
     default_protocol,
-    default_out as _default_out,
     int_arg,
     run_trial_jobs,
 )
+from graspguide.study.jobs import (
+    default_out as _default_out,
+)
+
 DEFAULT_SOURCE = "participant"
 
 DESCRIPTION = """\
@@ -65,48 +67,75 @@ _jobs = int_arg(1, 256)
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("demo", help="the paper's study end to end, simulated: 8 virtual "
-                                    "participants, then Tables I-II, the ANOVA and Figure 4",
-                       description=DESCRIPTION,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--participants", type=_jobs, default=8, metavar="N",
-                   help="virtual participants U1..UN (default 8, as in the paper)")
-    p.add_argument("--protocol", default=None, metavar="FILE",
-                   help="study protocol (default: protocols/paper.toml of the repository)")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="study folder (default: logs/demo-study in the repository); "
-                        "running again into it resumes or, when complete, re-analyses")
-    p.add_argument("--jobs", "-j", type=_jobs, default=None, metavar="N",
-                   help="participants run at a time, each with its own simulated device "
-                        "(default: the CPU count)")
-    p.add_argument("--source", default=DEFAULT_SOURCE, metavar="SPEC",
-                   help="the virtual participant: participant[:key=value,...] "
-                        "(graspguide.study.participant parameters; default: the documented "
-                        "defaults)")
+    p = sub.add_parser(
+        "demo",
+        help="the paper's study end to end, simulated: 8 virtual "
+        "participants, then Tables I-II, the ANOVA and Figure 4",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--participants",
+        type=_jobs,
+        default=8,
+        metavar="N",
+        help="virtual participants U1..UN (default 8, as in the paper)",
+    )
+    p.add_argument(
+        "--protocol",
+        default=None,
+        metavar="FILE",
+        help="study protocol (default: protocols/paper.toml of the repository)",
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="study folder (default: logs/demo-study in the repository); "
+        "running again into it resumes or, when complete, re-analyses",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=_jobs,
+        default=None,
+        metavar="N",
+        help="participants run at a time, each with its own simulated device "
+        "(default: the CPU count)",
+    )
+    p.add_argument(
+        "--source",
+        default=DEFAULT_SOURCE,
+        metavar="SPEC",
+        help="the virtual participant: participant[:key=value,...] "
+        "(graspguide.study.participant parameters; default: the documented "
+        "defaults)",
+    )
     p.set_defaults(handler=run, command_parser=p)
     return p
 
 
-def _status(protocol, out: str, pid: str) -> Tuple[int, int, bool]:
+def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
     """(completed trials, planned trials, complete incl. TLX) of a participant."""
-    from graspguide.study.study_protocol import plan, session_order
     from graspguide.study.runner import read_jsonl
+    from graspguide.study.study_protocol import plan, session_order
 
     planned = len(plan(protocol, pid))
     pdir = os.path.join(out, pid)
     try:
-        done = {r.get("trial_index") for r in
-                read_jsonl(os.path.join(pdir, "trials.jsonl")).records}
+        done = {
+            r.get("trial_index") for r in read_jsonl(os.path.join(pdir, "trials.jsonl")).records
+        }
         tlx = {r.get("session") for r in read_jsonl(os.path.join(pdir, "tlx.jsonl")).records}
     except Exception:
-        return 0, planned, False      # let the runner report what is wrong
+        return 0, planned, False  # let the runner report what is wrong
     sessions = {s.session for s in session_order(protocol, pid)}
     return len(done), planned, len(done) >= planned and sessions <= tlx
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.study_protocol import ProtocolFileError, load_protocol
     from graspguide.study.runner import RunnerError, open_runner_source
+    from graspguide.study.study_protocol import ProtocolFileError, load_protocol
 
     t0 = time.monotonic()
     protocol_path = args.protocol or default_protocol()
@@ -115,29 +144,34 @@ def run(args: argparse.Namespace) -> int:
     try:
         protocol = load_protocol(protocol_path)
         if not args.source.startswith("participant"):
-            raise RunnerError("--source must be the virtual participant: "
-                              "participant[:key=value,...]", usage=True)
-        open_runner_source(args.source, protocol, "U1")   # checks the spec
+            raise RunnerError(
+                "--source must be the virtual participant: participant[:key=value,...]", usage=True
+            )
+        open_runner_source(args.source, protocol, "U1")  # checks the spec
     except (ProtocolFileError, RunnerError) as e:
         print(f"graspguide demo: error: {e}", file=sys.stderr)
         return EXIT_USAGE
     pids = [f"U{i}" for i in range(1, args.participants + 1)]
     logs = os.path.join(out, "demo-logs")
     os.makedirs(logs, exist_ok=True)
-    print(f"SIMULATED study (virtual participants, not human data): protocol {protocol_path}, "
-          f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {args.source}, "
-          f"{min(jobs, len(pids))} at a time; study folder {out}", flush=True)
+    print(
+        f"SIMULATED study (virtual participants, not human data): protocol {protocol_path}, "
+        f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {args.source}, "
+        f"{min(jobs, len(pids))} at a time; study folder {out}",
+        flush=True,
+    )
 
     status = {pid: _status(protocol, out, pid) for pid in pids}
     total = sum(s[1] for s in status.values())
     todo = [pid for pid in pids if not status[pid][2]]
     before = sum(s[0] for s in status.values())
     if not todo:
-        print(f"the study in {out} is complete ({total} trials): analysing it again",
-              flush=True)
+        print(f"the study in {out} is complete ({total} trials): analysing it again", flush=True)
     elif before:
-        print(f"resuming: {before} of {total} trials already completed are kept and not run "
-              "again", flush=True)
+        print(
+            f"resuming: {before} of {total} trials already completed are kept and not run again",
+            flush=True,
+        )
 
     code = _run_participants(args, protocol_path, out, logs, todo, jobs, total, status)
     if code != EXIT_OK:
@@ -146,12 +180,22 @@ def run(args: argparse.Namespace) -> int:
     return _analyse(out, run_s, t0)
 
 
-def _run_participants(args, protocol_path: str, out: str, logs: str, todo: List[str],
-                      jobs: int, total: int, status: Dict[str, Tuple[int, int, bool]]) -> int:
+def _run_participants(
+    args,
+    protocol_path: str,
+    out: str,
+    logs: str,
+    todo: list[str],
+    jobs: int,
+    total: int,
+    status: dict[str, tuple[int, int, bool]],
+) -> int:
     if not todo:
         return EXIT_OK
-    tasks = [TrialJob(protocol_path, out, pid, args.source, os.path.join(logs, f"{pid}.log"))
-             for pid in todo]
+    tasks = [
+        TrialJob(protocol_path, out, pid, args.source, os.path.join(logs, f"{pid}.log"))
+        for pid in todo
+    ]
     next_report = [time.monotonic() + 5.0]
 
     def done_trials() -> int:
@@ -159,29 +203,43 @@ def _run_participants(args, protocol_path: str, out: str, logs: str, todo: List[
 
     def on_exit(job: TrialJob, rc: int) -> None:
         if rc == 0:
-            print(f"{job.participant}: done, {job.completed_trials()}/"
-                  f"{status[job.participant][1]} trials (simulated)", flush=True)
+            print(
+                f"{job.participant}: done, {job.completed_trials()}/"
+                f"{status[job.participant][1]} trials (simulated)",
+                flush=True,
+            )
         else:
-            print(f"{job.participant}: `graspguide trial` exited with {rc}; see {job.log}",
-                  file=sys.stderr, flush=True)
+            print(
+                f"{job.participant}: `graspguide trial` exited with {rc}; see {job.log}",
+                file=sys.stderr,
+                flush=True,
+            )
 
-    def on_tick(running: List[TrialJob]) -> None:
+    def on_tick(running: list[TrialJob]) -> None:
         if time.monotonic() >= next_report[0]:
             next_report[0] = time.monotonic() + 10.0
-            print(f"  {done_trials()}/{total} trials done; running "
-                  f"{', '.join(j.participant for j in running)}", flush=True)
+            print(
+                f"  {done_trials()}/{total} trials done; running "
+                f"{', '.join(j.participant for j in running)}",
+                flush=True,
+            )
 
     interrupted, failed = run_trial_jobs(tasks, jobs, on_exit, on_tick, poll_s=0.1)
     if interrupted:
-        print(f"\ngraspguide demo: interrupted with {done_trials()}/{total} trials done; "
-              "completed trials are saved: run the same command again to resume",
-              file=sys.stderr)
+        print(
+            f"\ngraspguide demo: interrupted with {done_trials()}/{total} trials done; "
+            "completed trials are saved: run the same command again to resume",
+            file=sys.stderr,
+        )
         return EXIT_INTERRUPTED
     if failed:
-        print("graspguide demo: error: " + ", ".join(f"{j.participant} (exit {c})"
-                                                     for j, c in failed)
-              + f" failed; their logs are in {logs}; completed trials are kept: fix the cause "
-              "and run the same command again", file=sys.stderr)
+        print(
+            "graspguide demo: error: "
+            + ", ".join(f"{j.participant} (exit {c})" for j, c in failed)
+            + f" failed; their logs are in {logs}; completed trials are kept: fix the cause "
+            "and run the same command again",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     return EXIT_OK
 
@@ -200,8 +258,10 @@ def _analyse(out: str, run_s: float, t0: float) -> int:
     print(summary_text(res))
     print()
     print(f"Wrote {', '.join(p.name for p in written)} to {target}")
-    print(f"SIMULATED study: {len(res.participants)} virtual participants; trials "
-          f"{run_s:.1f} s, total {time.monotonic() - t0:.1f} s wall time")
+    print(
+        f"SIMULATED study: {len(res.participants)} virtual participants; trials "
+        f"{run_s:.1f} s, total {time.monotonic() - t0:.1f} s wall time"
+    )
     return EXIT_OK
 
 

@@ -1,6 +1,7 @@
 """Many `graspguide trial` processes at a time, each with its own simulated device: what
 `graspguide demo` and `graspguide sweep` share. A job is one participant of one study
 folder; the runner inside it resumes, so a killed pool loses no completed trial."""
+
 from __future__ import annotations
 
 import argparse
@@ -10,7 +11,8 @@ import signal
 import subprocess
 import sys
 import time
-from typing import Any, Callable, List, Optional, Tuple
+from collections.abc import Callable
+from typing import Any
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -22,20 +24,34 @@ class TrialJob:
     participant: str
     source: str
     log: str
-    tag: Any = None   # the caller's (what the job stands for, for its messages)
+    tag: Any = None  # the caller's (what the job stands for, for its messages)
 
-    def command(self) -> List[str]:
-        return [sys.executable, "-m", "graspguide", "trial", "--protocol",
-                self.protocol_path, "--participant", self.participant, "--port", "sim",
-                "--source", self.source, "--out", self.study_dir]
+    def command(self) -> list[str]:
+        return [
+            sys.executable,
+            "-m",
+            "graspguide",
+            "trial",
+            "--protocol",
+            self.protocol_path,
+            "--participant",
+            self.participant,
+            "--port",
+            "sim",
+            "--source",
+            self.source,
+            "--out",
+            self.study_dir,
+        ]
 
     def completed_trials(self) -> int:
         return count_lines(os.path.join(self.study_dir, self.participant, "trials.jsonl"))
 
 
-def repo_root() -> Optional[str]:
+def repo_root() -> str | None:
     try:
         from graspguide.link.transport import find_repo_root
+
         return find_repo_root()
     except Exception:  # pragma: no cover - informational default only
         return None
@@ -53,6 +69,7 @@ def default_out(name: str) -> str:
 
 def int_arg(lo: int, hi: int) -> Callable[[str], int]:
     """An argparse type: an integer in [lo, hi]."""
+
     def conv(text: str) -> int:
         try:
             v = int(text)
@@ -61,6 +78,7 @@ def int_arg(lo: int, hi: int) -> Callable[[str], int]:
         if not lo <= v <= hi:
             raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
         return v
+
     return conv
 
 
@@ -72,14 +90,18 @@ def count_lines(path: str) -> int:
         return 0
 
 
-def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
-                   on_exit: Callable[[TrialJob, int], None],
-                   on_tick: Optional[Callable[[List[TrialJob]], None]] = None,
-                   poll_s: float = 0.05) -> Tuple[bool, List[Tuple[TrialJob, int]]]:
+def run_trial_jobs(
+    jobs: list[TrialJob],
+    max_jobs: int,
+    on_exit: Callable[[TrialJob, int], None],
+    on_tick: Callable[[list[TrialJob]], None] | None = None,
+    poll_s: float = 0.05,
+) -> tuple[bool, list[tuple[TrialJob, int]]]:
     """Runs the jobs, ``max_jobs`` at a time; ``on_exit(job, returncode)`` as each ends,
     ``on_tick(running jobs)`` every poll. SIGTERM/SIGHUP/Ctrl-C stop the running runners
     with SIGTERM (each sends STOP and keeps its completed trials). Returns (interrupted,
     failed jobs with their return codes)."""
+
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
@@ -89,8 +111,8 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
     preexec = die_with_parent()
     old = {s: signal.signal(s, _interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
     queue = list(jobs)
-    running: List[Tuple[TrialJob, subprocess.Popen, Any]] = []
-    failed: List[Tuple[TrialJob, int]] = []
+    running: list[tuple[TrialJob, subprocess.Popen, Any]] = []
+    failed: list[tuple[TrialJob, int]] = []
     try:
         while queue or running:
             while queue and len(running) < max_jobs:
@@ -100,8 +122,13 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
                 log = open(job.log, "ab")
                 log.write(f"\n$ {' '.join(cmd)}\n".encode())
                 log.flush()
-                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log,
-                                        stderr=subprocess.STDOUT, preexec_fn=preexec)
+                proc = subprocess.Popen(
+                    cmd,
+                    stdin=subprocess.DEVNULL,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    preexec_fn=preexec,
+                )
                 running.append((job, proc, log))
             time.sleep(poll_s)
             for item in list(running):
@@ -119,7 +146,7 @@ def run_trial_jobs(jobs: List[TrialJob], max_jobs: int,
     except KeyboardInterrupt:
         for _, proc, _ in running:
             if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)   # the runner STOPs and exits (130)
+                proc.send_signal(signal.SIGTERM)  # the runner STOPs and exits (130)
         for _, proc, log in running:
             try:
                 proc.wait(timeout=10)

@@ -75,12 +75,15 @@ from __future__ import annotations
 import hashlib
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
-from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 import numpy as np
 
-from graspguide.study.sources import quat_angle_deg as quaternion_angle_deg  # re-exported: tests, analysis
+from graspguide.study.sources import (
+    quat_angle_deg as quaternion_angle_deg,  # re-exported: tests, analysis
+)
 
 # Every number a pose depends on is computed on plain Python floats with `math`, in a
 # fixed order. numpy's linear algebra (norm, dot, @) runs in OpenBLAS, whose kernel -- and
@@ -91,11 +94,11 @@ from graspguide.study.sources import quat_angle_deg as quaternion_angle_deg  # r
 # not depend on the CPU). Left: the last bit of libm's sin/cos/exp/atan2 (glibc has an FMA
 # code path). tools/tests/test_participant.py checks both: the same bits under another
 # OpenBLAS kernel, and a golden record within a tolerance stated there.
-Vec3 = Tuple[float, float, float]
-Quat = Tuple[float, float, float, float]
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
 
-PWM_FLOOR = 70      # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
-PWM_RANGE = 185     # PWM span above the floor, docs/algorithm.md step 6
+PWM_FLOOR = 70  # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
+PWM_RANGE = 185  # PWM span above the floor, docs/algorithm.md step 6
 PWM_MAX = 255
 GRAVITY: Vec3 = (0.0, 0.0, -1.0)
 _POLICIES = ("F", "Fperp")
@@ -190,24 +193,27 @@ def _validate_params(p: ParticipantParams) -> None:
         elif not v > 0:
             raise ValueError(f"participant parameter {f.name} must be > 0, got {v!r}")
         if f.name in _FRAC_FIELDS and v >= 1:
-            raise ValueError(f"participant parameter {f.name} is a fraction and must be < 1, "
-                             f"got {v!r}")
+            raise ValueError(
+                f"participant parameter {f.name} is a fraction and must be < 1, got {v!r}"
+            )
 
 
 # --------------------------------------------------------------------------------------
 # Rotations (quaternions [w, x, y, z], hand -> world, like POSE)
 # --------------------------------------------------------------------------------------
-def _qmul(a: Tuple[float, ...], b: Tuple[float, ...]) -> Tuple[float, float, float, float]:
+def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
     """Quaternion product on plain floats (the per-step path)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
 
 
-def _qexp(x: float, y: float, z: float) -> Tuple[float, float, float, float]:
+def _qexp(x: float, y: float, z: float) -> tuple[float, float, float, float]:
     """Unit quaternion of the rotation vector (x, y, z) [rad], plain floats."""
     angle = math.sqrt(x * x + y * y + z * z)
     if angle < 1e-12:
@@ -217,7 +223,7 @@ def _qexp(x: float, y: float, z: float) -> Tuple[float, float, float, float]:
     return (math.cos(0.5 * angle), x * s, y * s, z * s)
 
 
-def _qnormalize(q: Tuple[float, ...]) -> Tuple[float, float, float, float]:
+def _qnormalize(q: tuple[float, ...]) -> tuple[float, float, float, float]:
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
@@ -267,13 +273,16 @@ class FeelLagError(RuntimeError):
 
 
 def _check_time(t_s: Any) -> float:
-    if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.floating, np.integer)) \
-            or not math.isfinite(float(t_s)):
+    if (
+        isinstance(t_s, bool)
+        or not isinstance(t_s, (int, float, np.floating, np.integer))
+        or not math.isfinite(float(t_s))
+    ):
         raise ValueError(f"t_s must be a finite number of seconds, got {t_s!r}")
     return float(t_s)
 
 
-def _finite_vector(x: Any, n: Optional[int], what: str) -> np.ndarray:
+def _finite_vector(x: Any, n: int | None, what: str) -> np.ndarray:
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError):
@@ -315,14 +324,23 @@ class VirtualParticipant:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_spec(cls, spec: str, seed: int) -> "VirtualParticipant":
+    def from_spec(cls, spec: str, seed: int) -> VirtualParticipant:
         """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams
         fields); also just the part after ``participant:`` (``""`` for the defaults)."""
         return cls(parse_spec(spec), seed)
 
     # ------------------------------------------------------------------ trial
-    def begin_trial(self, *, contacts, y_axis, wrench, policy: str, mode: str,
-                    start_quat, noise_seed: Optional[int] = None) -> None:
+    def begin_trial(
+        self,
+        *,
+        contacts,
+        y_axis,
+        wrench,
+        policy: str,
+        mode: str,
+        start_quat,
+        noise_seed: int | None = None,
+    ) -> None:
         """Start a trial. ``wrench`` never enters a decision (see the module doc).
 
         The trial's random stream (perception and motor noise, tremor phases, search
@@ -359,9 +377,18 @@ class VirtualParticipant:
         if not all(n > 1e-9 * max(1.0, max(norms)) for n in norms):
             raise ValueError("contacts must not coincide with their centroid")
         if noise_seed is None:
-            digest = hashlib.sha256(b"|".join([
-                c.tobytes(), y.tobytes(), w.tobytes(), policy.encode(), mode.encode(),
-                q.tobytes()])).digest()
+            digest = hashlib.sha256(
+                b"|".join(
+                    [
+                        c.tobytes(),
+                        y.tobytes(),
+                        w.tobytes(),
+                        policy.encode(),
+                        mode.encode(),
+                        q.tobytes(),
+                    ]
+                )
+            ).digest()
             trial_key = int.from_bytes(digest[:8], "little")
         else:
             if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)):
@@ -374,20 +401,20 @@ class VirtualParticipant:
         self._k = c.shape[0]
         self.policy = policy
         self.mode = mode
-        self._qt = _qnormalize(q0)             # commanded (proprioceptive) orientation
-        self._motor = [0.0] * self._k          # ERM speeds, PWM units
-        self._history: Deque[Tuple[float, List[float]]] = deque()
-        self._t_prev: Optional[float] = None   # time of the last motor update
-        self._t_last: Optional[float] = None   # time of the last act/step
-        self._unfelt: Deque[float] = deque()   # act times whose telemetry is not felt yet
-        self._keys: Deque[float] = deque()     # act times whose motor update waits for PWM
+        self._qt = _qnormalize(q0)  # commanded (proprioceptive) orientation
+        self._motor = [0.0] * self._k  # ERM speeds, PWM units
+        self._history: deque[tuple[float, list[float]]] = deque()
+        self._t_prev: float | None = None  # time of the last motor update
+        self._t_last: float | None = None  # time of the last act/step
+        self._unfelt: deque[float] = deque()  # act times whose telemetry is not felt yet
+        self._keys: deque[float] = deque()  # act times whose motor update waits for PWM
         # Felt PWM waiting for its motor update; the first pose's: nothing felt (zeros).
-        self._inputs: Deque[List[float]] = deque([[0.0] * self._k])
-        self._cue_onset: Optional[float] = None
-        self._move: Optional[Dict[str, Any]] = None
-        self._next_decision: Optional[float] = None
+        self._inputs: deque[list[float]] = deque([[0.0] * self._k])
+        self._cue_onset: float | None = None
+        self._move: dict[str, Any] | None = None
+        self._next_decision: float | None = None
         self._plans = 0
-        self._search: Dict[str, Any] = {}
+        self._search: dict[str, Any] = {}
         p = self.params
         # Tremor: two independent horizontal components with random phases.
         self._tremor_phase = self._rng.uniform(0.0, 2.0 * math.pi, size=2).tolist()
@@ -395,13 +422,14 @@ class VirtualParticipant:
         self._trial = True
 
     # ------------------------------------------------------------------ perception
-    def motor_speeds(self) -> List[float]:
+    def motor_speeds(self) -> list[float]:
         """Current ERM speeds in PWM units (the first-order lag of the PWM)."""
         self._need_trial()
         return [float(v) for v in self._motor]
 
-    def felt_direction(self, speeds: Optional[Sequence[float]] = None,
-                       noise: Optional[Sequence[float]] = None) -> Optional[np.ndarray]:
+    def felt_direction(
+        self, speeds: Sequence[float] | None = None, noise: Sequence[float] | None = None
+    ) -> np.ndarray | None:
         """Weight direction the participant infers in its hand frame (unit), or None
         when no motor is felt. ``speeds``: motor speeds (default: the current ones);
         ``noise``: k standard normal draws for the Weber noise (default: none)."""
@@ -409,8 +437,7 @@ class VirtualParticipant:
         d = self._direction(self._motor if speeds is None else speeds, noise)
         return None if d is None else np.array(d)
 
-    def _direction(self, speeds: Sequence[float],
-                   noise: Optional[Sequence[float]]) -> Optional[Vec3]:
+    def _direction(self, speeds: Sequence[float], noise: Sequence[float] | None) -> Vec3 | None:
         s = [float(v) for v in speeds]
         felt = [v >= 0.5 * PWM_FLOOR for v in s]
         if not any(felt):
@@ -432,8 +459,9 @@ class VirtualParticipant:
             return None
         return (d[0] / n, d[1] / n, d[2] / n)
 
-    def felt_distance_deg(self, speeds: Optional[Sequence[float]] = None,
-                          noise: Optional[Sequence[float]] = None) -> Optional[float]:
+    def felt_distance_deg(
+        self, speeds: Sequence[float] | None = None, noise: Sequence[float] | None = None
+    ) -> float | None:
         """Distance to the target the participant reads from the intensity [deg]; None in
         mode C (no magnitude information) or when no motor is felt."""
         self._need_trial()
@@ -457,7 +485,7 @@ class VirtualParticipant:
         return math.degrees(2.0 * math.asin(min(1.0, step / PWM_RANGE)))
 
     # ------------------------------------------------------------------ the loop
-    def step(self, t_s: float, pwm: Sequence[int]) -> Tuple[float, float, float, float]:
+    def step(self, t_s: float, pwm: Sequence[int]) -> tuple[float, float, float, float]:
         """Lockstep: advance to virtual time ``t_s`` having felt ``pwm`` (the PWM of the
         previous pose's telemetry; at the first pose of a trial the PWM of the interval
         before it, normally zeros); return the pose (w, x, y, z) at ``t_s``.
@@ -472,12 +500,14 @@ class VirtualParticipant:
             raise ValueError(f"time went backwards: {t} after {self._t_last}")
         if self._unfelt:
             if len(self._unfelt) > 1:
-                raise RuntimeError("step() after act() with poses not yet felt: call feel() "
-                                   "for them (or use feel/act throughout)")
+                raise RuntimeError(
+                    "step() after act() with poses not yet felt: call feel() "
+                    "for them (or use feel/act throughout)"
+                )
             self._unfelt.popleft()
             self._inputs.append(u)
         elif self._t_last is None and len(self._inputs) == 1:
-            self._inputs[0] = u             # the first pose: the input before it
+            self._inputs[0] = u  # the first pose: the input before it
         else:
             raise RuntimeError("step() after the last pose was already felt: call act()")
         return self._act(t)
@@ -495,13 +525,15 @@ class VirtualParticipant:
         u = self._check_pwm(pwm)
         if not self._unfelt or t != self._unfelt[0]:
             expected = self._unfelt[0] if self._unfelt else None
-            raise ValueError(f"feel({t}) is not for the oldest pose not yet felt "
-                             f"(expected t_s = {expected}); feel the poses act() gave, in "
-                             "order, once each")
+            raise ValueError(
+                f"feel({t}) is not for the oldest pose not yet felt "
+                f"(expected t_s = {expected}); feel the poses act() gave, in "
+                "order, once each"
+            )
         self._unfelt.popleft()
         self._inputs.append(u)
 
-    def act(self, t_s: float) -> Tuple[float, float, float, float]:
+    def act(self, t_s: float) -> tuple[float, float, float, float]:
         """The pose (w, x, y, z) at virtual time ``t_s`` (after the previous act/step time).
 
         **Guarantee** (docs/participant.md, "feel and act"): the pose depends on a felt
@@ -529,7 +561,7 @@ class VirtualParticipant:
         n = int(math.floor(self.params.reaction_time_s * float(pose_rate_hz) + 1e-9)) - 1
         return max(1, n)
 
-    def _act(self, t: float) -> Tuple[float, float, float, float]:
+    def _act(self, t: float) -> tuple[float, float, float, float]:
         """act() without the argument checks (t is a float, not before the last one)."""
         self._t_last = t
         self._unfelt.append(t)
@@ -542,12 +574,12 @@ class VirtualParticipant:
             # pose could depend on (see act()).
             s = keys[0]
             p = self.params
-            if s <= t - p.reaction_time_s or \
-                    s + 3.0 * p.erm_tau_s + p.reaction_time_s <= t:
+            if s <= t - p.reaction_time_s or s + 3.0 * p.erm_tau_s + p.reaction_time_s <= t:
                 raise FeelLagError(
                     f"act({t}) is too far ahead of feel(): the PWM of the pose before "
                     f"{s} is not felt yet and the pose at {t} could depend on it (act may "
-                    f"run at most reaction_time_s = {p.reaction_time_s} s ahead)")
+                    f"run at most reaction_time_s = {p.reaction_time_s} s ahead)"
+                )
 
         # 2. Decide (with the percept of reaction_time_s ago) when the last movement and
         #    its pause are over.
@@ -558,7 +590,7 @@ class VirtualParticipant:
         if self._move is not None:
             m = self._move
             tau = min(1.0, (t - m["t0"]) / m["T"]) if m["T"] > 0 else 1.0
-            s = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+            s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
             rx, ry, rz = m["rotvec_t"]
             self._qt = _qmul(_qexp(rx * s, ry * s, rz * s), m["q0_t"])
             if tau >= 1.0:
@@ -570,11 +602,17 @@ class VirtualParticipant:
         q = self._qt
         if self._tremor_amp > 0:
             w = 2.0 * math.pi * self.params.tremor_frequency_hz * t
-            q = _qmul(_qexp(self._tremor_amp * math.sin(w + self._tremor_phase[0]),
-                            self._tremor_amp * math.sin(w + self._tremor_phase[1]), 0.0), q)
+            q = _qmul(
+                _qexp(
+                    self._tremor_amp * math.sin(w + self._tremor_phase[0]),
+                    self._tremor_amp * math.sin(w + self._tremor_phase[1]),
+                    0.0,
+                ),
+                q,
+            )
         return _qnormalize(q)
 
-    def _advance(self, t: float, u: List[float]) -> None:
+    def _advance(self, t: float, u: list[float]) -> None:
         """The motors from the previous motor time to ``t`` with the PWM ``u`` held (the
         delay line gets the state at ``t``); the first felt cue starts the clock of the
         first decision."""
@@ -587,18 +625,16 @@ class VirtualParticipant:
         self._motor = motor
         self._history.append((t, motor))
         if self._cue_onset is None:
-            while len(self._history) > 1 and \
-                    self._history[1][0] <= t - self.params.reaction_time_s:
+            while len(self._history) > 1 and self._history[1][0] <= t - self.params.reaction_time_s:
                 self._history.popleft()
             if max(motor) >= 0.5 * PWM_FLOOR:
                 # First felt cue. Relative strengths can be judged once the motors have
                 # (nearly) reached their steady speed (3 tau: 95 %); the first movement
                 # starts a reaction time after that percept.
                 self._cue_onset = t
-                self._next_decision = (t + 3.0 * self.params.erm_tau_s
-                                       + self.params.reaction_time_s)
+                self._next_decision = t + 3.0 * self.params.erm_tau_s + self.params.reaction_time_s
 
-    def _check_pwm(self, pwm: Any) -> List[float]:
+    def _check_pwm(self, pwm: Any) -> list[float]:
         # Fast path: a list or tuple of k ints/floats in 0..255 (NaN fails the range test).
         if type(pwm) in (list, tuple) and len(pwm) == self._k:
             try:
@@ -609,7 +645,7 @@ class VirtualParticipant:
                 return u
         return self._check_pwm_slow(pwm)
 
-    def _check_pwm_slow(self, pwm: Any) -> List[float]:
+    def _check_pwm_slow(self, pwm: Any) -> list[float]:
         what = f"pwm must be {self._k} numbers 0..255"
         if isinstance(pwm, (str, bytes)) or not hasattr(pwm, "__iter__"):
             raise ValueError(f"{what}, got {pwm!r}")
@@ -619,7 +655,8 @@ class VirtualParticipant:
         out = []
         for v in u:
             if isinstance(v, (bool, np.bool_)) or not isinstance(
-                    v, (int, float, np.integer, np.floating)):
+                v, (int, float, np.integer, np.floating)
+            ):
                 raise ValueError(f"{what}, got {u!r}")
             x = float(v)
             if not math.isfinite(x):
@@ -634,14 +671,14 @@ class VirtualParticipant:
         if not self._trial:
             raise RuntimeError("call begin_trial() first")
 
-    def _delayed_speeds(self, t: float) -> List[float]:
+    def _delayed_speeds(self, t: float) -> list[float]:
         """Motor speeds as they were reaction_time_s before t (the delay line)."""
         horizon = t - self.params.reaction_time_s
         while len(self._history) > 1 and self._history[1][0] <= horizon:
             self._history.popleft()
         return self._history[0][1]
 
-    def _noise(self) -> List[float]:
+    def _noise(self) -> list[float]:
         return self._rng.standard_normal(self._k).tolist()
 
     def _start_move(self, t: float, rotvec: Vec3, pause: float) -> None:
@@ -658,7 +695,7 @@ class VirtualParticipant:
     def _hold(self, t: float, duration: float) -> None:
         self._next_decision = t + duration
 
-    def _tilt_to_align(self, d_hand: Vec3) -> Tuple[Vec3, float]:
+    def _tilt_to_align(self, d_hand: Vec3) -> tuple[Vec3, float]:
         """World rotation vector bringing the hand direction d_hand to gravity, and its angle."""
         u = _rotate(self._qt, d_hand)
         axis = _cross(u, GRAVITY)
@@ -667,7 +704,7 @@ class VirtualParticipant:
         if s < 1e-12:
             if angle < 1e-6:
                 return (0.0, 0.0, 0.0), 0.0
-            axis = (1.0, 0.0, 0.0)             # antiparallel: any horizontal axis
+            axis = (1.0, 0.0, 0.0)  # antiparallel: any horizontal axis
             s = 1.0
         return (axis[0] / s * angle, axis[1] / s * angle, axis[2] / s * angle), angle
 
@@ -675,7 +712,7 @@ class VirtualParticipant:
         p = self.params
         speeds = self._delayed_speeds(t)
         direction = self._direction(speeds, self._noise())
-        if direction is None:          # nothing felt (cue over): stay
+        if direction is None:  # nothing felt (cue over): stay
             self._hold(t, p.reaction_time_s)
             return
         distance = self.felt_distance_deg(speeds, self._noise())  # None in mode C
@@ -689,8 +726,12 @@ class VirtualParticipant:
                 # The first candidate is the first estimate itself (the centre of the
                 # candidate grid); wait there for the cue to stop.
                 grid = _hex_directions(direction, _C_SPACING * p.task_threshold_deg)
-                self._search = {"grid": grid, "readings": direction, "n_readings": 1,
-                                "tried": np.zeros(len(grid[0]), dtype=bool)}
+                self._search = {
+                    "grid": grid,
+                    "readings": direction,
+                    "n_readings": 1,
+                    "tried": np.zeros(len(grid[0]), dtype=bool),
+                }
                 self._start_move(t, rotvec, self.c_dwell_s())
             else:
                 self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
@@ -730,12 +771,12 @@ class VirtualParticipant:
         # at again, with a small, precise correction.
         down = _rotate(_conj(self._qt), GRAVITY)
         tol = math.radians(_C_AIM_TOL * self.params.task_threshold_deg)
-        gx, gy, gz = grid                  # elementwise only: _hex_directions says why
+        gx, gy, gz = grid  # elementwise only: _hex_directions says why
         tried |= gx * down[0] + gy * down[1] + gz * down[2] >= math.cos(tol)
-        if tried.all():                    # the whole sphere tried: start over
+        if tried.all():  # the whole sphere tried: start over
             tried[:] = False
         cosines = np.where(tried, -np.inf, gx * centre[0] + gy * centre[1] + gz * centre[2])
-        i = int(np.argmax(cosines))        # the nearest untried candidate (first on ties)
+        i = int(np.argmax(cosines))  # the nearest untried candidate (first on ties)
         rotvec, _ = self._tilt_to_align((float(gx[i]), float(gy[i]), float(gz[i])))
         self._start_move(t, rotvec, self.c_dwell_s())
 
@@ -756,18 +797,31 @@ class VirtualParticipant:
         pause = p.reaction_time_s + 3.0 * p.erm_tau_s
         if "base_q" not in st:
             # Right after the first (metaphor) move: this pose is the first base.
-            st.update(base_q=self._qt, base_sum=distance, base_n=1,
-                      axis=self._random_horizontal(), tries=0, step=max(distance, res),
-                      at_base=True, held=False)
+            st.update(
+                base_q=self._qt,
+                base_sum=distance,
+                base_n=1,
+                axis=self._random_horizontal(),
+                tries=0,
+                step=max(distance, res),
+                at_base=True,
+                held=False,
+            )
         elif st["at_base"]:
-            st["base_sum"] += distance             # felt the base again
+            st["base_sum"] += distance  # felt the base again
             st["base_n"] += 1
         else:
             base_val = st["base_sum"] / st["base_n"]
-            if distance < base_val:                # warmer: new base, same direction
-                st.update(base_q=self._qt, base_sum=distance, base_n=1, tries=0,
-                          step=max(distance, res), held=False)
-            else:                                  # colder: back to the base
+            if distance < base_val:  # warmer: new base, same direction
+                st.update(
+                    base_q=self._qt,
+                    base_sum=distance,
+                    base_n=1,
+                    tries=0,
+                    step=max(distance, res),
+                    held=False,
+                )
+            else:  # colder: back to the base
                 st["tries"] += 1
                 turn = (0.5 * math.pi, math.pi, -0.5 * math.pi, math.pi)[(st["tries"] - 1) % 4]
                 a = st["axis"]
@@ -802,7 +856,7 @@ _C_AIM_TOL = 1.0 / 3.0
 _C_SPACING = math.sqrt(3.0) * (1.0 - _C_AIM_TOL)
 
 
-def _hex_directions(centre: Vec3, spacing_deg: float) -> Tuple[np.ndarray, ...]:
+def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
     """Unit directions on a hexagonal lattice of the given spacing in the tangent plane at
     ``centre`` (mapped onto the sphere by the exponential map), sorted by their angle to
     the centre (the centre first), out to 180 degrees; as three arrays (x, y, z).
@@ -821,10 +875,13 @@ def _hex_directions(centre: Vec3, spacing_deg: float) -> Tuple[np.ndarray, ...]:
     h = math.sqrt(3.0) / 2.0
     # Point (i, j) lies at (i + j/2, j sqrt(3)/2) s, at the distance sqrt(i^2 + i j + j^2) s:
     # sorting by that integer orders the rings exactly, then by angle within a ring.
-    points = sorted((k, math.atan2(y, x), x, y, math.sqrt(k) * s)
-                    for i in range(-n, n + 1) for j in range(-n, n + 1)
-                    for k, x, y in ((i * i + i * j + j * j, (i + 0.5 * j) * s, j * h * s),)
-                    if math.sqrt(k) * s <= math.pi + 1e-12)
+    points = sorted(
+        (k, math.atan2(y, x), x, y, math.sqrt(k) * s)
+        for i in range(-n, n + 1)
+        for j in range(-n, n + 1)
+        for k, x, y in ((i * i + i * j + j * j, (i + 0.5 * j) * s, j * h * s),)
+        if math.sqrt(k) * s <= math.pi + 1e-12
+    )
     out = []
     for _, _, x, y, r in points:
         if r > 0:
@@ -846,15 +903,14 @@ def parse_spec(spec: str) -> ParticipantParams:
     """ParticipantParams from ``participant``, ``participant:key=val,key=val`` or the part
     after ``participant:`` alone (``""``: the defaults)."""
     names = [f.name for f in fields(ParticipantParams)]
-    usage = ("expected 'participant' or 'participant:key=value,...' with keys "
-             + ", ".join(names))
+    usage = "expected 'participant' or 'participant:key=value,...' with keys " + ", ".join(names)
     if not isinstance(spec, str):
         raise ValueError(f"participant spec must be a string; {usage}")
     head, sep, rest = spec.partition(":")
     if head.strip() != "participant":
         # Also accepted: what follows 'participant:' alone ('' = the defaults).
         head, sep, rest = "participant", (":" if spec.strip() else ""), spec
-    values: Dict[str, float] = {}
+    values: dict[str, float] = {}
     if sep:
         if not rest.strip():
             raise ValueError(f"participant spec {spec!r} has ':' but no key=value; {usage}")
@@ -864,21 +920,29 @@ def parse_spec(spec: str) -> ParticipantParams:
             if not eq:
                 raise ValueError(f"participant spec item {item!r} is not key=value; {usage}")
             if key not in names:
-                raise ValueError(f"unknown participant parameter {key!r}; known: "
-                                 + ", ".join(names))
+                raise ValueError(
+                    f"unknown participant parameter {key!r}; known: " + ", ".join(names)
+                )
             if key in values:
                 raise ValueError(f"participant parameter {key!r} given twice")
             try:
                 x = float(val)
             except ValueError:
-                raise ValueError(f"participant parameter {key}={val.strip()!r} is not a number") \
-                    from None
+                raise ValueError(
+                    f"participant parameter {key}={val.strip()!r} is not a number"
+                ) from None
             values[key] = x
     params = ParticipantParams(**values)
     _validate_params(params)
     return params
 
 
-__all__ = ["ParticipantParams", "VirtualParticipant", "FeelLagError", "parse_spec",
-           "quaternion_angle_deg",
-           "PWM_FLOOR", "PWM_RANGE"]
+__all__ = [
+    "ParticipantParams",
+    "VirtualParticipant",
+    "FeelLagError",
+    "parse_spec",
+    "quaternion_angle_deg",
+    "PWM_FLOOR",
+    "PWM_RANGE",
+]

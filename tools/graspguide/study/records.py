@@ -29,12 +29,25 @@ import io
 import json
 import os
 import time
-from typing import Any, Dict, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 POSE_COLUMNS = ["send_time_s", "host_time_us", "t_s", "qw", "qx", "qy", "qz", "has_contacts"]
-TELEMETRY_COLUMNS = ["recv_time_s", "host_time_us", "error_deg", "alpha", "pwm0", "pwm1",
-                     "pwm2", "pwm3", "constraints_used", "solver_status", "iterations", "flags",
-                     "compute_time_us"]
+TELEMETRY_COLUMNS = [
+    "recv_time_s",
+    "host_time_us",
+    "error_deg",
+    "alpha",
+    "pwm0",
+    "pwm1",
+    "pwm2",
+    "pwm3",
+    "constraints_used",
+    "solver_status",
+    "iterations",
+    "flags",
+    "compute_time_us",
+]
 
 
 def _default(o: Any) -> Any:
@@ -52,16 +65,25 @@ class RecordWriteError(OSError):
     limit). ``str()`` is one line: what happened, which file, what to do. An appended
     record that failed is not in the file (see :func:`append_record`)."""
 
-    def __init__(self, path: str, cause: OSError, hint: str = "", appended: bool = False,
-                 cut_back: bool = True):
+    def __init__(
+        self,
+        path: str,
+        cause: OSError,
+        hint: str = "",
+        appended: bool = False,
+        cut_back: bool = True,
+    ):
         super().__init__(cause.errno, cause.strerror, path)
         reason, todo = _DISK_FAULTS.get(cause.errno, ("", "check the disk and the folder"))
         what = cause.strerror or str(cause) or type(cause).__name__
         if reason and reason.lower() != what.lower():
             what = f"{reason} ({what})"
         if appended:
-            what += ("; the record was not written, the file holds only whole records"
-                     if cut_back else "; it could not be cut back: its last line is partial")
+            what += (
+                "; the record was not written, the file holds only whole records"
+                if cut_back
+                else "; it could not be cut back: its last line is partial"
+            )
         self.message = f"cannot write {path}: {what}; {todo}{hint}"
 
     def __str__(self) -> str:
@@ -72,8 +94,10 @@ _WRITE_ELSEWHERE = "use a folder you can write to"
 _DISK_FAULTS = {
     errno.ENOSPC: ("the disk is full", "free some space on it"),
     errno.EDQUOT: ("the disk quota is used up", "free some space or raise the quota"),
-    errno.EFBIG: ("the file reached a size limit (`ulimit -f` or the file system's)",
-                  "raise the limit or start a new folder"),
+    errno.EFBIG: (
+        "the file reached a size limit (`ulimit -f` or the file system's)",
+        "raise the limit or start a new folder",
+    ),
     errno.EROFS: ("the folder is on a read-only file system", _WRITE_ELSEWHERE),
     errno.EACCES: ("permission denied", _WRITE_ELSEWHERE + " or fix its permissions"),
     errno.EPERM: ("not permitted", _WRITE_ELSEWHERE + " or fix its permissions"),
@@ -93,7 +117,7 @@ def append_record(fd: int, path: str, data: bytes, sync: bool = False, hint: str
             n = os.write(fd, view[done:])
             if n <= 0:  # pragma: no cover - regular files never take 0 bytes of >0
                 raise OSError(errno.EIO, "the write took no bytes")
-            done += n    # a short write: the next one says why (ENOSPC, EFBIG, ...)
+            done += n  # a short write: the next one says why (ENOSPC, EFBIG, ...)
         if sync:
             os.fsync(fd)
     except OSError as e:
@@ -140,7 +164,7 @@ class _Lines:
     """An append-only text file; every write is one complete line, flushed (and fsync'ed
     when ``sync``), or nothing (RecordWriteError)."""
 
-    def __init__(self, path: str, header: Optional[Sequence[str]] = None, sync: bool = False):
+    def __init__(self, path: str, header: Sequence[str] | None = None, sync: bool = False):
         self.path = path
         self.fd = open_append(path, _HINT)
         self.sync = sync
@@ -189,34 +213,44 @@ class SessionLog:
         return round(time.monotonic() - self.t0, 6)
 
     def write_json(self, name: str, data: Any) -> None:
-        write_json_file(self.path(name), data, _HINT, indent=2, sort_keys=True,
-                        default=_default)
+        write_json_file(self.path(name), data, _HINT, indent=2, sort_keys=True, default=_default)
 
-    def scene(self, data: Dict[str, Any]) -> None:
+    def scene(self, data: dict[str, Any]) -> None:
         self.write_json("scene.json", data)
 
     def device(self, hello: Any) -> None:
         self.write_json("device.json", hello)
 
-    def config(self, data: Dict[str, Any]) -> None:
+    def config(self, data: dict[str, Any]) -> None:
         self.write_json("config.json", data)
 
-    def pose(self, host_time_us: int, t_s: float, quat: Sequence[float],
-             has_contacts: bool) -> None:
-        self.poses.write_row([self.now(), int(host_time_us), repr(float(t_s))]
-                             + [repr(float(x)) for x in quat] + [int(bool(has_contacts))])
+    def pose(
+        self, host_time_us: int, t_s: float, quat: Sequence[float], has_contacts: bool
+    ) -> None:
+        self.poses.write_row(
+            [self.now(), int(host_time_us), repr(float(t_s))]
+            + [repr(float(x)) for x in quat]
+            + [int(bool(has_contacts))]
+        )
 
     def telemetry(self, tel: Any) -> None:
         d = tel.to_dict() if hasattr(tel, "to_dict") else dict(tel)
         pwm = list(d["pwm"]) + [0] * (4 - len(d["pwm"]))
         self.telemetry_file.write_row(
-            [self.now(), d["host_time_us"], repr(float(d["error_deg"])),
-             repr(float(d["alpha"]))] + pwm[:4]
-            + [_default(d["constraints_used"]) if isinstance(d["constraints_used"], enum.Enum)
-               else d["constraints_used"],
-               _default(d["solver_status"]) if isinstance(d["solver_status"], enum.Enum)
-               else d["solver_status"], d["iterations"], int(d["flags"]),
-               d["compute_time_us"]])
+            [self.now(), d["host_time_us"], repr(float(d["error_deg"])), repr(float(d["alpha"]))]
+            + pwm[:4]
+            + [
+                _default(d["constraints_used"])
+                if isinstance(d["constraints_used"], enum.Enum)
+                else d["constraints_used"],
+                _default(d["solver_status"])
+                if isinstance(d["solver_status"], enum.Enum)
+                else d["solver_status"],
+                d["iterations"],
+                int(d["flags"]),
+                d["compute_time_us"],
+            ]
+        )
 
     def result(self, record: Any) -> None:
         d = record.to_dict() if hasattr(record, "to_dict") else dict(record)
@@ -233,12 +267,19 @@ class SessionLog:
         if errors:
             raise errors[0]
 
-    def __enter__(self) -> "SessionLog":
+    def __enter__(self) -> SessionLog:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
 
 
-__all__ = ["SessionLog", "RecordWriteError", "append_record", "open_append", "write_json_file",
-           "POSE_COLUMNS", "TELEMETRY_COLUMNS"]
+__all__ = [
+    "SessionLog",
+    "RecordWriteError",
+    "append_record",
+    "open_append",
+    "write_json_file",
+    "POSE_COLUMNS",
+    "TELEMETRY_COLUMNS",
+]

@@ -56,9 +56,16 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, TextIO, Tuple
+from typing import Any, TextIO
 
+from graspguide.study.records import (
+    RecordWriteError,
+    append_record,
+    open_append,
+    write_json_file,
+)
 from graspguide.study.study_protocol import (
     PlannedTrial,
     Protocol,
@@ -69,23 +76,58 @@ from graspguide.study.study_protocol import (
     plan,
     session_order,
 )
-from graspguide.study.records import (
-    RecordWriteError,
-    append_record,
-    open_append,
-    write_json_file,
-)
 
 TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
-TLX_NAMES = {"MD": "Mental Demand", "TD": "Temporal Demand", "PD": "Physical Demand",
-             "PE": "Performance", "EF": "Effort", "FR": "Frustration"}
+TLX_NAMES = {
+    "MD": "Mental Demand",
+    "TD": "Temporal Demand",
+    "PD": "Physical Demand",
+    "PE": "Performance",
+    "EF": "Effort",
+    "FR": "Frustration",
+}
 TLX_MIN, TLX_MAX = 1, 21
-FRAME_COLUMNS = ["t_s", "host_time_us", "qw", "qx", "qy", "qz", "error_deg", "alpha", "pwm0",
-                 "pwm1", "pwm2", "pwm3", "solver_status", "flags"]
-TRIAL_FIELDS = ("participant", "simulated", "trial_index", "session", "session_trial", "k",
-                "policy", "mode", "modality", "wrench_id", "wrench", "single_motor",
-                "wrench_class", "success", "completion_s", "familiarization", "first_entry_s",
-                "final_error_deg", "poses", "wall_s", "config_hash", "source", "recorded_at")
+FRAME_COLUMNS = [
+    "t_s",
+    "host_time_us",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "error_deg",
+    "alpha",
+    "pwm0",
+    "pwm1",
+    "pwm2",
+    "pwm3",
+    "solver_status",
+    "flags",
+]
+TRIAL_FIELDS = (
+    "participant",
+    "simulated",
+    "trial_index",
+    "session",
+    "session_trial",
+    "k",
+    "policy",
+    "mode",
+    "modality",
+    "wrench_id",
+    "wrench",
+    "single_motor",
+    "wrench_class",
+    "success",
+    "completion_s",
+    "familiarization",
+    "first_entry_s",
+    "final_error_deg",
+    "poses",
+    "wall_s",
+    "config_hash",
+    "source",
+    "recorded_at",
+)
 STUDY_FORMAT = "graspguide-study/1"
 # A trial whose device clock passed timeout_s by this much without a TRIAL_RESULT is an
 # error (the device should have ended it).
@@ -102,12 +144,13 @@ class RunnerError(Exception):
 
 
 def _now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
 def _dumps(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, ensure_ascii=True, allow_nan=False,
-                      separators=(", ", ": "))
+    return json.dumps(
+        obj, sort_keys=True, ensure_ascii=True, allow_nan=False, separators=(", ", ": ")
+    )
 
 
 # Said after a disk fault (RecordWriteError): every completed trial is kept.
@@ -170,7 +213,7 @@ class _FramesFile:
         try:
             self.f.close()
         except OSError:
-            self.failed = True     # the buffer's rest did not fit either
+            self.failed = True  # the buffer's rest did not fit either
         if self.failed:
             try:
                 os.unlink(self.path)
@@ -180,9 +223,9 @@ class _FramesFile:
 
 @dataclass
 class JsonlContents:
-    records: List[Dict[str, Any]]
-    damaged_tail: Optional[bytes] = None     # a half-written last line, if any
-    good_size: int = 0                       # bytes of the complete, valid prefix
+    records: list[dict[str, Any]]
+    damaged_tail: bytes | None = None  # a half-written last line, if any
+    good_size: int = 0  # bytes of the complete, valid prefix
 
 
 def read_jsonl(path: str) -> JsonlContents:
@@ -193,13 +236,13 @@ def read_jsonl(path: str) -> JsonlContents:
         return JsonlContents([])
     with open(path, "rb") as f:
         data = f.read()
-    records: List[Dict[str, Any]] = []
+    records: list[dict[str, Any]] = []
     pos = 0
     line_no = 0
     while pos < len(data):
         line_no += 1
         nl = data.find(b"\n", pos)
-        if nl == -1:                      # no newline: a cut write
+        if nl == -1:  # no newline: a cut write
             return JsonlContents(records, data[pos:], pos)
         line = data[pos:nl]
         if line.strip():
@@ -208,12 +251,13 @@ def read_jsonl(path: str) -> JsonlContents:
                 if not isinstance(obj, dict):
                     raise ValueError("not an object")
             except (ValueError, UnicodeDecodeError):
-                if nl == len(data) - 1:   # the last line
+                if nl == len(data) - 1:  # the last line
                     return JsonlContents(records, data[pos:], pos)
-                raise RunnerError(f"{path}: line {line_no} is damaged (not a JSON object) "
-                                  "and more lines follow it; this is not a cut write: "
-                                  "inspect the file, repair or move it, and run again"
-                                  ) from None
+                raise RunnerError(
+                    f"{path}: line {line_no} is damaged (not a JSON object) "
+                    "and more lines follow it; this is not a cut write: "
+                    "inspect the file, repair or move it, and run again"
+                ) from None
             records.append(obj)
         pos = nl + 1
     return JsonlContents(records, None, pos)
@@ -222,7 +266,7 @@ def read_jsonl(path: str) -> JsonlContents:
 def set_aside_damaged_tail(path: str, contents: JsonlContents) -> str:
     """Move a damaged last line to ``PATH.damaged-<time>`` and cut it from the file.
     Returns the new file's path."""
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S%fZ")
     aside = f"{path}.damaged-{stamp}"
     with open(aside, "wb") as f:
         f.write(contents.damaged_tail or b"")
@@ -241,22 +285,25 @@ def set_aside_damaged_tail(path: str, contents: JsonlContents) -> str:
 def check_tlx_value(scale: str, value: Any) -> int:
     """An integer 1..21, else ValueError saying what is wrong."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{scale} ({TLX_NAMES[scale]}) must be an integer "
-                         f"{TLX_MIN}..{TLX_MAX}, got {value!r}")
+        raise ValueError(
+            f"{scale} ({TLX_NAMES[scale]}) must be an integer {TLX_MIN}..{TLX_MAX}, got {value!r}"
+        )
     if not TLX_MIN <= value <= TLX_MAX:
-        raise ValueError(f"{scale} ({TLX_NAMES[scale]}) must be in {TLX_MIN}..{TLX_MAX}, got "
-                         f"{value}")
+        raise ValueError(
+            f"{scale} ({TLX_NAMES[scale]}) must be in {TLX_MIN}..{TLX_MAX}, got {value}"
+        )
     return int(value)
 
 
-def load_tlx_file(path: str, participant: str, sessions: Sequence[Session]
-                  ) -> Dict[int, Dict[str, int]]:
+def load_tlx_file(
+    path: str, participant: str, sessions: Sequence[Session]
+) -> dict[int, dict[str, int]]:
     """``--tlx FILE``: JSON Lines, one object per session: ``{"session": 1, "MD": 5,
     "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}``, optionally ``"participant"``,
     ``"modality"`` and ``"k"`` (checked against the plan when present). Blank lines are
     skipped. Returns session -> scales; RunnerError (usage) naming the line otherwise."""
     by_session = {s.session: s for s in sessions}
-    out: Dict[int, Dict[str, int]] = {}
+    out: dict[int, dict[str, int]] = {}
     try:
         with open(path, encoding="utf-8") as f:
             lines = f.read().splitlines()
@@ -272,37 +319,57 @@ def load_tlx_file(path: str, participant: str, sessions: Sequence[Session]
         try:
             obj = json.loads(line)
         except ValueError as e:
-            raise RunnerError(f"{where}: not JSON ({e}); one object per line such as "
-                              '{"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, '
-                              '"FR": 3}', usage=True) from None
+            raise RunnerError(
+                f"{where}: not JSON ({e}); one object per line such as "
+                '{"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, '
+                '"FR": 3}',
+                usage=True,
+            ) from None
         if not isinstance(obj, dict):
             raise RunnerError(f"{where}: must be a JSON object", usage=True)
         unknown = sorted(set(obj) - allowed)
         if unknown:
-            raise RunnerError(f"{where}: unknown key {unknown[0]!r}; keys: session, "
-                              f"{', '.join(TLX_SCALES)} (and optionally participant, "
-                              "modality, k)", usage=True)
+            raise RunnerError(
+                f"{where}: unknown key {unknown[0]!r}; keys: session, "
+                f"{', '.join(TLX_SCALES)} (and optionally participant, "
+                "modality, k)",
+                usage=True,
+            )
         s = obj.get("session")
         if isinstance(s, bool) or not isinstance(s, int) or s not in by_session:
-            raise RunnerError(f"{where}: session must be one of this participant's sessions "
-                              f"1..{len(sessions)}, got {s!r}", usage=True)
+            raise RunnerError(
+                f"{where}: session must be one of this participant's sessions "
+                f"1..{len(sessions)}, got {s!r}",
+                usage=True,
+            )
         if s in out:
             raise RunnerError(f"{where}: session {s} is given twice", usage=True)
         if "participant" in obj and obj["participant"] != participant:
-            raise RunnerError(f"{where}: participant {obj['participant']!r} is not "
-                              f"{participant!r}: is this the right file?", usage=True)
+            raise RunnerError(
+                f"{where}: participant {obj['participant']!r} is not "
+                f"{participant!r}: is this the right file?",
+                usage=True,
+            )
         sess = by_session[s]
         if "modality" in obj and obj["modality"] != sess.modality:
-            raise RunnerError(f"{where}: session {s} of {participant} is {sess.modality}, "
-                              f"the file says {obj['modality']!r}", usage=True)
+            raise RunnerError(
+                f"{where}: session {s} of {participant} is {sess.modality}, "
+                f"the file says {obj['modality']!r}",
+                usage=True,
+            )
         if "k" in obj and obj["k"] != sess.k:
-            raise RunnerError(f"{where}: session {s} of {participant} has k = {sess.k}, the "
-                              f"file says {obj['k']!r}", usage=True)
+            raise RunnerError(
+                f"{where}: session {s} of {participant} has k = {sess.k}, the "
+                f"file says {obj['k']!r}",
+                usage=True,
+            )
         missing = [sc for sc in TLX_SCALES if sc not in obj]
         if missing:
-            raise RunnerError(f"{where}: missing {', '.join(missing)} (the six scales "
-                              f"{', '.join(TLX_SCALES)}, integers {TLX_MIN}..{TLX_MAX})",
-                              usage=True)
+            raise RunnerError(
+                f"{where}: missing {', '.join(missing)} (the six scales "
+                f"{', '.join(TLX_SCALES)}, integers {TLX_MIN}..{TLX_MAX})",
+                usage=True,
+            )
         scales = {}
         for sc in TLX_SCALES:
             try:
@@ -313,29 +380,37 @@ def load_tlx_file(path: str, participant: str, sessions: Sequence[Session]
     return out
 
 
-def ask_tlx(session: Session, ask: Callable[[str], str], out: TextIO,
-            attempts: int = 5) -> Dict[str, int]:
+def ask_tlx(
+    session: Session, ask: Callable[[str], str], out: TextIO, attempts: int = 5
+) -> dict[str, int]:
     """The six scales asked one by one (``ask`` is input()); a bad answer is asked again
     (at most ``attempts`` times); EOF raises RunnerError."""
-    print(f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
-          f"answer each scale with an integer {TLX_MIN} (very low) .. {TLX_MAX} (very high)",
-          file=out, flush=True)
-    scales: Dict[str, int] = {}
+    print(
+        f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
+        f"answer each scale with an integer {TLX_MIN} (very low) .. {TLX_MAX} (very high)",
+        file=out,
+        flush=True,
+    )
+    scales: dict[str, int] = {}
     for sc in TLX_SCALES:
         for _ in range(attempts):
             try:
                 text = ask(f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
             except EOFError:
-                raise RunnerError("the NASA-TLX answers ended (stdin closed); give them with "
-                                  "--tlx FILE and run again (completed trials are kept)"
-                                  ) from None
+                raise RunnerError(
+                    "the NASA-TLX answers ended (stdin closed); give them with "
+                    "--tlx FILE and run again (completed trials are kept)"
+                ) from None
             text = text.strip()
             try:
                 scales[sc] = check_tlx_value(sc, int(text))
                 break
             except ValueError as e:
-                msg = str(e) if text.lstrip("+-").isdigit() else \
-                    f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
+                msg = (
+                    str(e)
+                    if text.lstrip("+-").isdigit()
+                    else f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
+                )
                 print(f"  {msg}; try again", file=out, flush=True)
         else:
             raise RunnerError(f"no valid answer for {sc} after {attempts} attempts")
@@ -355,7 +430,7 @@ class RunnerSource:
     live = False
     rate_hz: float = 100.0
 
-    def describe(self) -> Dict[str, Any]:  # pragma: no cover - interface
+    def describe(self) -> dict[str, Any]:  # pragma: no cover - interface
         raise NotImplementedError
 
 
@@ -365,20 +440,29 @@ class ClosedLoopSource(RunnerSource):
     def __init__(self, model: Any, spec: str):
         for attr in ("rate_hz", "begin_trial", "step"):
             if not hasattr(model, attr):
-                raise RunnerError(f"--source {spec}: {type(model).__name__} has no {attr}; a "
-                                  "closed-loop source needs rate_hz, SIMULATED, "
-                                  "begin_trial(...) and step(t_s, pwm)", usage=True)
+                raise RunnerError(
+                    f"--source {spec}: {type(model).__name__} has no {attr}; a "
+                    "closed-loop source needs rate_hz, SIMULATED, "
+                    "begin_trial(...) and step(t_s, pwm)",
+                    usage=True,
+                )
         self.model = model
         self.spec = spec
         self.rate_hz = float(model.rate_hz)
         if not 0 < self.rate_hz <= 10000:
-            raise RunnerError(f"--source {spec}: rate_hz must be in (0, 10000], got "
-                              f"{model.rate_hz!r}", usage=True)
+            raise RunnerError(
+                f"--source {spec}: rate_hz must be in (0, 10000], got {model.rate_hz!r}", usage=True
+            )
         self.simulated = bool(getattr(model, "SIMULATED", True))
 
-    def describe(self) -> Dict[str, Any]:
-        d = {"source": self.spec, "kind": "closed_loop", "class": type(self.model).__name__,
-             "source_rate_hz": self.rate_hz, "simulated": self.simulated}
+    def describe(self) -> dict[str, Any]:
+        d = {
+            "source": self.spec,
+            "kind": "closed_loop",
+            "class": type(self.model).__name__,
+            "source_rate_hz": self.rate_hz,
+            "simulated": self.simulated,
+        }
         extra = getattr(self.model, "describe", None)
         if callable(extra):
             try:
@@ -389,8 +473,15 @@ class ClosedLoopSource(RunnerSource):
 
 
 class OpenLoopSource(RunnerSource):
-    def __init__(self, spec: str, make: Callable[[PlannedTrial], Any], rate_hz: float,
-                 simulated: bool, live: bool, info: Dict[str, Any]):
+    def __init__(
+        self,
+        spec: str,
+        make: Callable[[PlannedTrial], Any],
+        rate_hz: float,
+        simulated: bool,
+        live: bool,
+        info: dict[str, Any],
+    ):
         self.spec = spec
         self.make = make
         self.rate_hz = float(rate_hz)
@@ -398,12 +489,17 @@ class OpenLoopSource(RunnerSource):
         self.live = live
         self.info = info
 
-    def samples(self, trial: PlannedTrial) -> Iterator[Tuple[float, Any, Any]]:
+    def samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
         return iter(self.make(trial))
 
-    def describe(self) -> Dict[str, Any]:
-        return {**self.info, "source": self.spec, "kind": "open_loop",
-                "rate_hz": self.rate_hz, "simulated": self.simulated}
+    def describe(self) -> dict[str, Any]:
+        return {
+            **self.info,
+            "source": self.spec,
+            "kind": "open_loop",
+            "rate_hz": self.rate_hz,
+            "simulated": self.simulated,
+        }
 
 
 def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
@@ -420,11 +516,14 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
     if kind == "participant":
         try:
             mod = importlib.import_module(".participant", __package__)
-            cls = getattr(mod, "VirtualParticipant")
+            cls = mod.VirtualParticipant
         except (ImportError, AttributeError) as e:
-            raise RunnerError(f"--source {spec}: the virtual participant "
-                              f"(graspguide.study.participant.VirtualParticipant) is not available: "
-                              f"{e}", usage=True) from None
+            raise RunnerError(
+                f"--source {spec}: the virtual participant "
+                f"(graspguide.study.participant.VirtualParticipant) is not available: "
+                f"{e}",
+                usage=True,
+            ) from None
         try:
             model = cls.from_spec(rest, seed)
         except (ValueError, TypeError) as e:
@@ -434,21 +533,31 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
         module_name, _, tail = rest.partition(":")
         class_name, _, arg = tail.partition(":")
         if not module_name or not class_name:
-            raise RunnerError("--source plugin needs a module and a class: "
-                              "plugin:MODULE:CLASS[:ARG]", usage=True)
+            raise RunnerError(
+                "--source plugin needs a module and a class: plugin:MODULE:CLASS[:ARG]", usage=True
+            )
         try:
             cls = getattr(importlib.import_module(module_name), class_name)
         except (ImportError, AttributeError) as e:
-            raise RunnerError(f"--source {spec}: cannot load {module_name}.{class_name}: {e}",
-                              usage=True) from None
+            raise RunnerError(
+                f"--source {spec}: cannot load {module_name}.{class_name}: {e}", usage=True
+            ) from None
         if isinstance(cls, type) and issubclass(cls, TrackerAdapter):
             adapter = cls(arg) if arg else cls()
-            return OpenLoopSource(spec, lambda trial: adapter, adapter.rate_hz or 100.0,
-                                  simulated=bool(getattr(adapter, "SIMULATED", False)),
-                                  live=True, info=adapter.describe())
+            return OpenLoopSource(
+                spec,
+                lambda trial: adapter,
+                adapter.rate_hz or 100.0,
+                simulated=bool(getattr(adapter, "SIMULATED", False)),
+                live=True,
+                info=adapter.describe(),
+            )
         try:
-            model = cls.from_spec(arg, seed) if hasattr(cls, "from_spec") else \
-                (cls(arg) if arg else cls())
+            model = (
+                cls.from_spec(arg, seed)
+                if hasattr(cls, "from_spec")
+                else (cls(arg) if arg else cls())
+            )
         except (ValueError, TypeError) as e:
             raise RunnerError(f"--source {spec}: {e}", usage=True) from None
         return ClosedLoopSource(model, spec)
@@ -461,19 +570,35 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             rate = base.rate_hz if "rate=" in rest else protocol.pose_rate_hz
 
             def make(trial: PlannedTrial) -> SyntheticSource:
-                s = SyntheticSource(rate=rate, duration=base.duration,
-                                    seed=derive_seed(base.seed, participant,
-                                                     trial.trial_index) % 2**32,
-                                    tremor_deg=base.tremor_deg)
-                return s.aim([list(c) for c in protocol.hands[trial.k]], list(trial.wrench),
-                             trial.policy, protocol.constraints, list(protocol.y_axis))
+                s = SyntheticSource(
+                    rate=rate,
+                    duration=base.duration,
+                    seed=derive_seed(base.seed, participant, trial.trial_index) % 2**32,
+                    tremor_deg=base.tremor_deg,
+                )
+                return s.aim(
+                    [list(c) for c in protocol.hands[trial.k]],
+                    list(trial.wrench),
+                    trial.policy,
+                    protocol.constraints,
+                    list(protocol.y_axis),
+                )
 
             return OpenLoopSource(spec, make, rate, True, False, base.describe())
-        return OpenLoopSource(spec, lambda trial: base, base.rate_hz or protocol.pose_rate_hz,
-                              True, False, base.describe())
-    raise RunnerError(f"unknown --source {spec!r}: use participant[:PARAMS], "
-                      "synthetic[:rate=..,duration=..,seed=..], replay:FILE.csv or "
-                      "plugin:MODULE:CLASS[:ARG]", usage=True)
+        return OpenLoopSource(
+            spec,
+            lambda trial: base,
+            base.rate_hz or protocol.pose_rate_hz,
+            True,
+            False,
+            base.describe(),
+        )
+    raise RunnerError(
+        f"unknown --source {spec!r}: use participant[:PARAMS], "
+        "synthetic[:rate=..,duration=..,seed=..], replay:FILE.csv or "
+        "plugin:MODULE:CLASS[:ARG]",
+        usage=True,
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -483,8 +608,7 @@ class Progress:
     """Trial n of N, the condition and the live error: one rewritten line on a terminal,
     plain lines (one per trial; every ``period_s`` of a real-time trial) otherwise."""
 
-    def __init__(self, out: Optional[TextIO] = None, tty: Optional[bool] = None,
-                 period_s: float = 5.0):
+    def __init__(self, out: TextIO | None = None, tty: bool | None = None, period_s: float = 5.0):
         self.out = out or sys.stdout
         self.tty = self.out.isatty() if tty is None else tty
         self.period_s = period_s
@@ -498,10 +622,10 @@ class Progress:
         print(text, file=self.out, flush=True)
 
     def trial_start(self, trial: PlannedTrial, total: int, sessions: int) -> None:
-        sess = "familiarization" if trial.familiarization else \
-            f"session {trial.session}/{sessions}"
-        self._head = (f"[{trial.trial_index}/{total}] {sess} {trial.modality} k={trial.k} "
-                      f"{trial.wrench_id}")
+        sess = "familiarization" if trial.familiarization else f"session {trial.session}/{sessions}"
+        self._head = (
+            f"[{trial.trial_index}/{total}] {sess} {trial.modality} k={trial.k} {trial.wrench_id}"
+        )
         self._next_t = self.period_s
         if self.tty:
             self.out.write(f"\r\x1b[K{self._head} ...")
@@ -512,17 +636,22 @@ class Progress:
             now = time.monotonic()
             if now - self._last >= 0.1:
                 self._last = now
-                self.out.write(f"\r\x1b[K{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg "
-                               f"pwm={list(pwm)}")
+                self.out.write(
+                    f"\r\x1b[K{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg pwm={list(pwm)}"
+                )
                 self.out.flush()
         elif real_time and t_s >= self._next_t:
             self._next_t = t_s + self.period_s
-            print(f"{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg", file=self.out,
-                  flush=True)
+            print(
+                f"{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg", file=self.out, flush=True
+            )
 
-    def trial_end(self, record: Dict[str, Any]) -> None:
-        outcome = (f"success {record['completion_s']:.2f} s" if record["success"]
-                   else f"failure ({record['completion_s']:g} s)")
+    def trial_end(self, record: dict[str, Any]) -> None:
+        outcome = (
+            f"success {record['completion_s']:.2f} s"
+            if record["success"]
+            else f"failure ({record['completion_s']:g} s)"
+        )
         self.line(f"{self._head} {outcome}, final error {record['final_error_deg']:.2f} deg")
 
 
@@ -533,13 +662,22 @@ class StudyRunner:
     """One participant's run into ``out_dir``. :meth:`run` goes through the plan; the
     caller owns the device client (HELLO is sent here, STOP in :meth:`run`'s finally)."""
 
-    def __init__(self, protocol: Protocol, participant: str, out_dir: str,
-                 source: RunnerSource, client: Any, virtual_clock: bool,
-                 tlx: Optional[Dict[int, Dict[str, int]]] = None,
-                 ask: Optional[Callable[[str], str]] = None,
-                 progress: Optional[Progress] = None, protocol_file: Optional[str] = None,
-                 err: Optional[TextIO] = None, port: str = "",
-                 pipeline: Optional[int] = None):
+    def __init__(
+        self,
+        protocol: Protocol,
+        participant: str,
+        out_dir: str,
+        source: RunnerSource,
+        client: Any,
+        virtual_clock: bool,
+        tlx: dict[int, dict[str, int]] | None = None,
+        ask: Callable[[str], str] | None = None,
+        progress: Progress | None = None,
+        protocol_file: str | None = None,
+        err: TextIO | None = None,
+        port: str = "",
+        pipeline: int | None = None,
+    ):
         self.protocol = protocol
         # POSEs sent ahead of their TELEMETRY (closed loop, virtual clock): None = what
         # the source allows (pipeline_window), 1 = lockstep. See _closed_loop_pipelined.
@@ -567,25 +705,29 @@ class StudyRunner:
         self.plan = plan(protocol, participant, self.wrenches, self.fam_wrenches)
         self.config_hash = protocol.config_hash
         self._vt_base_us = 0
-        self._scene_key: Optional[Tuple[int, str, str]] = None
-        self._lock_fd: Optional[int] = None
+        self._scene_key: tuple[int, str, str] | None = None
+        self._lock_fd: int | None = None
         self.ran = 0
         self.skipped = 0
-        self.damaged: List[str] = []
+        self.damaged: list[str] = []
 
     # ---- files
-    def _study_dict(self) -> Dict[str, Any]:
-        return {"format": STUDY_FORMAT, "protocol": self.protocol.to_dict(),
-                "config_hash": self.config_hash, "protocol_file": self.protocol_file,
-                "wrenches": [w.to_dict() for w in self.wrenches],
-                "familiarization_wrenches": [w.to_dict() for w in self.fam_wrenches],
-                "sessions_per_participant": self.protocol.sessions_per_participant,
-                "trials_per_participant": len(self.plan),
-                "single_motor_rule": "mode C, protocol constraints, at [trial] start_quat: "
-                                     "exactly one motor PWM > 0",
-                "tlx_scales": list(TLX_SCALES)}
+    def _study_dict(self) -> dict[str, Any]:
+        return {
+            "format": STUDY_FORMAT,
+            "protocol": self.protocol.to_dict(),
+            "config_hash": self.config_hash,
+            "protocol_file": self.protocol_file,
+            "wrenches": [w.to_dict() for w in self.wrenches],
+            "familiarization_wrenches": [w.to_dict() for w in self.fam_wrenches],
+            "sessions_per_participant": self.protocol.sessions_per_participant,
+            "trials_per_participant": len(self.plan),
+            "single_motor_rule": "mode C, protocol constraints, at [trial] start_quat: "
+            "exactly one motor PWM > 0",
+            "tlx_scales": list(TLX_SCALES),
+        }
 
-    def prepare(self) -> Tuple[set, set]:
+    def prepare(self) -> tuple[set, set]:
         """Create/check the folders; returns (completed trial indices, sessions with TLX)."""
         study_path = os.path.join(self.out_dir, "study.json")
         study = self._study_dict()
@@ -594,26 +736,36 @@ class StudyRunner:
                 with open(study_path, encoding="utf-8") as f:
                     old = json.load(f)
             except (OSError, ValueError) as e:
-                raise RunnerError(f"{study_path} is unreadable ({e}); move it away",
-                                  usage=True) from None
+                raise RunnerError(
+                    f"{study_path} is unreadable ({e}); move it away", usage=True
+                ) from None
             if old.get("config_hash") != self.config_hash:
                 raise RunnerError(
                     f"{self.out_dir} holds a study with another protocol (config_hash "
                     f"{str(old.get('config_hash'))[:12]}..., this one {self.config_hash[:12]}"
                     "...): use another --out, or the protocol that study was run with",
-                    usage=True)
+                    usage=True,
+                )
             if old.get("wrenches") != study["wrenches"]:
                 raise RunnerError(
                     f"{study_path}: the same protocol now draws other wrenches (a different "
                     "core version?); finish this study with the tools it was started with, "
-                    "or use another --out", usage=True)
+                    "or use another --out",
+                    usage=True,
+                )
         else:
             write_json_atomic(study_path, study)
-        write_json_atomic(os.path.join(self.pdir, "plan.json"),
-                          {"participant": self.participant, "config_hash": self.config_hash,
-                           "sessions": [{"session": s.session, "k": s.k,
-                                         "modality": s.modality} for s in self.sessions],
-                           "trials": [t.to_dict() for t in self.plan]})
+        write_json_atomic(
+            os.path.join(self.pdir, "plan.json"),
+            {
+                "participant": self.participant,
+                "config_hash": self.config_hash,
+                "sessions": [
+                    {"session": s.session, "k": s.k, "modality": s.modality} for s in self.sessions
+                ],
+                "trials": [t.to_dict() for t in self.plan],
+            },
+        )
         done = self._completed_trials()
         tlx_done = self._tlx_sessions()
         return done, tlx_done
@@ -629,8 +781,10 @@ class StudyRunner:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             os.close(fd)
-            raise RunnerError(f"another `graspguide trial` is writing {self.pdir}; wait for it "
-                              "or stop it first", usage=True) from None
+            raise RunnerError(
+                f"another `graspguide trial` is writing {self.pdir}; wait for it or stop it first",
+                usage=True,
+            ) from None
         self._lock_fd = fd
 
     def _unlock(self) -> None:
@@ -638,16 +792,18 @@ class StudyRunner:
             os.close(self._lock_fd)
             self._lock_fd = None
 
-    def _read_checked(self, path: str) -> List[Dict[str, Any]]:
+    def _read_checked(self, path: str) -> list[dict[str, Any]]:
         contents = read_jsonl(path)
         if contents.damaged_tail is not None:
             try:
                 aside = set_aside_damaged_tail(path, contents)
             except OSError as e:
                 raise RecordWriteError(e.filename or path, e, _RESUME_HINT) from e
-            msg = (f"{path}: the last line was half-written ({len(contents.damaged_tail)} "
-                   f"bytes, a write cut by a crash or power loss); moved it to {aside} and "
-                   "will run what it recorded again")
+            msg = (
+                f"{path}: the last line was half-written ({len(contents.damaged_tail)} "
+                f"bytes, a write cut by a crash or power loss); moved it to {aside} and "
+                "will run what it recorded again"
+            )
             print(f"graspguide trial: warning: {msg}", file=self.err, flush=True)
             self.damaged.append(msg)
         return contents.records
@@ -658,20 +814,31 @@ class StudyRunner:
         for rec in self._read_checked(self.trials_path):
             idx = rec.get("trial_index")
             t = by_index.get(idx)  # type: ignore[arg-type]
-            if t is None or rec.get("wrench_id") != t.wrench_id or \
-                    rec.get("modality") != t.modality or rec.get("k") != t.k:
-                raise RunnerError(f"{self.trials_path}: trial {idx} does not match this "
-                                  f"protocol's plan for {self.participant}; this folder belongs "
-                                  "to another protocol or participant", usage=True)
+            if (
+                t is None
+                or rec.get("wrench_id") != t.wrench_id
+                or rec.get("modality") != t.modality
+                or rec.get("k") != t.k
+            ):
+                raise RunnerError(
+                    f"{self.trials_path}: trial {idx} does not match this "
+                    f"protocol's plan for {self.participant}; this folder belongs "
+                    "to another protocol or participant",
+                    usage=True,
+                )
             if idx in done:
-                raise RunnerError(f"{self.trials_path}: trial {idx} is recorded twice; inspect "
-                                  "the file", usage=True)
+                raise RunnerError(
+                    f"{self.trials_path}: trial {idx} is recorded twice; inspect the file",
+                    usage=True,
+                )
             if bool(rec.get("simulated")) != self.source.simulated:
                 kind = "simulated" if rec.get("simulated") else "human"
-                raise RunnerError(f"{self.trials_path} holds {kind} trials; this source is "
-                                  f"{'simulated' if self.source.simulated else 'a person'}: "
-                                  "use another --out or --participant, never mix them",
-                                  usage=True)
+                raise RunnerError(
+                    f"{self.trials_path} holds {kind} trials; this source is "
+                    f"{'simulated' if self.source.simulated else 'a person'}: "
+                    "use another --out or --participant, never mix them",
+                    usage=True,
+                )
             done.add(idx)
         return done
 
@@ -679,8 +846,10 @@ class StudyRunner:
         return {rec.get("session") for rec in self._read_checked(self.tlx_path)}
 
     def _log_run(self, event: str, **extra: Any) -> None:
-        append_line(self.runs_path, {"event": event, "time": _now_iso(),
-                                     "participant": self.participant, **extra})
+        append_line(
+            self.runs_path,
+            {"event": event, "time": _now_iso(), "participant": self.participant, **extra},
+        )
 
     # ---- one trial
     def _scene(self, trial: PlannedTrial) -> None:
@@ -688,13 +857,19 @@ class StudyRunner:
         if key == self._scene_key:
             return
         p = self.protocol
-        self.client.set_scene([list(c) for c in p.hands[trial.k]], y_axis=list(p.y_axis),
-                              constraints=p.constraints, policy=trial.policy, mode=trial.mode,
-                              threshold_deg=p.threshold_deg, hold_s=p.hold_s,
-                              timeout_s=p.timeout_s)
+        self.client.set_scene(
+            [list(c) for c in p.hands[trial.k]],
+            y_axis=list(p.y_axis),
+            constraints=p.constraints,
+            policy=trial.policy,
+            mode=trial.mode,
+            threshold_deg=p.threshold_deg,
+            hold_s=p.hold_s,
+            timeout_s=p.timeout_s,
+        )
         self._scene_key = key
 
-    def _poses(self, trial: PlannedTrial) -> Iterator[Tuple[float, Any, Any]]:
+    def _poses(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
         """Open loop: the source's samples, then its last pose held at its rate."""
         period = 1.0 / self.source.rate_hz
         last = None
@@ -719,8 +894,7 @@ class StudyRunner:
             limit = min(limit, int(self.pipeline))
         return max(1, limit)
 
-    def _restart_trial(self, trial: PlannedTrial, model: Any, contacts: List[List[float]]
-                       ) -> None:
+    def _restart_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
         p = self.protocol
         try:
             self.client.stop()
@@ -733,8 +907,14 @@ class StudyRunner:
         self._scene_key = None
         self._scene(trial)
         self.client.start_trial(trial.trial_index & 0xFFFF, list(trial.wrench))
-        model.begin_trial(contacts=contacts, y_axis=list(p.y_axis), wrench=list(trial.wrench),
-                          policy=trial.policy, mode=trial.mode, start_quat=list(p.start_quat))
+        model.begin_trial(
+            contacts=contacts,
+            y_axis=list(p.y_axis),
+            wrench=list(trial.wrench),
+            policy=trial.policy,
+            mode=trial.mode,
+            start_quat=list(p.start_quat),
+        )
 
     def _trial_result(self, trial: PlannedTrial) -> Any:
         """The TRIAL_RESULT of a trial the device has ended (already queued, or awaited)."""
@@ -746,16 +926,20 @@ class StudyRunner:
         try:
             return client.wait_trial_result(client.timeout)
         except LinkTimeout:
-            raise RunnerError(f"trial {trial.trial_index}: the device ended the trial but no "
-                              "TRIAL_RESULT arrived") from None
+            raise RunnerError(
+                f"trial {trial.trial_index}: the device ended the trial but no TRIAL_RESULT arrived"
+            ) from None
 
     def _no_result_error(self, trial: PlannedTrial, t_s: float) -> RunnerError:
-        return RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s into a "
-                           f"{self.protocol.timeout_s:g} s trial; is the device's clock "
-                           "following the poses?")
+        return RunnerError(
+            f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s into a "
+            f"{self.protocol.timeout_s:g} s trial; is the device's clock "
+            "following the poses?"
+        )
 
-    def _closed_loop_pipelined(self, trial: PlannedTrial, model: Any, rate: float,
-                               window: int, fh: Any) -> Tuple[Any, int, float]:
+    def _closed_loop_pipelined(
+        self, trial: PlannedTrial, model: Any, rate: float, window: int, fh: Any
+    ) -> tuple[Any, int, float]:
         """The closed loop with up to ``window`` POSEs in flight, giving exactly what
         lockstep gives, for a source that separates feeling from acting (``feel``/``act``,
         the virtual participant: docs/participant.md, "feel and act").
@@ -794,36 +978,41 @@ class StudyRunner:
                     t = j / rate
                     batch.append((t, tuple(map(float, act(t)))))
             except lag_error as e:
-                raise _Diverged(f"pose {i + len(batch)} could not be acted ahead: {e}"
-                                ) from None
+                raise _Diverged(f"pose {i + len(batch)} could not be acted ahead: {e}") from None
             stamped = [(t, _virtual_us(base, t), q) for t, q in batch]
             answers = client.pose_batch([(t_us, q) for _, t_us, q in stamped])
             for j, ((t_s, t_us, quat), tel) in enumerate(zip(stamped, answers)):
                 if isinstance(tel, Error):
-                    raise RunnerError(f"trial {trial.trial_index}: the device refused pose "
-                                      f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
-                                      "the trial was running")
+                    raise RunnerError(
+                        f"trial {trial.trial_index}: the device refused pose "
+                        f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
+                        "the trial was running"
+                    )
                 poses += 1
                 pwm = tel.pwm[:k]
                 write(_frame_row(t_s, t_us, quat, tel))
                 frame(t_s, float(tel.error_deg), pwm, False)
                 if not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
                     # The trial ended with this pose; the rest of the batch was refused.
-                    for rest in answers[j + 1:]:
+                    for rest in answers[j + 1 :]:
                         if not isinstance(rest, Error):
-                            raise RunnerError(f"trial {trial.trial_index}: the device "
-                                              "answered a POSE after the trial ended")
+                            raise RunnerError(
+                                f"trial {trial.trial_index}: the device "
+                                "answered a POSE after the trial ended"
+                            )
                     return self._trial_result(trial), poses, t_s
                 if t_s > limit:
                     raise self._no_result_error(trial, t_s)
                 try:
                     feel(t_s, list(pwm))
                 except ValueError as e:
-                    raise RunnerError(f"trial {trial.trial_index}: pose {i + j}: the model "
-                                      f"refused the TELEMETRY's PWM: {e}") from None
+                    raise RunnerError(
+                        f"trial {trial.trial_index}: pose {i + j}: the model "
+                        f"refused the TELEMETRY's PWM: {e}"
+                    ) from None
             i += len(batch)
 
-    def run_trial(self, trial: PlannedTrial) -> Dict[str, Any]:
+    def run_trial(self, trial: PlannedTrial) -> dict[str, Any]:
         from graspguide.link.client import host_time_us
         from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
 
@@ -835,10 +1024,15 @@ class StudyRunner:
         closed = self.source.closed_loop
         if closed:
             model = self.source.model  # type: ignore[attr-defined]
-            model.begin_trial(contacts=contacts, y_axis=list(p.y_axis),
-                              wrench=list(trial.wrench), policy=trial.policy, mode=trial.mode,
-                              start_quat=list(p.start_quat))
-            rate = p.pose_rate_hz       # the study's pose rate (the tracker's)
+            model.begin_trial(
+                contacts=contacts,
+                y_axis=list(p.y_axis),
+                wrench=list(trial.wrench),
+                policy=trial.policy,
+                mode=trial.mode,
+                start_quat=list(p.start_quat),
+            )
+            rate = p.pose_rate_hz  # the study's pose rate (the tracker's)
             it = None
         else:
             it = self._poses(trial)
@@ -848,7 +1042,7 @@ class StudyRunner:
         f.write(_FRAME_HEADER)
         result = None
         poses = 0
-        pwm: List[int] = [0] * trial.k
+        pwm: list[int] = [0] * trial.k
         t_s = 0.0
         wall0 = time.monotonic()
         window = self._window(closed)
@@ -856,15 +1050,18 @@ class StudyRunner:
             i = 0
             while window > 1:
                 try:
-                    result, poses, t_s = self._closed_loop_pipelined(trial, model, rate,
-                                                                     window, f)
+                    result, poses, t_s = self._closed_loop_pipelined(trial, model, rate, window, f)
                     break
                 except _Diverged as e:
                     # Never expected (see _closed_loop_pipelined); the poses the device
                     # got are not the lockstep ones: run the whole trial again in lockstep.
                     self.pipeline_fallbacks += 1
-                    print(f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
-                          "running it again in lockstep", file=self.err, flush=True)
+                    print(
+                        f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
+                        "running it again in lockstep",
+                        file=self.err,
+                        flush=True,
+                    )
                     f.restart()
                     self._restart_trial(trial, model, contacts)
                     window = 1
@@ -886,26 +1083,31 @@ class StudyRunner:
                 tel = self.client.pose(t_us, quat, pose_contacts)
                 poses += 1
                 i += 1
-                pwm = [int(x) for x in tel.pwm[:trial.k]]
+                pwm = [int(x) for x in tel.pwm[: trial.k]]
                 f.write(_frame_row(t_s, t_us, quat, tel))
                 self.progress.frame(t_s, float(tel.error_deg), pwm, not self.virtual_clock)
-                if self.client.trial_results or \
-                        not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
+                if self.client.trial_results or not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
                     result = self._trial_result(trial)
                     break
                 if t_s > p.timeout_s + RESULT_MARGIN_S and self.virtual_clock:
                     raise self._no_result_error(trial, t_s)
-                if not self.virtual_clock and time.monotonic() - wall0 > \
-                        p.timeout_s + 10 * RESULT_MARGIN_S:
-                    raise RunnerError(f"trial {trial.trial_index}: no TRIAL_RESULT after "
-                                      f"{time.monotonic() - wall0:.1f} s")
+                if (
+                    not self.virtual_clock
+                    and time.monotonic() - wall0 > p.timeout_s + 10 * RESULT_MARGIN_S
+                ):
+                    raise RunnerError(
+                        f"trial {trial.trial_index}: no TRIAL_RESULT after "
+                        f"{time.monotonic() - wall0:.1f} s"
+                    )
             f.sync()
         finally:
             f.close()
         if int(result.trial_id) != trial.trial_index & 0xFFFF:
-            raise RunnerError(f"trial {trial.trial_index}: the device answered with the "
-                              f"TRIAL_RESULT of trial id {result.trial_id}; run again (this "
-                              "trial was not recorded)")
+            raise RunnerError(
+                f"trial {trial.trial_index}: the device answered with the "
+                f"TRIAL_RESULT of trial id {result.trial_id}; run again (this "
+                "trial was not recorded)"
+            )
         try:
             os.replace(frames_tmp, frames_path)
         except OSError as e:
@@ -914,13 +1116,17 @@ class StudyRunner:
         success = bool(result.success)
         completion = round(float(result.completion_s), 6) if success else float(p.timeout_s)
         record = {
-            "participant": self.participant, "simulated": self.source.simulated,
+            "participant": self.participant,
+            "simulated": self.source.simulated,
             **{k: v for k, v in trial.to_dict().items() if k != "participant"},
-            "success": success, "completion_s": completion,
+            "success": success,
+            "completion_s": completion,
             "first_entry_s": round(float(result.first_entry_s), 6),
             "final_error_deg": round(float(result.final_error_deg), 6),
-            "poses": poses, "wall_s": round(time.monotonic() - wall0, 4),
-            "config_hash": self.config_hash, "source": self.source.describe()["source"],
+            "poses": poses,
+            "wall_s": round(time.monotonic() - wall0, 4),
+            "config_hash": self.config_hash,
+            "source": self.source.describe()["source"],
             "recorded_at": _now_iso(),
         }
         return record
@@ -928,25 +1134,39 @@ class StudyRunner:
     # ---- TLX
     def _tlx(self, session: Session) -> None:
         if self.tlx_given is not None and session.session in self.tlx_given:
-            scales: Optional[Dict[str, int]] = self.tlx_given[session.session]
+            scales: dict[str, int] | None = self.tlx_given[session.session]
             origin = "file"
         elif self.tlx_given is not None and not self.source.simulated:
-            raise RunnerError(f"the --tlx file has no line for session {session.session} "
-                              f"({session.modality}, k = {session.k}); add it and run again "
-                              "(completed trials are kept)", usage=True)
+            raise RunnerError(
+                f"the --tlx file has no line for session {session.session} "
+                f"({session.modality}, k = {session.k}); add it and run again "
+                "(completed trials are kept)",
+                usage=True,
+            )
         elif self.source.simulated:
             scales, origin = None, "absent: simulated source, no --tlx"
         else:
             scales = ask_tlx(session, self.ask, self.progress.out)
             origin = "interactive"
-        append_line(self.tlx_path, {
-            "participant": self.participant, "simulated": self.source.simulated,
-            "session": session.session, "k": session.k, "modality": session.modality,
-            "policy": session.policy, "mode": session.mode, "scales": scales,
-            "origin": origin, "config_hash": self.config_hash, "recorded_at": _now_iso()})
+        append_line(
+            self.tlx_path,
+            {
+                "participant": self.participant,
+                "simulated": self.source.simulated,
+                "session": session.session,
+                "k": session.k,
+                "modality": session.modality,
+                "policy": session.policy,
+                "mode": session.mode,
+                "scales": scales,
+                "origin": origin,
+                "config_hash": self.config_hash,
+                "recorded_at": _now_iso(),
+            },
+        )
 
     # ---- all
-    def run(self) -> Dict[str, Any]:
+    def run(self) -> dict[str, Any]:
         """Run what is left of the plan. Returns a summary; raises RunnerError, LinkError,
         KeyboardInterrupt. STOP is sent on the way out, whatever happens. A disk fault
         (full, read-only, a size limit) is a RunnerError naming the file; no record is
@@ -960,25 +1180,36 @@ class StudyRunner:
         except RecordWriteError as e:
             raise RunnerError(str(e)) from e
 
-    def _run_locked(self) -> Dict[str, Any]:
+    def _run_locked(self) -> dict[str, Any]:
         done, tlx_done = self.prepare()
         info = self.client.hello()
-        self.client.stop()   # a trial left running by an earlier run would refuse SET_SCENE
+        self.client.stop()  # a trial left running by an earlier run would refuse SET_SCENE
         self.skipped = len(done)
-        self._log_run("start", config_hash=self.config_hash, source=self.source.describe(),
-                      port=self.port, virtual_clock=self.virtual_clock,
-                      device={"board": info.board, "build_id": f"{info.build_id:08x}",
-                              "firmware": ".".join(map(str, info.firmware_version))},
-                      completed_before=len(done), damaged=self.damaged)
+        self._log_run(
+            "start",
+            config_hash=self.config_hash,
+            source=self.source.describe(),
+            port=self.port,
+            virtual_clock=self.virtual_clock,
+            device={
+                "board": info.board,
+                "build_id": f"{info.build_id:08x}",
+                "firmware": ".".join(map(str, info.firmware_version)),
+            },
+            completed_before=len(done),
+            damaged=self.damaged,
+        )
         if done:
-            self.progress.line(f"resuming {self.participant}: {len(done)} of {len(self.plan)} "
-                               "trials already completed are skipped")
+            self.progress.line(
+                f"resuming {self.participant}: {len(done)} of {len(self.plan)} "
+                "trials already completed are skipped"
+            )
         total = len(self.plan)
         n_sessions = len(self.sessions)
         outcome = "error"
-        cause: Optional[BaseException] = None
+        cause: BaseException | None = None
         try:
-            by_session: Dict[int, List[PlannedTrial]] = {}
+            by_session: dict[int, list[PlannedTrial]] = {}
             for t in self.plan:
                 by_session.setdefault(t.session, []).append(t)
             for sess_no in sorted(by_session):
@@ -1006,13 +1237,14 @@ class StudyRunner:
                 self.client.stop()
             except Exception as e:
                 if outcome == "complete":
-                    raise                 # the run's only error: report it
+                    raise  # the run's only error: report it
                 # keep the error that ended the run; this one is secondary
                 print(f"graspguide trial: STOP failed: {e}", file=self.err, flush=True)
             finally:
                 try:
-                    self._log_run("end", outcome=outcome, ran=self.ran,
-                                  completed=len(done), planned=total)
+                    self._log_run(
+                        "end", outcome=outcome, ran=self.ran, completed=len(done), planned=total
+                    )
                 except RecordWriteError as e:
                     if outcome == "complete":
                         raise
@@ -1020,8 +1252,13 @@ class StudyRunner:
                     # it is this one again.
                     if not isinstance(cause, RecordWriteError):
                         print(f"graspguide trial: warning: {e}", file=self.err, flush=True)
-        return {"participant": self.participant, "planned": total, "ran": self.ran,
-                "skipped": self.skipped, "completed": len(done)}
+        return {
+            "participant": self.participant,
+            "planned": total,
+            "ran": self.ran,
+            "skipped": self.skipped,
+            "completed": len(done),
+        }
 
 
 #: One FRAME_COLUMNS row as csv.writer writes it for these fields (floats by repr, none
@@ -1032,9 +1269,13 @@ _FRAME_HEADER = ",".join(FRAME_COLUMNS) + "\n"
 
 def _frame_row(t_s: float, t_us: int, quat: Sequence[float], tel: Any) -> str:
     """One FRAME_COLUMNS row: the POSE sent and its TELEMETRY."""
-    return _FRAME_ROW % ((round(t_s, 6), t_us) + tuple(quat)
-                         + (float(tel.error_deg), float(tel.alpha)) + tuple(tel.pwm)
-                         + (int(tel.solver_status), int(tel.flags)))
+    return _FRAME_ROW % (
+        (round(t_s, 6), t_us)
+        + tuple(quat)
+        + (float(tel.error_deg), float(tel.alpha))
+        + tuple(tel.pwm)
+        + (int(tel.solver_status), int(tel.flags))
+    )
 
 
 def _virtual_us(base_us: int, t_s: float) -> int:
@@ -1076,10 +1317,10 @@ def pipeline_window(model: Any, pose_rate_hz: float) -> int:
     return max(1, min(MAX_PIPELINE, n))
 
 
-def summary_lines(out_dir: str, participant: str) -> List[str]:
+def summary_lines(out_dir: str, participant: str) -> list[str]:
     """Per-modality successes and mean completion time of a participant (main trials)."""
     recs = read_jsonl(os.path.join(out_dir, participant, "trials.jsonl")).records
-    rows: Dict[Tuple[int, str], List[Dict[str, Any]]] = {}
+    rows: dict[tuple[int, str], list[dict[str, Any]]] = {}
     for r in recs:
         if not r.get("familiarization"):
             rows.setdefault((r["k"], r["modality"]), []).append(r)
@@ -1091,6 +1332,20 @@ def summary_lines(out_dir: str, participant: str) -> List[str]:
     return out
 
 
-__all__ = ["StudyRunner", "RunnerError", "RunnerSource", "ClosedLoopSource", "OpenLoopSource",
-           "open_runner_source", "load_tlx_file", "ask_tlx", "check_tlx_value", "read_jsonl",
-           "Progress", "TLX_SCALES", "FRAME_COLUMNS", "TRIAL_FIELDS", "summary_lines"]
+__all__ = [
+    "StudyRunner",
+    "RunnerError",
+    "RunnerSource",
+    "ClosedLoopSource",
+    "OpenLoopSource",
+    "open_runner_source",
+    "load_tlx_file",
+    "ask_tlx",
+    "check_tlx_value",
+    "read_jsonl",
+    "Progress",
+    "TLX_SCALES",
+    "FRAME_COLUMNS",
+    "TRIAL_FIELDS",
+    "summary_lines",
+]

@@ -36,13 +36,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any
 
 from graspguide.study.toml_file import load_toml, loads_toml
 
 FINGERS = ("thumb", "index", "middle", "palm")
-UNITS = {"m": 1.0, "mm": 1000.0}   # divisor to metres (x / 1000 is correctly rounded)
+UNITS = {"m": 1.0, "mm": 1000.0}  # divisor to metres (x / 1000 is correctly rounded)
 POLICIES = ("F", "Fperp")
 MODES = ("C", "V")
 CONSTRAINTS = ("paper", "normal", "none")
@@ -66,7 +67,7 @@ class SceneError(ValueError):
 _TRIAL_UNITS = {"threshold_deg": "degrees", "hold_s": "seconds", "timeout_s": "seconds"}
 
 
-def trial_limits() -> Dict[str, Dict[str, Any]]:
+def trial_limits() -> dict[str, dict[str, Any]]:
     """The core's range of each trial field: key -> {"min", "max", "min_exclusive"}.
     Read from the compiled core, never copied, so the readers cannot drift from it."""
     from graspguide.core._core import TRIAL_LIMITS
@@ -82,12 +83,13 @@ def trial_range_text(key: str) -> str:
     return text + ", at most timeout_s" if key == "hold_s" else text
 
 
-def check_trial_fields(values: Mapping[str, Any],
-                       fail: Callable[[str, str], Exception]) -> Dict[str, float]:
+def check_trial_fields(
+    values: Mapping[str, Any], fail: Callable[[str, str], Exception]
+) -> dict[str, float]:
     """threshold_deg, hold_s and timeout_s as floats, each checked against the core's
     range (and hold_s <= timeout_s, or the trial could never succeed); ``fail(key,
     message)`` makes the exception raised for the first bad one."""
-    out: Dict[str, float] = {}
+    out: dict[str, float] = {}
     for key in TRIAL_DEFAULTS:
         value = values[key]
         if not _is_number(value):
@@ -99,8 +101,11 @@ def check_trial_fields(values: Mapping[str, Any],
             raise fail(key, f"must be in {trial_range_text(key)}, got {value!r}")
         out[key] = v
     if out["hold_s"] > out["timeout_s"]:
-        raise fail("hold_s", f"must not exceed timeout_s ({out['timeout_s']:g} s), got "
-                             f"{out['hold_s']:g}: the trial could never succeed")
+        raise fail(
+            "hold_s",
+            f"must not exceed timeout_s ({out['timeout_s']:g} s), got "
+            f"{out['hold_s']:g}: the trial could never succeed",
+        )
     return out
 
 
@@ -109,8 +114,7 @@ def check_trial_fields(values: Mapping[str, Any],
 # the core cannot tell, since it uses only ratios of positions.
 HAND_SPAN_M = (0.005, 0.5)
 _TYPICAL_SPAN_M = 0.08
-_LENGTH_UNITS = (("millimetres", "mm", 1e-3), ("centimetres", "cm", 1e-2),
-                 ("metres", "m", 1.0))
+_LENGTH_UNITS = (("millimetres", "mm", 1e-3), ("centimetres", "cm", 1e-2), ("metres", "m", 1.0))
 # A moment's lever arm |m| / |f| of more than this many hand spans is no hand's: with
 # the contacts known to be in metres, such a moment is almost surely in N mm (1000 times
 # too large). The paper's wrenches have |m| / |f| <= 5 mm, 1/16 of a span.
@@ -119,12 +123,14 @@ MAX_LEVER_SPANS = 10.0
 
 def hand_span(contacts: Sequence[Sequence[float]]) -> float:
     """The largest distance between two contacts."""
-    return max((math.dist(a, b) for i, a in enumerate(contacts) for b in contacts[i + 1:]),
-               default=0.0)
+    return max(
+        (math.dist(a, b) for i, a in enumerate(contacts) for b in contacts[i + 1 :]), default=0.0
+    )
 
 
-def hand_span_problem(contacts: Sequence[Sequence[float]], unit: str,
-                      fix: Callable[[Optional[str]], str]) -> Optional[str]:
+def hand_span_problem(
+    contacts: Sequence[Sequence[float]], unit: str, fix: Callable[[str | None], str]
+) -> str | None:
     """None when ``contacts`` (in ``unit``, "m" or "mm") span like a hand
     (:data:`HAND_SPAN_M`); else what is wrong, the likely unit and ``fix(symbol)`` (the
     likely unit's symbol, "mm", "cm" or "m", or None when no unit makes it a hand)."""
@@ -132,17 +138,22 @@ def hand_span_problem(contacts: Sequence[Sequence[float]], unit: str,
     lo, hi = HAND_SPAN_M
     if lo <= raw / UNITS[unit] <= hi:
         return None
-    fits = [(abs(math.log(raw * scale / _TYPICAL_SPAN_M)), name, sym)
-            for name, sym, scale in _LENGTH_UNITS if raw > 0 and lo <= raw * scale <= hi]
-    head = (f"contacts span {raw:g} {unit} (the two farthest apart), but a hand spans "
-            f"{lo * 1000:g} mm to {hi:g} m")
+    fits = [
+        (abs(math.log(raw * scale / _TYPICAL_SPAN_M)), name, sym)
+        for name, sym, scale in _LENGTH_UNITS
+        if raw > 0 and lo <= raw * scale <= hi
+    ]
+    head = (
+        f"contacts span {raw:g} {unit} (the two farthest apart), but a hand spans "
+        f"{lo * 1000:g} mm to {hi:g} m"
+    )
     if not fits:
         return f"{head}: check the contact positions and their unit; {fix(None)}"
     _, name, sym = min(fits)
     return f"{head}: looks like {name}; {fix(sym)}"
 
 
-def file_unit_fix(key: str, sym: Optional[str]) -> str:
+def file_unit_fix(key: str, sym: str | None) -> str:
     """How to fix a file's contacts whose likely unit is ``sym`` (hand_span_problem)."""
     if sym in UNITS:
         return f'set {key} = "{sym}"'
@@ -151,8 +162,9 @@ def file_unit_fix(key: str, sym: Optional[str]) -> str:
     return f'{key} ("m" or "mm") is the unit of the contact positions'
 
 
-def moment_unit_problem(contacts_m: Sequence[Sequence[float]],
-                        wrench: Sequence[float]) -> Optional[str]:
+def moment_unit_problem(
+    contacts_m: Sequence[Sequence[float]], wrench: Sequence[float]
+) -> str | None:
     """None unless the wrench's moment is implausibly large for its force and the hand
     (contacts in metres): a lever arm |m| / |f| over :data:`MAX_LEVER_SPANS` hand spans,
     which is what a moment in N mm given as N m looks like. A zero force is left to the
@@ -165,37 +177,41 @@ def moment_unit_problem(contacts_m: Sequence[Sequence[float]],
     lever = m / f
     if lever <= MAX_LEVER_SPANS * span:
         return None
-    text = (f"the moment |m| = {m:g} with the force |f| = {f:g} N is a lever arm of "
-            f"{lever:g} m, {lever / span:.0f} times the hand's span ({span * 1000:.0f} mm; "
-            f"at most {MAX_LEVER_SPANS:g} spans are accepted)")
+    text = (
+        f"the moment |m| = {m:g} with the force |f| = {f:g} N is a lever arm of "
+        f"{lever:g} m, {lever / span:.0f} times the hand's span ({span * 1000:.0f} mm; "
+        f"at most {MAX_LEVER_SPANS:g} spans are accepted)"
+    )
     if lever / 1000 <= MAX_LEVER_SPANS * span:
-        return (f"{text}: the moment looks like N mm while the contacts are metres; give it "
-                "in N m (divide by 1000)")
+        return (
+            f"{text}: the moment looks like N mm while the contacts are metres; give it "
+            "in N m (divide by 1000)"
+        )
     return f"{text}: check the moment and its unit (N m, about the contacts' centroid)"
 
 
 @dataclass(frozen=True)
 class Scene:
-    contacts: Tuple[Tuple[float, float, float], ...]   # metres, thumb, index, middle(, palm)
-    y_axis: Tuple[float, float, float] = (0.0, 1.0, 0.0)
+    contacts: tuple[tuple[float, float, float], ...]  # metres, thumb, index, middle(, palm)
+    y_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
     constraints: str = "paper"
     policy: str = "F"
     mode: str = "C"
     threshold_deg: float = 3.0
     hold_s: float = 0.5
     timeout_s: float = 90.0
-    source: Optional[str] = field(default=None, compare=False)
-    units: str = field(default="m", compare=False)   # units of the file (informational)
+    source: str | None = field(default=None, compare=False)
+    units: str = field(default="m", compare=False)  # units of the file (informational)
 
     @property
     def k(self) -> int:
         return len(self.contacts)
 
     @property
-    def fingers(self) -> Tuple[str, ...]:
+    def fingers(self) -> tuple[str, ...]:
         return FINGERS[: self.k]
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         """The normalised configuration (metres, defaults filled in)."""
         return {
             "k": self.k,
@@ -215,17 +231,24 @@ class Scene:
     def config_hash(self) -> str:
         return config_hash(self.to_dict())
 
-    def set_scene_kwargs(self) -> Dict[str, Any]:
+    def set_scene_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :meth:`graspguide.link.client.DeviceClient.set_scene`."""
-        return {"contacts": [list(c) for c in self.contacts], "y_axis": list(self.y_axis),
-                "constraints": self.constraints, "policy": self.policy, "mode": self.mode,
-                "threshold_deg": self.threshold_deg, "hold_s": self.hold_s,
-                "timeout_s": self.timeout_s}
+        return {
+            "contacts": [list(c) for c in self.contacts],
+            "y_axis": list(self.y_axis),
+            "constraints": self.constraints,
+            "policy": self.policy,
+            "mode": self.mode,
+            "threshold_deg": self.threshold_deg,
+            "hold_s": self.hold_s,
+            "timeout_s": self.timeout_s,
+        }
 
 
 def canonical_json(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
-                      allow_nan=False)
+    return json.dumps(
+        obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
 
 
 def config_hash(obj: Any) -> str:
@@ -237,54 +260,65 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-def _vector(where: str, key: str, value: Any, divisor: float = 1.0) -> Tuple[float, float, float]:
+def _vector(where: str, key: str, value: Any, divisor: float = 1.0) -> tuple[float, float, float]:
     if not isinstance(value, list) or len(value) != 3 or not all(_is_number(x) for x in value):
-        raise SceneError(f"{where}: {key} must be a list of 3 numbers [x, y, z], got "
-                         f"{value!r}")
+        raise SceneError(f"{where}: {key} must be a list of 3 numbers [x, y, z], got {value!r}")
     out = tuple(float(x) / divisor for x in value)
     if not all(math.isfinite(x) for x in out):
         raise SceneError(f"{where}: {key} must be finite numbers, got {value!r}")
     return out  # type: ignore[return-value]
 
 
-def _choice(where: str, key: str, value: Any, allowed: Tuple[str, ...]) -> str:
+def _choice(where: str, key: str, value: Any, allowed: tuple[str, ...]) -> str:
     if not isinstance(value, str) or value not in allowed:
-        raise SceneError(f"{where}: {key} must be one of "
-                         f"{', '.join(repr(a) for a in allowed)}, got {value!r}")
+        raise SceneError(
+            f"{where}: {key} must be one of {', '.join(repr(a) for a in allowed)}, got {value!r}"
+        )
     return value
 
 
-def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
+def parse_scene(data: dict[str, Any], source: str = "<scene>") -> Scene:
     """A :class:`Scene` from the parsed TOML ``data``; ``source`` names it in errors."""
     if not isinstance(data, dict):
         raise SceneError(f"{source}: expected a TOML document with tables")
     for table in data:
         if table not in _TABLES:
-            raise SceneError(f"{source}: unknown table [{table}]; the tables are "
-                             f"{', '.join('[' + t + ']' for t in _TABLES)}")
+            raise SceneError(
+                f"{source}: unknown table [{table}]; the tables are "
+                f"{', '.join('[' + t + ']' for t in _TABLES)}"
+            )
         if not isinstance(data[table], dict):
-            raise SceneError(f"{source}: {table} must be a table ([{table}]), got "
-                             f"{type(data[table]).__name__}")
+            raise SceneError(
+                f"{source}: {table} must be a table ([{table}]), got {type(data[table]).__name__}"
+            )
         for key in data[table]:
             if key not in _TABLES[table]:
-                raise SceneError(f"{source}: unknown key {key!r} in [{table}]; allowed: "
-                                 f"{', '.join(sorted(_TABLES[table]))}")
+                raise SceneError(
+                    f"{source}: unknown key {key!r} in [{table}]; allowed: "
+                    f"{', '.join(sorted(_TABLES[table]))}"
+                )
     scene_t = data.get("scene", {})
     if "units" not in scene_t:
-        raise SceneError(f"{source}: [scene] units is missing: add units = \"m\" or "
-                         "units = \"mm\" (the unit of the contact positions)")
+        raise SceneError(
+            f'{source}: [scene] units is missing: add units = "m" or '
+            'units = "mm" (the unit of the contact positions)'
+        )
     units = _choice(f"{source}: [scene]", "units", scene_t["units"], tuple(UNITS))
     scale = UNITS[units]
 
     ct = data.get("contacts")
     if ct is None:
-        raise SceneError(f"{source}: the [contacts] table is missing: add thumb, index, "
-                         "middle (and optionally palm) as [x, y, z]")
+        raise SceneError(
+            f"{source}: the [contacts] table is missing: add thumb, index, "
+            "middle (and optionally palm) as [x, y, z]"
+        )
     where = f"{source}: [contacts]"
     missing = [f for f in FINGERS[:3] if f not in ct]
     if missing:
-        raise SceneError(f"{where}: missing {', '.join(missing)}: thumb, index and middle "
-                         "are required ([x, y, z] each), palm is optional")
+        raise SceneError(
+            f"{where}: missing {', '.join(missing)}: thumb, index and middle "
+            "are required ([x, y, z] each), palm is optional"
+        )
     names = list(FINGERS[:3]) + (["palm"] if "palm" in ct else [])
     raw = [_vector(where, n, ct[n]) for n in names]
     problem = hand_span_problem(raw, units, lambda sym: file_unit_fix("[scene] units", sym))
@@ -300,9 +334,18 @@ def parse_scene(data: Dict[str, Any], source: str = "<scene>") -> Scene:
 
     trial = check_trial_fields(
         {**TRIAL_DEFAULTS, **data.get("trial", {})},
-        lambda key, message: SceneError(f"{source}: [trial] {key} {message}"))
-    return Scene(contacts=contacts, y_axis=y_axis, constraints=constraints, policy=policy,
-                 mode=mode, source=source, units=units, **trial)
+        lambda key, message: SceneError(f"{source}: [trial] {key} {message}"),
+    )
+    return Scene(
+        contacts=contacts,
+        y_axis=y_axis,
+        constraints=constraints,
+        policy=policy,
+        mode=mode,
+        source=source,
+        units=units,
+        **trial,
+    )
 
 
 def load_scene(path: str) -> Scene:
@@ -314,7 +357,21 @@ def loads_scene(text: str, source: str = "<string>") -> Scene:
     return parse_scene(loads_toml(text, source, SceneError), source)
 
 
-__all__ = ["Scene", "SceneError", "load_scene", "loads_scene", "parse_scene", "config_hash",
-           "canonical_json", "FINGERS", "check_trial_fields", "trial_limits",
-           "trial_range_text", "hand_span", "hand_span_problem", "moment_unit_problem",
-           "HAND_SPAN_M", "MAX_LEVER_SPANS"]
+__all__ = [
+    "Scene",
+    "SceneError",
+    "load_scene",
+    "loads_scene",
+    "parse_scene",
+    "config_hash",
+    "canonical_json",
+    "FINGERS",
+    "check_trial_fields",
+    "trial_limits",
+    "trial_range_text",
+    "hand_span",
+    "hand_span_problem",
+    "moment_unit_problem",
+    "HAND_SPAN_M",
+    "MAX_LEVER_SPANS",
+]

@@ -33,12 +33,12 @@ from __future__ import annotations
 import csv
 import importlib
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-Sample = Tuple[float, Tuple[float, float, float, float], Optional[List[List[float]]]]
+Sample = tuple[float, tuple[float, float, float, float], list[list[float]] | None]
 FINGERS = ("thumb", "index", "middle", "palm")
 QUAT_COLUMNS = ["t_s", "qw", "qx", "qy", "qz"]
 
@@ -53,10 +53,14 @@ class SourceError(ValueError):
 def quat_mul(a, b) -> np.ndarray:
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def quat_from_axis_angle(axis, angle_rad: float) -> np.ndarray:
@@ -70,10 +74,13 @@ def quat_from_axis_angle(axis, angle_rad: float) -> np.ndarray:
 
 def quat_to_matrix(q) -> np.ndarray:
     w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def matrix_to_quat(m) -> np.ndarray:
@@ -137,13 +144,16 @@ class TrackerConvention:
     quat_order: str = "wxyz"
 
     def __post_init__(self):
-        for name, value, allowed in (("units", self.units, ("m", "mm")),
-                                     ("up_axis", self.up_axis, ("y", "z")),
-                                     ("handedness", self.handedness, ("right", "left")),
-                                     ("quat_order", self.quat_order, ("wxyz", "xyzw"))):
+        for name, value, allowed in (
+            ("units", self.units, ("m", "mm")),
+            ("up_axis", self.up_axis, ("y", "z")),
+            ("handedness", self.handedness, ("right", "left")),
+            ("quat_order", self.quat_order, ("wxyz", "xyzw")),
+        ):
             if value not in allowed:
-                raise SourceError(f"TrackerConvention {name} must be one of {allowed}, "
-                                  f"got {value!r}")
+                raise SourceError(
+                    f"TrackerConvention {name} must be one of {allowed}, got {value!r}"
+                )
 
     @property
     def matrix(self) -> np.ndarray:
@@ -156,11 +166,11 @@ class TrackerConvention:
             up = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
         return up @ mirror
 
-    def position(self, p: Sequence[float]) -> List[float]:
+    def position(self, p: Sequence[float]) -> list[float]:
         scale = 1000.0 if self.units == "mm" else 1.0
         return list(self.matrix @ (np.asarray(p, dtype=float) / scale))
 
-    def quaternion(self, q: Sequence[float]) -> Tuple[float, float, float, float]:
+    def quaternion(self, q: Sequence[float]) -> tuple[float, float, float, float]:
         q = np.asarray(q, dtype=float)
         if q.shape != (4,):
             raise SourceError(f"a quaternion has 4 components, got {list(q)}")
@@ -168,19 +178,25 @@ class TrackerConvention:
         m = self.matrix
         return tuple(matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))  # type: ignore
 
-    def describe(self) -> Dict[str, str]:
-        return {"units": self.units, "up_axis": self.up_axis, "handedness": self.handedness,
-                "quat_order": self.quat_order}
+    def describe(self) -> dict[str, str]:
+        return {
+            "units": self.units,
+            "up_axis": self.up_axis,
+            "handedness": self.handedness,
+            "quat_order": self.quat_order,
+        }
 
     def convert(self, q, positions=None):
         """(quat_wxyz, positions in metres, world axes) from the tracker's values."""
-        return (self.quaternion(q),
-                None if positions is None else [self.position(p) for p in positions])
+        return (
+            self.quaternion(q),
+            None if positions is None else [self.position(p) for p in positions],
+        )
 
 
 WORLD = TrackerConvention("m", "z", "right", "wxyz")
 # Typical defaults; verify against your tracker's settings.
-TRACKER_PRESETS: Dict[str, TrackerConvention] = {
+TRACKER_PRESETS: dict[str, TrackerConvention] = {
     # Vicon (Nexus/Tracker, DataStream SDK): millimetres, z up, right-handed, x,y,z,w.
     "vicon": TrackerConvention("mm", "z", "right", "xyzw"),
     # OptiTrack (Motive, NatNet streaming): metres, y up, right-handed, x,y,z,w.
@@ -198,19 +214,19 @@ class Source:
     """Iterable of samples; ``rate_hz`` is the nominal rate (None if unknown)."""
 
     name = "source"
-    rate_hz: Optional[float] = None
+    rate_hz: float | None = None
 
     def __iter__(self) -> Iterator[Sample]:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def describe(self) -> Dict[str, object]:
+    def describe(self) -> dict[str, object]:
         return {"source": self.name, "rate_hz": self.rate_hz}
 
 
 class ReplaySource(Source):
     name = "replay"
 
-    def __init__(self, path: str, convention: "Optional[TrackerConvention]" = None):
+    def __init__(self, path: str, convention: TrackerConvention | None = None):
         self.path = path
         self.convention = convention
         self.samples = self._load(path, convention or WORLD)
@@ -218,7 +234,7 @@ class ReplaySource(Source):
         self.rate_hz = float(1.0 / np.median(dts)) if len(dts) and np.median(dts) > 0 else None
 
     @staticmethod
-    def _load(path: str, convention: TrackerConvention) -> List[Sample]:
+    def _load(path: str, convention: TrackerConvention) -> list[Sample]:
         try:
             f = open(path, newline="", encoding="utf-8")
         except OSError as e:
@@ -228,11 +244,15 @@ class ReplaySource(Source):
             try:
                 header = [h.strip() for h in next(reader)]
             except StopIteration:
-                raise SourceError(f"{path}: empty file; the first line must be the header "
-                                  f"{','.join(QUAT_COLUMNS)}[,thumb_x,...]") from None
+                raise SourceError(
+                    f"{path}: empty file; the first line must be the header "
+                    f"{','.join(QUAT_COLUMNS)}[,thumb_x,...]"
+                ) from None
             if header[:5] != QUAT_COLUMNS:
-                raise SourceError(f"{path}:1: the header must start with "
-                                  f"{','.join(QUAT_COLUMNS)}, got {','.join(header)}")
+                raise SourceError(
+                    f"{path}:1: the header must start with "
+                    f"{','.join(QUAT_COLUMNS)}, got {','.join(header)}"
+                )
             extra = header[5:]
             k = len(extra) // 3
             expected = [f"{n}_{a}" for n in FINGERS[:k] for a in "xyz"]
@@ -240,16 +260,18 @@ class ReplaySource(Source):
                 raise SourceError(
                     f"{path}:1: contact columns must be "
                     f"{','.join(f'{n}_{a}' for n in FINGERS[:3] for a in 'xyz')}"
-                    f"[,palm_x,palm_y,palm_z], got {','.join(extra)}")
-            samples: List[Sample] = []
+                    f"[,palm_x,palm_y,palm_z], got {','.join(extra)}"
+                )
+            samples: list[Sample] = []
             last_t = -math.inf
             for row in reader:
                 line = reader.line_num
                 if not row or all(not c.strip() for c in row):
                     continue
                 if len(row) != len(header):
-                    raise SourceError(f"{path}:{line}: {len(row)} values, the header has "
-                                      f"{len(header)}")
+                    raise SourceError(
+                        f"{path}:{line}: {len(row)} values, the header has {len(header)}"
+                    )
                 try:
                     vals = [float(c) for c in row]
                 except ValueError:
@@ -262,10 +284,12 @@ class ReplaySource(Source):
                     raise SourceError(f"{path}:{line}: t_s must increase ({t} after {last_t})")
                 n = math.sqrt(sum(x * x for x in q))
                 if abs(n - 1) > 1e-3:
-                    raise SourceError(f"{path}:{line}: the quaternion qw,qx,qy,qz is not "
-                                      f"unit length (|q| = {n:.6g})")
+                    raise SourceError(
+                        f"{path}:{line}: the quaternion qw,qx,qy,qz is not "
+                        f"unit length (|q| = {n:.6g})"
+                    )
                 last_t = t
-                contacts = [vals[5 + 3 * i: 8 + 3 * i] for i in range(k)] if k else None
+                contacts = [vals[5 + 3 * i : 8 + 3 * i] for i in range(k)] if k else None
                 if contacts is not None:
                     problem = _contact_units_problem(contacts, convention)
                     if problem:
@@ -283,8 +307,12 @@ class ReplaySource(Source):
             yield (t - t0, q, c)
 
     def describe(self):
-        d = {"source": self.name, "path": self.path, "rate_hz": self.rate_hz,
-             "samples": len(self.samples)}
+        d = {
+            "source": self.name,
+            "path": self.path,
+            "rate_hz": self.rate_hz,
+            "samples": len(self.samples),
+        }
         if self.convention is not None:
             d["tracker_convention"] = self.convention.describe()
         return d
@@ -322,24 +350,28 @@ class TrackerAdapter(Source):
         for t, q, positions in self.raw_samples():
             values = [float(t), *[float(x) for x in q]]
             if not all(math.isfinite(v) for v in values):
-                raise SourceError(f"{self.name}: the tracker gave a non-finite sample "
-                                  f"t={t} q={list(q)}")
+                raise SourceError(
+                    f"{self.name}: the tracker gave a non-finite sample t={t} q={list(q)}"
+                )
             t0 = float(t) if t0 is None else t0
             if positions is not None:
                 problem = _contact_units_problem(positions, self.convention, adapter=True)
                 if problem:
-                    raise SourceError(f"{self.name}: the tracker's contacts at t={t}: "
-                                      f"{problem}")
+                    raise SourceError(f"{self.name}: the tracker's contacts at t={t}: {problem}")
             wxyz, contacts = self.convention.convert(q, positions)
             yield (float(t) - t0, wxyz, contacts)
 
     def describe(self):
-        return {"source": self.name, "rate_hz": self.rate_hz,
-                "tracker_convention": self.convention.describe()}
+        return {
+            "source": self.name,
+            "rate_hz": self.rate_hz,
+            "tracker_convention": self.convention.describe(),
+        }
 
 
-def _contact_units_problem(positions, convention: TrackerConvention,
-                           adapter: bool = False) -> Optional[str]:
+def _contact_units_problem(
+    positions, convention: TrackerConvention, adapter: bool = False
+) -> str | None:
     """What is wrong with a pose's contacts in the convention's unit (a hand spans 5 mm to
     0.5 m), or None. All contacts at one point are left to the device (coincident)."""
     from graspguide.study.scene_file import hand_span, hand_span_problem
@@ -347,15 +379,20 @@ def _contact_units_problem(positions, convention: TrackerConvention,
     if hand_span(positions) == 0.0:
         return None
 
-    def fix(sym: Optional[str]) -> str:
+    def fix(sym: str | None) -> str:
         if sym not in ("m", "mm"):
             return f"the positions are read as {convention.units}; check their unit"
         c = convention
         if adapter:
-            return (f"the adapter's convention says units {c.units!r}: declare "
-                    f"TrackerConvention(units={sym!r}, ...)")
-        return (f"the positions are read as {c.units}: convert them, or replay with "
-                f"--tracker {sym}/{c.up_axis}/{c.handedness}/{c.quat_order}")
+            return (
+                f"the adapter's convention says units {c.units!r}: declare "
+                f"TrackerConvention(units={sym!r}, ...)"
+            )
+        return (
+            f"the positions are read as {c.units}: convert them, or replay with "
+            f"--tracker {sym}/{c.up_axis}/{c.handedness}/{c.quat_order}"
+        )
+
     return hand_span_problem(positions, convention.units, fix)
 
 
@@ -367,8 +404,9 @@ def _is_float(text: str) -> bool:
         return False
 
 
-def aligned_quaternion(contacts, wrench, policy="F", constraints="paper",
-                       y_axis=(0.0, 1.0, 0.0)) -> np.ndarray:
+def aligned_quaternion(
+    contacts, wrench, policy="F", constraints="paper", y_axis=(0.0, 1.0, 0.0)
+) -> np.ndarray:
     """An orientation with zero guidance error (the scene's force along gravity), from the
     core: the force direction f (hand frame) probed through mode V's gain
     alpha = |R f - g| / 2 * span for three orientations, then rotated onto g = -z."""
@@ -377,8 +415,15 @@ def aligned_quaternion(contacts, wrench, policy="F", constraints="paper",
     s = math.sqrt(0.5)
 
     def fz(q):  # z of R f, from |R f - g|^2 = 2 + 2 (R f)_z
-        r = solver.solve(contacts, wrench, policy=policy, mode="V", constraints=constraints,
-                         orientation=q, y_axis=y_axis)
+        r = solver.solve(
+            contacts,
+            wrench,
+            policy=policy,
+            mode="V",
+            constraints=constraints,
+            orientation=q,
+            y_axis=y_axis,
+        )
         if r["status"] != "ok":
             raise SourceError(f"synthetic: the core cannot solve the scene: {r['status']}")
         d = 2 * r["alpha"] / solver.PWM_SPAN
@@ -396,9 +441,15 @@ def aligned_quaternion(contacts, wrench, policy="F", constraints="paper",
 class SyntheticSource(Source):
     name = "synthetic"
 
-    def __init__(self, rate: float = 240.0, duration: float = 10.0, seed: int = 0,
-                 tremor_deg: float = 0.3, start_deg: Tuple[float, float] = (40.0, 80.0),
-                 converge_fraction: float = 0.6):
+    def __init__(
+        self,
+        rate: float = 240.0,
+        duration: float = 10.0,
+        seed: int = 0,
+        tremor_deg: float = 0.3,
+        start_deg: tuple[float, float] = (40.0, 80.0),
+        converge_fraction: float = 0.6,
+    ):
         if not 1 <= rate <= 10000:
             raise SourceError(f"synthetic: rate must be in 1..10000 Hz, got {rate}")
         if not 0 < duration <= 3600:
@@ -411,8 +462,9 @@ class SyntheticSource(Source):
         self.converge_fraction = converge_fraction
         self.target = np.array([1.0, 0.0, 0.0, 0.0])
 
-    def aim(self, contacts, wrench, policy="F", constraints="paper",
-            y_axis=(0.0, 1.0, 0.0)) -> "SyntheticSource":
+    def aim(
+        self, contacts, wrench, policy="F", constraints="paper", y_axis=(0.0, 1.0, 0.0)
+    ) -> SyntheticSource:
         """Turn towards the orientation aligning this scene's force with gravity."""
         self.target = aligned_quaternion(contacts, wrench, policy, constraints, y_axis)
         return self
@@ -432,17 +484,21 @@ class SyntheticSource(Source):
         for i in range(n + 1):
             t = i / self.rate_hz
             u = min(1.0, t / t_conv) if t_conv > 0 else 1.0
-            s = u * u * u * (10 - 15 * u + 6 * u * u)   # minimum jerk
+            s = u * u * u * (10 - 15 * u + 6 * u * u)  # minimum jerk
             q = slerp(start, self.target, s)
-            tremor = amp * (np.sin(2 * math.pi * freqs * t + phases)
-                            + 0.3 * rng.normal(size=3))
+            tremor = amp * (np.sin(2 * math.pi * freqs * t + phases) + 0.3 * rng.normal(size=3))
             q = quat_mul(q, quat_from_axis_angle(tremor, float(np.linalg.norm(tremor))))
             q /= np.linalg.norm(q)
             yield (t, (float(q[0]), float(q[1]), float(q[2]), float(q[3])), None)
 
     def describe(self):
-        return {"source": self.name, "rate_hz": self.rate_hz, "duration_s": self.duration,
-                "seed": self.seed, "target_wxyz": [float(x) for x in self.target]}
+        return {
+            "source": self.name,
+            "rate_hz": self.rate_hz,
+            "duration_s": self.duration,
+            "seed": self.seed,
+            "target_wxyz": [float(x) for x in self.target],
+        }
 
 
 def tracker_convention(name: str) -> TrackerConvention:
@@ -452,9 +508,11 @@ def tracker_convention(name: str) -> TrackerConvention:
         return TRACKER_PRESETS[name]
     parts = name.split("/")
     if len(parts) != 4:
-        raise SourceError(f"unknown tracker {name!r}: use one of "
-                          f"{', '.join(sorted(TRACKER_PRESETS))} or "
-                          "UNITS/UP/HANDEDNESS/ORDER such as mm/y/right/xyzw")
+        raise SourceError(
+            f"unknown tracker {name!r}: use one of "
+            f"{', '.join(sorted(TRACKER_PRESETS))} or "
+            "UNITS/UP/HANDEDNESS/ORDER such as mm/y/right/xyzw"
+        )
     return TrackerConvention(*parts)
 
 
@@ -462,27 +520,30 @@ def _open_plugin(rest: str) -> Source:
     module_name, _, tail = rest.partition(":")
     class_name, _, arg = tail.partition(":")
     if not module_name or not class_name:
-        raise SourceError("plugin needs a module and a class: "
-                          "--source plugin:MODULE:CLASS[:ARG]")
+        raise SourceError("plugin needs a module and a class: --source plugin:MODULE:CLASS[:ARG]")
     try:
         module = importlib.import_module(module_name)
     except ImportError as e:
         raise SourceError(f"plugin: cannot import {module_name!r}: {e}") from None
     cls = getattr(module, class_name, None)
     if not (isinstance(cls, type) and issubclass(cls, TrackerAdapter)):
-        raise SourceError(f"plugin: {module_name}.{class_name} must be a "
-                          "graspguide.study.sources.TrackerAdapter subclass")
+        raise SourceError(
+            f"plugin: {module_name}.{class_name} must be a "
+            "graspguide.study.sources.TrackerAdapter subclass"
+        )
     return cls(arg) if arg else cls()
 
 
-def open_source(spec: str, tracker: Optional[str] = None) -> Source:
+def open_source(spec: str, tracker: str | None = None) -> Source:
     """A Source from ``replay:FILE.csv``, ``synthetic[:rate=..,duration=..,seed=..]`` or
     ``plugin:MODULE:CLASS[:ARG]``. ``tracker`` (a preset name or UNITS/UP/HANDEDNESS/ORDER)
     says in which convention a replay file is written."""
     kind, _, rest = spec.partition(":")
     if tracker is not None and kind != "replay":
-        raise SourceError(f"--tracker only applies to replay sources (a plugin declares its "
-                          f"own convention), not to {kind!r}")
+        raise SourceError(
+            f"--tracker only applies to replay sources (a plugin declares its "
+            f"own convention), not to {kind!r}"
+        )
     if kind == "replay":
         if not rest:
             raise SourceError("replay needs a file: --source replay:FILE.csv")
@@ -490,24 +551,42 @@ def open_source(spec: str, tracker: Optional[str] = None) -> Source:
     if kind == "plugin":
         return _open_plugin(rest)
     if kind == "synthetic":
-        kw: Dict[str, float] = {}
+        kw: dict[str, float] = {}
         conv = {"rate": float, "duration": float, "seed": int, "tremor_deg": float}
         for item in filter(None, rest.split(",")):
             key, eq, value = item.partition("=")
             key = key.strip()
             if not eq or key not in conv:
-                raise SourceError(f"synthetic: bad option {item!r}; options are "
-                                  f"{', '.join(k + '=N' for k in conv)}")
+                raise SourceError(
+                    f"synthetic: bad option {item!r}; options are "
+                    f"{', '.join(k + '=N' for k in conv)}"
+                )
             try:
                 kw[key] = conv[key](value)
             except ValueError:
                 raise SourceError(f"synthetic: {key} must be a number, got {value!r}") from None
         return SyntheticSource(**kw)  # type: ignore[arg-type]
-    raise SourceError(f"unknown source {spec!r}: use replay:FILE.csv, "
-                      "synthetic[:rate=240,duration=10,seed=0] or plugin:MODULE:CLASS[:ARG]")
+    raise SourceError(
+        f"unknown source {spec!r}: use replay:FILE.csv, "
+        "synthetic[:rate=240,duration=10,seed=0] or plugin:MODULE:CLASS[:ARG]"
+    )
 
 
-__all__ = ["Source", "ReplaySource", "SyntheticSource", "SourceError", "TrackerConvention",
-           "TrackerAdapter", "tracker_convention",
-           "TRACKER_PRESETS", "WORLD", "open_source", "aligned_quaternion", "quat_mul",
-           "quat_from_axis_angle", "quat_to_matrix", "matrix_to_quat", "quat_angle_deg"]
+__all__ = [
+    "Source",
+    "ReplaySource",
+    "SyntheticSource",
+    "SourceError",
+    "TrackerConvention",
+    "TrackerAdapter",
+    "tracker_convention",
+    "TRACKER_PRESETS",
+    "WORLD",
+    "open_source",
+    "aligned_quaternion",
+    "quat_mul",
+    "quat_from_axis_angle",
+    "quat_to_matrix",
+    "matrix_to_quat",
+    "quat_angle_deg",
+]

@@ -31,8 +31,9 @@ import hashlib
 import math
 import random
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 from graspguide.study.scene_file import (
     CONSTRAINTS,
@@ -60,23 +61,43 @@ PARTICIPANT_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,30}?([0-9]+)$")
 POSE_RATE_HZ = (5.0, 2000.0)
 
 # table -> {key: (required, default)}; None default with required False: optional.
-_SCHEMA: Dict[str, Dict[str, Tuple[bool, Any]]] = {
-    "study": {"name": (True, None), "seed": (True, None), "participants": (False, 8),
-              "pose_rate_hz": (False, 100.0)},
-    "trial": {"threshold_deg": (False, 3.0), "hold_s": (False, 0.5),
-              "timeout_s": (False, 90.0), "constraints": (False, "paper"),
-              "start_quat": (False, [1.0, 0.0, 0.0, 0.0])},
-    "hand": {"units": (True, None), "y_axis": (False, [0.0, 1.0, 0.0]), "k3": (False, None),
-             "k4": (False, None)},
-    "conditions": {"modalities": (False, list(MODALITIES)),
-                   "contact_counts": (False, [3, 4]),
-                   "modality_order": (False, "balanced_latin_square"),
-                   "contact_order": (False, "alternate"),
-                   "wrench_order": (False, "shuffle")},
-    "wrenches": {"count": (False, 12), "single_motor": (False, 5), "split_k": (False, 3),
-                 "split_policy": (False, "Fperp"), "force_N": (False, 1.0),
-                 "moment_max_Nm": (False, 0.0), "start_error_deg": (False, [20.0, 120.0]),
-                 "max_draws": (False, 100000)},
+_SCHEMA: dict[str, dict[str, tuple[bool, Any]]] = {
+    "study": {
+        "name": (True, None),
+        "seed": (True, None),
+        "participants": (False, 8),
+        "pose_rate_hz": (False, 100.0),
+    },
+    "trial": {
+        "threshold_deg": (False, 3.0),
+        "hold_s": (False, 0.5),
+        "timeout_s": (False, 90.0),
+        "constraints": (False, "paper"),
+        "start_quat": (False, [1.0, 0.0, 0.0, 0.0]),
+    },
+    "hand": {
+        "units": (True, None),
+        "y_axis": (False, [0.0, 1.0, 0.0]),
+        "k3": (False, None),
+        "k4": (False, None),
+    },
+    "conditions": {
+        "modalities": (False, list(MODALITIES)),
+        "contact_counts": (False, [3, 4]),
+        "modality_order": (False, "balanced_latin_square"),
+        "contact_order": (False, "alternate"),
+        "wrench_order": (False, "shuffle"),
+    },
+    "wrenches": {
+        "count": (False, 12),
+        "single_motor": (False, 5),
+        "split_k": (False, 3),
+        "split_policy": (False, "Fperp"),
+        "force_N": (False, 1.0),
+        "moment_max_Nm": (False, 0.0),
+        "start_error_deg": (False, [20.0, 120.0]),
+        "max_draws": (False, 100000),
+    },
     "familiarization": {"duration_s": (False, 120.0), "trials": (False, 0)},
 }
 
@@ -86,7 +107,7 @@ class ProtocolFileError(ValueError):
     fix."""
 
 
-def modality_parts(modality: str) -> Tuple[str, str]:
+def modality_parts(modality: str) -> tuple[str, str]:
     """("F"|"Fperp", "C"|"V") of a modality name such as "Fperp+C"."""
     policy, _, mode = modality.partition("+")
     return policy, mode
@@ -107,7 +128,8 @@ def participant_number(participant: str) -> int:
         raise ProtocolFileError(
             f"participant id {participant!r}: use a letter, then letters, digits, '-' or "
             "'_', ending with a number >= 1 (U1, U2, P07): the number picks the "
-            "participant's counterbalanced order")
+            "participant's counterbalanced order"
+        )
     return int(m.group(1))
 
 
@@ -117,15 +139,19 @@ def participant_number(participant: str) -> int:
 @dataclass(frozen=True)
 class Wrench:
     id: str
-    wrench: Tuple[float, ...]
-    wrench_class: str                       # "single" | "multi" | "" (familiarization)
-    single_motor: Dict[str, bool] = field(default_factory=dict)   # "k3/Fperp" -> bool
+    wrench: tuple[float, ...]
+    wrench_class: str  # "single" | "multi" | "" (familiarization)
+    single_motor: dict[str, bool] = field(default_factory=dict)  # "k3/Fperp" -> bool
     start_error_deg: float = 0.0
 
-    def to_dict(self) -> Dict[str, Any]:
-        return {"id": self.id, "wrench": list(self.wrench), "class": self.wrench_class,
-                "single_motor": dict(self.single_motor),
-                "start_error_deg": self.start_error_deg}
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "wrench": list(self.wrench),
+            "class": self.wrench_class,
+            "single_motor": dict(self.single_motor),
+            "start_error_deg": self.start_error_deg,
+        }
 
 
 @dataclass(frozen=True)
@@ -138,11 +164,11 @@ class Protocol:
     hold_s: float
     timeout_s: float
     constraints: str
-    start_quat: Tuple[float, float, float, float]
-    y_axis: Tuple[float, float, float]
-    hands: Dict[int, Tuple[Tuple[float, float, float], ...]]   # k -> contacts (metres)
-    modalities: Tuple[str, ...]
-    contact_counts: Tuple[int, ...]
+    start_quat: tuple[float, float, float, float]
+    y_axis: tuple[float, float, float]
+    hands: dict[int, tuple[tuple[float, float, float], ...]]  # k -> contacts (metres)
+    modalities: tuple[str, ...]
+    contact_counts: tuple[int, ...]
     modality_order: str
     contact_order: str
     wrench_order: str
@@ -152,34 +178,53 @@ class Protocol:
     split_policy: str
     force_N: float
     moment_max_Nm: float
-    start_error_deg: Tuple[float, float]
+    start_error_deg: tuple[float, float]
     max_draws: int
     familiarization_s: float
     familiarization_trials: int
     source: str = field(default="<protocol>", compare=False)
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         """The normalised protocol (metres, defaults filled in): what is hashed."""
         return {
-            "study": {"name": self.name, "seed": self.seed, "participants": self.participants,
-                      "pose_rate_hz": self.pose_rate_hz},
-            "trial": {"threshold_deg": self.threshold_deg, "hold_s": self.hold_s,
-                      "timeout_s": self.timeout_s, "constraints": self.constraints,
-                      "start_quat": list(self.start_quat)},
-            "hand": {"y_axis": list(self.y_axis),
-                     **{f"k{k}": [list(c) for c in cs] for k, cs in sorted(self.hands.items())}},
-            "conditions": {"modalities": list(self.modalities),
-                           "contact_counts": list(self.contact_counts),
-                           "modality_order": self.modality_order,
-                           "contact_order": self.contact_order,
-                           "wrench_order": self.wrench_order},
-            "wrenches": {"count": self.wrench_count, "single_motor": self.single_motor,
-                         "split_k": self.split_k, "split_policy": self.split_policy,
-                         "force_N": self.force_N, "moment_max_Nm": self.moment_max_Nm,
-                         "start_error_deg": list(self.start_error_deg),
-                         "max_draws": self.max_draws},
-            "familiarization": {"duration_s": self.familiarization_s,
-                                "trials": self.familiarization_trials},
+            "study": {
+                "name": self.name,
+                "seed": self.seed,
+                "participants": self.participants,
+                "pose_rate_hz": self.pose_rate_hz,
+            },
+            "trial": {
+                "threshold_deg": self.threshold_deg,
+                "hold_s": self.hold_s,
+                "timeout_s": self.timeout_s,
+                "constraints": self.constraints,
+                "start_quat": list(self.start_quat),
+            },
+            "hand": {
+                "y_axis": list(self.y_axis),
+                **{f"k{k}": [list(c) for c in cs] for k, cs in sorted(self.hands.items())},
+            },
+            "conditions": {
+                "modalities": list(self.modalities),
+                "contact_counts": list(self.contact_counts),
+                "modality_order": self.modality_order,
+                "contact_order": self.contact_order,
+                "wrench_order": self.wrench_order,
+            },
+            "wrenches": {
+                "count": self.wrench_count,
+                "single_motor": self.single_motor,
+                "split_k": self.split_k,
+                "split_policy": self.split_policy,
+                "force_N": self.force_N,
+                "moment_max_Nm": self.moment_max_Nm,
+                "start_error_deg": list(self.start_error_deg),
+                "max_draws": self.max_draws,
+            },
+            "familiarization": {
+                "duration_s": self.familiarization_s,
+                "trials": self.familiarization_trials,
+            },
         }
 
     def canonical_json(self) -> str:
@@ -191,7 +236,7 @@ class Protocol:
         return config_hash(self.to_dict())
 
     @property
-    def policies(self) -> Tuple[str, ...]:
+    def policies(self) -> tuple[str, ...]:
         return tuple(dict.fromkeys(modality_parts(m)[0] for m in self.modalities))
 
     @property
@@ -213,8 +258,9 @@ class _Checker:
     def fail(self, where: str, message: str) -> ProtocolFileError:
         return ProtocolFileError(f"{self.source}: {where}: {message}")
 
-    def number(self, where: str, v: Any, lo: float, hi: float, unit: str = "",
-               lo_open: bool = False) -> float:
+    def number(
+        self, where: str, v: Any, lo: float, hi: float, unit: str = "", lo_open: bool = False
+    ) -> float:
         accepted = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]{' ' + unit if unit else ''}"
         if not _is_number(v):
             raise self.fail(where, f"must be a number in {accepted}, got {v!r}")
@@ -232,11 +278,12 @@ class _Checker:
 
     def choice(self, where: str, v: Any, allowed: Sequence[Any]) -> Any:
         if v not in allowed or isinstance(v, bool):
-            raise self.fail(where, f"must be one of {', '.join(repr(a) for a in allowed)}, "
-                                   f"got {v!r}")
+            raise self.fail(
+                where, f"must be one of {', '.join(repr(a) for a in allowed)}, got {v!r}"
+            )
         return v
 
-    def vector(self, where: str, v: Any, n: int, divisor: float = 1.0) -> Tuple[float, ...]:
+    def vector(self, where: str, v: Any, n: int, divisor: float = 1.0) -> tuple[float, ...]:
         if not isinstance(v, list) or len(v) != n or not all(_is_number(x) for x in v):
             raise self.fail(where, f"must be a list of {n} numbers, got {v!r}")
         out = tuple(float(x) / divisor for x in v)
@@ -245,21 +292,24 @@ class _Checker:
         return out
 
 
-def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol:
+def parse_protocol(data: dict[str, Any], source: str = "<protocol>") -> Protocol:
     """A :class:`Protocol` from parsed TOML; ``source`` names it in errors."""
     c = _Checker(source)
     if not isinstance(data, dict):
         raise ProtocolFileError(f"{source}: expected a TOML document with tables")
     for table, value in data.items():
         if table not in _SCHEMA:
-            raise c.fail(f"[{table}]", "unknown table; the tables are "
-                         + ", ".join(f"[{t}]" for t in _SCHEMA))
+            raise c.fail(
+                f"[{table}]",
+                "unknown table; the tables are " + ", ".join(f"[{t}]" for t in _SCHEMA),
+            )
         if not isinstance(value, dict):
             raise c.fail(table, f"must be a table ([{table}]), got {type(value).__name__}")
         for key in value:
             if key not in _SCHEMA[table]:
-                raise c.fail(f"[{table}] {key}", "unknown key; allowed: "
-                             + ", ".join(sorted(_SCHEMA[table])))
+                raise c.fail(
+                    f"[{table}] {key}", "unknown key; allowed: " + ", ".join(sorted(_SCHEMA[table]))
+                )
     for table in ("study", "hand"):
         if table not in data:
             raise c.fail(f"[{table}]", "table missing; see docs/study.md for its keys")
@@ -278,18 +328,22 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         raise c.fail("[study] name", f"must be a non-empty string, got {name!r}")
     seed = c.integer("[study] seed", get("study", "seed"), 0, 2**63 - 1)
     participants = c.integer("[study] participants", get("study", "participants"), 1, 10000)
-    rate = c.number("[study] pose_rate_hz", get("study", "pose_rate_hz"), *POSE_RATE_HZ,
-                    "poses per second")
+    rate = c.number(
+        "[study] pose_rate_hz", get("study", "pose_rate_hz"), *POSE_RATE_HZ, "poses per second"
+    )
 
-    trial = check_trial_fields({k: get("trial", k) for k in TRIAL_DEFAULTS},
-                               lambda key, message: c.fail(f"[trial] {key}", message))
+    trial = check_trial_fields(
+        {k: get("trial", k) for k in TRIAL_DEFAULTS},
+        lambda key, message: c.fail(f"[trial] {key}", message),
+    )
     threshold, hold, timeout = (trial[k] for k in ("threshold_deg", "hold_s", "timeout_s"))
     constraints = c.choice("[trial] constraints", get("trial", "constraints"), CONSTRAINTS)
     start_quat = c.vector("[trial] start_quat", get("trial", "start_quat"), 4)
     qn = math.sqrt(sum(x * x for x in start_quat))
     if abs(qn - 1.0) > 1e-6:
-        raise c.fail("[trial] start_quat", f"must be a unit quaternion [w, x, y, z], its norm "
-                                           f"is {qn:.6g}")
+        raise c.fail(
+            "[trial] start_quat", f"must be a unit quaternion [w, x, y, z], its norm is {qn:.6g}"
+        )
 
     units = c.choice("[hand] units", get("hand", "units"), tuple(UNITS))
     y_axis = c.vector("[hand] y_axis", get("hand", "y_axis"), 3)
@@ -297,45 +351,64 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         raise c.fail("[hand] y_axis", "must not be zero")
 
     cond_modalities = get("conditions", "modalities")
-    if (not isinstance(cond_modalities, list) or not cond_modalities
-            or any(m not in MODALITIES for m in cond_modalities)):
-        raise c.fail("[conditions] modalities",
-                     f"must be a non-empty list of {', '.join(repr(m) for m in MODALITIES)}, "
-                     f"got {cond_modalities!r}")
+    if (
+        not isinstance(cond_modalities, list)
+        or not cond_modalities
+        or any(m not in MODALITIES for m in cond_modalities)
+    ):
+        raise c.fail(
+            "[conditions] modalities",
+            f"must be a non-empty list of {', '.join(repr(m) for m in MODALITIES)}, "
+            f"got {cond_modalities!r}",
+        )
     if len(set(cond_modalities)) != len(cond_modalities):
         raise c.fail("[conditions] modalities", f"lists a modality twice: {cond_modalities!r}")
     counts = get("conditions", "contact_counts")
-    if (not isinstance(counts, list) or not counts
-            or any(isinstance(k, bool) or k not in (3, 4) for k in counts)
-            or len(set(counts)) != len(counts)):
-        raise c.fail("[conditions] contact_counts",
-                     f"must be [3], [4], [3, 4] or [4, 3], got {counts!r}")
-    modality_order = c.choice("[conditions] modality_order", get("conditions", "modality_order"),
-                              MODALITY_ORDERS)
-    contact_order = c.choice("[conditions] contact_order", get("conditions", "contact_order"),
-                             CONTACT_ORDERS)
-    wrench_order = c.choice("[conditions] wrench_order", get("conditions", "wrench_order"),
-                            WRENCH_ORDERS)
+    if (
+        not isinstance(counts, list)
+        or not counts
+        or any(isinstance(k, bool) or k not in (3, 4) for k in counts)
+        or len(set(counts)) != len(counts)
+    ):
+        raise c.fail(
+            "[conditions] contact_counts", f"must be [3], [4], [3, 4] or [4, 3], got {counts!r}"
+        )
+    modality_order = c.choice(
+        "[conditions] modality_order", get("conditions", "modality_order"), MODALITY_ORDERS
+    )
+    contact_order = c.choice(
+        "[conditions] contact_order", get("conditions", "contact_order"), CONTACT_ORDERS
+    )
+    wrench_order = c.choice(
+        "[conditions] wrench_order", get("conditions", "wrench_order"), WRENCH_ORDERS
+    )
 
-    hands: Dict[int, Tuple[Tuple[float, float, float], ...]] = {}
+    hands: dict[int, tuple[tuple[float, float, float], ...]] = {}
     for k in (3, 4):
         table = get("hand", f"k{k}")
         where = f"[hand.k{k}]"
         if table is None:
             if k in counts:
-                raise c.fail(where, f"missing: contact_counts uses k = {k}; add [hand.k{k}] "
-                             f"with {', '.join(FINGERS[:k])} = [x, y, z]")
+                raise c.fail(
+                    where,
+                    f"missing: contact_counts uses k = {k}; add [hand.k{k}] "
+                    f"with {', '.join(FINGERS[:k])} = [x, y, z]",
+                )
             continue
         if not isinstance(table, dict):
             raise c.fail(where, "must be a table of finger = [x, y, z]")
         unknown = [f for f in table if f not in FINGERS[:k]]
         if unknown:
-            raise c.fail(f"{where} {unknown[0]}", f"unknown contact; k = {k} has "
-                         f"{', '.join(FINGERS[:k])}")
+            raise c.fail(
+                f"{where} {unknown[0]}", f"unknown contact; k = {k} has {', '.join(FINGERS[:k])}"
+            )
         missing = [f for f in FINGERS[:k] if f not in table]
         if missing:
-            raise c.fail(where, f"missing {', '.join(missing)} (k = {k} needs "
-                         f"{', '.join(FINGERS[:k])}, each [x, y, z] in {units})")
+            raise c.fail(
+                where,
+                f"missing {', '.join(missing)} (k = {k} needs "
+                f"{', '.join(FINGERS[:k])}, each [x, y, z] in {units})",
+            )
         raw = [c.vector(f"{where} {f}", table[f], 3) for f in FINGERS[:k]]
         problem = hand_span_problem(raw, units, lambda sym: file_unit_fix("[hand] units", sym))
         if problem:
@@ -343,45 +416,83 @@ def parse_protocol(data: Dict[str, Any], source: str = "<protocol>") -> Protocol
         hands[k] = tuple(tuple(x / UNITS[units] for x in p) for p in raw)  # type: ignore
 
     count = c.integer("[wrenches] count", get("wrenches", "count"), 1, 1000)
-    single = c.integer("[wrenches] single_motor", get("wrenches", "single_motor"), 0, count,
-                       f" (at most count = {count})")
+    single = c.integer(
+        "[wrenches] single_motor",
+        get("wrenches", "single_motor"),
+        0,
+        count,
+        f" (at most count = {count})",
+    )
     split_k = c.choice("[wrenches] split_k", get("wrenches", "split_k"), (3, 4))
     if split_k not in hands:
         raise c.fail("[wrenches] split_k", f"k = {split_k} has no [hand.k{split_k}]")
-    split_policy = c.choice("[wrenches] split_policy", get("wrenches", "split_policy"),
-                            ("F", "Fperp"))
-    force = c.number("[wrenches] force_N", get("wrenches", "force_N"), 0.0, 1000.0, "N",
-                     lo_open=True)
-    moment = c.number("[wrenches] moment_max_Nm", get("wrenches", "moment_max_Nm"), 0.0, 100.0,
-                      "N m")
+    split_policy = c.choice(
+        "[wrenches] split_policy", get("wrenches", "split_policy"), ("F", "Fperp")
+    )
+    force = c.number(
+        "[wrenches] force_N", get("wrenches", "force_N"), 0.0, 1000.0, "N", lo_open=True
+    )
+    moment = c.number(
+        "[wrenches] moment_max_Nm", get("wrenches", "moment_max_Nm"), 0.0, 100.0, "N m"
+    )
     for k, contacts in sorted(hands.items()):
         problem = moment_unit_problem(contacts, [force, 0.0, 0.0, moment, 0.0, 0.0])
         if problem:
             raise c.fail("[wrenches] moment_max_Nm", f"with force_N and [hand.k{k}]: {problem}")
     span = get("wrenches", "start_error_deg")
-    if (not isinstance(span, list) or len(span) != 2 or not all(_is_number(x) for x in span)
-            or not 0.0 <= span[0] < span[1] <= 180.0):   # NaN fails the comparison
-        raise c.fail("[wrenches] start_error_deg", f"must be [min, max] with 0 <= min < max "
-                     f"<= 180 degrees, got {span!r}")
+    if (
+        not isinstance(span, list)
+        or len(span) != 2
+        or not all(_is_number(x) for x in span)
+        or not 0.0 <= span[0] < span[1] <= 180.0
+    ):  # NaN fails the comparison
+        raise c.fail(
+            "[wrenches] start_error_deg",
+            f"must be [min, max] with 0 <= min < max <= 180 degrees, got {span!r}",
+        )
     lo, hi = float(span[0]), float(span[1])
     if lo <= threshold:
-        raise c.fail("[wrenches] start_error_deg", f"the minimum ({lo:g}) must exceed "
-                     f"[trial] threshold_deg ({threshold:g}), or a trial could start aligned")
+        raise c.fail(
+            "[wrenches] start_error_deg",
+            f"the minimum ({lo:g}) must exceed "
+            f"[trial] threshold_deg ({threshold:g}), or a trial could start aligned",
+        )
     max_draws = c.integer("[wrenches] max_draws", get("wrenches", "max_draws"), 1, 10**7)
 
-    fam_s = c.number("[familiarization] duration_s", get("familiarization", "duration_s"), 0.0,
-                     3600.0, "seconds")
+    fam_s = c.number(
+        "[familiarization] duration_s", get("familiarization", "duration_s"), 0.0, 3600.0, "seconds"
+    )
     fam_n = c.integer("[familiarization] trials", get("familiarization", "trials"), 0, 100)
 
     return Protocol(
-        name=name, seed=seed, participants=participants, pose_rate_hz=rate,
-        threshold_deg=threshold, hold_s=hold, timeout_s=timeout, constraints=constraints,
-        start_quat=start_quat, y_axis=y_axis, hands=hands,  # type: ignore[arg-type]
-        modalities=tuple(cond_modalities), contact_counts=tuple(counts),
-        modality_order=modality_order, contact_order=contact_order, wrench_order=wrench_order,
-        wrench_count=count, single_motor=single, split_k=split_k, split_policy=split_policy,
-        force_N=force, moment_max_Nm=moment, start_error_deg=(lo, hi), max_draws=max_draws,
-        familiarization_s=fam_s, familiarization_trials=fam_n, source=source)
+        name=name,
+        seed=seed,
+        participants=participants,
+        pose_rate_hz=rate,
+        threshold_deg=threshold,
+        hold_s=hold,
+        timeout_s=timeout,
+        constraints=constraints,
+        start_quat=start_quat,
+        y_axis=y_axis,
+        hands=hands,  # type: ignore[arg-type]
+        modalities=tuple(cond_modalities),
+        contact_counts=tuple(counts),
+        modality_order=modality_order,
+        contact_order=contact_order,
+        wrench_order=wrench_order,
+        wrench_count=count,
+        single_motor=single,
+        split_k=split_k,
+        split_policy=split_policy,
+        force_N=force,
+        moment_max_Nm=moment,
+        start_error_deg=(lo, hi),
+        max_draws=max_draws,
+        familiarization_s=fam_s,
+        familiarization_trials=fam_n,
+        source=source,
+    )
 
 
 def load_protocol(path: str) -> Protocol:
@@ -397,30 +508,41 @@ def loads_protocol(text: str, source: str = "<string>") -> Protocol:
 # --------------------------------------------------------------------------------------
 # Wrenches
 # --------------------------------------------------------------------------------------
-def motors_driven(protocol: Protocol, k: int, policy: str, wrench: Sequence[float]
-                  ) -> Optional[int]:
+def motors_driven(protocol: Protocol, k: int, policy: str, wrench: Sequence[float]) -> int | None:
     """How many motors the core drives (PWM > 0) for this wrench in condition (k, policy)
     at the protocol's start orientation, mode C; None if the core cannot solve it."""
     from graspguide.core import solver
 
-    r = solver.solve([list(c) for c in protocol.hands[k]], list(wrench), policy=policy,
-                     mode="C", constraints=protocol.constraints,
-                     orientation=list(protocol.start_quat), y_axis=list(protocol.y_axis))
+    r = solver.solve(
+        [list(c) for c in protocol.hands[k]],
+        list(wrench),
+        policy=policy,
+        mode="C",
+        constraints=protocol.constraints,
+        orientation=list(protocol.start_quat),
+        y_axis=list(protocol.y_axis),
+    )
     if r["status"] != "ok":
         return None
     return sum(1 for p in r["pwm"] if p > 0)
 
 
-def _start_error_deg(protocol: Protocol, k: int, wrench: Sequence[float]) -> Optional[float]:
+def _start_error_deg(protocol: Protocol, k: int, wrench: Sequence[float]) -> float | None:
     from graspguide.core import solver
 
-    r = solver.solve([list(c) for c in protocol.hands[k]], list(wrench), policy="F", mode="V",
-                     constraints=protocol.constraints, orientation=list(protocol.start_quat),
-                     y_axis=list(protocol.y_axis))
+    r = solver.solve(
+        [list(c) for c in protocol.hands[k]],
+        list(wrench),
+        policy="F",
+        mode="V",
+        constraints=protocol.constraints,
+        orientation=list(protocol.start_quat),
+        y_axis=list(protocol.y_axis),
+    )
     return None if r["status"] != "ok" else float(r["error_deg"])
 
 
-def _candidate(rng: random.Random, protocol: Protocol) -> Tuple[float, ...]:
+def _candidate(rng: random.Random, protocol: Protocol) -> tuple[float, ...]:
     # force direction uniform on the sphere, moment uniform in a ball of moment_max_Nm
     while True:
         f = [rng.gauss(0.0, 1.0) for _ in range(3)]
@@ -438,8 +560,7 @@ def _candidate(rng: random.Random, protocol: Protocol) -> Tuple[float, ...]:
     return tuple(round(x, 4) + 0.0 for x in f + m)
 
 
-def _classify(protocol: Protocol, w: Tuple[float, ...]) -> Optional[Tuple[Dict[str, bool],
-                                                                           float]]:
+def _classify(protocol: Protocol, w: tuple[float, ...]) -> tuple[dict[str, bool], float] | None:
     """Single-motor flags of every condition, and the start error; None when the wrench
     is unusable (the core fails in a condition, or the start error is out of range)."""
     errs = []
@@ -452,7 +573,7 @@ def _classify(protocol: Protocol, w: Tuple[float, ...]) -> Optional[Tuple[Dict[s
     lo, hi = protocol.start_error_deg
     if not lo <= err <= hi:
         return None
-    flags: Dict[str, bool] = {}
+    flags: dict[str, bool] = {}
     for k in sorted(protocol.hands):
         for policy in ("F", "Fperp"):
             n = motors_driven(protocol, k, policy, w)
@@ -462,15 +583,14 @@ def _classify(protocol: Protocol, w: Tuple[float, ...]) -> Optional[Tuple[Dict[s
     return flags, round(err, 3)
 
 
-def draw_wrenches(protocol: Protocol) -> List[Wrench]:
+def draw_wrenches(protocol: Protocol) -> list[Wrench]:
     """The protocol's wrench set, W01..Wnn: ``single_motor`` of them drive a single motor
     in the reference condition (split_k, split_policy), the others several. Every wrench
     is solvable in every condition and starts ``start_error_deg`` off gravity.
     Deterministic for the protocol (seeded by [study] seed)."""
     rng = random.Random(derive_seed(protocol.seed, "wrenches"))
-    want = {"single": protocol.single_motor,
-            "multi": protocol.wrench_count - protocol.single_motor}
-    got: List[Tuple[Tuple[float, ...], str, Dict[str, bool], float]] = []
+    want = {"single": protocol.single_motor, "multi": protocol.wrench_count - protocol.single_motor}
+    got: list[tuple[tuple[float, ...], str, dict[str, bool], float]] = []
     have = {"single": 0, "multi": 0}
     ref = f"k{protocol.split_k}/{protocol.split_policy}"
     for _ in range(protocol.max_draws):
@@ -492,38 +612,56 @@ def draw_wrenches(protocol: Protocol) -> List[Wrench]:
             f"single-motor and {have['multi']} of {want['multi']} multi-motor wrenches found "
             f"in max_draws = {protocol.max_draws} draws for k = {protocol.split_k}, policy "
             f"{protocol.split_policy} (with policy F a motor's level is |lambda_i|, which is "
-            "hardly ever exactly zero: use split_policy = \"Fperp\"), or lower single_motor, "
-            "or widen start_error_deg, or raise max_draws")
+            'hardly ever exactly zero: use split_policy = "Fperp"), or lower single_motor, '
+            "or widen start_error_deg, or raise max_draws"
+        )
     width = max(2, len(str(len(got))))
-    return [Wrench(id=f"W{i + 1:0{width}d}", wrench=w, wrench_class=cls, single_motor=flags,
-                   start_error_deg=err) for i, (w, cls, flags, err) in enumerate(got)]
+    return [
+        Wrench(
+            id=f"W{i + 1:0{width}d}",
+            wrench=w,
+            wrench_class=cls,
+            single_motor=flags,
+            start_error_deg=err,
+        )
+        for i, (w, cls, flags, err) in enumerate(got)
+    ]
 
 
-def draw_familiarization_wrenches(protocol: Protocol) -> List[Wrench]:
+def draw_familiarization_wrenches(protocol: Protocol) -> list[Wrench]:
     """Wrenches of the familiarization trials (F01..): drawn like the others from their
     own seed, without the split."""
     n = protocol.familiarization_trials
     if n == 0:
         return []
     rng = random.Random(derive_seed(protocol.seed, "familiarization"))
-    out: List[Wrench] = []
+    out: list[Wrench] = []
     for _ in range(protocol.max_draws):
         w = _candidate(rng, protocol)
         c = _classify(protocol, w)
         if c is None:
             continue
-        out.append(Wrench(id=f"F{len(out) + 1:02d}", wrench=w, wrench_class="",
-                          single_motor=c[0], start_error_deg=c[1]))
+        out.append(
+            Wrench(
+                id=f"F{len(out) + 1:02d}",
+                wrench=w,
+                wrench_class="",
+                single_motor=c[0],
+                start_error_deg=c[1],
+            )
+        )
         if len(out) == n:
             return out
-    raise ProtocolFileError(f"{protocol.source}: [familiarization]: only {len(out)} of {n} "
-                            f"usable wrenches in max_draws = {protocol.max_draws} draws")
+    raise ProtocolFileError(
+        f"{protocol.source}: [familiarization]: only {len(out)} of {n} "
+        f"usable wrenches in max_draws = {protocol.max_draws} draws"
+    )
 
 
 # --------------------------------------------------------------------------------------
 # Order and plan
 # --------------------------------------------------------------------------------------
-def balanced_latin_square(n: int) -> List[List[int]]:
+def balanced_latin_square(n: int) -> list[list[int]]:
     """Rows of a Williams design over n conditions: every condition once in every position
     across the rows, and (for even n) every ordered pair of neighbours exactly once. n rows
     for even n, 2n (the square and its mirror) for odd n."""
@@ -546,27 +684,36 @@ def balanced_latin_square(n: int) -> List[List[int]]:
 
 @dataclass(frozen=True)
 class PlannedTrial:
-    trial_index: int            # 1..N, the order of the run
+    trial_index: int  # 1..N, the order of the run
     participant: str
-    session: int                # 0: familiarization; 1..S: the (k, modality) blocks
-    session_trial: int          # 1..n within the session
+    session: int  # 0: familiarization; 1..S: the (k, modality) blocks
+    session_trial: int  # 1..n within the session
     k: int
     policy: str
     mode: str
     modality: str
     wrench_id: str
-    wrench: Tuple[float, ...]
-    single_motor: bool          # in this trial's (k, policy), at the start orientation
-    wrench_class: str           # "single"/"multi" in the reference condition; "" for F..
+    wrench: tuple[float, ...]
+    single_motor: bool  # in this trial's (k, policy), at the start orientation
+    wrench_class: str  # "single"/"multi" in the reference condition; "" for F..
     familiarization: bool
 
-    def to_dict(self) -> Dict[str, Any]:
-        return {"trial_index": self.trial_index, "participant": self.participant,
-                "session": self.session, "session_trial": self.session_trial, "k": self.k,
-                "policy": self.policy, "mode": self.mode, "modality": self.modality,
-                "wrench_id": self.wrench_id, "wrench": list(self.wrench),
-                "single_motor": self.single_motor, "wrench_class": self.wrench_class,
-                "familiarization": self.familiarization}
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "trial_index": self.trial_index,
+            "participant": self.participant,
+            "session": self.session,
+            "session_trial": self.session_trial,
+            "k": self.k,
+            "policy": self.policy,
+            "mode": self.mode,
+            "modality": self.modality,
+            "wrench_id": self.wrench_id,
+            "wrench": list(self.wrench),
+            "single_motor": self.single_motor,
+            "wrench_class": self.wrench_class,
+            "familiarization": self.familiarization,
+        }
 
 
 @dataclass(frozen=True)
@@ -584,7 +731,7 @@ class Session:
         return modality_parts(self.modality)[1]
 
 
-def session_order(protocol: Protocol, participant: str) -> List[Session]:
+def session_order(protocol: Protocol, participant: str) -> list[Session]:
     """The participant's sessions 1..S in run order."""
     n = participant_number(participant)
     mods = list(protocol.modalities)
@@ -612,9 +759,12 @@ def session_order(protocol: Protocol, participant: str) -> List[Session]:
     return sessions
 
 
-def plan(protocol: Protocol, participant: str,
-         wrenches: Optional[List[Wrench]] = None,
-         familiarization: Optional[List[Wrench]] = None) -> List[PlannedTrial]:
+def plan(
+    protocol: Protocol,
+    participant: str,
+    wrenches: list[Wrench] | None = None,
+    familiarization: list[Wrench] | None = None,
+) -> list[PlannedTrial]:
     """Every trial of one participant, in run order (deterministic): the familiarization
     trials (session 0) first, then each session's wrenches. ``wrenches`` /
     ``familiarization``: the drawn sets, when the caller has them already."""
@@ -623,16 +773,27 @@ def plan(protocol: Protocol, participant: str,
     if familiarization is None:
         familiarization = draw_familiarization_wrenches(protocol)
     sessions = session_order(protocol, participant)
-    trials: List[PlannedTrial] = []
+    trials: list[PlannedTrial] = []
 
     def add(session: int, pos: int, k: int, modality: str, w: Wrench, fam: bool) -> None:
         policy, mode = modality_parts(modality)
-        trials.append(PlannedTrial(
-            trial_index=len(trials) + 1, participant=participant, session=session,
-            session_trial=pos, k=k, policy=policy, mode=mode, modality=modality,
-            wrench_id=w.id, wrench=tuple(w.wrench),
-            single_motor=bool(w.single_motor[f"k{k}/{policy}"]),
-            wrench_class=w.wrench_class, familiarization=fam))
+        trials.append(
+            PlannedTrial(
+                trial_index=len(trials) + 1,
+                participant=participant,
+                session=session,
+                session_trial=pos,
+                k=k,
+                policy=policy,
+                mode=mode,
+                modality=modality,
+                wrench_id=w.id,
+                wrench=tuple(w.wrench),
+                single_motor=bool(w.single_motor[f"k{k}/{policy}"]),
+                wrench_class=w.wrench_class,
+                familiarization=fam,
+            )
+        )
 
     # familiarization: the first sessions' conditions in turn, first contact count
     for i, w in enumerate(familiarization):
@@ -641,15 +802,31 @@ def plan(protocol: Protocol, participant: str,
     for s in sessions:
         order = list(wrenches)
         if protocol.wrench_order == "shuffle":
-            random.Random(derive_seed(protocol.seed, "wrench_order", participant,
-                                      s.session)).shuffle(order)
+            random.Random(
+                derive_seed(protocol.seed, "wrench_order", participant, s.session)
+            ).shuffle(order)
         for pos, w in enumerate(order, start=1):
             add(s.session, pos, s.k, s.modality, w, False)
     return trials
 
 
-__all__ = ["Protocol", "ProtocolFileError", "Wrench", "PlannedTrial", "Session",
-           "load_protocol", "loads_protocol", "parse_protocol", "draw_wrenches",
-           "draw_familiarization_wrenches", "plan", "session_order", "balanced_latin_square",
-           "participant_number", "derive_seed", "motors_driven", "modality_parts",
-           "MODALITIES"]
+__all__ = [
+    "Protocol",
+    "ProtocolFileError",
+    "Wrench",
+    "PlannedTrial",
+    "Session",
+    "load_protocol",
+    "loads_protocol",
+    "parse_protocol",
+    "draw_wrenches",
+    "draw_familiarization_wrenches",
+    "plan",
+    "session_order",
+    "balanced_latin_square",
+    "participant_number",
+    "derive_seed",
+    "motors_driven",
+    "modality_parts",
+    "MODALITIES",
+]

@@ -41,7 +41,8 @@ import os
 import statistics
 import sys
 import time
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from collections.abc import Sequence
+from typing import Any
 
 from graspguide.study.jobs import (
     EXIT_FAILURE,
@@ -51,18 +52,26 @@ from graspguide.study.jobs import (
     TrialJob,
     count_lines,
     default_protocol,
-    default_out as _default_out,
-    int_arg as _int_arg,
-    repo_root as _repo_root,
     run_trial_jobs,
+)
+from graspguide.study.jobs import (
+    default_out as _default_out,
+)
+from graspguide.study.jobs import (
+    int_arg as _int_arg,
+)
+from graspguide.study.jobs import (
+    repo_root as _repo_root,
 )
 
 SWEEP_FORMAT = "graspguide-sweep/1"
 DEFAULT_THRESHOLDS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0)
 DEFAULT_RATES = (30.0, 60.0, 100.0, 240.0)
 DEFAULT_SOURCE = "participant"
-SIMULATED_NOTE = ("SIMULATED: virtual participants (graspguide.study.participant, a model of a "
-                  "person) on the simulated device; not human data")
+SIMULATED_NOTE = (
+    "SIMULATED: virtual participants (graspguide.study.participant, a model of a "
+    "person) on the simulated device; not human data"
+)
 
 DESCRIPTION = """\
 The guidance speed-accuracy trade, SIMULATED: runs the study protocol with the virtual
@@ -87,12 +96,14 @@ class SweepError(ValueError):
 # --------------------------------------------------------------------------------------
 # Arguments
 # --------------------------------------------------------------------------------------
-def parse_values(text: str, what: str, lo: float, hi: float) -> Tuple[float, ...]:
+def parse_values(text: str, what: str, lo: float, hi: float) -> tuple[float, ...]:
     """Comma-separated positive numbers in (lo, hi], sorted, without repeats."""
     items = [s.strip() for s in str(text).split(",")]
     if not items or any(not s for s in items):
-        raise SweepError(f"--{what}: expected comma-separated numbers such as "
-                         f"{'1,2,3,5' if what == 'thresholds' else '30,60,100'}, got {text!r}")
+        raise SweepError(
+            f"--{what}: expected comma-separated numbers such as "
+            f"{'1,2,3,5' if what == 'thresholds' else '30,60,100'}, got {text!r}"
+        )
     out = []
     for s in items:
         try:
@@ -101,27 +112,31 @@ def parse_values(text: str, what: str, lo: float, hi: float) -> Tuple[float, ...
             raise SweepError(f"--{what}: {s!r} is not a number") from None
         if not math.isfinite(v) or v <= lo or v > hi:
             unit = "degrees" if what == "thresholds" else "poses per second"
-            raise SweepError(f"--{what}: {s} is out of range: each value must be > {lo:g} "
-                             f"and <= {hi:g} {unit}")
+            raise SweepError(
+                f"--{what}: {s} is out of range: each value must be > {lo:g} and <= {hi:g} {unit}"
+            )
         out.append(v)
     return tuple(sorted(set(out)))
 
 
-def parse_modalities(text: str) -> Tuple[str, ...]:
+def parse_modalities(text: str) -> tuple[str, ...]:
     from graspguide.study.study_protocol import MODALITIES
 
     items = [s.strip() for s in str(text).split(",") if s.strip()]
     if not items:
         raise SweepError("--modalities: give at least one of " + ", ".join(MODALITIES))
-    out: List[str] = []
+    out: list[str] = []
     for s in items:
         if s in MODALITIES:
             picked = [s]
-        elif s in ("C", "V"):                         # a mode: both policies
+        elif s in ("C", "V"):  # a mode: both policies
             picked = [f"F+{s}", f"Fperp+{s}"]
         else:
-            raise SweepError(f"--modalities: unknown modality or mode {s!r}; use "
-                             + ", ".join(MODALITIES) + " or a mode C, V (both policies)")
+            raise SweepError(
+                f"--modalities: unknown modality or mode {s!r}; use "
+                + ", ".join(MODALITIES)
+                + " or a mode C, V (both policies)"
+            )
         out += [m for m in picked if m not in out]
     return tuple(out)
 
@@ -131,46 +146,96 @@ def default_out() -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--protocol", default=None, metavar="FILE",
-                   help="study protocol (default: protocols/paper.toml of the repository)")
-    p.add_argument("--thresholds", default=",".join(f"{v:g}" for v in DEFAULT_THRESHOLDS),
-                   metavar="LIST", help="alignment thresholds in degrees, each in (0, 90), "
-                   "run at the protocol's pose rate (default 1,2,3,5,7,10)")
-    p.add_argument("--rates", default=",".join(f"{v:g}" for v in DEFAULT_RATES),
-                   metavar="LIST", help="pose rates in Hz, each in [5, 2000], run at the "
-                   "protocol's threshold (default 30,60,100,240)")
-    p.add_argument("--grid", action="store_true",
-                   help="also run every threshold x rate pair (else one factor at a time)")
-    p.add_argument("--modalities", default=None, metavar="LIST",
-                   help="modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both "
-                        "policies); default: the protocol's")
-    p.add_argument("--contacts", default=None, metavar="LIST",
-                   help="contact counts, 3 and/or 4 (default: the protocol's)")
-    p.add_argument("--participants", type=_int_arg(1, 1000), default=2, metavar="N",
-                   help="virtual participants U1..UN per point (default 2)")
-    p.add_argument("--wrenches", type=_int_arg(1, 1000), default=4, metavar="N",
-                   help="target wrenches per session: the first N of the protocol's seeded "
-                        "draw, its single/multi split scaled (default 4)")
-    p.add_argument("--source", default=DEFAULT_SOURCE, metavar="SPEC",
-                   help="participant[:key=value,...] (default; told each point's threshold, "
-                        "hold and rate unless given here) or another simulated source of "
-                        "`graspguide trial` (synthetic[:...]: open loop, the same trajectory "
-                        "at every threshold)")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="sweep folder (default logs/guidance-sweep in the repository): "
-                        "points/, sweep.json, sweep.png; running again resumes")
-    p.add_argument("--jobs", "-j", type=_int_arg(1, 256), default=None, metavar="N",
-                   help="runner processes at a time, each with its own simulated device "
-                        "(default: the CPU count)")
+    p.add_argument(
+        "--protocol",
+        default=None,
+        metavar="FILE",
+        help="study protocol (default: protocols/paper.toml of the repository)",
+    )
+    p.add_argument(
+        "--thresholds",
+        default=",".join(f"{v:g}" for v in DEFAULT_THRESHOLDS),
+        metavar="LIST",
+        help="alignment thresholds in degrees, each in (0, 90), "
+        "run at the protocol's pose rate (default 1,2,3,5,7,10)",
+    )
+    p.add_argument(
+        "--rates",
+        default=",".join(f"{v:g}" for v in DEFAULT_RATES),
+        metavar="LIST",
+        help="pose rates in Hz, each in [5, 2000], run at the "
+        "protocol's threshold (default 30,60,100,240)",
+    )
+    p.add_argument(
+        "--grid",
+        action="store_true",
+        help="also run every threshold x rate pair (else one factor at a time)",
+    )
+    p.add_argument(
+        "--modalities",
+        default=None,
+        metavar="LIST",
+        help="modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both "
+        "policies); default: the protocol's",
+    )
+    p.add_argument(
+        "--contacts",
+        default=None,
+        metavar="LIST",
+        help="contact counts, 3 and/or 4 (default: the protocol's)",
+    )
+    p.add_argument(
+        "--participants",
+        type=_int_arg(1, 1000),
+        default=2,
+        metavar="N",
+        help="virtual participants U1..UN per point (default 2)",
+    )
+    p.add_argument(
+        "--wrenches",
+        type=_int_arg(1, 1000),
+        default=4,
+        metavar="N",
+        help="target wrenches per session: the first N of the protocol's seeded "
+        "draw, its single/multi split scaled (default 4)",
+    )
+    p.add_argument(
+        "--source",
+        default=DEFAULT_SOURCE,
+        metavar="SPEC",
+        help="participant[:key=value,...] (default; told each point's threshold, "
+        "hold and rate unless given here) or another simulated source of "
+        "`graspguide trial` (synthetic[:...]: open loop, the same trajectory "
+        "at every threshold)",
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="sweep folder (default logs/guidance-sweep in the repository): "
+        "points/, sweep.json, sweep.png; running again resumes",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=_int_arg(1, 256),
+        default=None,
+        metavar="N",
+        help="runner processes at a time, each with its own simulated device "
+        "(default: the CPU count)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add `graspguide sweep` to the CLI's subparsers."""
     p = subparsers.add_parser(
-        "sweep", help="the speed-accuracy trade, simulated: success rate and completion "
-                      "time against the threshold and the pose rate, per modality",
-        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+        "sweep",
+        help="the speed-accuracy trade, simulated: success rate and completion "
+        "time against the threshold and the pose rate, per modality",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_arguments(p)
     p.set_defaults(handler=run, command_parser=p)
     return p
@@ -183,18 +248,23 @@ def register(subparsers) -> argparse.ArgumentParser:
 class Point:
     threshold_deg: float
     pose_rate_hz: float
-    axes: Tuple[str, ...]           # "threshold", "rate", "grid": which plots it is on
+    axes: tuple[str, ...]  # "threshold", "rate", "grid": which plots it is on
 
     @property
-    def key(self) -> Tuple[float, float]:
+    def key(self) -> tuple[float, float]:
         return (self.threshold_deg, self.pose_rate_hz)
 
 
-def sweep_points(thresholds: Sequence[float], rates: Sequence[float], base_threshold: float,
-                 base_rate: float, grid: bool = False) -> List[Point]:
+def sweep_points(
+    thresholds: Sequence[float],
+    rates: Sequence[float],
+    base_threshold: float,
+    base_rate: float,
+    grid: bool = False,
+) -> list[Point]:
     """One factor at a time around (base_threshold, base_rate), plus the grid if asked;
     every (threshold, rate) once, the base point always included."""
-    axes: Dict[Tuple[float, float], List[str]] = {}
+    axes: dict[tuple[float, float], list[str]] = {}
 
     def add(t: float, r: float, axis: str) -> None:
         lst = axes.setdefault((float(t), float(r)), [])
@@ -214,23 +284,34 @@ def sweep_points(thresholds: Sequence[float], rates: Sequence[float], base_thres
     return [Point(t, r, tuple(a)) for (t, r), a in sorted(axes.items())]
 
 
-def derive_protocol(base, threshold_deg: float, pose_rate_hz: float, wrenches: int,
-                    modalities: Optional[Sequence[str]] = None,
-                    contacts: Optional[Sequence[int]] = None):
+def derive_protocol(
+    base,
+    threshold_deg: float,
+    pose_rate_hz: float,
+    wrenches: int,
+    modalities: Sequence[str] | None = None,
+    contacts: Sequence[int] | None = None,
+):
     """The protocol of one point: ``base`` with the threshold and pose rate changed,
     ``wrenches`` wrenches (single-motor share scaled), no familiarization trials."""
     from graspguide.study.study_protocol import ProtocolFileError
 
     if threshold_deg >= base.start_error_deg[0]:
-        raise SweepError(f"threshold {threshold_deg:g} deg: must be below the protocol's "
-                         f"smallest start error ({base.start_error_deg[0]:g} deg, [wrenches] "
-                         "start_error_deg), or a trial could start aligned")
+        raise SweepError(
+            f"threshold {threshold_deg:g} deg: must be below the protocol's "
+            f"smallest start error ({base.start_error_deg[0]:g} deg, [wrenches] "
+            "start_error_deg), or a trial could start aligned"
+        )
     single = int(math.floor(wrenches * base.single_motor / base.wrench_count + 0.5))
     single = max(0, min(wrenches, single))
-    changes: Dict[str, Any] = dict(
-        name=f"{base.name}-sweep", threshold_deg=float(threshold_deg),
-        pose_rate_hz=float(pose_rate_hz), wrench_count=int(wrenches), single_motor=single,
-        familiarization_trials=0)
+    changes: dict[str, Any] = dict(
+        name=f"{base.name}-sweep",
+        threshold_deg=float(threshold_deg),
+        pose_rate_hz=float(pose_rate_hz),
+        wrench_count=int(wrenches),
+        single_motor=single,
+        familiarization_trials=0,
+    )
     if modalities is not None:
         changes["modalities"] = tuple(modalities)
     if contacts is not None:
@@ -263,8 +344,7 @@ def protocol_toml(protocol) -> str:
     from graspguide.study.study_protocol import FINGERS
 
     d = protocol.to_dict()
-    lines = ["# A point of `graspguide sweep` (SIMULATED): derived from "
-             f"{protocol.source}", ""]
+    lines = [f"# A point of `graspguide sweep` (SIMULATED): derived from {protocol.source}", ""]
     for table in ("study", "trial"):
         lines.append(f"[{table}]")
         lines += [f"{k} = {_toml_value(v)}" for k, v in d[table].items()]
@@ -290,8 +370,11 @@ def point_source(spec: str, point: Point, hold_s: float) -> str:
         return spec
     given = {item.partition("=")[0].strip() for item in rest.split(",") if item.strip()}
     extra = []
-    for key, value in (("task_threshold_deg", point.threshold_deg),
-                       ("task_hold_s", hold_s), ("rate_hz", point.pose_rate_hz)):
+    for key, value in (
+        ("task_threshold_deg", point.threshold_deg),
+        ("task_hold_s", hold_s),
+        ("rate_hz", point.pose_rate_hz),
+    ):
         if key not in given:
             extra.append(f"{key}={value:g}")
     items = [s for s in rest.split(",") if s.strip()] + extra
@@ -299,18 +382,17 @@ def point_source(spec: str, point: Point, hold_s: float) -> str:
 
 
 def point_dir_name(point: Point, protocol) -> str:
-    return (f"t{point.threshold_deg:g}_r{point.pose_rate_hz:g}_"
-            f"{protocol.config_hash[:10]}")
+    return f"t{point.threshold_deg:g}_r{point.pose_rate_hz:g}_{protocol.config_hash[:10]}"
 
 
 # --------------------------------------------------------------------------------------
 # Statistics
 # --------------------------------------------------------------------------------------
-def _r(x: Optional[float], nd: int = 3) -> Optional[float]:
+def _r(x: float | None, nd: int = 3) -> float | None:
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
-def summarize(records: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
+def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Success rate and completion time of main trials (failures count as the timeout,
     which the runner records as their completion_s)."""
     n = len(records)
@@ -325,16 +407,19 @@ def summarize(records: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
         "completion_sd_s": _r(statistics.stdev(times)) if n > 1 else None,
         "success_completion_median_s": _r(statistics.median(ok)) if ok else None,
         "success_completion_mean_s": _r(statistics.fmean(ok)) if ok else None,
-        "final_error_median_deg": _r(statistics.median(
-            float(r["final_error_deg"]) for r in records)) if n else None,
+        "final_error_median_deg": _r(
+            statistics.median(float(r["final_error_deg"]) for r in records)
+        )
+        if n
+        else None,
         "poses": int(sum(int(r.get("poses", 0)) for r in records)),
     }
 
 
-def read_point_trials(study_dir: str, participants: Sequence[str]) -> List[Dict[str, Any]]:
+def read_point_trials(study_dir: str, participants: Sequence[str]) -> list[dict[str, Any]]:
     from graspguide.study.runner import read_jsonl
 
-    out: List[Dict[str, Any]] = []
+    out: list[dict[str, Any]] = []
     for pid in participants:
         path = os.path.join(study_dir, pid, "trials.jsonl")
         if os.path.exists(path):
@@ -342,7 +427,7 @@ def read_point_trials(study_dir: str, participants: Sequence[str]) -> List[Dict[
     return out
 
 
-def threshold_pairs(by_threshold: Dict[float, List[Dict[str, Any]]]) -> Dict[str, Any]:
+def threshold_pairs(by_threshold: dict[float, list[dict[str, Any]]]) -> dict[str, Any]:
     """The same (participant, trial) at neighbouring thresholds (same rate): how often the
     larger threshold took longer. For an open-loop source (the same trajectory whatever
     the threshold) never; for the closed-loop participant it can (the cue and its search
@@ -361,14 +446,13 @@ def threshold_pairs(by_threshold: Dict[float, List[Dict[str, Any]]]) -> Dict[str
             if d > 1e-9:
                 longer += 1
                 worst = max(worst, d)
-    return {"pairs": pairs, "larger_threshold_took_longer": longer,
-            "largest_increase_s": _r(worst)}
+    return {"pairs": pairs, "larger_threshold_took_longer": longer, "largest_increase_s": _r(worst)}
 
 
 # --------------------------------------------------------------------------------------
 # Running
 # --------------------------------------------------------------------------------------
-def _run_tasks(tasks: List[TrialJob], jobs: int, quiet: bool, err) -> int:
+def _run_tasks(tasks: list[TrialJob], jobs: int, quiet: bool, err) -> int:
     """Run the tasks' `graspguide trial` processes, ``jobs`` at a time (tag: the point)."""
     if not tasks:
         return EXIT_OK
@@ -379,33 +463,51 @@ def _run_tasks(tasks: List[TrialJob], jobs: int, quiet: bool, err) -> int:
         pt, planned = t.tag
         where = f"threshold {pt.threshold_deg:g} deg, rate {pt.pose_rate_hz:g} Hz, {t.participant}"
         if rc != 0:
-            print(f"graspguide sweep: {where}: `graspguide trial` exited with {rc}; see "
-                  f"{t.log}", file=err, flush=True)
+            print(
+                f"graspguide sweep: {where}: `graspguide trial` exited with {rc}; see {t.log}",
+                file=err,
+                flush=True,
+            )
         elif not quiet:
-            print(f"  [{done[0]}/{len(tasks)}] {where}: {t.completed_trials()}/{planned} "
-                  "trials (simulated)", flush=True)
+            print(
+                f"  [{done[0]}/{len(tasks)}] {where}: {t.completed_trials()}/{planned} "
+                "trials (simulated)",
+                flush=True,
+            )
 
     interrupted, failed = run_trial_jobs(tasks, jobs, on_exit)
     if interrupted:
-        print("\ngraspguide sweep: interrupted; completed trials are kept: run the same "
-              "command again to resume", file=err)
+        print(
+            "\ngraspguide sweep: interrupted; completed trials are kept: run the same "
+            "command again to resume",
+            file=err,
+        )
         return EXIT_INTERRUPTED
     if failed:
-        print(f"graspguide sweep: error: {len(failed)} runner process(es) failed; completed "
-              "trials are kept: fix the cause and run the same command again", file=err)
+        print(
+            f"graspguide sweep: error: {len(failed)} runner process(es) failed; completed "
+            "trials are kept: fix the cause and run the same command again",
+            file=err,
+        )
         return EXIT_FAILURE
     return EXIT_OK
 
 
-def _fmt(x: Optional[float], spec: str = "5.1f") -> str:
+def _fmt(x: float | None, spec: str = "5.1f") -> str:
     return "-" if x is None else format(x, spec)
 
 
-def table_lines(result: Dict[str, Any]) -> List[str]:
-    head = (f"{'axis':<9} {'thr':>5} {'rate':>5}  {'modality':<8} {'success':>13}  "
-            f"{'median':>6}  {'mean +- SD':>13}  {'med.succ':>8}")
-    lines = ["SIMULATED (virtual participants, not human data); completion time in s, "
-             f"failures counted as {result['timeout_s']:g} s", head, "-" * len(head)]
+def table_lines(result: dict[str, Any]) -> list[str]:
+    head = (
+        f"{'axis':<9} {'thr':>5} {'rate':>5}  {'modality':<8} {'success':>13}  "
+        f"{'median':>6}  {'mean +- SD':>13}  {'med.succ':>8}"
+    )
+    lines = [
+        "SIMULATED (virtual participants, not human data); completion time in s, "
+        f"failures counted as {result['timeout_s']:g} s",
+        head,
+        "-" * len(head),
+    ]
     for pt in result["points"]:
         named = [a for a in pt["axes"] if a != "grid"]
         axis = "base" if len(named) == 2 else (named[0] if named else "grid")
@@ -413,38 +515,49 @@ def table_lines(result: Dict[str, Any]) -> List[str]:
             rate = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f}%"
             succ = f"{s['successes']}/{s['trials']} {rate:>4}"
             ms = f"{_fmt(s['completion_mean_s'])} +- {_fmt(s['completion_sd_s'], '4.1f')}"
-            lines.append(f"{axis:<9} {pt['threshold_deg']:>5g} {pt['pose_rate_hz']:>5g}  "
-                         f"{m:<8} {succ:>13}  {_fmt(s['completion_median_s'], '6.1f')}  "
-                         f"{ms:>13}  {_fmt(s['success_completion_median_s'], '8.2f')}")
+            lines.append(
+                f"{axis:<9} {pt['threshold_deg']:>5g} {pt['pose_rate_hz']:>5g}  "
+                f"{m:<8} {succ:>13}  {_fmt(s['completion_median_s'], '6.1f')}  "
+                f"{ms:>13}  {_fmt(s['success_completion_median_s'], '8.2f')}"
+            )
     return lines
 
 
-def plot(result: Dict[str, Any], path: str) -> None:
+def plot(result: dict[str, Any], path: str) -> None:
     """Two rows (against the threshold, against the pose rate), two columns (success rate,
     completion time: mean +- SD with failures as the timeout, solid; median over
     successes, dotted); one line per modality."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     mods = result["modalities"]
-    colors = {"F+C": "tab:blue", "Fperp+C": "tab:cyan", "F+V": "tab:red",
-              "Fperp+V": "tab:orange"}
+    colors = {"F+C": "tab:blue", "Fperp+C": "tab:cyan", "F+V": "tab:red", "Fperp+V": "tab:orange"}
     fig, axes = plt.subplots(2, 2, figsize=(11, 8.2))
-    rows = (("threshold", "threshold_deg", "alignment threshold [deg] (at "
-             f"{result['base']['pose_rate_hz']:g} Hz)"),
-            ("rate", "pose_rate_hz", "pose rate [Hz] (at "
-             f"{result['base']['threshold_deg']:g} deg)"))
+    rows = (
+        (
+            "threshold",
+            "threshold_deg",
+            f"alignment threshold [deg] (at {result['base']['pose_rate_hz']:g} Hz)",
+        ),
+        ("rate", "pose_rate_hz", f"pose rate [Hz] (at {result['base']['threshold_deg']:g} deg)"),
+    )
     for row, (axis, key, label) in enumerate(rows):
         pts = sorted((p for p in result["points"] if axis in p["axes"]), key=lambda p: p[key])
         xs_all = [p[key] for p in pts]
         for j, m in enumerate(mods):
             c = colors.get(m, None)
             xs = [p[key] for p in pts]
-            sr = [None if p["modalities"][m]["success_rate"] is None
-                  else 100 * p["modalities"][m]["success_rate"] for p in pts]
-            axes[row][0].plot(xs, [math.nan if v is None else v for v in sr], "o-",
-                              color=c, label=m)
+            sr = [
+                None
+                if p["modalities"][m]["success_rate"] is None
+                else 100 * p["modalities"][m]["success_rate"]
+                for p in pts
+            ]
+            axes[row][0].plot(
+                xs, [math.nan if v is None else v for v in sr], "o-", color=c, label=m
+            )
             # small offsets so the error bars do not hide each other
             span = (max(xs_all) / min(xs_all)) if row == 1 and min(xs_all) > 0 else None
             if span:
@@ -453,15 +566,23 @@ def plot(result: Dict[str, Any], path: str) -> None:
                 off = [x + 0.06 * (j - (len(mods) - 1) / 2) for x in xs]
             mean = [p["modalities"][m]["completion_mean_s"] for p in pts]
             sd = [p["modalities"][m]["completion_sd_s"] or 0.0 for p in pts]
-            axes[row][1].errorbar(off, [math.nan if v is None else v for v in mean], yerr=sd,
-                                  fmt="o-", color=c, capsize=3, label=m)
+            axes[row][1].errorbar(
+                off,
+                [math.nan if v is None else v for v in mean],
+                yerr=sd,
+                fmt="o-",
+                color=c,
+                capsize=3,
+                label=m,
+            )
             med = [p["modalities"][m]["success_completion_median_s"] for p in pts]
-            axes[row][1].plot(xs, [math.nan if v is None else v for v in med], ":",
-                              marker="x", color=c)
+            axes[row][1].plot(
+                xs, [math.nan if v is None else v for v in med], ":", marker="x", color=c
+            )
         axes[row][0].set_ylabel("success rate [%]")
         axes[row][0].set_ylim(-3, 103)
         axes[row][1].set_ylabel(f"completion time [s] (failure = {result['timeout_s']:g} s)")
-        axes[row][1].set_ylim(0, result["timeout_s"] * 1.4)   # room for the legend
+        axes[row][1].set_ylim(0, result["timeout_s"] * 1.4)  # room for the legend
         for ax in axes[row]:
             ax.set_xlabel(label)
             ax.grid(True, alpha=0.3)
@@ -474,16 +595,27 @@ def plot(result: Dict[str, Any], path: str) -> None:
                 ax.set_xticks(xs_all)
         axes[row][0].legend(fontsize=8, loc="lower right" if row == 0 else "center right")
     from matplotlib.lines import Line2D
+
     handles = [Line2D([], [], color=colors.get(m), marker="o", label=m) for m in mods] + [
-        Line2D([], [], color="gray", marker="o", label="mean +- SD, failure = "
-               f"{result['timeout_s']:g} s"),
-        Line2D([], [], color="gray", marker="x", linestyle=":",
-               label="median of successes")]
+        Line2D(
+            [],
+            [],
+            color="gray",
+            marker="o",
+            label=f"mean +- SD, failure = {result['timeout_s']:g} s",
+        ),
+        Line2D([], [], color="gray", marker="x", linestyle=":", label="median of successes"),
+    ]
     axes[0][1].legend(handles=handles, fontsize=7, loc="upper right", ncol=3)
-    size = (f"{result['participants']} virtual participants x {result['wrenches']} wrenches x "
-            f"k = {','.join(str(k) for k in result['contact_counts'])} per modality and point")
-    fig.suptitle("SIMULATED guidance speed-accuracy trade (virtual participant model, not "
-                 f"human data)\n{size}", fontsize=11)
+    size = (
+        f"{result['participants']} virtual participants x {result['wrenches']} wrenches x "
+        f"k = {','.join(str(k) for k in result['contact_counts'])} per modality and point"
+    )
+    fig.suptitle(
+        "SIMULATED guidance speed-accuracy trade (virtual participant model, not "
+        f"human data)\n{size}",
+        fontsize=11,
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.94))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -499,35 +631,49 @@ def _shown_path(path: str) -> str:
     return path
 
 
-def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequence[float],
-              participants: int, wrenches: int, out: str, jobs: int, source: str,
-              modalities: Optional[Sequence[str]] = None,
-              contacts: Optional[Sequence[int]] = None, grid: bool = False,
-              quiet: bool = False, err=None) -> Tuple[int, Optional[Dict[str, Any]]]:
+def run_sweep(
+    *,
+    protocol_path: str,
+    thresholds: Sequence[float],
+    rates: Sequence[float],
+    participants: int,
+    wrenches: int,
+    out: str,
+    jobs: int,
+    source: str,
+    modalities: Sequence[str] | None = None,
+    contacts: Sequence[int] | None = None,
+    grid: bool = False,
+    quiet: bool = False,
+    err=None,
+) -> tuple[int, dict[str, Any] | None]:
     """Run (or resume) the sweep into ``out``; returns (exit status, result dict)."""
-    from graspguide.study.study_protocol import load_protocol, plan
     from graspguide.study.runner import RunnerError, open_runner_source
+    from graspguide.study.study_protocol import load_protocol, plan
 
     err = err or sys.stderr
     t0 = time.monotonic()
     base = load_protocol(protocol_path)
     pts = sweep_points(thresholds, rates, base.threshold_deg, base.pose_rate_hz, grid)
     pids = [f"U{i}" for i in range(1, participants + 1)]
-    tasks: List[TrialJob] = []
-    plan_info: List[Tuple[Point, Any, str, str]] = []
+    tasks: list[TrialJob] = []
+    plan_info: list[tuple[Point, Any, str, str]] = []
     # check every point before writing anything
     derived = []
     for pt in pts:
-        proto = derive_protocol(base, pt.threshold_deg, pt.pose_rate_hz, wrenches,
-                                modalities, contacts)
+        proto = derive_protocol(
+            base, pt.threshold_deg, pt.pose_rate_hz, wrenches, modalities, contacts
+        )
         spec = point_source(source, pt, base.hold_s)
         try:
             src = open_runner_source(spec, proto, "U1")
         except RunnerError as e:
             raise SweepError(str(e)) from None
         if not src.simulated or getattr(src, "live", False):
-            raise SweepError(f"--source {source}: the sweep runs simulated sources only "
-                             "(participant[:...], synthetic[:...])")
+            raise SweepError(
+                f"--source {source}: the sweep runs simulated sources only "
+                "(participant[:...], synthetic[:...])"
+            )
         derived.append((pt, proto, spec))
     for pt, proto, spec in derived:
         study_dir = os.path.join(out, "points", point_dir_name(pt, proto))
@@ -546,16 +692,26 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
         for pid in pids:
             if count_lines(os.path.join(study_dir, pid, "trials.jsonl")) >= planned:
                 continue
-            tasks.append(TrialJob(ppath, study_dir, pid, spec,
-                                  os.path.join(study_dir, "logs", f"{pid}.log"),
-                                  tag=(pt, planned)))
+            tasks.append(
+                TrialJob(
+                    ppath,
+                    study_dir,
+                    pid,
+                    spec,
+                    os.path.join(study_dir, "logs", f"{pid}.log"),
+                    tag=(pt, planned),
+                )
+            )
     n_trials = sum(len(plan(p, "U1")) for _, p, _, _ in plan_info) * len(pids)
     if not quiet:
-        print(f"{SIMULATED_NOTE}.\nSweep of {protocol_path}: {len(pts)} points x "
-              f"{len(pids)} participants = {n_trials} trials; {len(tasks)} runner processes "
-              f"to run, {jobs} at a time; folder {out}", flush=True)
+        print(
+            f"{SIMULATED_NOTE}.\nSweep of {protocol_path}: {len(pts)} points x "
+            f"{len(pids)} participants = {n_trials} trials; {len(tasks)} runner processes "
+            f"to run, {jobs} at a time; folder {out}",
+            flush=True,
+        )
     # the slow points (small threshold, high rate) first, so the pool ends together
-    tasks.sort(key=lambda t: (t.tag[0].pose_rate_hz / t.tag[0].threshold_deg), reverse=True)
+    tasks.sort(key=lambda t: t.tag[0].pose_rate_hz / t.tag[0].threshold_deg, reverse=True)
     code = _run_tasks(tasks, jobs, quiet, err)
     if code != EXIT_OK:
         return code, None
@@ -563,8 +719,8 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
 
     mods = list(plan_info[0][1].modalities)
     points_out = []
-    by_threshold: Dict[str, Dict[float, List[Dict[str, Any]]]] = {m: {} for m in mods}
-    all_by_threshold: Dict[float, List[Dict[str, Any]]] = {}
+    by_threshold: dict[str, dict[float, list[dict[str, Any]]]] = {m: {} for m in mods}
+    all_by_threshold: dict[float, list[dict[str, Any]]] = {}
     for pt, proto, study_dir, spec in plan_info:
         recs = read_point_trials(study_dir, pids)
         expected = len(plan(proto, "U1")) * len(pids)
@@ -573,17 +729,30 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
         if not all(r.get("simulated") for r in recs):
             raise SweepError(f"{study_dir}: holds trials not marked simulated")
         per_mod = {m: summarize([r for r in recs if r["modality"] == m]) for m in mods}
-        per_mode = {mode: summarize([r for r in recs if r["mode"] == mode])
-                    for mode in sorted({r["mode"] for r in recs})}
-        points_out.append({
-            "threshold_deg": pt.threshold_deg, "pose_rate_hz": pt.pose_rate_hz,
-            "axes": list(pt.axes), "folder": os.path.relpath(study_dir, out),
-            "config_hash": proto.config_hash, "source": spec,
-            "modalities": per_mod, "modes": per_mode,
-            "modes_by_contacts": {f"k{k}/{mode}": summarize(
-                [r for r in recs if r["k"] == k and r["mode"] == mode])
-                for k in proto.contact_counts for mode in sorted(per_mode)},
-            "all": summarize(recs)})
+        per_mode = {
+            mode: summarize([r for r in recs if r["mode"] == mode])
+            for mode in sorted({r["mode"] for r in recs})
+        }
+        points_out.append(
+            {
+                "threshold_deg": pt.threshold_deg,
+                "pose_rate_hz": pt.pose_rate_hz,
+                "axes": list(pt.axes),
+                "folder": os.path.relpath(study_dir, out),
+                "config_hash": proto.config_hash,
+                "source": spec,
+                "modalities": per_mod,
+                "modes": per_mode,
+                "modes_by_contacts": {
+                    f"k{k}/{mode}": summarize(
+                        [r for r in recs if r["k"] == k and r["mode"] == mode]
+                    )
+                    for k in proto.contact_counts
+                    for mode in sorted(per_mode)
+                },
+                "all": summarize(recs),
+            }
+        )
         if "threshold" in pt.axes:
             all_by_threshold[pt.threshold_deg] = recs
             for m in mods:
@@ -596,19 +765,28 @@ def run_sweep(*, protocol_path: str, thresholds: Sequence[float], rates: Sequenc
         "protocol_file": _shown_path(protocol_path),
         "base_config_hash": base.config_hash,
         "base": {"threshold_deg": base.threshold_deg, "pose_rate_hz": base.pose_rate_hz},
-        "hold_s": base.hold_s, "timeout_s": base.timeout_s,
+        "hold_s": base.hold_s,
+        "timeout_s": base.timeout_s,
         "source": source,
-        "participants": len(pids), "wrenches": wrenches,
-        "wrench_ids": [w for w in sorted({r["wrench_id"] for r in
-                                          read_point_trials(plan_info[0][2], pids)})],
+        "participants": len(pids),
+        "wrenches": wrenches,
+        "wrench_ids": [
+            w for w in sorted({r["wrench_id"] for r in read_point_trials(plan_info[0][2], pids)})
+        ],
         "contact_counts": list(proto0.contact_counts),
         "modalities": mods,
         "trials_per_point": len(plan(proto0, "U1")) * len(pids),
-        "thresholds_deg": list(thresholds), "rates_hz": list(rates), "grid": grid,
-        "completion_rule": (f"a failure counts as the timeout ({base.timeout_s:g} s), as the "
-                            "paper reports; success_completion_* are over successes only"),
-        "threshold_pairs": {"all": threshold_pairs(all_by_threshold),
-                            **{m: threshold_pairs(v) for m, v in by_threshold.items()}},
+        "thresholds_deg": list(thresholds),
+        "rates_hz": list(rates),
+        "grid": grid,
+        "completion_rule": (
+            f"a failure counts as the timeout ({base.timeout_s:g} s), as the "
+            "paper reports; success_completion_* are over successes only"
+        ),
+        "threshold_pairs": {
+            "all": threshold_pairs(all_by_threshold),
+            **{m: threshold_pairs(v) for m, v in by_threshold.items()},
+        },
         "points": points_out,
         "run_wall_s": round(run_s, 1),
         "runner_processes_run": len(tasks),
@@ -639,16 +817,18 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
     from graspguide.study.runner import RunnerError
+    from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
 
     prog = "graspguide sweep"
     try:
         thresholds = parse_values(args.thresholds, "thresholds", 0.0, 90.0)
         rates = parse_values(args.rates, "rates", 0.0, POSE_RATE_HZ[1])
         if any(r < POSE_RATE_HZ[0] for r in rates):
-            raise SweepError(f"--rates: each value must be at least {POSE_RATE_HZ[0]:g} poses "
-                             "per second, the protocol file's minimum ([study] pose_rate_hz)")
+            raise SweepError(
+                f"--rates: each value must be at least {POSE_RATE_HZ[0]:g} poses "
+                "per second, the protocol file's minimum ([study] pose_rate_hz)"
+            )
         if any(t >= 90.0 for t in thresholds):
             raise SweepError("--thresholds: each value must be below 90 degrees")
         modalities = parse_modalities(args.modalities) if args.modalities else None
@@ -657,18 +837,31 @@ def run(args: argparse.Namespace) -> int:
             try:
                 contacts = tuple(int(s) for s in args.contacts.split(","))
             except ValueError:
-                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}") \
-                    from None
-            if not contacts or any(k not in (3, 4) for k in contacts) or \
-                    len(set(contacts)) != len(contacts):
+                raise SweepError(
+                    f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}"
+                ) from None
+            if (
+                not contacts
+                or any(k not in (3, 4) for k in contacts)
+                or len(set(contacts)) != len(contacts)
+            ):
                 raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}")
         out = args.out or default_out()
         jobs = args.jobs or os.cpu_count() or 1
         code, result = run_sweep(
-            protocol_path=args.protocol or default_protocol(), thresholds=thresholds,
-            rates=rates, participants=args.participants, wrenches=args.wrenches, out=out,
-            jobs=jobs, source=args.source, modalities=modalities, contacts=contacts,
-            grid=args.grid, quiet=args.quiet)
+            protocol_path=args.protocol or default_protocol(),
+            thresholds=thresholds,
+            rates=rates,
+            participants=args.participants,
+            wrenches=args.wrenches,
+            out=out,
+            jobs=jobs,
+            source=args.source,
+            modalities=modalities,
+            contacts=contacts,
+            grid=args.grid,
+            quiet=args.quiet,
+        )
     except (SweepError, ProtocolFileError, RunnerError) as e:
         print(f"{prog}: error: {e}", file=sys.stderr)
         return EXIT_USAGE
@@ -687,22 +880,29 @@ def run(args: argparse.Namespace) -> int:
     for line in table_lines(result):
         print(line)
     tp = result["threshold_pairs"]["all"]
-    print(f"\nSame trial, next larger threshold: took longer in "
-          f"{tp['larger_threshold_took_longer']} of {tp['pairs']} pairs "
-          "(never for an open-loop source; possible for the closed-loop participant, whose "
-          "cue and search change with the threshold)")
-    print(f"\nWrote {json_path} and {png_path}; {result['run_wall_s']:.1f} s wall, "
-          f"{result['runner_processes_run']} runner processes run now ({result['jobs']} "
-          "at a time). SIMULATED: no human took part.")
+    print(
+        f"\nSame trial, next larger threshold: took longer in "
+        f"{tp['larger_threshold_took_longer']} of {tp['pairs']} pairs "
+        "(never for an open-loop source; possible for the closed-loop participant, whose "
+        "cue and search change with the threshold)"
+    )
+    print(
+        f"\nWrote {json_path} and {png_path}; {result['run_wall_s']:.1f} s wall, "
+        f"{result['runner_processes_run']} runner processes run now ({result['jobs']} "
+        "at a time). SIMULATED: no human took part."
+    )
     return EXIT_OK
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """`graspguide sweep` on its own (``python -m graspguide.study.sweep ...``)."""
     from graspguide.cli.app import ArgumentParser
 
-    parser = ArgumentParser(prog="graspguide sweep", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(
+        prog="graspguide sweep",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_arguments(parser)
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
@@ -712,9 +912,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_INTERRUPTED
 
 
-__all__ = ["register", "main", "run", "run_sweep", "sweep_points", "derive_protocol",
-           "protocol_toml", "point_source", "summarize", "threshold_pairs", "table_lines",
-           "plot", "parse_values", "parse_modalities", "SweepError"]
+__all__ = [
+    "register",
+    "main",
+    "run",
+    "run_sweep",
+    "sweep_points",
+    "derive_protocol",
+    "protocol_toml",
+    "point_source",
+    "summarize",
+    "threshold_pairs",
+    "table_lines",
+    "plot",
+    "parse_values",
+    "parse_modalities",
+    "SweepError",
+]
 
 
 if __name__ == "__main__":

@@ -1,12 +1,13 @@
 """Reading the project's TOML files (scene.toml, protocol files) with errors that name
 the file: one place for what every loader needs."""
+
 from __future__ import annotations
 
 import tomllib
-from typing import Any, Dict, Type
+from typing import Any
 
 
-def load_toml(path: str, error: Type[Exception], what: str) -> Dict[str, Any]:
+def load_toml(path: str, error: type[Exception], what: str) -> dict[str, Any]:
     """The parsed file; ``error`` (naming the file and ``what`` it is) if it cannot be
     read or is not valid TOML."""
     try:
@@ -18,7 +19,7 @@ def load_toml(path: str, error: Type[Exception], what: str) -> Dict[str, Any]:
         raise error(f"{path}: not valid TOML: {e}") from None
 
 
-def loads_toml(text: str, source: str, error: Type[Exception]) -> Dict[str, Any]:
+def loads_toml(text: str, source: str, error: type[Exception]) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -9,12 +9,22 @@ Import("projenv")  # noqa: F821 (SCons)
 
 def _commit_prefix(project_dir):
     try:
-        out = subprocess.run(["git", "-C", project_dir, "rev-parse", "--short=8", "HEAD"],
-                             check=True, capture_output=True, text=True).stdout.strip()
+        out = subprocess.run(
+            ["git", "-C", project_dir, "rev-parse", "--short=8", "HEAD"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
         return int(out, 16)
     except (OSError, subprocess.CalledProcessError, ValueError):
         return 0
 
 
-projenv.Append(CPPDEFINES=[("GRASPGUIDE_BUILD_ID",  # noqa: F821
-                            "0x%08xu" % _commit_prefix(projenv.subst("$PROJECT_DIR")))])  # noqa: F821
+projenv.Append(
+    CPPDEFINES=[
+        (
+            "GRASPGUIDE_BUILD_ID",  # noqa: F821
+            "0x%08xu" % _commit_prefix(projenv.subst("$PROJECT_DIR")),
+        )
+    ]
+)  # noqa: F821

@@ -16,8 +16,16 @@ import subprocess
 
 Import("env")  # noqa: F821 (SCons)
 
-FLASH_SECTIONS = (".isr_vector", ".text", ".rodata", ".ARM.extab", ".ARM.exidx",
-                  ".preinit_array", ".init_array", ".fini_array")
+FLASH_SECTIONS = (
+    ".isr_vector",
+    ".text",
+    ".rodata",
+    ".ARM.extab",
+    ".ARM.exidx",
+    ".preinit_array",
+    ".init_array",
+    ".fini_array",
+)
 RAM_SECTIONS = (".data", ".bss")
 
 
@@ -29,8 +37,13 @@ def _run(env, tool, *args):
 def _demangle(names):
     if not names:
         return {}
-    out = subprocess.run(["arm-none-eabi-c++filt"], input="\n".join(names),
-                         capture_output=True, text=True, check=True).stdout.split("\n")
+    out = subprocess.run(
+        ["arm-none-eabi-c++filt"],
+        input="\n".join(names),
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split("\n")
     return dict(zip(names, out))
 
 
@@ -89,8 +102,11 @@ def _category(section, obj):
     if "libgraspguide" in obj:
         return "core (graspguide)"
     base = os.path.basename(obj)
-    if SOFT_DOUBLE.match(sym) or re.search(r"_(arm_)?(addsub|muldiv|cmp|fixdfdi|fixunsdfdi|"
-                                          r"fixunsdfsi|fixdfsi|floatdidf|floatundidf)df", base):
+    if SOFT_DOUBLE.match(sym) or re.search(
+        r"_(arm_)?(addsub|muldiv|cmp|fixdfdi|fixunsdfdi|"
+        r"fixunsdfsi|fixdfsi|floatdidf|floatundidf)df",
+        base,
+    ):
         return "runtime: soft double"
     if "libm" in obj:
         return "runtime: libm"
@@ -116,12 +132,14 @@ def parse_map(path):
     for line in lines[start + 1 :]:
         m = re.match(r"^(\.[\w.]+)\s+0x[0-9a-f]+\s+0x[0-9a-f]+", line)
         if m or re.match(r"^\.[\w.]+$", line):
-            out_sec = (m.group(1) if m else line.strip())
+            out_sec = m.group(1) if m else line.strip()
             pending = None
             continue
         if out_sec not in FLASH_SECTIONS + RAM_SECTIONS:
             continue
-        m = re.match(r"^ (\*fill\*|[.\w$]\S*)?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)(?:\s+(\S.*))?$", line)
+        m = re.match(
+            r"^ (\*fill\*|[.\w$]\S*)?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)(?:\s+(\S.*))?$", line
+        )
         if m and (m.group(1) or pending):
             name = m.group(1) or pending
             size = int(m.group(3), 16)
@@ -200,11 +218,21 @@ def _reg_count(reglist):
 HELPERS = [
     ("heap (malloc)", re.compile(r"^(malloc|_malloc_r|calloc|realloc|_sbrk|_Zna?[jm]\w*)$")),
     ("soft-float double", SOFT_DOUBLE),
-    ("stdio/printf", re.compile(r"^(_?v?f?i?printf|_?v?s?n?i?printf(_r)?|_svfi?printf_r|"
-                                r"_vfi?printf_r|puts|fputs|_puts_r|__sfvwrite_r|_fwalk\w*)$")),
-    ("C++ exceptions/unwinding", re.compile(r"^(__cxa_throw|__cxa_allocate_exception|"
-                                            r"__gxx_personality_v0|_Unwind_\w+|"
-                                            r"__aeabi_unwind_cpp_pr\d)$")),
+    (
+        "stdio/printf",
+        re.compile(
+            r"^(_?v?f?i?printf|_?v?s?n?i?printf(_r)?|_svfi?printf_r|"
+            r"_vfi?printf_r|puts|fputs|_puts_r|__sfvwrite_r|_fwalk\w*)$"
+        ),
+    ),
+    (
+        "C++ exceptions/unwinding",
+        re.compile(
+            r"^(__cxa_throw|__cxa_allocate_exception|"
+            r"__gxx_personality_v0|_Unwind_\w+|"
+            r"__aeabi_unwind_cpp_pr\d)$"
+        ),
+    ),
     ("iostream/locale", re.compile(r"^_ZNS[it]|^_ZSt4cout|^_ZNSt6locale")),
 ]
 
@@ -320,9 +348,11 @@ def report(target, source, env):  # pylint: disable=unused-argument
         core_f = flash["core (graspguide)"] + flash["core (Eigen)"]
         core_r = ram["core (graspguide)"] + ram["core (Eigen)"]
         print("  %-28s %9d %6.1f%% %9d" % ("total", tf, 100.0, tr))
-        print("  core share (graspguide + Eigen): %d B flash (%.1f%%), %d B static RAM "
-              "(the core's state lives inside the Application object)"
-              % (core_f, 100.0 * core_f / tf, core_r))
+        print(
+            "  core share (graspguide + Eigen): %d B flash (%.1f%%), %d B static RAM "
+            "(the core's state lives inside the Application object)"
+            % (core_f, 100.0 * core_f / tf, core_r)
+        )
 
     nm = _run(env, "nm", "-S", "--size-sort", elf)
     symbols, ram_syms = {}, []
@@ -334,8 +364,10 @@ def report(target, source, env):  # pylint: disable=unused-argument
                 ram_syms.append((int(parts[1], 16), parts[3]))
     dem = _demangle([s for _, s in ram_syms])
     biggest = sorted(ram_syms, reverse=True)[:4]
-    print("  largest RAM objects: " + ", ".join("%s %d B" % (_short(dem.get(s, s), 60), n)
-                                               for n, s in biggest))
+    print(
+        "  largest RAM objects: "
+        + ", ".join("%s %d B" % (_short(dem.get(s, s), 60), n) for n, s in biggest)
+    )
     stack_reserve = None
     for line in _run(env, "nm", elf).split("\n"):
         if line.endswith(" _min_stack_size"):
@@ -353,29 +385,47 @@ def report(target, source, env):  # pylint: disable=unused-argument
     # Eigen's blocked Householder code runs only for 48 or more reflectors: linked
     # (the size test is at run time) but dead for the core's sizes (at most 12).
     blocked = re.compile(r"apply_block_householder_on_the_left")
-    for title, skip in (("every linked path", None),
-                        ("without Eigen's blocked Householder path (dead here)", blocked)):
-        (depth, path), notes = worst_stack("Reset_Handler", frames, edges, virtuals,
-                                            callees, prologue, skip)
+    for title, skip in (
+        ("every linked path", None),
+        ("without Eigen's blocked Householder path (dead here)", blocked),
+    ):
+        (depth, path), notes = worst_stack(
+            "Reset_Handler", frames, edges, virtuals, callees, prologue, skip
+        )
         dem = _demangle(path)
         dyn = [p for p in path if p in dynamic]
-        print("  worst-case stack, %s: %d B%s (reserved %s B)" % (
-            title, depth, " + bounded allocas in %d frame(s)" % len(dyn) if dyn else "",
-            stack_reserve if stack_reserve is not None else "?"))
-        print("      " + " -> ".join("%s[%d]" % (_short(dem.get(p, p), 40),
-                                                 frames.get(p, prologue.get(p, 0)))
-                                     for p in path[2:]))
-        extra = sorted(n.split(":", 1)[1] for n in notes if n.startswith(("unknown:", "recursion:")))
+        print(
+            "  worst-case stack, %s: %d B%s (reserved %s B)"
+            % (
+                title,
+                depth,
+                " + bounded allocas in %d frame(s)" % len(dyn) if dyn else "",
+                stack_reserve if stack_reserve is not None else "?",
+            )
+        )
+        print(
+            "      "
+            + " -> ".join(
+                "%s[%d]" % (_short(dem.get(p, p), 40), frames.get(p, prologue.get(p, 0)))
+                for p in path[2:]
+            )
+        )
+        extra = sorted(
+            n.split(":", 1)[1] for n in notes if n.startswith(("unknown:", "recursion:"))
+        )
         if extra:
             print("      not counted (no frame info or recursive): " + ", ".join(extra[:8]))
         if stack_reserve is not None and depth > stack_reserve:
             print("  WARNING: worst-case stack exceeds the reserved stack")
-    print("      (+ up to 104 B per nested exception with FP context, + handler frames;"
-          " allocas are bounded by EIGEN_STACK_ALLOCATION_LIMIT each)")
+    print(
+        "      (+ up to 104 B per nested exception with FP context, + handler frames;"
+        " allocas are bounded by EIGEN_STACK_ALLOCATION_LIMIT each)"
+    )
 
 
-report_alias = env.Alias("m4freport", env["PIOMAINPROG"],
-                         env.VerboseAction(report, "Report for $SOURCE"))
+report_alias = env.Alias(
+    "m4freport", env["PIOMAINPROG"], env.VerboseAction(report, "Report for $SOURCE")
+)
 AlwaysBuild(report_alias)  # noqa: F821
 env.Depends(report_alias, env.Alias("memreport"))  # after the builder's flash/RAM lines
 Default(report_alias)  # noqa: F821

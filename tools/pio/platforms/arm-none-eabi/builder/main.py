@@ -57,9 +57,16 @@ env.Append(
 
 # build_flags all land in CCFLAGS, which C files get too: move the C++-only ones to
 # CXXFLAGS (else cc1 warns "valid for C++ but not for C" on start-up code in C).
-CXX_ONLY_FLAGS = ("-fno-rtti", "-frtti", "-fno-threadsafe-statics", "-fthreadsafe-statics",
-                  "-fno-use-cxa-atexit", "-fuse-cxa-atexit", "-fvisibility-inlines-hidden",
-                  "-fno-enforce-eh-specs")
+CXX_ONLY_FLAGS = (
+    "-fno-rtti",
+    "-frtti",
+    "-fno-threadsafe-statics",
+    "-fthreadsafe-statics",
+    "-fno-use-cxa-atexit",
+    "-fuse-cxa-atexit",
+    "-fvisibility-inlines-hidden",
+    "-fno-enforce-eh-specs",
+)
 
 
 def _process_flags_cxx_aware(env, flags):
@@ -83,27 +90,42 @@ if env.get("LDSCRIPT_PATH"):
 
 # build_flags were parsed inside BuildProgram into CCFLAGS; command lines are expanded
 # only when the link runs, so appending now still reaches the linker.
-MACHINE_PREFIXES = ("-mcpu=", "-march=", "-mthumb", "-marm", "-mfpu=", "-mfloat-abi=",
-                    "--specs=", "-specs=")
-machine = [f for f in env.get("CCFLAGS", []) if isinstance(f, str) and f.startswith(MACHINE_PREFIXES)]
+MACHINE_PREFIXES = (
+    "-mcpu=",
+    "-march=",
+    "-mthumb",
+    "-marm",
+    "-mfpu=",
+    "-mfloat-abi=",
+    "--specs=",
+    "-specs=",
+)
+machine = [
+    f for f in env.get("CCFLAGS", []) if isinstance(f, str) and f.startswith(MACHINE_PREFIXES)
+]
 env.Append(LINKFLAGS=[f for f in machine if f not in env["LINKFLAGS"]])
 env.Append(ASFLAGS=[f for f in machine if not f.startswith(("--specs=", "-specs="))])
 
 
 def print_memory(target, source, env):  # pylint: disable=unused-argument
     elf = str(source[0])
-    out = subprocess.run([env.subst("$SIZETOOL"), "-B", "-d", elf], check=True,
-                         capture_output=True, text=True).stdout
+    out = subprocess.run(
+        [env.subst("$SIZETOOL"), "-B", "-d", elf], check=True, capture_output=True, text=True
+    ).stdout
     print(out.rstrip())
     text, data, bss = (int(v) for v in out.splitlines()[1].split()[:3])
     print("Flash: %d bytes (text %d + data %d)" % (text + data, text, data))
     print("RAM:   %d bytes (data %d + bss %d), stack not included" % (data + bss, data, bss))
 
 
-target_size = env.Alias("size", target_elf, env.VerboseAction(print_memory, "Memory use of $SOURCE"))
+target_size = env.Alias(
+    "size", target_elf, env.VerboseAction(print_memory, "Memory use of $SOURCE")
+)
 AlwaysBuild(target_size)
 # PlatformIO drops a default target named "size" when SIZETOOL is set; keep ours.
-memreport = env.Alias("memreport", target_elf, env.VerboseAction(print_memory, "Memory use of $SOURCE"))
+memreport = env.Alias(
+    "memreport", target_elf, env.VerboseAction(print_memory, "Memory use of $SOURCE")
+)
 AlwaysBuild(memreport)
 
 Default([target_elf, memreport])
