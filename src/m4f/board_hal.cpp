@@ -13,7 +13,9 @@ struct SysTickRegs {
   volatile uint32_t csr, rvr, cvr, calib;
 };
 SysTickRegs& systick() { return *reinterpret_cast<SysTickRegs*>(uintptr_t{0xE000E010u}); }
-volatile uint32_t& scb_icsr() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED04u}); }
+volatile uint32_t& scb_icsr() {
+  return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED04u});
+}
 constexpr uint32_t kPendStSet = 1u << 26;
 
 constexpr uint32_t kTicksPerMs = M4F_CORE_HZ / 1000u;

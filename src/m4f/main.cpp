@@ -6,10 +6,9 @@
 // The results are left in volatile words for a debugger or QEMU (mps2-an386).
 #include <cstdint>
 
-#include "graspguide.h"
 #include "board_hal.h"
+#include "graspguide.h"
 #include "graspguide_device/application.h"
-
 
 using graspguide::Real;
 namespace gg = graspguide;
@@ -17,9 +16,9 @@ namespace dev = graspguide::device;
 
 extern "C" {
 // What the harness saw, for a debugger or a QEMU test.
-volatile uint32_t m4f_trials_ok;      // trials that succeeded (2 expected)
-volatile uint32_t m4f_poses_ok;       // poses the application accepted
-volatile uint32_t m4f_last_status;    // first non-ok Status or Refusal seen (0: none)
+volatile uint32_t m4f_trials_ok;    // trials that succeeded (2 expected)
+volatile uint32_t m4f_poses_ok;     // poses the application accepted
+volatile uint32_t m4f_last_status;  // first non-ok Status or Refusal seen (0: none)
 volatile float m4f_last_error_deg;
 volatile uint32_t m4f_max_compute_us;  // slowest Guidance::update
 volatile uint32_t m4f_stack_peak;      // bytes of stack ever used (painted by start-up)
@@ -49,7 +48,8 @@ Vec4 quat_mul(const Vec4& q, const Vec4& r) {
 
 void note(const dev::Reply& r) {
   if (!r.ok() && m4f_last_status == 0)
-    m4f_last_status = r.status != gg::Status::kOk ? 0x100u + uint32_t(r.status) : 0x200u + uint32_t(r.refusal);
+    m4f_last_status =
+        r.status != gg::Status::kOk ? 0x100u + uint32_t(r.status) : 0x200u + uint32_t(r.refusal);
 }
 
 // One trial; true if it succeeded.

@@ -43,7 +43,10 @@ __attribute__((section(".isr_vector"), used)) const vector_t m4f_vectors[16 + M4
     MemManage_Handler,
     BusFault_Handler,
     UsageFault_Handler,
-    0, 0, 0, 0, /* reserved */
+    0,
+    0,
+    0,
+    0, /* reserved */
     SVC_Handler,
     DebugMon_Handler,
     0, /* reserved */

@@ -2,11 +2,11 @@
 // minimal. There is no heap: malloc, _sbrk and operator new trap, so heap use is a link
 // error in the size report (the symbols would be kept) and a halt at run time.
 // Assertions, pure virtual calls and abort trap too, without pulling in stdio.
+#include <sys/stat.h>
 #include <cerrno>
 #include <cstddef>
 #include <cstdint>
 #include <new>
-#include <sys/stat.h>
 
 extern "C" {
 

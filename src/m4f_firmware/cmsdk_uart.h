@@ -103,8 +103,10 @@ class CmsdkUart final : public device::ByteStream {
     reg(kIntStatus) = kIntRx;
     while (reg(kState) & kStateRxFull) {
       const uint8_t b = uint8_t(reg(kData));
-      if (rx_.space() > 0) rx_.push(b);
-      else ++rx_dropped_;
+      if (rx_.space() > 0)
+        rx_.push(b);
+      else
+        ++rx_dropped_;
     }
   }
 
@@ -115,7 +117,13 @@ class CmsdkUart final : public device::ByteStream {
   }
 
  private:
-  enum : uintptr_t { kData = 0x00, kState = 0x04, kCtrl = 0x08, kIntStatus = 0x0C, kBauddiv = 0x10 };
+  enum : uintptr_t {
+    kData = 0x00,
+    kState = 0x04,
+    kCtrl = 0x08,
+    kIntStatus = 0x0C,
+    kBauddiv = 0x10
+  };
   enum : uint32_t {
     kStateTxFull = 1u << 0,
     kStateRxFull = 1u << 1,

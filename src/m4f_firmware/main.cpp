@@ -26,7 +26,7 @@ extern "C" {
 // or the QEMU test: the link has no message for them.
 volatile uint32_t m4f_uart_rx_dropped;
 volatile uint32_t m4f_uart_tx_frames_dropped;
-volatile uint32_t m4f_stack_peak;  // bytes of stack ever used (painted by start-up)
+volatile uint32_t m4f_stack_peak;     // bytes of stack ever used (painted by start-up)
 uint32_t m4f_stack_high_water(void);  // startup.c
 
 // startup.c's flash vector table, whose 16 system entries are copied to the RAM table.
@@ -47,8 +47,12 @@ constexpr int kUart0RxIrq = 0;
 constexpr int kUart0TxIrq = 1;
 constexpr int kIrqCount = 32;
 
-volatile uint32_t& scb_vtor() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED08u}); }
-volatile uint32_t& nvic_iser0() { return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000E100u}); }
+volatile uint32_t& scb_vtor() {
+  return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000ED08u});
+}
+volatile uint32_t& nvic_iser0() {
+  return *reinterpret_cast<volatile uint32_t*>(uintptr_t{0xE000E100u});
+}
 
 dev::DeviceInfo board_info() {
   dev::DeviceInfo info;

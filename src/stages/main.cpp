@@ -163,8 +163,7 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
       t_svd = elapsed(t0, ticks());
     }
   }
-  line.str("S ").str(c.name).sp().num(K).sp().str(gg::status_name(cold.status)).sp()
-      .str(c.status);
+  line.str("S ").str(c.name).sp().num(K).sp().str(gg::status_name(cold.status)).sp().str(c.status);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(cold.pwm.duty[i]);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(c.pwm[i]);
   for (int32_t v : stage) line.sp().num(v);
@@ -191,11 +190,14 @@ int main() {
   stages::write0(line.str("CAL ").num(empty).sp().num(loop_a).sp().num(loop_b).end());
   stages::write0(line.str("COLUMNS name k status ref_status pwm0 pwm1 pwm2 pwm3 ref0 ref1 ref2 "
                           "ref3 frames grasp decomposition qp mapping full_cold full_warm "
-                          "full_svd fixed svd_status svd0 svd1 svd2 svd3").end());
+                          "full_svd fixed svd_status svd0 svd1 svd2 svd3")
+                     .end());
   for (int i = 0; i < stages::kStageSceneCount; ++i) {
     const stages::StageScene& c = stages::kStageScenes[i];
-    if (c.k == 3) one_scene<3>(c, line);
-    else one_scene<4>(c, line);
+    if (c.k == 3)
+      one_scene<3>(c, line);
+    else
+      one_scene<4>(c, line);
   }
   stages::write0(line.str("STACK ").num(m4f_stack_high_water()).end());
   stages::write0(line.str("END ").num(stages::kStageSceneCount).end());

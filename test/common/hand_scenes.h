@@ -19,16 +19,16 @@ struct RandomScene {
 // Nominal hand frame: x toward the thumb, y wrist -> fingertips, z out of the palm (m).
 inline Eigen::Matrix<double, 3, 4> nominal_hand() {
   Eigen::Matrix<double, 3, 4> c;
-  c << 0.045, 0.015, -0.010, 0.000,
-       0.045, 0.095, 0.100, 0.045,
-       0.035, 0.040, 0.040, 0.000;
+  c << 0.045, 0.015, -0.010, 0.000, 0.045, 0.095, 0.100, 0.045, 0.035, 0.040, 0.040, 0.000;
   return c;
 }
 
 inline Eigen::Vector3d random_unit(std::mt19937_64& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
   Eigen::Vector3d v;
-  do { v << n(rng), n(rng), n(rng); } while (v.norm() < 1e-6);
+  do {
+    v << n(rng), n(rng), n(rng);
+  } while (v.norm() < 1e-6);
   return v.normalized();
 }
 

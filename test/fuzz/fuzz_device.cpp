@@ -48,13 +48,13 @@ namespace gd = graspguide::device;
 namespace gl = graspguide_link;
 
 // A macro, so every invariant traps at its own address and libFuzzer tells them apart.
-#define REQUIRE(cond, what)                                                                   \
-  do {                                                                                        \
-    if (!(cond)) {                                                                            \
+#define REQUIRE(cond, what)                                                                 \
+  do {                                                                                      \
+    if (!(cond)) {                                                                          \
       std::fprintf(stderr, "fuzz_device: invariant violated: %s (%s:%d)\n", what, __FILE__, \
-                   __LINE__);                                                                 \
-      __builtin_trap();                                                                       \
-    }                                                                                         \
+                   __LINE__);                                                               \
+      __builtin_trap();                                                                     \
+    }                                                                                       \
   } while (0)
 
 namespace {
@@ -70,8 +70,14 @@ class Input {
   Input(const uint8_t* data, size_t size) : data_(data), size_(size) {}
   bool done() const { return at_ >= size_; }
   uint8_t u8() { return at_ < size_ ? data_[at_++] : 0; }
-  uint16_t u16() { const uint16_t lo = u8(); return uint16_t(lo | u8() << 8); }
-  uint32_t u32() { const uint32_t lo = u16(); return lo | uint32_t(u16()) << 16; }
+  uint16_t u16() {
+    const uint16_t lo = u8();
+    return uint16_t(lo | u8() << 8);
+  }
+  uint32_t u32() {
+    const uint32_t lo = u16();
+    return lo | uint32_t(u16()) << 16;
+  }
   float f32() {
     const uint32_t bits = u32();
     float f;
@@ -87,16 +93,38 @@ class Input {
 
 // Values at the edges of what the device checks, and past them.
 float special_float(unsigned i) {
-  static const float kValues[32] = {
-      NAN, -NAN, INFINITY, -INFINITY, 0.0f, -0.0f, FLT_MAX, -FLT_MAX,
-      FLT_MIN, std::numeric_limits<float>::denorm_min(), 1e30f, -1e30f,
-      9.3e12f,                                          // the int64-overflow timeout
-      9.2233720e12f,                                    // INT64_MAX us in s
-      float(gg::kTrialTimeoutMaxS), std::nextafter(float(gg::kTrialTimeoutMaxS), INFINITY),
-      float(gg::kTrialHoldMaxS), std::nextafter(float(gg::kTrialHoldMaxS), INFINITY),
-      float(gg::kTrialThresholdMaxDeg), std::nextafter(float(gg::kTrialThresholdMaxDeg), INFINITY),
-      2147.483648f, 4294.967296f,                       // 2^31 and 2^32 us in s
-      1e-30f, 0.5f, 90.0f, 1.0f, -1.0f, 1e-7f, 1e7f, 1e-3f, 16777216.0f, -1e-3f};
+  static const float kValues[32] = {NAN,
+                                    -NAN,
+                                    INFINITY,
+                                    -INFINITY,
+                                    0.0f,
+                                    -0.0f,
+                                    FLT_MAX,
+                                    -FLT_MAX,
+                                    FLT_MIN,
+                                    std::numeric_limits<float>::denorm_min(),
+                                    1e30f,
+                                    -1e30f,
+                                    9.3e12f,        // the int64-overflow timeout
+                                    9.2233720e12f,  // INT64_MAX us in s
+                                    float(gg::kTrialTimeoutMaxS),
+                                    std::nextafter(float(gg::kTrialTimeoutMaxS), INFINITY),
+                                    float(gg::kTrialHoldMaxS),
+                                    std::nextafter(float(gg::kTrialHoldMaxS), INFINITY),
+                                    float(gg::kTrialThresholdMaxDeg),
+                                    std::nextafter(float(gg::kTrialThresholdMaxDeg), INFINITY),
+                                    2147.483648f,
+                                    4294.967296f,  // 2^31 and 2^32 us in s
+                                    1e-30f,
+                                    0.5f,
+                                    90.0f,
+                                    1.0f,
+                                    -1.0f,
+                                    1e-7f,
+                                    1e7f,
+                                    1e-3f,
+                                    16777216.0f,
+                                    -1e-3f};
   return kValues[i % 32];
 }
 
@@ -105,14 +133,22 @@ float value(Input& in, float dflt) {
   const uint8_t b = in.u8();
   const int small = b >> 3;  // 0..31
   switch (b & 7) {
-    case 0: return special_float(unsigned(small));
-    case 1: return dflt * (1.0f + float(small - 16) / 64.0f);
-    case 2: return dflt + float(small - 16) * 1e-3f;  // up to 16 mm for a contact
-    case 3: return in.f32();                          // any bit pattern
-    case 4: return float(int8_t(in.u8())) * std::pow(10.0f, float(small % 8) - 4.0f);
-    case 5: return -dflt;
-    case 6: return std::ldexp(dflt, small - 16);
-    default: return dflt + float(small) * 1e-6f;      // nearly the same: near-degenerate
+    case 0:
+      return special_float(unsigned(small));
+    case 1:
+      return dflt * (1.0f + float(small - 16) / 64.0f);
+    case 2:
+      return dflt + float(small - 16) * 1e-3f;  // up to 16 mm for a contact
+    case 3:
+      return in.f32();  // any bit pattern
+    case 4:
+      return float(int8_t(in.u8())) * std::pow(10.0f, float(small % 8) - 4.0f);
+    case 5:
+      return -dflt;
+    case 6:
+      return std::ldexp(dflt, small - 16);
+    default:
+      return dflt + float(small) * 1e-6f;  // nearly the same: near-degenerate
   }
 }
 
@@ -201,8 +237,18 @@ bool is_answer(uint8_t id) { return id != uint8_t(gl::MsgId::kTrialResult); }
 
 // ---- operations ---------------------------------------------------------------------------------
 
-enum class Op : uint8_t { kHello, kSetScene, kStartTrial, kPose, kStop, kSetMotors, kGetStatus,
-                          kAdvance, kRawFrame, kGarbage };
+enum class Op : uint8_t {
+  kHello,
+  kSetScene,
+  kStartTrial,
+  kPose,
+  kStop,
+  kSetMotors,
+  kGetStatus,
+  kAdvance,
+  kRawFrame,
+  kGarbage
+};
 // An op byte: the low 4 bits pick the operation (POSE is most of a real session), the high 4
 // are flags; flag 0x1 sends a delimiter first (what a host does to end a partial frame).
 constexpr Op kOpOfSlot[16] = {Op::kHello,     Op::kSetScene,  Op::kStartTrial, Op::kPose,
@@ -260,20 +306,35 @@ PoseTime pose_time(Input& in, uint32_t prev) {
   const uint32_t small = b >> 3;  // 0..31
   constexpr uint32_t kFrameUs = 10000;
   switch (b & 7) {
-    case 0: case 1: case 2: {  // a tracker at 100 Hz down to ~3 Hz
+    case 0:
+    case 1:
+    case 2: {  // a tracker at 100 Hz down to ~3 Hz
       const uint32_t dt = kFrameUs * (1 + small);
       return {prev + dt, dt};
     }
-    case 3: return {prev + in.u32(), kFrameUs};  // any jump, 2^31 and more included
-    case 4: return {in.u32(), kFrameUs};
+    case 3:
+      return {prev + in.u32(), kFrameUs};  // any jump, 2^31 and more included
+    case 4:
+      return {in.u32(), kFrameUs};
     case 5: {
-      const uint32_t kEdges[12] = {0u, 0xFFFFFFFFu, 0x7FFFFFFFu, 0x80000000u, prev + 0x80000000u,
-                                   prev + 0x7FFFFFFFu, prev + 0x80000001u, prev - 1, prev,
-                                   prev - kFrameUs, 0xFFFFFFFFu - 5000u, prev + 0xFFFFFFFFu / 3};
+      const uint32_t kEdges[12] = {0u,
+                                   0xFFFFFFFFu,
+                                   0x7FFFFFFFu,
+                                   0x80000000u,
+                                   prev + 0x80000000u,
+                                   prev + 0x7FFFFFFFu,
+                                   prev + 0x80000001u,
+                                   prev - 1,
+                                   prev,
+                                   prev - kFrameUs,
+                                   0xFFFFFFFFu - 5000u,
+                                   prev + 0xFFFFFFFFu / 3};
       return {kEdges[small % 12], kFrameUs};
     }
-    case 6: return {prev - small * 1000u, kFrameUs};  // a little back in time
-    default: return {prev + small * 1000000u, small * 1000000u};  // seconds of tracking loss
+    case 6:
+      return {prev - small * 1000u, kFrameUs};  // a little back in time
+    default:
+      return {prev + small * 1000000u, small * 1000000u};  // seconds of tracking loss
   }
 }
 
@@ -286,18 +347,27 @@ uint32_t clock_step(Input& in) {
   const uint8_t b = in.u8();
   const uint32_t small = b >> 3;
   switch (b & 7) {
-    case 0: return kStaleUs - 1;
-    case 1: return kStaleUs;
-    case 2: return kStaleUs + small * 1000u;
-    case 3: return small * 1000u;
-    case 4: return small * 1000000u;
-    case 5: return small * 10000000u;  // up to 310 s
-    case 6: return in.u32() % (kMaxPollGapUs + 1);
-    default: return small * 10000u;
+    case 0:
+      return kStaleUs - 1;
+    case 1:
+      return kStaleUs;
+    case 2:
+      return kStaleUs + small * 1000u;
+    case 3:
+      return small * 1000u;
+    case 4:
+      return small * 1000000u;
+    case 5:
+      return small * 10000000u;  // up to 310 s
+    case 6:
+      return in.u32() % (kMaxPollGapUs + 1);
+    default:
+      return small * 10000u;
   }
 }
 
-// ---- the rig --------------------------------------------------------------------------------------
+// ---- the rig
+// --------------------------------------------------------------------------------------
 
 class Rig {
  public:
@@ -323,8 +393,12 @@ class Rig {
           send(m, delimiter);
           break;
         }
-        case Op::kSetScene: send(scene(in), delimiter); break;
-        case Op::kStartTrial: send(start_trial(in), delimiter); break;
+        case Op::kSetScene:
+          send(scene(in), delimiter);
+          break;
+        case Op::kStartTrial:
+          send(start_trial(in), delimiter);
+          break;
         case Op::kPose: {
           gl::Pose m = pose_template(in.u8());
           const PoseTime t = pose_time(in, last_host_us_);
@@ -334,16 +408,24 @@ class Rig {
           send(m, delimiter);
           break;
         }
-        case Op::kStop: send(gl::Stop{}, delimiter); break;
+        case Op::kStop:
+          send(gl::Stop{}, delimiter);
+          break;
         case Op::kSetMotors: {
           gl::SetMotors m;
           for (uint8_t& d : m.pwm) d = in.u8();
           send(m, delimiter);
           break;
         }
-        case Op::kGetStatus: send(gl::GetStatus{}, delimiter); break;
-        case Op::kAdvance: advance(clock_step(in)); break;
-        case Op::kRawFrame: raw_frame(in, flags, delimiter); break;
+        case Op::kGetStatus:
+          send(gl::GetStatus{}, delimiter);
+          break;
+        case Op::kAdvance:
+          advance(clock_step(in));
+          break;
+        case Op::kRawFrame:
+          raw_frame(in, flags, delimiter);
+          break;
         case Op::kGarbage: {
           uint8_t bytes[128];
           const size_t n = in.u8() % sizeof bytes;
@@ -362,12 +444,18 @@ class Rig {
     gl::SetScene m = scene_template(in.u8());
     for (int n = in.u8() % 8; n > 0; --n) {
       const uint8_t f = in.u8() % 19;
-      if (f < 12) m.contacts[f / 3][f % 3] = value(in, m.contacts[f / 3][f % 3]);
-      else if (f < 15) m.y_axis[f - 12] = value(in, m.y_axis[f - 12]);
-      else if (f == 15) m.threshold_deg = value(in, m.threshold_deg);
-      else if (f == 16) m.hold_s = value(in, m.hold_s);
-      else if (f == 17) m.timeout_s = value(in, m.timeout_s);
-      else m.k = in.u8();
+      if (f < 12)
+        m.contacts[f / 3][f % 3] = value(in, m.contacts[f / 3][f % 3]);
+      else if (f < 15)
+        m.y_axis[f - 12] = value(in, m.y_axis[f - 12]);
+      else if (f == 15)
+        m.threshold_deg = value(in, m.threshold_deg);
+      else if (f == 16)
+        m.hold_s = value(in, m.hold_s);
+      else if (f == 17)
+        m.timeout_s = value(in, m.timeout_s);
+      else
+        m.k = in.u8();
     }
     return m;
   }
@@ -403,10 +491,22 @@ class Rig {
     size_t size = 0;
     if (flags & 2) {
       switch (h.msg_id % 4) {
-        case 0: h.msg_id = uint8_t(gl::MsgId::kSetScene); gl::pack(scene_template(in.u8()), payload, sizeof payload, &size); break;
-        case 1: h.msg_id = uint8_t(gl::MsgId::kPose); gl::pack(pose_template(in.u8()), payload, sizeof payload, &size); break;
-        case 2: h.msg_id = uint8_t(gl::MsgId::kStartTrial); gl::pack(gl::StartTrial{}, payload, sizeof payload, &size); break;
-        default: h.msg_id = uint8_t(gl::MsgId::kHello); gl::pack(gl::Hello{}, payload, sizeof payload, &size); break;
+        case 0:
+          h.msg_id = uint8_t(gl::MsgId::kSetScene);
+          gl::pack(scene_template(in.u8()), payload, sizeof payload, &size);
+          break;
+        case 1:
+          h.msg_id = uint8_t(gl::MsgId::kPose);
+          gl::pack(pose_template(in.u8()), payload, sizeof payload, &size);
+          break;
+        case 2:
+          h.msg_id = uint8_t(gl::MsgId::kStartTrial);
+          gl::pack(gl::StartTrial{}, payload, sizeof payload, &size);
+          break;
+        default:
+          h.msg_id = uint8_t(gl::MsgId::kHello);
+          gl::pack(gl::Hello{}, payload, sizeof payload, &size);
+          break;
       }
       const uint8_t at = in.u8();
       payload[at % size] = in.u8();
@@ -418,8 +518,9 @@ class Rig {
     size_t n = 0;
     wire[0] = gl::kFrameDelimiter;
     const size_t at = delimiter ? 1 : 0;
-    REQUIRE(gl::encode_frame(h, payload, size, wire + at, sizeof wire - at, &n) == gl::LinkStatus::kOk,
-            "harness: encode_frame takes any header and payload");
+    REQUIRE(
+        gl::encode_frame(h, payload, size, wire + at, sizeof wire - at, &n) == gl::LinkStatus::kOk,
+        "harness: encode_frame takes any header and payload");
     line_.send(wire, at + n);
     deliver();
   }
@@ -489,8 +590,10 @@ class Rig {
       }
     gl::LinkStatus decoded = gl::LinkStatus::kOk;
     if (req && req->event == gl::ParseEvent::kFrame)
-      decoded = gl::visit_payload(req->header.msg_id, req->payload, req->payload_size, [](const auto&) {});
-    const bool good_request = req && req->event == gl::ParseEvent::kFrame && decoded == gl::LinkStatus::kOk;
+      decoded = gl::visit_payload(req->header.msg_id, req->payload, req->payload_size,
+                                  [](const auto&) {});
+    const bool good_request =
+        req && req->event == gl::ParseEvent::kFrame && decoded == gl::LinkStatus::kOk;
     const uint8_t req_id = req ? req->header.msg_id : 0;
     auto is_req = [&](gl::MsgId id) { return good_request && req_id == uint8_t(id); };
 
@@ -508,33 +611,48 @@ class Rig {
         ++answers;
       }
     }
-    REQUIRE(answers == (req ? 1u : 0u), "each trusted request gets exactly one answer, nothing else does");
+    REQUIRE(answers == (req ? 1u : 0u),
+            "each trusted request gets exactly one answer, nothing else does");
     if (answer) {
       const uint8_t a = answer->id;
       if (a == uint8_t(gl::MsgId::kAck))
-        REQUIRE(answer->as<gl::Ack>().request_seq == req->header.seq, "ACK echoes the request's seq");
+        REQUIRE(answer->as<gl::Ack>().request_seq == req->header.seq,
+                "ACK echoes the request's seq");
       if (a == uint8_t(gl::MsgId::kError))
-        REQUIRE(answer->as<gl::Error>().request_seq == req->header.seq, "ERROR echoes the request's seq");
+        REQUIRE(answer->as<gl::Error>().request_seq == req->header.seq,
+                "ERROR echoes the request's seq");
       if (a == uint8_t(gl::MsgId::kHelloReply))
-        REQUIRE(answer->as<gl::HelloReply>().request_seq == req->header.seq, "HELLO_REPLY echoes the seq");
+        REQUIRE(answer->as<gl::HelloReply>().request_seq == req->header.seq,
+                "HELLO_REPLY echoes the seq");
       gl::ErrorCode code;
       if (req->event != gl::ParseEvent::kFrame) {
         REQUIRE(gl::error_code_for(req->event, &code) && a == uint8_t(gl::MsgId::kError) &&
                     answer->as<gl::Error>().code == code,
                 "a bad frame with a trusted header is answered with its ERROR");
       } else if (!good_request) {
-        REQUIRE(a == uint8_t(gl::MsgId::kError) && answer->as<gl::Error>().code == gl::ErrorCode::kBadEnumValue,
+        REQUIRE(a == uint8_t(gl::MsgId::kError) &&
+                    answer->as<gl::Error>().code == gl::ErrorCode::kBadEnumValue,
                 "a payload that does not decode is answered with ERROR bad_enum_value");
       } else {
-        const bool is_ack_or_error = a == uint8_t(gl::MsgId::kAck) || a == uint8_t(gl::MsgId::kError);
+        const bool is_ack_or_error =
+            a == uint8_t(gl::MsgId::kAck) || a == uint8_t(gl::MsgId::kError);
         switch (gl::MsgId(req_id)) {
-          case gl::MsgId::kHello: REQUIRE(a == uint8_t(gl::MsgId::kHelloReply), "HELLO -> HELLO_REPLY"); break;
-          case gl::MsgId::kGetStatus: REQUIRE(a == uint8_t(gl::MsgId::kStatus), "GET_STATUS -> STATUS"); break;
-          case gl::MsgId::kStop: REQUIRE(a == uint8_t(gl::MsgId::kAck), "STOP -> ACK"); break;
-          case gl::MsgId::kPose:
-            REQUIRE(a == uint8_t(gl::MsgId::kTelemetry) || a == uint8_t(gl::MsgId::kError), "POSE -> TELEMETRY or ERROR");
+          case gl::MsgId::kHello:
+            REQUIRE(a == uint8_t(gl::MsgId::kHelloReply), "HELLO -> HELLO_REPLY");
             break;
-          default: REQUIRE(is_ack_or_error, "SET_SCENE, START_TRIAL, SET_MOTORS -> ACK or ERROR"); break;
+          case gl::MsgId::kGetStatus:
+            REQUIRE(a == uint8_t(gl::MsgId::kStatus), "GET_STATUS -> STATUS");
+            break;
+          case gl::MsgId::kStop:
+            REQUIRE(a == uint8_t(gl::MsgId::kAck), "STOP -> ACK");
+            break;
+          case gl::MsgId::kPose:
+            REQUIRE(a == uint8_t(gl::MsgId::kTelemetry) || a == uint8_t(gl::MsgId::kError),
+                    "POSE -> TELEMETRY or ERROR");
+            break;
+          default:
+            REQUIRE(is_ack_or_error, "SET_SCENE, START_TRIAL, SET_MOTORS -> ACK or ERROR");
+            break;
         }
       }
     }
@@ -551,20 +669,23 @@ class Rig {
     for (const DeviceFrame& d : out) {
       if (d.id != uint8_t(gl::MsgId::kTelemetry)) continue;
       const gl::Telemetry t = d.as<gl::Telemetry>();
-      REQUIRE(std::memcmp(t.pwm, motors_.last().duty, sizeof t.pwm) == 0, "TELEMETRY.pwm is what the motors got");
+      REQUIRE(std::memcmp(t.pwm, motors_.last().duty, sizeof t.pwm) == 0,
+              "TELEMETRY.pwm is what the motors got");
       REQUIRE(t.solver_status == gl::ErrorCode::kOk || motors_.all_off(),
               "a TELEMETRY with a solver failure means the motors are off");
       gl::Pose p;
       gl::unpack(req->payload, req->payload_size, &p);
       REQUIRE(t.host_time_us == p.host_time_us, "TELEMETRY echoes the POSE's host_time_us");
       // The host ends its trial loop on a clear flag (tools/graspguide/study/runner.py).
-      REQUIRE(bool(t.flags & gl::kTelemetryFlagTrialRunning) == (after == gd::DeviceState::kTrialRunning),
+      REQUIRE(bool(t.flags & gl::kTelemetryFlagTrialRunning) ==
+                  (after == gd::DeviceState::kTrialRunning),
               "TELEMETRY's trial_running flag says whether the trial still runs");
     }
     if (is_req(gl::MsgId::kGetStatus)) {
       const gl::Status s = answer->as<gl::Status>();
       REQUIRE(uint8_t(s.state) == uint8_t(app_.state()), "STATUS.state is the device's state");
-      REQUIRE(s.frames_received == line_.mirror_.good_frames() && s.bad_frames == line_.mirror_.bad_frames(),
+      REQUIRE(s.frames_received == line_.mirror_.good_frames() &&
+                  s.bad_frames == line_.mirror_.bad_frames(),
               "STATUS counts the frames the device parsed");
     }
 
@@ -611,7 +732,8 @@ class Rig {
               "TRIAL_RESULT.first_entry_s is -1 or a time");
     }
     if (before == gd::DeviceState::kTrialRunning && after != gd::DeviceState::kTrialRunning)
-      REQUIRE(result_sent || error_sent || is_req(gl::MsgId::kStop), "a trial ends with TRIAL_RESULT, ERROR or STOP");
+      REQUIRE(result_sent || error_sent || is_req(gl::MsgId::kStop),
+              "a trial ends with TRIAL_RESULT, ERROR or STOP");
 
     // 4. A trial always ends: at most timeout_s + 1 s of device time after its first POSE.
     if (!virtual_clock_ && after == gd::DeviceState::kTrialRunning && first_pose_seen_)
@@ -623,18 +745,20 @@ class Rig {
   void print_poll(const Event* req, const std::vector<DeviceFrame>& out, gd::DeviceState after) {
     std::fprintf(stderr, "t=%llu us clock=%u", (unsigned long long)clock64_, clock_.now_us());
     if (req) {
-      std::fprintf(stderr, " <- %s", req->event == gl::ParseEvent::kFrame ? gl::message_name(req->header.msg_id)
-                                                                          : gl::parse_event_name(req->event));
+      std::fprintf(stderr, " <- %s",
+                   req->event == gl::ParseEvent::kFrame ? gl::message_name(req->header.msg_id)
+                                                        : gl::parse_event_name(req->event));
       if (req->header.msg_id == uint8_t(gl::MsgId::kPose) && req->event == gl::ParseEvent::kFrame) {
         gl::Pose p;
         gl::unpack(req->payload, req->payload_size, &p);
         std::fprintf(stderr, "(host_time_us=%u)", p.host_time_us);
       }
-      if (req->header.msg_id == uint8_t(gl::MsgId::kSetScene) && req->event == gl::ParseEvent::kFrame) {
+      if (req->header.msg_id == uint8_t(gl::MsgId::kSetScene) &&
+          req->event == gl::ParseEvent::kFrame) {
         gl::SetScene m;
         if (gl::unpack(req->payload, req->payload_size, &m) == gl::LinkStatus::kOk)
-          std::fprintf(stderr, "(k=%u threshold_deg=%g hold_s=%g timeout_s=%g)", m.k, double(m.threshold_deg),
-                       double(m.hold_s), double(m.timeout_s));
+          std::fprintf(stderr, "(k=%u threshold_deg=%g hold_s=%g timeout_s=%g)", m.k,
+                       double(m.threshold_deg), double(m.hold_s), double(m.timeout_s));
       }
     }
     for (const DeviceFrame& d : out) {
@@ -644,15 +768,17 @@ class Rig {
         std::fprintf(stderr, "(%s, detail %u)", gl::enum_name(e.code), e.detail);
       } else if (d.id == uint8_t(gl::MsgId::kTelemetry)) {
         const gl::Telemetry t = d.as<gl::Telemetry>();
-        std::fprintf(stderr, "(%s, err %.2f deg)", gl::enum_name(t.solver_status), double(t.error_deg));
+        std::fprintf(stderr, "(%s, err %.2f deg)", gl::enum_name(t.solver_status),
+                     double(t.error_deg));
       } else if (d.id == uint8_t(gl::MsgId::kTrialResult)) {
         const gl::TrialResult r = d.as<gl::TrialResult>();
-        std::fprintf(stderr, "(id %u, success %d, completion %g s, first entry %g s)", r.trial_id, int(r.success),
-                     double(r.completion_s), double(r.first_entry_s));
+        std::fprintf(stderr, "(id %u, success %d, completion %g s, first entry %g s)", r.trial_id,
+                     int(r.success), double(r.completion_s), double(r.first_entry_s));
       }
     }
     const gg::Pwm& m = motors_.last();
-    std::fprintf(stderr, " | state %u motors %u,%u,%u,%u\n", unsigned(after), m.duty[0], m.duty[1], m.duty[2], m.duty[3]);
+    std::fprintf(stderr, " | state %u motors %u,%u,%u,%u\n", unsigned(after), m.duty[0], m.duty[1],
+                 m.duty[2], m.duty[3]);
   }
 
   const bool trace_ = std::getenv("GRASPGUIDE_FUZZ_TRACE") != nullptr;
@@ -668,8 +794,8 @@ class Rig {
   gl::SequenceCounter seq_;
 
   uint32_t last_host_us_ = 0;
-  uint64_t clock64_ = 0;       // device time since boot, unwrapped (real-time clock)
-  uint64_t silence_us_ = 0;    // device time since the last POSE or SET_MOTORS
+  uint64_t clock64_ = 0;     // device time since boot, unwrapped (real-time clock)
+  uint64_t silence_us_ = 0;  // device time since the last POSE or SET_MOTORS
   uint16_t trial_ids_ = 0;
   float scene_timeout_s_ = 0;  // of the last acknowledged SET_SCENE
   float trial_timeout_s_ = 0;
@@ -710,35 +836,53 @@ class SeedWriter {
 };
 
 void write_seeds(const char* dir) {
-  const uint8_t kFar = 4;                       // pose template: 90 deg off the goal
-  const uint8_t kJump2e31 = 5 | (4 << 3);       // time spec: prev + 2^31
-  const uint8_t kSeconds30 = 4 | (30 << 3);     // clock step: 30 s
-  const uint8_t kStaleExactly = 1;              // clock step: the watchdog's time
-  const uint8_t kHugeTimeout = 0 | (10 << 3);   // value: special 1e30
-  struct Seed { const char* name; SeedWriter w; };
+  const uint8_t kFar = 4;                      // pose template: 90 deg off the goal
+  const uint8_t kJump2e31 = 5 | (4 << 3);      // time spec: prev + 2^31
+  const uint8_t kSeconds30 = 4 | (30 << 3);    // clock step: 30 s
+  const uint8_t kStaleExactly = 1;             // clock step: the watchdog's time
+  const uint8_t kHugeTimeout = 0 | (10 << 3);  // value: special 1e30
+  struct Seed {
+    const char* name;
+    SeedWriter w;
+  };
   std::vector<Seed> seeds;
   seeds.push_back({"trial_success", SeedWriter(0).scene().trial().poses(80)});
   seeds.push_back({"trial_timeout", SeedWriter(0).scene().trial().poses(220, kFar)});
-  seeds.push_back({"pose_time_jump_2e31", SeedWriter(0).scene().trial().poses(5, kFar)
-                                              .poses(1, kFar, kJump2e31).poses(5, kFar)
-                                              .advance(kSeconds30).poses(3, kFar)});
-  seeds.push_back({"trial_then_silence", SeedWriter(0).scene().trial().poses(5, kFar)
-                                             .advance(kStaleExactly).advance(kSeconds30)});
-  seeds.push_back({"set_motors_then_silence",
-                   SeedWriter(0).op(Op::kSetMotors).bytes({200, 200, 200, 200}).advance(kStaleExactly)});
+  seeds.push_back({"pose_time_jump_2e31", SeedWriter(0)
+                                              .scene()
+                                              .trial()
+                                              .poses(5, kFar)
+                                              .poses(1, kFar, kJump2e31)
+                                              .poses(5, kFar)
+                                              .advance(kSeconds30)
+                                              .poses(3, kFar)});
+  seeds.push_back(
+      {"trial_then_silence",
+       SeedWriter(0).scene().trial().poses(5, kFar).advance(kStaleExactly).advance(kSeconds30)});
+  seeds.push_back(
+      {"set_motors_then_silence",
+       SeedWriter(0).op(Op::kSetMotors).bytes({200, 200, 200, 200}).advance(kStaleExactly)});
   seeds.push_back({"refusal_during_trial", SeedWriter(0).scene().trial().poses(3, kFar).scene()});
-  seeds.push_back({"stop_during_trial", SeedWriter(0).scene().trial().poses(3, kFar).op(Op::kStop)
-                                            .op(Op::kGetStatus)});
-  seeds.push_back({"half_frame_then_stop",
-                   SeedWriter(0).scene().trial().poses(3, kFar)
-                       .op(Op::kGarbage).bytes({5, 0x20, 0x01, 0x03, 0x07, 0x11})
-                       .op(Op::kStop, kFlagDelimiterFirst)});
-  seeds.push_back({"huge_timeout",
-                   SeedWriter(0).op(Op::kSetScene).bytes({0x20, 1, 17, kHugeTimeout}).trial()
-                       .poses(3, kFar).advance(kSeconds30)});
-  seeds.push_back({"bad_enum_in_trial",  // SET_SCENE with byte 61 (constraints) = 7
-                   SeedWriter(0).scene().trial().poses(3, kFar).op(Op::kRawFrame, 2).bytes({0, 0x20, 61, 7})});
-  seeds.push_back({"virtual_clock_trial", SeedWriter(1).scene().trial().poses(30, kFar).advance(kStaleExactly)});
+  seeds.push_back({"stop_during_trial",
+                   SeedWriter(0).scene().trial().poses(3, kFar).op(Op::kStop).op(Op::kGetStatus)});
+  seeds.push_back({"half_frame_then_stop", SeedWriter(0)
+                                               .scene()
+                                               .trial()
+                                               .poses(3, kFar)
+                                               .op(Op::kGarbage)
+                                               .bytes({5, 0x20, 0x01, 0x03, 0x07, 0x11})
+                                               .op(Op::kStop, kFlagDelimiterFirst)});
+  seeds.push_back({"huge_timeout", SeedWriter(0)
+                                       .op(Op::kSetScene)
+                                       .bytes({0x20, 1, 17, kHugeTimeout})
+                                       .trial()
+                                       .poses(3, kFar)
+                                       .advance(kSeconds30)});
+  seeds.push_back(
+      {"bad_enum_in_trial",  // SET_SCENE with byte 61 (constraints) = 7
+       SeedWriter(0).scene().trial().poses(3, kFar).op(Op::kRawFrame, 2).bytes({0, 0x20, 61, 7})});
+  seeds.push_back({"virtual_clock_trial",
+                   SeedWriter(1).scene().trial().poses(30, kFar).advance(kStaleExactly)});
   seeds.push_back({"clock_wrap_trial", SeedWriter(2).scene().trial().poses(250, kFar)});
   for (const Seed& s : seeds) {
     const std::string path = std::string(dir) + "/" + s.name;

@@ -71,7 +71,8 @@ TEST(Application, AnInvalidSceneIsRefusedAndThePreviousOneKept) {
   EXPECT_EQ(r.app.state(), gd::DeviceState::kIdle);
   ASSERT_TRUE(r.app.set_scene(hand_scene()).ok());
   auto collinear = hand_scene(3);
-  collinear.contacts.col(1) = collinear.contacts.col(0) + 0.3f * (collinear.contacts.col(2) - collinear.contacts.col(0));
+  collinear.contacts.col(1) =
+      collinear.contacts.col(0) + 0.3f * (collinear.contacts.col(2) - collinear.contacts.col(0));
   EXPECT_EQ(r.app.set_scene(collinear).status, gg::Status::kRankDeficient);
   auto nan = hand_scene();
   nan.contacts(0, 0) = std::numeric_limits<Real>::quiet_NaN();
@@ -108,7 +109,8 @@ TEST(Application, TelemetryPwmEqualsTheCoreForEveryPose) {
     r.clock.advance_us(4 * kMs);
     ASSERT_TRUE(r.send(pose_at(n * 4 * kMs, rs.orientation.cast<float>())).ok());
     if (r.ended) break;
-    const auto expect = graspguide_test::solve_once<Real>(scene, sideways().cast<double>(), rs.orientation);
+    const auto expect =
+        graspguide_test::solve_once<Real>(scene, sideways().cast<double>(), rs.orientation);
     EXPECT_EQ(graspguide_test::max_pwm_diff(r.tel.pwm, expect.frame.pwm), 0) << n;
     EXPECT_NEAR(r.tel.error_deg, expect.frame.error_deg, 1e-4f);
     EXPECT_FALSE(r.tel.recomputed);  // fixed posture: the grasp was solved at START_TRIAL
@@ -140,7 +142,8 @@ TEST(Application, ATrialTimesOutAt90sAcrossA32BitWrap) {
   ASSERT_TRUE(r.app.start_trial(9, sideways()).ok());
   const Eigen::Vector4f upside_down(0, 1, 0, 0);
   uint32_t t = 0xFFFFFFFFu - 30'000'000u;  // wraps 30 s into the trial
-  for (int n = 0; n < 30000 && !r.ended; ++n, t += 4 * kMs) ASSERT_TRUE(r.send(pose_at(t, upside_down)).ok());
+  for (int n = 0; n < 30000 && !r.ended; ++n, t += 4 * kMs)
+    ASSERT_TRUE(r.send(pose_at(t, upside_down)).ok());
   ASSERT_TRUE(r.ended);
   EXPECT_FALSE(r.report.result.success);
   EXPECT_DOUBLE_EQ(r.report.result.completion_s, 90.0);

@@ -68,7 +68,8 @@ struct LinkRig {
     Msg m;
     if (frames.empty()) return m;
     EXPECT_EQ(frames[0].header.msg_id, uint8_t(Msg::kId));
-    EXPECT_EQ(gl::unpack(frames[0].payload.data(), frames[0].payload.size(), &m), gl::LinkStatus::kOk);
+    EXPECT_EQ(gl::unpack(frames[0].payload.data(), frames[0].payload.size(), &m),
+              gl::LinkStatus::kOk);
     return m;
   }
 };
@@ -212,8 +213,10 @@ TEST(LinkDevice, BadEnumValuesAndForeignIdsAreAnsweredWithTheirCode) {
   for (size_t i = 0; i < size && !found; ++i) {
     const uint8_t saved = payload[i];
     payload[i] = 9;
-    if (gl::unpack(payload, size, &probe, &bad_field) == gl::LinkStatus::kBadEnumValue) found = true;
-    else payload[i] = saved;
+    if (gl::unpack(payload, size, &probe, &bad_field) == gl::LinkStatus::kBadEnumValue)
+      found = true;
+    else
+      payload[i] = saved;
   }
   ASSERT_TRUE(found);
   gl::FrameHeader h;
@@ -283,7 +286,8 @@ TEST(LinkDevice, TwoLinksShareOneApplication) {
     uint8_t buf[1024];
     const size_t n = bt_stream.host_receive(buf, sizeof buf);
     for (size_t i = 0; i < n; ++i)
-      if (bt_host.push(buf[i]) == gl::ParseEvent::kFrame) ids.push_back(bt_host.frame().header.msg_id);
+      if (bt_host.push(buf[i]) == gl::ParseEvent::kFrame)
+        ids.push_back(bt_host.frame().header.msg_id);
     return ids;
   };
 

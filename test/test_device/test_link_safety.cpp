@@ -48,7 +48,9 @@ struct Rig {
     device.poll();
   }
   template <class Msg>
-  void send(const Msg& m) { raw(frame_of(m)); }
+  void send(const Msg& m) {
+    raw(frame_of(m));
+  }
 
   // Every frame the device sent since the last call: (id, payload).
   std::vector<std::pair<uint8_t, std::vector<uint8_t>>> received() {
@@ -58,7 +60,8 @@ struct Rig {
     for (size_t i = 0; i < n; ++i)
       if (host.push(buf[i]) == gl::ParseEvent::kFrame) {
         const auto& f = host.frame();
-        out.emplace_back(f.header.msg_id, std::vector<uint8_t>(f.payload, f.payload + f.payload_size));
+        out.emplace_back(f.header.msg_id,
+                         std::vector<uint8_t>(f.payload, f.payload + f.payload_size));
       }
     return out;
   }
@@ -125,10 +128,12 @@ struct Offence {
 
 std::vector<Offence> offences() {
   std::vector<Offence> o;
-  o.push_back({"bad_enum", [](Rig& r) {
+  o.push_back({"bad_enum",
+               [](Rig& r) {
                  uint8_t payload[gl::kMaxPayloadSize];
                  size_t size = 0;
-                 EXPECT_EQ(gl::pack(scene_msg(), payload, sizeof payload, &size), gl::LinkStatus::kOk);
+                 EXPECT_EQ(gl::pack(scene_msg(), payload, sizeof payload, &size),
+                           gl::LinkStatus::kOk);
                  payload[62] = 9;  // policy: no such value
                  gl::SetScene probe;
                  EXPECT_EQ(gl::unpack(payload, size, &probe), gl::LinkStatus::kBadEnumValue);
@@ -137,27 +142,31 @@ std::vector<Offence> offences() {
                  return r.frame_of(h, payload, size);
                },
                gl::ErrorCode::kBadEnumValue});
-  o.push_back({"bad_length", [](Rig& r) {
+  o.push_back({"bad_length",
+               [](Rig& r) {
                  const uint8_t three[3] = {1, 2, 3};
                  gl::FrameHeader h;
                  h.msg_id = uint8_t(gl::MsgId::kGetStatus);
                  return r.frame_of(h, three, sizeof three);
                },
                gl::ErrorCode::kBadLength});
-  o.push_back({"unknown_id", [](Rig& r) {
+  o.push_back({"unknown_id",
+               [](Rig& r) {
                  gl::FrameHeader h;
                  h.msg_id = 0x7E;
                  return r.frame_of(h, nullptr, 0);
                },
                gl::ErrorCode::kUnknownId});
-  o.push_back({"device_to_host_id", [](Rig& r) {
+  o.push_back({"device_to_host_id",
+               [](Rig& r) {
                  gl::FrameHeader h;
                  h.msg_id = uint8_t(gl::MsgId::kAck);
                  const uint8_t two[2] = {0, 0};
                  return r.frame_of(h, two, sizeof two);
                },
                gl::ErrorCode::kUnknownId});
-  o.push_back({"bad_version", [](Rig& r) {
+  o.push_back({"bad_version",
+               [](Rig& r) {
                  gl::FrameHeader h;
                  h.version = gl::kProtocolVersion + 1;
                  h.msg_id = uint8_t(gl::MsgId::kGetStatus);
@@ -165,15 +174,18 @@ std::vector<Offence> offences() {
                },
                gl::ErrorCode::kBadVersion});
   // START_TRIAL during a trial (not_allowed_in_state) or in idle (no_scene).
-  o.push_back({"state_refusal", [](Rig& r) { return r.frame_of(trial_msg()); }, gl::ErrorCode::kOk});
-  o.push_back({"bad_crc", [](Rig& r) {
+  o.push_back(
+      {"state_refusal", [](Rig& r) { return r.frame_of(trial_msg()); }, gl::ErrorCode::kOk});
+  o.push_back({"bad_crc",
+               [](Rig& r) {
                  auto f = r.frame_of(gl::GetStatus{});
                  f[2] ^= 0x01;
                  if (f[2] == 0) f[2] = 0x5A;
                  return f;
                },
                gl::ErrorCode::kOk});
-  o.push_back({"too_long", [](Rig&) { return std::vector<uint8_t>(gl::kMaxWireFrameSize + 8, 0x11); },
+  o.push_back({"too_long",
+               [](Rig&) { return std::vector<uint8_t>(gl::kMaxWireFrameSize + 8, 0x11); },
                gl::ErrorCode::kOk});
   o.push_back({"too_short", [](Rig&) { return std::vector<uint8_t>{0x02, 0x01, 0x00}; },
                gl::ErrorCode::kOk});
@@ -194,8 +206,9 @@ void expect_motors_off_after(const Offence& o, void (*setup)(Rig&), const char* 
     EXPECT_EQ(errors[0].code, o.answer);
   } else if (std::strcmp(o.name, "state_refusal") == 0) {
     ASSERT_EQ(errors.size(), 1u);
-    EXPECT_EQ(errors[0].code, r.app.state() == gd::DeviceState::kIdle ? gl::ErrorCode::kNoScene
-                                                                        : gl::ErrorCode::kNotAllowedInState);
+    EXPECT_EQ(errors[0].code, r.app.state() == gd::DeviceState::kIdle
+                                  ? gl::ErrorCode::kNoScene
+                                  : gl::ErrorCode::kNotAllowedInState);
   } else {
     EXPECT_TRUE(errors.empty());
   }
@@ -231,10 +244,8 @@ TEST(LinkSafety, AnOutOfRangeTrialFieldIsRefusedAndNamed) {
     const char* field;
   } cases[] = {
       {3, 0.5f, 9.3e12f, "timeout_s"},  // once accepted: overflowed the int64 microseconds
-      {3, 1e13f, 90, "hold_s"},
-      {3, 91, 90, "hold_s"},
-      {200, 0.5f, 90, "threshold_deg"},
-      {3, 0.5f, 0, "timeout_s"},
+      {3, 1e13f, 90, "hold_s"},         {3, 91, 90, "hold_s"},
+      {200, 0.5f, 90, "threshold_deg"}, {3, 0.5f, 0, "timeout_s"},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.field);
@@ -277,7 +288,8 @@ TEST(LinkSafety, ATimestampJumpOrStepBackEndsTheTrial) {
     ASSERT_EQ(answers.size(), 1u);
     ASSERT_EQ(answers[0].first, uint8_t(gl::MsgId::kError));
     gl::Error e;
-    ASSERT_EQ(gl::unpack(answers[0].second.data(), answers[0].second.size(), &e), gl::LinkStatus::kOk);
+    ASSERT_EQ(gl::unpack(answers[0].second.data(), answers[0].second.size(), &e),
+              gl::LinkStatus::kOk);
     EXPECT_EQ(e.code, gl::ErrorCode::kTimeWentBackwards);
     EXPECT_EQ(e.detail, uint8_t(gl::DeviceState::kStopped));
     EXPECT_TRUE(r.motors.all_off());

@@ -74,9 +74,8 @@ TYPED_TEST(Extremes, ContactExactlyOnTheAxisUsesTheFallbackAndStillRenders) {
   gg::Scene<T> s;
   s.k = 3;
   // Centroid (0, 0.03, 0): the third contact sits straight along +y from it.
-  s.contacts.template leftCols<3>() << T(-0.03), T(0.03), T(0),
-                T(0), T(0), T(0.09),
-                T(0.01), T(-0.01), T(0);
+  s.contacts.template leftCols<3>() << T(-0.03), T(0.03), T(0), T(0), T(0), T(0.09), T(0.01),
+      T(-0.01), T(0);
   const auto r = solve_once<T>(s, weight(), kIdentity);
   ASSERT_EQ(r.status, gg::Status::kOk);
   EXPECT_EQ(r.grasp.fallback_mask, 0b100);
@@ -157,9 +156,7 @@ TYPED_TEST(Extremes, ForceExactlyOnARelevanceBoundary) {
   using T = TypeParam;
   gg::Scene<T> s;
   s.k = 3;
-  s.contacts.template leftCols<3>() << T(2), T(-1), T(-1),
-                T(0), T(1), T(-1),
-                T(0), T(0.5), T(-0.5);
+  s.contacts.template leftCols<3>() << T(2), T(-1), T(-1), T(0), T(1), T(-1), T(0), T(0.5), T(-0.5);
   s.y_axis = gg::Vec3<T>::UnitZ();
   gg::Vec6<double> w;
   w << 0, 0, 0, 0, 0, 0;
@@ -175,7 +172,8 @@ TYPED_TEST(Extremes, PaperInfeasibleScenesFallBackAndSayWhichModel) {
   int fell_back = 0;
   for (int n = 0; n < 200; ++n) {
     const auto rs = graspguide_test::random_scene(rng, 3);
-    auto s = graspguide_test::make_scene<T>(rs, gg::ConstraintModel::kPaper, gg::Policy::kF, gg::Mode::kC);
+    auto s = graspguide_test::make_scene<T>(rs, gg::ConstraintModel::kPaper, gg::Policy::kF,
+                                            gg::Mode::kC);
     const auto r = solve_once<T>(s, rs.wrench, rs.orientation);
     ASSERT_EQ(r.status, gg::Status::kOk);
     if (r.grasp.used != gg::ConstraintModel::kPaper) {
@@ -191,8 +189,9 @@ TYPED_TEST(Extremes, PaperInfeasibleScenesFallBackAndSayWhichModel) {
 
 TYPED_TEST(Extremes, NanOrInfAnywhereIsRejectedWithMotorsOff) {
   using T = TypeParam;
-  for (double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
-                     -std::numeric_limits<double>::infinity()}) {
+  for (double bad :
+       {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+        -std::numeric_limits<double>::infinity()}) {
     for (int field = 0; field < 4; ++field) {
       auto s = hand_scene<T>();
       auto w = weight();

@@ -10,8 +10,8 @@
 #include "graspguide.h"
 
 namespace gg = graspguide;
-using graspguide_test::KnownAnswer;
 using graspguide_test::kKnownAnswers;
+using graspguide_test::KnownAnswer;
 
 template <typename T>
 graspguide_test::Solved<T> run_case(const KnownAnswer& ka) {
@@ -25,7 +25,8 @@ graspguide_test::Solved<T> run_case(const KnownAnswer& ka) {
   EXPECT_TRUE(gg::parse_mode(ka.mode, &scene.mode)) << ka.name;
   gg::Vec6<double> w;
   for (int j = 0; j < 6; ++j) w(j) = ka.wrench[j];
-  const Eigen::Vector4d q(ka.orientation[0], ka.orientation[1], ka.orientation[2], ka.orientation[3]);
+  const Eigen::Vector4d q(ka.orientation[0], ka.orientation[1], ka.orientation[2],
+                          ka.orientation[3]);
   return graspguide_test::solve_once<T>(scene, w, q);
 }
 
@@ -94,6 +95,8 @@ TEST(KnownAnswers, FloatMatchesTheReferenceWithinOnePwmCount) {
     exact += worst == 0;
   }
   EXPECT_GT(compared, 200);
-  std::printf("float vs float64 reference: %d/%d scenes with identical PWM, %d refused as "
-              "imprecise_contacts\n", exact, compared, refused);
+  std::printf(
+      "float vs float64 reference: %d/%d scenes with identical PWM, %d refused as "
+      "imprecise_contacts\n",
+      exact, compared, refused);
 }

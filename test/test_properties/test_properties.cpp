@@ -14,8 +14,8 @@ using graspguide_test::random_scene;
 using graspguide_test::RandomScene;
 using graspguide_test::solve_once;
 
-constexpr gg::ConstraintModel kModels[] = {gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal,
-                                           gg::ConstraintModel::kNone};
+constexpr gg::ConstraintModel kModels[] = {
+    gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal, gg::ConstraintModel::kNone};
 constexpr gg::Policy kPolicies[] = {gg::Policy::kF, gg::Policy::kFperp};
 constexpr gg::Mode kModes[] = {gg::Mode::kC, gg::Mode::kV};
 
@@ -37,17 +37,20 @@ void check_qp_optimality(const RandomScene& s, gg::ConstraintModel requested) {
   const gg::Vec6<double> w = gg::scaled_wrench<double>(s.wrench, f.length_scale);
   gg::Equilibrium<double, K> eq;
   ASSERT_EQ((gg::equilibrium<double, K>(f, w, gg::Decomposition::kQR, eq)), gg::Status::kOk);
-  const auto des = gg::desired_forces<double, K>(eq.lambda0, gg::relevance<double, K>(f, s.wrench.head<3>()));
+  const auto des =
+      gg::desired_forces<double, K>(eq.lambda0, gg::relevance<double, K>(f, s.wrench.head<3>()));
   gg::ForceSolution<double, K> sol;
-  ASSERT_EQ((gg::solve_forces<double, K>(eq, des, requested, 64, gg::ConstraintModel::kNone, 0, sol)),
-            gg::Status::kOk);
+  ASSERT_EQ(
+      (gg::solve_forces<double, K>(eq, des, requested, 64, gg::ConstraintModel::kNone, 0, sol)),
+      gg::Status::kOk);
   const double scale = eq.lambda0.norm();
   // Equilibrium of the final forces.
   EXPECT_LT((g * sol.lambda + w).norm(), 1e-10 * w.norm());
   // Constraints of the model used.
   gg::ProjectionQp<double, 3 * K - 6, 3 * K> qp;
   gg::constraint_rows<double, K>(eq, sol.used, qp);
-  const Eigen::Matrix<double, 3 * K - 6, 1> xi = eq.null_basis.transpose() * (sol.lambda - eq.lambda0);
+  const Eigen::Matrix<double, 3 * K - 6, 1> xi =
+      eq.null_basis.transpose() * (sol.lambda - eq.lambda0);
   const Eigen::Matrix<double, 3 * K - 6, 1> xu = eq.null_basis.transpose() * (des - eq.lambda0);
   for (int j = 0; j < qp.m; ++j) EXPECT_GE(qp.a.row(j).dot(xi) - qp.b(j), -1e-9 * scale);
   // Stationarity: xi - xu is a non-negative combination of the active rows.
@@ -73,8 +76,10 @@ TEST(Properties, EquilibriumConstraintsAndKktOnRandomScenes) {
   for (int n = 0; n < 3000; ++n) {
     const auto s = random_scene(rng, 3 + n % 2);
     SCOPED_TRACE(n);
-    if (s.k == 3) check_qp_optimality<3>(s, kModels[(n / 2) % 3]);
-    else check_qp_optimality<4>(s, kModels[(n / 2) % 3]);
+    if (s.k == 3)
+      check_qp_optimality<3>(s, kModels[(n / 2) % 3]);
+    else
+      check_qp_optimality<4>(s, kModels[(n / 2) % 3]);
   }
 }
 
@@ -83,17 +88,19 @@ TEST(Properties, PwmIsInvariantToTheLengthUnit) {
   for (int n = 0; n < 2000; ++n) {
     auto s = random_scene(rng, 3 + n % 2);
     const Combo c = combo(n);
-    const auto base = solve_once<double>(graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode),
-                                         s.wrench, s.orientation);
+    const auto base = solve_once<double>(
+        graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode), s.wrench, s.orientation);
     ASSERT_EQ(base.status, gg::Status::kOk);
     for (double unit : {1e3, 2e-3, 200.0}) {  // mm; contacts ~0.1 mm apart; ~10 m apart
       RandomScene t = s;
       t.contacts *= unit;
       t.wrench.tail<3>() *= unit;  // the same moment, in force x the new length unit
-      const auto r = solve_once<double>(graspguide_test::make_scene<double>(t, c.model, c.policy, c.mode),
-                                        t.wrench, t.orientation);
+      const auto r =
+          solve_once<double>(graspguide_test::make_scene<double>(t, c.model, c.policy, c.mode),
+                             t.wrench, t.orientation);
       ASSERT_EQ(r.status, gg::Status::kOk) << n << " unit " << unit;
-      EXPECT_EQ(graspguide_test::max_pwm_diff(r.frame.pwm, base.frame.pwm), 0) << n << " unit " << unit;
+      EXPECT_EQ(graspguide_test::max_pwm_diff(r.frame.pwm, base.frame.pwm), 0)
+          << n << " unit " << unit;
       EXPECT_LT((r.grasp.lambda - base.grasp.lambda).norm(), 1e-9 * base.grasp.lambda.norm());
     }
   }
@@ -106,15 +113,17 @@ TEST(Properties, PwmIsInvariantToRotatingTheWholeScene) {
   for (int n = 0; n < total; ++n) {
     const auto s = random_scene(rng, 3 + n % 2);
     const Combo c = combo(n);
-    const auto base = solve_once<double>(graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode),
-                                         s.wrench, s.orientation);
+    const auto base = solve_once<double>(
+        graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode), s.wrench, s.orientation);
     ASSERT_EQ(base.status, gg::Status::kOk);
-    const Eigen::Quaterniond rot(Eigen::AngleAxisd(0.1 + n * 0.37, graspguide_test::random_unit(rng)));
+    const Eigen::Quaterniond rot(
+        Eigen::AngleAxisd(0.1 + n * 0.37, graspguide_test::random_unit(rng)));
     RandomScene t = s;
     t.contacts = rot.toRotationMatrix() * s.contacts;
     t.wrench.head<3>() = rot * s.wrench.head<3>();
     t.wrench.tail<3>() = rot * s.wrench.tail<3>();
-    const Eigen::Quaterniond hand(s.orientation(0), s.orientation(1), s.orientation(2), s.orientation(3));
+    const Eigen::Quaterniond hand(s.orientation(0), s.orientation(1), s.orientation(2),
+                                  s.orientation(3));
     const Eigen::Quaterniond moved = hand * rot.conjugate();  // the world sees the same force
     t.orientation << moved.w(), moved.x(), moved.y(), moved.z();
     auto scene = graspguide_test::make_scene<double>(t, c.model, c.policy, c.mode);
@@ -171,10 +180,10 @@ TEST(Properties, FloatAgreesWithDoubleWithinOnePwmCount) {
   for (int n = 0; n < total; ++n) {
     const auto s = random_scene(rng, 3 + n % 2);
     const Combo c = combo(n);
-    const auto d = solve_once<double>(graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode),
-                                      s.wrench, s.orientation);
-    const auto f = solve_once<float>(graspguide_test::make_scene<float>(s, c.model, c.policy, c.mode),
-                                     s.wrench, s.orientation);
+    const auto d = solve_once<double>(
+        graspguide_test::make_scene<double>(s, c.model, c.policy, c.mode), s.wrench, s.orientation);
+    const auto f = solve_once<float>(
+        graspguide_test::make_scene<float>(s, c.model, c.policy, c.mode), s.wrench, s.orientation);
     if (d.status != f.status || d.grasp.used != f.grasp.used) {
       ++status_mismatch;
       continue;
@@ -184,9 +193,10 @@ TEST(Properties, FloatAgreesWithDoubleWithinOnePwmCount) {
     identical += diff == 0;
   }
   const double rate = double(within_one) / total;
-  std::printf("float vs double: PWM within 1 count on %d/%d scenes (%.4f%%), identical on %d, "
-              "different status/model on %d\n",
-              within_one, total, 100 * rate, identical, status_mismatch);
+  std::printf(
+      "float vs double: PWM within 1 count on %d/%d scenes (%.4f%%), identical on %d, "
+      "different status/model on %d\n",
+      within_one, total, 100 * rate, identical, status_mismatch);
   RecordProperty("float_double_within_one_rate", std::to_string(rate));
   EXPECT_GE(rate, 0.999);
 }
@@ -207,14 +217,16 @@ TEST(Properties, IterationAndFallbackFigures) {
         const auto r = solve_once<double>(scene, s.wrench, s.orientation);
         ASSERT_EQ(r.status, gg::Status::kOk);
         iterations.push_back(r.grasp.iterations);
-        if (r.grasp.used != model) (r.grasp.used == gg::ConstraintModel::kNormal ? to_normal : to_none)++;
+        if (r.grasp.used != model)
+          (r.grasp.used == gg::ConstraintModel::kNormal ? to_normal : to_none)++;
       }
       std::sort(iterations.begin(), iterations.end());
       const int median = iterations[total / 2], worst = iterations.back();
-      std::printf("k=%d model=%s: QP iterations median %d max %d (cold); fell back to normal "
-                  "%.1f%%, to none %.1f%% of %d scenes\n",
-                  k, gg::constraint_model_name(model), median, worst, 100.0 * to_normal / total,
-                  100.0 * to_none / total, total);
+      std::printf(
+          "k=%d model=%s: QP iterations median %d max %d (cold); fell back to normal "
+          "%.1f%%, to none %.1f%% of %d scenes\n",
+          k, gg::constraint_model_name(model), median, worst, 100.0 * to_normal / total,
+          100.0 * to_none / total, total);
       EXPECT_LE(worst, gg::kDefaultMaxIterations);
     }
   }

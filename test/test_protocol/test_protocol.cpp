@@ -164,7 +164,8 @@ template <class... Ms>
 void random_payload(gl::MessageList<Ms...>, std::mt19937& rng, uint8_t* id, Bytes* payload) {
   const size_t pick = rng() % sizeof...(Ms);
   size_t i = 0;
-  ((i++ == pick ? (void)(*id = static_cast<uint8_t>(Ms::kId), *payload = payload_of(random_message<Ms>(rng)))
+  ((i++ == pick ? (void)(*id = static_cast<uint8_t>(Ms::kId),
+                         *payload = payload_of(random_message<Ms>(rng)))
                 : (void)0),
    ...);
 }
@@ -239,7 +240,8 @@ TEST(Cobs, RoundTripsRunsAndZeros) {
   for (int t = 0; t < 2000; ++t) {
     Bytes d(rng() % 700);
     const uint32_t zero_per_mille = rng() % 1001;
-    for (auto& b : d) b = (rng() % 1000 < zero_per_mille) ? 0 : static_cast<uint8_t>(1 + rng() % 255);
+    for (auto& b : d)
+      b = (rng() % 1000 < zero_per_mille) ? 0 : static_cast<uint8_t>(1 + rng() % 255);
     cases.push_back(d);
   }
   for (const Bytes& d : cases) {
@@ -253,7 +255,8 @@ TEST(Cobs, RoundTripsRunsAndZeros) {
     gl::CobsStreamDecoder s;
     Bytes streamed(d.size() + 1);
     size_t n = 0;
-    for (uint8_t b : e) ASSERT_EQ(s.push(b, streamed.data(), streamed.size(), &n), gl::LinkStatus::kOk);
+    for (uint8_t b : e)
+      ASSERT_EQ(s.push(b, streamed.data(), streamed.size(), &n), gl::LinkStatus::kOk);
     EXPECT_EQ(s.finish(), gl::LinkStatus::kOk);
     streamed.resize(n);
     EXPECT_EQ(streamed, d);
@@ -271,12 +274,14 @@ TEST(Cobs, RejectsMalformedInputAndSmallBuffers) {
   for (size_t cap = 0; cap < enc.size(); ++cap) {
     uint8_t buf[8];
     size_t n = 0;
-    EXPECT_EQ(gl::cobs_encode(data.data(), data.size(), buf, cap, &n), gl::LinkStatus::kBufferTooSmall);
+    EXPECT_EQ(gl::cobs_encode(data.data(), data.size(), buf, cap, &n),
+              gl::LinkStatus::kBufferTooSmall);
   }
   for (size_t cap = 0; cap < data.size(); ++cap) {
     uint8_t buf[8];
     size_t n = 0;
-    EXPECT_EQ(gl::cobs_decode(enc.data(), enc.size(), buf, cap, &n), gl::LinkStatus::kBufferTooSmall);
+    EXPECT_EQ(gl::cobs_decode(enc.data(), enc.size(), buf, cap, &n),
+              gl::LinkStatus::kBufferTooSmall);
   }
 }
 
@@ -295,7 +300,8 @@ TEST(Schema, ErrorCodesMirrorTheCoreStatus) {
     }
   }
   EXPECT_EQ(core_codes, static_cast<size_t>(gg::kStatusCount));
-  EXPECT_EQ(static_cast<int>(gl::ErrorCode::kImpreciseContacts), static_cast<int>(gg::Status::kImpreciseContacts));
+  EXPECT_EQ(static_cast<int>(gl::ErrorCode::kImpreciseContacts),
+            static_cast<int>(gg::Status::kImpreciseContacts));
   EXPECT_EQ(static_cast<int>(gl::ErrorCode::kBadConfig), static_cast<int>(gg::Status::kBadConfig));
 }
 
@@ -332,7 +338,8 @@ void check_ids(gl::MessageList<Ms...>) {
   const size_t sizes[] = {Ms::kPayloadSize...};
   size_t largest = 0;
   for (size_t i = 0; i < sizeof...(Ms); ++i) {
-    EXPECT_TRUE(gl::is_host_to_device_id(ids[i]) || gl::is_device_to_host_id(ids[i])) << int(ids[i]);
+    EXPECT_TRUE(gl::is_host_to_device_id(ids[i]) || gl::is_device_to_host_id(ids[i]))
+        << int(ids[i]);
     for (size_t j = 0; j < i; ++j) EXPECT_NE(ids[i], ids[j]);
     size_t size = 0;
     EXPECT_TRUE(gl::payload_size_of(ids[i], &size));
@@ -403,7 +410,8 @@ void round_trip_one_type(std::mt19937& rng) {
     EXPECT_EQ(gl::unpack(big.data(), Msg::kPayloadSize - 1, &out), gl::LinkStatus::kBadLength);
     // pack needs the whole payload's room.
     size_t n = 0;
-    EXPECT_EQ(gl::pack(Msg{}, big.data(), Msg::kPayloadSize - 1, &n), gl::LinkStatus::kBufferTooSmall);
+    EXPECT_EQ(gl::pack(Msg{}, big.data(), Msg::kPayloadSize - 1, &n),
+              gl::LinkStatus::kBufferTooSmall);
   }
 }
 
@@ -445,7 +453,8 @@ TEST(Messages, RejectsValuesOutsideTheirSets) {
   Bytes pose = payload_of(gl::Pose{});
   pose[20] = 2;  // has_contacts is a bool
   gl::Pose pose_out;
-  EXPECT_EQ(gl::unpack(pose.data(), pose.size(), &pose_out, &bad_field), gl::LinkStatus::kBadEnumValue);
+  EXPECT_EQ(gl::unpack(pose.data(), pose.size(), &pose_out, &bad_field),
+            gl::LinkStatus::kBadEnumValue);
   EXPECT_EQ(bad_field, 2);
 
   gl::HelloReply reply;
@@ -517,8 +526,9 @@ TEST(GoldenFrames, CoverEveryMessage) {
 
 std::vector<Bytes> golden_wires() {
   std::vector<Bytes> out;
-  graspguide_link_test::for_each_golden_frame(
-      [&](const char*, uint16_t, const auto&, const uint8_t* b, size_t n) { out.emplace_back(b, b + n); });
+  graspguide_link_test::for_each_golden_frame([&](const char*, uint16_t, const auto&,
+                                                  const uint8_t* b,
+                                                  size_t n) { out.emplace_back(b, b + n); });
   return out;
 }
 
@@ -607,10 +617,12 @@ TEST(Parser, ResyncsAfterAnOversizedFrame) {
   Bytes stream = wire_of_raw(raw);
   stream.insert(stream.end(), good.begin(), good.end());
   gl::FrameParser p;
-  EXPECT_EQ(events(feed(p, stream)), (std::vector<gl::ParseEvent>{gl::ParseEvent::kTooLong, gl::ParseEvent::kFrame}));
+  EXPECT_EQ(events(feed(p, stream)),
+            (std::vector<gl::ParseEvent>{gl::ParseEvent::kTooLong, gl::ParseEvent::kFrame}));
   // The largest real frame fits exactly.
   gl::FrameParser q;
-  EXPECT_EQ(events(feed(q, wire_of(gl::SetScene{}, 9))), (std::vector<gl::ParseEvent>{gl::ParseEvent::kFrame}));
+  EXPECT_EQ(events(feed(q, wire_of(gl::SetScene{}, 9))),
+            (std::vector<gl::ParseEvent>{gl::ParseEvent::kFrame}));
 }
 
 TEST(Parser, EveryFlippedBitIsCaught) {
@@ -628,7 +640,8 @@ TEST(Parser, EveryFlippedBitIsCaught) {
         // The damaged frame never parses (a flip to 0x00 splits it into two bad ones);
         // the clean copy after it always does.
         ASSERT_FALSE(got.empty());
-        for (size_t k = 0; k + 1 < got.size(); ++k) EXPECT_NE(got[k].event, gl::ParseEvent::kFrame) << i << ":" << bit;
+        for (size_t k = 0; k + 1 < got.size(); ++k)
+          EXPECT_NE(got[k].event, gl::ParseEvent::kFrame) << i << ":" << bit;
         EXPECT_EQ(got.back().event, gl::ParseEvent::kFrame);
         EXPECT_EQ(p.good_frames(), 1u);
       }
@@ -684,10 +697,13 @@ TEST(Parser, TooShortAndTruncatedCobs) {
   gl::FrameParser p;
   for (size_t n = 1; n < gl::kFrameOverhead; ++n) {
     const Bytes raw(n, 0x01);
-    EXPECT_EQ(events(feed(p, wire_of_raw(raw))), (std::vector<gl::ParseEvent>{gl::ParseEvent::kTooShort})) << n;
+    EXPECT_EQ(events(feed(p, wire_of_raw(raw))),
+              (std::vector<gl::ParseEvent>{gl::ParseEvent::kTooShort}))
+        << n;
   }
   // A code byte promising more data than arrives before the delimiter.
-  EXPECT_EQ(events(feed(p, {0x09, 0x01, 0x02, 0x00})), (std::vector<gl::ParseEvent>{gl::ParseEvent::kBadCobs}));
+  EXPECT_EQ(events(feed(p, {0x09, 0x01, 0x02, 0x00})),
+            (std::vector<gl::ParseEvent>{gl::ParseEvent::kBadCobs}));
   EXPECT_EQ(p.event_count(gl::ParseEvent::kTooShort), gl::kFrameOverhead - 1);
   EXPECT_EQ(p.event_count(gl::ParseEvent::kBadCobs), 1u);
   EXPECT_EQ(p.bad_frames(), gl::kFrameOverhead);
@@ -736,8 +752,8 @@ TEST(Parser, RecoversEveryFrameFromRandomStreams) {
       if (p.push(b) != gl::ParseEvent::kFrame) continue;
       const gl::FrameView& f = p.frame();
       const Bytes payload(f.payload, f.payload + f.payload_size);
-      if (next < sent.size() && sent[next].id == f.header.msg_id && sent[next].seq == f.header.seq &&
-          sent[next].payload == payload)
+      if (next < sent.size() && sent[next].id == f.header.msg_id &&
+          sent[next].seq == f.header.seq && sent[next].payload == payload)
         ++next;
       else
         ++mismatches;
@@ -752,7 +768,8 @@ TEST(Parser, RecoversEveryFrameFromRandomStreams) {
       Bytes payload;
       random_payload(gl::AllMessages{}, rng, &id, &payload);
       const Bytes w = forge(gl::kProtocolVersion, id, static_cast<uint16_t>(rng()), payload);
-      garbage.insert(garbage.end(), w.begin(), w.begin() + static_cast<long>(rng() % (w.size() - 1)));
+      garbage.insert(garbage.end(), w.begin(),
+                     w.begin() + static_cast<long>(rng() % (w.size() - 1)));
     }
     garbage.push_back(0x00);
     push_all(garbage);
@@ -785,8 +802,9 @@ TEST(Writer, BufferTooSmallAndPayloadTooLong) {
   }
   const Bytes too_long(gl::kMaxPayloadSize + 1, 1);
   size_t n = 0;
-  EXPECT_EQ(gl::encode_frame(gl::FrameHeader{}, too_long.data(), too_long.size(), buf, sizeof buf, &n),
-            gl::LinkStatus::kTooLong);
+  EXPECT_EQ(
+      gl::encode_frame(gl::FrameHeader{}, too_long.data(), too_long.size(), buf, sizeof buf, &n),
+      gl::LinkStatus::kTooLong);
 }
 
 TEST(Writer, SequenceCounterWraps) {

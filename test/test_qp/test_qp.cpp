@@ -55,8 +55,9 @@ TEST(ProjectionQp, ProjectionOntoAHalfSpace) {
 }
 
 TEST(ProjectionQp, BoxProjectionClamps) {
-  auto p = problem<double, 3, 9>({{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}},
-                                 {0, -1, 0, -1, 0, -1}, {-2, 0.5, 7});
+  auto p =
+      problem<double, 3, 9>({{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}},
+                            {0, -1, 0, -1, 0, -1}, {-2, 0.5, 7});
   V3 x;
   gg::QpInfo info;
   ASSERT_EQ((gg::solve_projection<double, 3, 9>(p, 20, 0, x, info)), gg::Status::kOk);
@@ -104,7 +105,8 @@ TEST(ProjectionQp, InfeasibleSetsAreReportedNotGuessed) {
   auto p = problem<double, 3, 9>({{1, 0, 0}, {-1, 0, 0}}, {1, 0}, {0, 0, 0});  // x >= 1, x <= 0
   EXPECT_EQ((gg::solve_projection<double, 3, 9>(p, 20, 0, x, info)), gg::Status::kQpInfeasible);
   auto zero_row = problem<double, 3, 9>({{0, 0, 0}}, {1}, {0, 0, 0});  // 0 >= 1
-  EXPECT_EQ((gg::solve_projection<double, 3, 9>(zero_row, 20, 0, x, info)), gg::Status::kQpInfeasible);
+  EXPECT_EQ((gg::solve_projection<double, 3, 9>(zero_row, 20, 0, x, info)),
+            gg::Status::kQpInfeasible);
   auto harmless = problem<double, 3, 9>({{0, 0, 0}}, {-1}, {4, 5, 6});  // 0 >= -1
   EXPECT_EQ((gg::solve_projection<double, 3, 9>(harmless, 20, 0, x, info)), gg::Status::kOk);
   EXPECT_TRUE(x.isApprox(V3(4, 5, 6)));
@@ -124,7 +126,8 @@ TEST(ProjectionQp, IterationCapIsAStatus) {
 }
 
 TEST(ProjectionQp, WarmStartGivesTheSameAnswerInFewerIterations) {
-  auto p = problem<double, 3, 9>({{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}}, {1, 1, 1, 0}, {0, 0, 0});
+  auto p =
+      problem<double, 3, 9>({{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}}, {1, 1, 1, 0}, {0, 0, 0});
   V3 cold, warm, wrong;
   gg::QpInfo ci, wi, xi;
   ASSERT_EQ((gg::solve_projection<double, 3, 9>(p, 20, 0, cold, ci)), gg::Status::kOk);
@@ -148,7 +151,8 @@ void kkt_on_random_problems(unsigned seed) {
   for (int trial = 0; trial < 3000; ++trial) {
     gg::ProjectionQp<double, N, M> p;
     p.m = rows(rng);
-    const Eigen::Matrix<double, N, 1> anchor = Eigen::Matrix<double, N, 1>::NullaryExpr([&] { return g(rng); });
+    const Eigen::Matrix<double, N, 1> anchor =
+        Eigen::Matrix<double, N, 1>::NullaryExpr([&] { return g(rng); });
     for (int j = 0; j < p.m; ++j) {
       for (int c = 0; c < N; ++c) p.a(j, c) = g(rng);
       if (j >= 2 && trial % 3 == 0) p.a.row(j) = -(p.a.row(j - 1) + 0.5 * p.a.row(j - 2));
@@ -196,7 +200,8 @@ void kkt_on_random_problems(unsigned seed) {
     // Warm start from its own active set reproduces the answer.
     Eigen::Matrix<double, N, 1> again;
     gg::QpInfo info2;
-    ASSERT_EQ((gg::solve_projection<double, N, M>(p, 100, info.active, again, info2)), gg::Status::kOk);
+    ASSERT_EQ((gg::solve_projection<double, N, M>(p, 100, info.active, again, info2)),
+              gg::Status::kOk);
     EXPECT_LT((again - x).norm(), 1e-9 * (1 + x.norm())) << trial;
   }
   EXPECT_GT(feasible, 1000);

@@ -14,10 +14,14 @@ using Scalars = ::testing::Types<float, double>;
 TYPED_TEST_SUITE(Steps, Scalars);
 
 template <typename T>
-T tol() { return std::is_same<T, float>::value ? T(2e-5) : T(1e-12); }
+T tol() {
+  return std::is_same<T, float>::value ? T(2e-5) : T(1e-12);
+}
 
 template <typename T, int K>
-gg::Contacts<T, K> hand() { return nominal_hand().leftCols<K>().template cast<T>(); }
+gg::Contacts<T, K> hand() {
+  return nominal_hand().leftCols<K>().template cast<T>();
+}
 
 // ---------------------------------------------------------------- contact frames
 
@@ -53,9 +57,7 @@ TYPED_TEST(Steps, ContactOnTheAxisUsesTheFallbackAndSaysSo) {
   using T = TypeParam;
   gg::Contacts<T, 3> c;
   // Contact 0 lies straight "above" the centroid along y: y_0 is parallel to y_O.
-  c << T(0), T(-1), T(1),
-       T(2), T(-1), T(-1),
-       T(0), T(0), T(0);
+  c << T(0), T(-1), T(1), T(2), T(-1), T(-1), T(0), T(0), T(0);
   gg::ContactFrames<T, 3> f;
   ASSERT_EQ((gg::contact_frames<T, 3>(c, gg::Vec3<T>::UnitY(), f)), gg::Status::kOk);
   EXPECT_EQ(f.fallback_mask, 1);
@@ -220,9 +222,7 @@ TYPED_TEST(Steps, CollinearContactsAreRankDeficientOnBothRoutes) {
   using T = TypeParam;
   gg::Contacts<T, 3> c;
   // On one line, and not symmetric (a symmetric set puts a contact on the centroid).
-  c << T(0), T(0.03), T(0.1),
-       T(0), T(0.012), T(0.04),
-       T(0), T(0.006), T(0.02);
+  c << T(0), T(0.03), T(0.1), T(0), T(0.012), T(0.04), T(0), T(0.006), T(0.02);
   gg::ContactFrames<T, 3> f;
   ASSERT_EQ((gg::contact_frames<T, 3>(c, gg::Vec3<T>::UnitY(), f)), gg::Status::kOk);
   gg::Vec6<T> w;
@@ -240,9 +240,7 @@ TYPED_TEST(Steps, RelevanceMarksContactsOppositeTheForceIncludingTheBoundary) {
   using T = TypeParam;
   gg::Contacts<T, 3> c;
   // Offsets from the centroid (0,0,0): +x, -x + y, -x - y.
-  c << T(2), T(-1), T(-1),
-       T(0), T(1), T(-1),
-       T(0), T(0), T(0);
+  c << T(2), T(-1), T(-1), T(0), T(1), T(-1), T(0), T(0), T(0);
   gg::ContactFrames<T, 3> f;
   ASSERT_EQ((gg::contact_frames<T, 3>(c, gg::Vec3<T>(T(0), T(0), T(1)), f)), gg::Status::kOk);
   EXPECT_EQ((gg::relevance<T, 3>(f, gg::Vec3<T>(T(1), T(0), T(0)))), 0b110);
@@ -296,7 +294,7 @@ TYPED_TEST(Steps, PwmMappingOffThresholdRoundingAndGain) {
   EXPECT_EQ(c.duty[2], 0);    // at the off threshold: off, never a stray 70
   EXPECT_EQ(c.duty[3], 70);   // 70 + 0.2035
   gg::Pwm v = gg::pwm_from_levels<T, 4>(m, T(0));
-  EXPECT_EQ(v.duty[0], 70);   // mode V, aligned: alpha = 0
+  EXPECT_EQ(v.duty[0], 70);  // mode V, aligned: alpha = 0
   EXPECT_EQ(v.duty[2], 0);
   gg::Pwm big = gg::pwm_from_levels<T, 4>(m, T(1e6));
   EXPECT_EQ(big.duty[0], 255);  // clamped
@@ -338,7 +336,8 @@ TYPED_TEST(Steps, QuaternionScaleDoesNotMatterButZeroAndNanAreRejected) {
   ASSERT_EQ((gg::unit_quaternion<T>(Eigen::Matrix<T, 4, 1>(T(3.7) * q), b)), gg::Status::kOk);
   EXPECT_TRUE(a.coeffs().isApprox(b.coeffs(), tol<T>()));
   EXPECT_NEAR(a.norm(), T(1), tol<T>());
-  EXPECT_EQ((gg::unit_quaternion<T>(Eigen::Matrix<T, 4, 1>::Zero(), a)), gg::Status::kBadQuaternion);
+  EXPECT_EQ((gg::unit_quaternion<T>(Eigen::Matrix<T, 4, 1>::Zero(), a)),
+            gg::Status::kBadQuaternion);
   q(2) = std::numeric_limits<T>::quiet_NaN();
   EXPECT_EQ((gg::unit_quaternion<T>(q, a)), gg::Status::kNonFiniteInput);
 }

@@ -66,7 +66,8 @@ TEST(Trial, BadInputLeavesTheStateUnchanged) {
   gg::Trial t = started(1000 * kMs);
   EXPECT_EQ(t.update(2000 * kMs, 1.0), gg::Status::kOk);
   EXPECT_EQ(t.update(1500 * kMs, 1.0), gg::Status::kTimeWentBackwards);
-  EXPECT_EQ(t.update(2100 * kMs, std::numeric_limits<double>::quiet_NaN()), gg::Status::kNonFiniteInput);
+  EXPECT_EQ(t.update(2100 * kMs, std::numeric_limits<double>::quiet_NaN()),
+            gg::Status::kNonFiniteInput);
   EXPECT_TRUE(t.running());
   EXPECT_EQ(t.update(2500 * kMs, 1.0), gg::Status::kOk);
   EXPECT_EQ(t.state(), gg::TrialState::kSucceeded);

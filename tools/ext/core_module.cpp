@@ -49,7 +49,10 @@ std::string shown(const std::string& s) {
   static const char* hex = "0123456789abcdef";
   std::string out;
   for (unsigned char c : s) {
-    if (out.size() >= 40) { out += "..."; break; }
+    if (out.size() >= 40) {
+      out += "...";
+      break;
+    }
     if (c >= 0x20 && c < 0x7f && c != '\\') {
       out += static_cast<char>(c);
     } else {
@@ -64,8 +67,7 @@ std::string shown(const std::string& s) {
 // Exact, case-sensitive name lookup (std::string comparison, so an embedded NUL never
 // matches a shorter name).
 template <typename E, std::size_t N>
-E parse_name(const std::string& s, const E (&values)[N], const char* (*name)(E),
-             const char* what) {
+E parse_name(const std::string& s, const E (&values)[N], const char* (*name)(E), const char* what) {
   for (E v : values)
     if (s == name(v)) return v;
   std::string accepted;
@@ -80,11 +82,9 @@ E parse_name(const std::string& s, const E (&values)[N], const char* (*name)(E),
 
 constexpr gg::Policy kPolicies[] = {gg::Policy::kF, gg::Policy::kFperp};
 constexpr gg::Mode kModes[] = {gg::Mode::kC, gg::Mode::kV};
-constexpr gg::ConstraintModel kModels[] = {gg::ConstraintModel::kPaper,
-                                           gg::ConstraintModel::kNormal,
-                                           gg::ConstraintModel::kNone};
-constexpr gg::Decomposition kDecompositions[] = {gg::Decomposition::kQR,
-                                                 gg::Decomposition::kSVD};
+constexpr gg::ConstraintModel kModels[] = {
+    gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal, gg::ConstraintModel::kNone};
+constexpr gg::Decomposition kDecompositions[] = {gg::Decomposition::kQR, gg::Decomposition::kSVD};
 
 const char* policy_name_fn(gg::Policy p) { return gg::policy_name(p); }
 const char* mode_name_fn(gg::Mode m) { return gg::mode_name(m); }
@@ -106,8 +106,8 @@ SceneOptions parse_options(const std::string& policy, const std::string& mode,
   o.policy = parse_name(policy, kPolicies, policy_name_fn, "policy");
   o.mode = parse_name(mode, kModes, mode_name_fn, "mode");
   o.constraints = parse_name(constraints, kModels, model_name_fn, "constraint model");
-  o.decomposition = parse_name(decomposition, kDecompositions, decomposition_name_fn,
-                               "decomposition");
+  o.decomposition =
+      parse_name(decomposition, kDecompositions, decomposition_name_fn, "decomposition");
   o.max_iterations = max_iterations;  // < 1 is the core's bad_config
   return o;
 }
@@ -131,8 +131,8 @@ gg::Scene<T> make_scene(const ContactList& contacts, const Axis3& y_axis, const 
   gg::Scene<T> s;
   s.k = contact_count(contacts);
   fill_contacts<T>(contacts, s.contacts);
-  s.y_axis = gg::Vec3<T>(static_cast<T>(y_axis[0]), static_cast<T>(y_axis[1]),
-                         static_cast<T>(y_axis[2]));
+  s.y_axis =
+      gg::Vec3<T>(static_cast<T>(y_axis[0]), static_cast<T>(y_axis[1]), static_cast<T>(y_axis[2]));
   s.constraints = o.constraints;
   s.policy = o.policy;
   s.mode = o.mode;
@@ -150,8 +150,8 @@ gg::Vec6<T> make_wrench(const Wrench& w) {
 
 template <typename T>
 Eigen::Matrix<T, 4, 1> make_quat(const Quat4& q) {
-  return Eigen::Matrix<T, 4, 1>(static_cast<T>(q[0]), static_cast<T>(q[1]),
-                                static_cast<T>(q[2]), static_cast<T>(q[3]));
+  return Eigen::Matrix<T, 4, 1>(static_cast<T>(q[0]), static_cast<T>(q[1]), static_cast<T>(q[2]),
+                                static_cast<T>(q[3]));
 }
 
 // The result of one frame as a dict. Outputs that the status leaves undefined are None
@@ -217,9 +217,9 @@ bool is_float_scalar(const std::string& scalar) {
 }
 
 nb::dict solve(const ContactList& contacts, const Wrench& wrench, const std::string& policy,
-               const std::string& mode, const std::string& constraints,
-               const Quat4& orientation, const Axis3& y_axis, const std::string& scalar,
-               const std::string& decomposition, int max_iterations) {
+               const std::string& mode, const std::string& constraints, const Quat4& orientation,
+               const Axis3& y_axis, const std::string& scalar, const std::string& decomposition,
+               int max_iterations) {
   const SceneOptions o = parse_options(policy, mode, constraints, decomposition, max_iterations);
   return is_float_scalar(scalar) ? solve_t<float>(contacts, wrench, o, orientation, y_axis)
                                  : solve_t<double>(contacts, wrench, o, orientation, y_axis);
@@ -232,10 +232,8 @@ class PyGuidance {
 
   std::string set_scene(const ContactList& contacts, const std::string& policy,
                         const std::string& mode, const std::string& constraints,
-                        const Axis3& y_axis, const std::string& decomposition,
-                        int max_iterations) {
-    const SceneOptions o =
-        parse_options(policy, mode, constraints, decomposition, max_iterations);
+                        const Axis3& y_axis, const std::string& decomposition, int max_iterations) {
+    const SceneOptions o = parse_options(policy, mode, constraints, decomposition, max_iterations);
     return gg::status_name(g_->set_scene(make_scene<double>(contacts, y_axis, o)));
   }
 
@@ -272,8 +270,8 @@ nb::dict tolerances(bool is_float) {
   d["kZeroForceRelTol"] = gg::kZeroForceRelTol;
   d["kRelevanceCosTol"] = gg::kRelevanceCosTol;
   d["kTinyRel"] = gg::kTinyRel;
-  d["kFeasRelTol"] = is_float ? double(gg::Tolerances<float>::kFeasRel)
-                              : gg::Tolerances<double>::kFeasRel;
+  d["kFeasRelTol"] =
+      is_float ? double(gg::Tolerances<float>::kFeasRel) : gg::Tolerances<double>::kFeasRel;
   d["kDependentRelTol"] = is_float ? double(gg::Tolerances<float>::kDependentRel)
                                    : gg::Tolerances<double>::kDependentRel;
   d["kMotorOffLevel"] = gg::kMotorOffLevel;
@@ -333,8 +331,7 @@ void check_count(const V& v, std::size_t n, const char* what) {
 
 // Every per-instance list of time_frames / time_stages has one entry per instance.
 void check_instance_lists(std::size_t n, const std::vector<Wrench>& wrenches,
-                          const std::vector<Quat4>& orientations,
-                          const std::vector<Axis3>& y_axes,
+                          const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
                           const std::vector<std::string>& policies,
                           const std::vector<std::string>& modes,
                           const std::vector<std::string>& constraints) {
@@ -358,9 +355,9 @@ Eigen::Matrix<T, 3, gg::kMaxContacts> nudged(const Eigen::Matrix<T, 3, gg::kMaxC
 }
 
 template <typename T>
-void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr,
-                   const gg::GraspSolution<T>& g, nb::list& status, nb::list& pwm,
-                   nb::list& lambda, nb::list& used, nb::list& iterations) {
+void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr, const gg::GraspSolution<T>& g,
+                   nb::list& status, nb::list& pwm, nb::list& lambda, nb::list& used,
+                   nb::list& iterations) {
   const bool ok = s == gg::Status::kOk;
   status.append(gg::status_name(s));
   nb::list p, l;
@@ -380,10 +377,10 @@ void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr,
 // previous frame as on the device. Fixed posture: only the orientation changes, so a frame
 // is the orientation error, alpha and the PWM mapping.
 template <typename T>
-nb::dict time_frames_t(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
-                       const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
-                       const std::vector<SceneOptions>& options, bool warm_start,
-                       bool fixed_posture, int reps, int batches, int warmup) {
+nb::dict time_frames_t(const std::vector<ContactList>& contacts,
+                       const std::vector<Wrench>& wrenches, const std::vector<Quat4>& orientations,
+                       const std::vector<Axis3>& y_axes, const std::vector<SceneOptions>& options,
+                       bool warm_start, bool fixed_posture, int reps, int batches, int warmup) {
   nb::list ns, status, pwm, lambda, used, iterations, recomputed;
   auto g = std::make_unique<gg::Guidance<T>>();
   for (std::size_t n = 0; n < contacts.size(); ++n) {
@@ -477,9 +474,9 @@ nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector
 // tracker frame can give it.
 template <typename T, int K>
 void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& null_basis,
-               const std::vector<double>& lambda_des, gg::ConstraintModel model,
-               int max_iterations, bool warm_start, double violation_rel, int reps, int batches,
-               int warmup, nb::list& ns, nb::list& status, nb::list& lambda, nb::list& used,
+               const std::vector<double>& lambda_des, gg::ConstraintModel model, int max_iterations,
+               bool warm_start, double violation_rel, int reps, int batches, int warmup,
+               nb::list& ns, nb::list& status, nb::list& lambda, nb::list& used,
                nb::list& iterations) {
   constexpr int kVars = 3 * K - 6;
   auto eq = std::make_unique<gg::Equilibrium<T, K>>();
@@ -521,8 +518,8 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
                  const std::vector<std::vector<double>>& null_basis,
                  const std::vector<std::vector<double>>& lambda_des,
                  const std::vector<std::string>& models, const std::string& scalar,
-                 int max_iterations, bool warm_start, double violation_rel, int reps,
-                 int batches, int warmup) {
+                 int max_iterations, bool warm_start, double violation_rel, int reps, int batches,
+                 int warmup) {
   const std::size_t n = lambda0.size();
   check_count(null_basis, n, "null_basis");
   check_count(lambda_des, n, "lambda_des");
@@ -543,7 +540,8 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
     if (lambda_des[i].size() != m || null_basis[i].size() != m * vars)
       throw nb::value_error(("instance " + std::to_string(i) +
                              ": lambda_des needs 3k entries and null_basis 3k*(3k-6) "
-                             "(row-major)").c_str());
+                             "(row-major)")
+                                .c_str());
     const gg::ConstraintModel model =
         parse_name(models[i], kModels, model_name_fn, "constraint model");
     const bool k4 = m == 12;
@@ -595,8 +593,8 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   const std::uint8_t relevant = gg::relevance<T, K>(*frames, force);
   const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq->lambda0, relevant);
   gg::ForceSolution<T, K> forces;
-  if (gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations,
-                             gg::ConstraintModel::kNone, 0, forces) != gg::Status::kOk)
+  if (gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations, gg::ConstraintModel::kNone,
+                             0, forces) != gg::Status::kOk)
     return d;
   gg::Quat<T> q;
   gg::unit_quaternion<T>(make_quat<T>(orientation), q);
@@ -609,8 +607,8 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   };
   gg::ContactFrames<T, K>& fr = *frames;
   d["contact_frames"] = to_list(time_batches(
-      [&](int) { return std::uint32_t(gg::contact_frames<T, K>(c, scene.y_axis, fr)); },
-      reps, batches, warmup));
+      [&](int) { return std::uint32_t(gg::contact_frames<T, K>(c, scene.y_axis, fr)); }, reps,
+      batches, warmup));
   // Each route builds only the matrix it decomposes: the reduced M^T (QR) or G (SVD).
   const bool svd = o.decomposition == gg::Decomposition::kSVD;
   d["grasp_matrix"] = to_list(time_batches(
@@ -671,17 +669,17 @@ nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector
                                          gg::kDefaultMaxIterations);
     const int k = contact_count(contacts[i]);
     if (k == 3 && is_float)
-      out.append(time_stages_k<float, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i],
-                                         o, reps, batches, warmup));
+      out.append(time_stages_k<float, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i], o,
+                                         reps, batches, warmup));
     else if (k == 3)
-      out.append(time_stages_k<double, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i],
-                                          o, reps, batches, warmup));
+      out.append(time_stages_k<double, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i], o,
+                                          reps, batches, warmup));
     else if (k == 4 && is_float)
-      out.append(time_stages_k<float, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i],
-                                         o, reps, batches, warmup));
+      out.append(time_stages_k<float, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i], o,
+                                         reps, batches, warmup));
     else if (k == 4)
-      out.append(time_stages_k<double, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i],
-                                          o, reps, batches, warmup));
+      out.append(time_stages_k<double, 4>(contacts[i], wrenches[i], orientations[i], y_axes[i], o,
+                                          reps, batches, warmup));
     else
       out.append(nb::dict());
   }
@@ -720,8 +718,8 @@ NB_MODULE(_core, m) {
   m.attr("TOLERANCES") = tol;
   // The trial fields' accepted ranges (scene.h), for the host's scene and protocol readers.
   nb::dict limits;
-  for (gg::TrialField f : {gg::TrialField::kThresholdDeg, gg::TrialField::kHoldS,
-                           gg::TrialField::kTimeoutS}) {
+  for (gg::TrialField f :
+       {gg::TrialField::kThresholdDeg, gg::TrialField::kHoldS, gg::TrialField::kTimeoutS}) {
     const gg::TrialFieldRange r = gg::trial_field_range(f);
     nb::dict d;
     d["min"] = r.min;
@@ -744,15 +742,14 @@ NB_MODULE(_core, m) {
         "constraints"_a = "paper", "orientation"_a = Quat4{1.0, 0.0, 0.0, 0.0},
         "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "qr",
         "max_iterations"_a = gg::kDefaultMaxIterations,
-        (std::string(
-             "Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
-             "orientation in one call).\n\n"
-             "contacts: k triples [x, y, z] in the hand frame (k must be 3 or 4, anything "
-             "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
-             "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "
-             "'normal' | 'none'; orientation: [w, x, y, z] hand -> world; y_axis: y_O in "
-             "the hand frame; scalar 'double' | 'float'; decomposition 'qr' | 'svd'; "
-             "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
+        (std::string("Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
+                     "orientation in one call).\n\n"
+                     "contacts: k triples [x, y, z] in the hand frame (k must be 3 or 4, anything "
+                     "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
+                     "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "
+                     "'normal' | 'none'; orientation: [w, x, y, z] hand -> world; y_axis: y_O in "
+                     "the hand frame; scalar 'double' | 'float'; decomposition 'qr' | 'svd'; "
+                     "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
          kResultDoc)
             .c_str());
 
@@ -763,8 +760,8 @@ NB_MODULE(_core, m) {
                          "return a status name ('ok' or the error; on error nothing changes).")
       .def(nb::init<>())
       .def("set_scene", &PyGuidance::set_scene, "contacts"_a, "policy"_a = "F", "mode"_a = "C",
-           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0},
-           "decomposition"_a = "qr", "max_iterations"_a = gg::kDefaultMaxIterations,
+           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "decomposition"_a = "qr",
+           "max_iterations"_a = gg::kDefaultMaxIterations,
            "Set the contacts (3 or 4 triples) and the scene's parameters; forces a "
            "recomputation. Returns a status name.")
       .def("set_wrench", &PyGuidance::set_wrench, "wrench"_a,
@@ -774,16 +771,14 @@ NB_MODULE(_core, m) {
            "New contact positions (same count as the scene); exactly equal contacts do not "
            "force a recomputation. Returns a status name.")
       .def("update", &PyGuidance::update, "orientation"_a = Quat4{1.0, 0.0, 0.0, 0.0},
-           (std::string("One frame for the hand orientation [w, x, y, z]. Returns a ") +
-            kResultDoc)
+           (std::string("One frame for the hand orientation [w, x, y, z]. Returns a ") + kResultDoc)
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
 
   m.def("time_frames", &time_frames, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
-        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double",
-        "decomposition"_a = "qr", "warm_start"_a = true,
-        "max_iterations"_a = gg::kDefaultMaxIterations, "fixed_posture"_a = false,
-        "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
+        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double", "decomposition"_a = "qr",
+        "warm_start"_a = true, "max_iterations"_a = gg::kDefaultMaxIterations,
+        "fixed_posture"_a = false, "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
         "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. One list "
         "entry per instance for every argument. Moving posture (default): each frame sets "
         "new contacts (the instance's own and a copy moved by one ulp, alternately) and "
@@ -794,8 +789,8 @@ NB_MODULE(_core, m) {
         "recomputed (grasp recomputations among the timed and warm-up frames), "
         "frames_per_instance.");
   m.def("time_stages", &time_stages, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
-        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double",
-        "decomposition"_a = "qr", "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
+        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double", "decomposition"_a = "qr",
+        "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
         "Benchmark (graspguide bench): time each stage of a frame (contact_frames, "
         "grasp_matrix, decomposition, relevance (with desired forces), qp (solve_forces, "
         "cold), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns one "

@@ -13,11 +13,11 @@ namespace graspguide {
 
 template <typename T, int K>
 struct ContactFrames {
-  Vec3<T> origin = Vec3<T>::Zero();   // O, in the hand frame
-  T length_scale = T(0);              // L = max |C_i - O|
-  Contacts<T, K> offset_scaled;       // (C_i - O) / L, one column per contact
-  Mat3<T> rotation[K];                // R_i = [x_i y_i z_i], contact i -> object frame
-  uint8_t fallback_mask = 0;          // bit i: contact i used the fallback x axis
+  Vec3<T> origin = Vec3<T>::Zero();  // O, in the hand frame
+  T length_scale = T(0);             // L = max |C_i - O|
+  Contacts<T, K> offset_scaled;      // (C_i - O) / L, one column per contact
+  Mat3<T> rotation[K];               // R_i = [x_i y_i z_i], contact i -> object frame
+  uint8_t fallback_mask = 0;         // bit i: contact i used the fallback x axis
 };
 
 // A unit vector perpendicular to y_O, used when y_i is (anti)parallel to y_O. Built from

@@ -61,8 +61,10 @@ Status equilibrium_qr(const ContactFrames<T, K>& frames, const ReducedGraspT<T, 
   // M^T P = Q R  =>  M^+ = Q_1 R^-T P^T.
   Eigen::Matrix<T, kRows, 1> z = Eigen::Matrix<T, kRows, 1>::Zero();
   z.template head<3>() = qr.colsPermutation().transpose() * (-w.template tail<3>());
-  packed.template topLeftCorner<3, 3>().template triangularView<Eigen::Upper>()
-      .transpose().solveInPlace(z.template head<3>());
+  packed.template topLeftCorner<3, 3>()
+      .template triangularView<Eigen::Upper>()
+      .transpose()
+      .solveInPlace(z.template head<3>());
   apply_householder_q<2>(packed, qr.hCoeffs(), z);
   const Vec3<T> share = w.template head<3>() / T(-K);
   for (int i = 0; i < K; ++i) {
@@ -115,11 +117,10 @@ Status equilibrium(const ContactFrames<T, K>& frames, const Vec6<T>& w, Decompos
 // Instantiated once in equilibrium_qr.cpp / equilibrium_svd.cpp (EXTERN empty) and
 // declared extern everywhere else: Eigen's decompositions are slow to compile, and every
 // test would otherwise compile them again.
-#define GRASPGUIDE_EQUILIBRIUM_QR(EXTERN, T, K)                                             \
-  EXTERN template Status equilibrium_qr<T, K>(const ContactFrames<T, K>&,                   \
-                                              const ReducedGraspT<T, K>&, const Vec6<T>&,    \
-                                              Equilibrium<T, K>&);
-#define GRASPGUIDE_EQUILIBRIUM_SVD(EXTERN, T, K) \
+#define GRASPGUIDE_EQUILIBRIUM_QR(EXTERN, T, K) \
+  EXTERN template Status equilibrium_qr<T, K>(  \
+      const ContactFrames<T, K>&, const ReducedGraspT<T, K>&, const Vec6<T>&, Equilibrium<T, K>&);
+#define GRASPGUIDE_EQUILIBRIUM_SVD(EXTERN, T, K)                                      \
   EXTERN template Status equilibrium_svd<T, K>(const GraspMat<T, K>&, const Vec6<T>&, \
                                                Equilibrium<T, K>&);
 #define GRASPGUIDE_EQUILIBRIA(EXTERN, ROUTE) \

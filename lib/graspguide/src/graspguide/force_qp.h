@@ -9,10 +9,10 @@ namespace graspguide {
 
 template <typename T, int K>
 struct ForceSolution {
-  ForceVec<T, K> lambda;                   // lambda0 + N xi*, before normalisation
+  ForceVec<T, K> lambda;  // lambda0 + N xi*, before normalisation
   ConstraintModel used = ConstraintModel::kNone;
-  int iterations = 0;                      // summed over the models tried
-  uint16_t active = 0;                     // active set of the model used (warm start)
+  int iterations = 0;   // summed over the models tried
+  uint16_t active = 0;  // active set of the model used (warm start)
 };
 
 // Rows of the constraint matrix for one model: component j of lambda >= 0.

@@ -8,9 +8,7 @@ namespace graspguide {
 template <typename T>
 Mat3<T> skew(const Vec3<T>& v) {
   Mat3<T> s;
-  s << T(0), -v(2), v(1),
-       v(2), T(0), -v(0),
-       -v(1), v(0), T(0);
+  s << T(0), -v(2), v(1), v(2), T(0), -v(0), -v(1), v(0), T(0);
   return s;
 }
 

@@ -14,7 +14,7 @@ struct GraspSolution {
   int k = 0;
   Eigen::Matrix<T, 3 * kMaxContacts, 1> lambda = Eigen::Matrix<T, 3 * kMaxContacts, 1>::Zero();
   Eigen::Matrix<T, kMaxContacts, 1> levels = Eigen::Matrix<T, kMaxContacts, 1>::Zero();
-  Vec3<T> force_unit = Vec3<T>::Zero();   // f_hat, hand frame
+  Vec3<T> force_unit = Vec3<T>::Zero();  // f_hat, hand frame
   ConstraintModel used = ConstraintModel::kNone;
   uint8_t relevant_mask = 0;
   uint8_t fallback_mask = 0;
@@ -74,16 +74,16 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
 }
 
 // Declared here with EXTERN = extern, defined once in grasp_solution.cpp with EXTERN empty.
-#define GRASPGUIDE_GRASP_SOLUTION(EXTERN, T, K)                                              \
-  EXTERN template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&,            \
-                                           const Vec3<T>&, ConstraintModel, Policy,           \
-                                           const SolverSettings&, const WarmStart&,           \
-                                           GraspSolution<T>&);                                \
-  EXTERN template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,  \
-                                            ConstraintModel, int, ConstraintModel, uint16_t,  \
+#define GRASPGUIDE_GRASP_SOLUTION(EXTERN, T, K)                                                   \
+  EXTERN template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&, const Vec3<T>&, \
+                                           ConstraintModel, Policy, const SolverSettings&,        \
+                                           const WarmStart&, GraspSolution<T>&);                  \
+  EXTERN template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,      \
+                                            ConstraintModel, int, ConstraintModel, uint16_t,      \
                                             ForceSolution<T, K>&, T);
-#define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN) \
-  GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \
+#define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN)    \
+  GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) \
+  GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 3) GRASPGUIDE_GRASP_SOLUTION(EXTERN, double, 4)
 #ifndef GRASPGUIDE_INSTANTIATING_GRASP_SOLUTION
 GRASPGUIDE_GRASP_SOLUTIONS(extern)

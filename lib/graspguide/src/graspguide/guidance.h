@@ -11,10 +11,10 @@ namespace graspguide {
 template <typename T>
 struct FrameResult {
   Status status = Status::kOk;
-  Pwm pwm;                 // all zero unless status is kOk
+  Pwm pwm;  // all zero unless status is kOk
   T error_deg = T(0);
   T alpha = T(0);
-  bool recomputed = false; // the grasp part ran in this frame
+  bool recomputed = false;  // the grasp part ran in this frame
 };
 
 // Whether the scene's contacts form a usable grasp (frames and rank), before any wrench is
@@ -22,7 +22,8 @@ struct FrameResult {
 template <typename T, int K>
 Status geometry_status_k(const Scene<T>& scene) {
   ContactFrames<T, K> frames;
-  const Status s = contact_frames<T, K>(scene.contacts.template leftCols<K>(), scene.y_axis, frames);
+  const Status s =
+      contact_frames<T, K>(scene.contacts.template leftCols<K>(), scene.y_axis, frames);
   if (s != Status::kOk) return s;
   Equilibrium<T, K> eq;
   return equilibrium<T, K>(frames, Vec6<T>::Unit(2), scene.solver.decomposition, eq);
@@ -122,8 +123,8 @@ class Guidance {
   Status solve_k() {
     GraspSolution<T> next;
     const Contacts<T, K> c = scene_.contacts.template leftCols<K>();
-    const Status s = solve_grasp<T, K>(c, wrench_, scene_.y_axis, scene_.constraints,
-                                       scene_.policy, scene_.solver, warm_, next);
+    const Status s = solve_grasp<T, K>(c, wrench_, scene_.y_axis, scene_.constraints, scene_.policy,
+                                       scene_.solver, warm_, next);
     grasp_ = next;
     if (s == Status::kOk) warm_ = WarmStart{next.used, next.active};
     return s;

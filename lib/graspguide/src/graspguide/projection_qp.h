@@ -18,18 +18,18 @@ namespace graspguide {
 
 template <typename T, int N, int M>
 struct ProjectionQp {
-  Eigen::Matrix<T, M, N> a;   // rows 0..m-1 used
+  Eigen::Matrix<T, M, N> a;  // rows 0..m-1 used
   Eigen::Matrix<T, M, 1> b;
   int m = 0;
   Eigen::Matrix<T, N, 1> x_unconstrained;
-  T violation_tol = T(0);     // a constraint counts as violated below b - violation_tol
-  T dependent_tol = T(0);     // |projection of a row| below this times the largest row
-                              // norm: the row depends on the active rows
+  T violation_tol = T(0);  // a constraint counts as violated below b - violation_tol
+  T dependent_tol = T(0);  // |projection of a row| below this times the largest row
+                           // norm: the row depends on the active rows
 };
 
 struct QpInfo {
-  int iterations = 0;    // active-set changes (additions and removals)
-  uint16_t active = 0;   // bit j: constraint j active at the solution
+  int iterations = 0;   // active-set changes (additions and removals)
+  uint16_t active = 0;  // bit j: constraint j active at the solution
 };
 
 namespace detail {
@@ -120,8 +120,8 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
   const T inf = std::numeric_limits<T>::infinity();
 
   detail::ActiveFactor<T, N> f;
-  int w[N];        // active constraint indices, in the factor's column order
-  T u[N + 1];      // their multipliers (plus room for a candidate)
+  int w[N];             // active constraint indices, in the factor's column order
+  T u[N + 1];           // their multipliers (plus room for a candidate)
   uint16_t active = 0;  // the same set as a mask
   info = QpInfo{};
   x = p.x_unconstrained;
@@ -170,7 +170,10 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
     for (int j = 0; j < p.m; ++j) {
       if (active & (1u << j)) continue;
       const T s = p.a.row(j).dot(x) - p.b(j);
-      if (s < worst) { worst = s; cand = j; }
+      if (s < worst) {
+        worst = s;
+        cand = j;
+      }
     }
     if (cand < 0) break;
 
@@ -187,7 +190,10 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
       for (int i = 0; i < f.q; ++i) {
         if (coeff(i) > T(0)) {
           const T ratio = u[i] / coeff(i);
-          if (ratio < t_dual) { t_dual = ratio; drop = i; }
+          if (ratio < t_dual) {
+            t_dual = ratio;
+            drop = i;
+          }
         }
       }
       const T s = ap.dot(x) - p.b(cand);
@@ -207,7 +213,10 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
         break;
       }
       active = static_cast<uint16_t>(active & ~(1u << w[drop]));
-      for (int i = drop; i + 1 < f.q; ++i) { w[i] = w[i + 1]; u[i] = u[i + 1]; }
+      for (int i = drop; i + 1 < f.q; ++i) {
+        w[i] = w[i + 1];
+        u[i] = u[i + 1];
+      }
       f.drop(drop);  // a partial step leaves the candidate violated: keep going with it
     }
   }
@@ -217,11 +226,12 @@ Status solve_projection(const ProjectionQp<T, N, M>& p, int max_iterations, uint
 
 // Defined once in projection_qp.cpp (EXTERN empty), extern everywhere else: 3 or 6
 // variables with 9 or 12 rows.
-#define GRASPGUIDE_PROJECTION_QP(EXTERN, T, N, M)                                             \
+#define GRASPGUIDE_PROJECTION_QP(EXTERN, T, N, M)                                               \
   EXTERN template Status solve_projection<T, N, M>(const ProjectionQp<T, N, M>&, int, uint16_t, \
                                                    Eigen::Matrix<T, N, 1>&, QpInfo&);
-#define GRASPGUIDE_PROJECTION_QPS(EXTERN)                                                    \
-  GRASPGUIDE_PROJECTION_QP(EXTERN, float, 3, 9) GRASPGUIDE_PROJECTION_QP(EXTERN, float, 6, 12) \
+#define GRASPGUIDE_PROJECTION_QPS(EXTERN)        \
+  GRASPGUIDE_PROJECTION_QP(EXTERN, float, 3, 9)  \
+  GRASPGUIDE_PROJECTION_QP(EXTERN, float, 6, 12) \
   GRASPGUIDE_PROJECTION_QP(EXTERN, double, 3, 9) GRASPGUIDE_PROJECTION_QP(EXTERN, double, 6, 12)
 #ifndef GRASPGUIDE_INSTANTIATING_PROJECTION_QP
 GRASPGUIDE_PROJECTION_QPS(extern)

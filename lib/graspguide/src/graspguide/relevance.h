@@ -27,8 +27,10 @@ ForceVec<T, K> desired_forces(const ForceVec<T, K>& lambda0, uint8_t mask) {
   for (int i = 0; i < K; ++i)
     if (mask & (1u << i)) des.template segment<3>(3 * i) = lambda0.template segment<3>(3 * i);
   const T n = des.norm();
-  if (n > T(kTinyRel) * lambda0.norm()) des /= n;
-  else des.setZero();
+  if (n > T(kTinyRel) * lambda0.norm())
+    des /= n;
+  else
+    des.setZero();
   return des;
 }
 

@@ -22,19 +22,40 @@ constexpr const char* mode_name(Mode m) { return m == Mode::kC ? "C" : "V"; }
 
 // Parsers return false on unknown names so callers can say what is accepted.
 inline bool parse_constraint_model(const char* s, ConstraintModel* out) {
-  if (std::strcmp(s, "paper") == 0) { *out = ConstraintModel::kPaper; return true; }
-  if (std::strcmp(s, "normal") == 0) { *out = ConstraintModel::kNormal; return true; }
-  if (std::strcmp(s, "none") == 0) { *out = ConstraintModel::kNone; return true; }
+  if (std::strcmp(s, "paper") == 0) {
+    *out = ConstraintModel::kPaper;
+    return true;
+  }
+  if (std::strcmp(s, "normal") == 0) {
+    *out = ConstraintModel::kNormal;
+    return true;
+  }
+  if (std::strcmp(s, "none") == 0) {
+    *out = ConstraintModel::kNone;
+    return true;
+  }
   return false;
 }
 inline bool parse_policy(const char* s, Policy* out) {
-  if (std::strcmp(s, "F") == 0) { *out = Policy::kF; return true; }
-  if (std::strcmp(s, "Fperp") == 0) { *out = Policy::kFperp; return true; }
+  if (std::strcmp(s, "F") == 0) {
+    *out = Policy::kF;
+    return true;
+  }
+  if (std::strcmp(s, "Fperp") == 0) {
+    *out = Policy::kFperp;
+    return true;
+  }
   return false;
 }
 inline bool parse_mode(const char* s, Mode* out) {
-  if (std::strcmp(s, "C") == 0) { *out = Mode::kC; return true; }
-  if (std::strcmp(s, "V") == 0) { *out = Mode::kV; return true; }
+  if (std::strcmp(s, "C") == 0) {
+    *out = Mode::kC;
+    return true;
+  }
+  if (std::strcmp(s, "V") == 0) {
+    *out = Mode::kV;
+    return true;
+  }
   return false;
 }
 
@@ -74,20 +95,21 @@ struct Scene {
 enum class TrialField : uint8_t { kNone = 0, kThresholdDeg, kHoldS, kTimeoutS };
 
 struct TrialFieldRange {
-  const char* key;     // the name in SET_SCENE, scene and protocol files
+  const char* key;  // the name in SET_SCENE, scene and protocol files
   double min, max;
   bool min_exclusive;  // timeout_s must be > 0; the others may equal their minimum
 };
 
 inline constexpr double kTrialThresholdMaxDeg = 180.0;  // the largest possible error
 inline constexpr double kTrialHoldMaxS = 600.0;
-inline constexpr double kTrialTimeoutMaxS = 1800.0;     // < 2^31 us: a jump is unambiguous
+inline constexpr double kTrialTimeoutMaxS = 1800.0;  // < 2^31 us: a jump is unambiguous
 
 constexpr TrialFieldRange trial_field_range(TrialField f) {
-  return f == TrialField::kThresholdDeg ? TrialFieldRange{"threshold_deg", 0.0, kTrialThresholdMaxDeg, false}
-         : f == TrialField::kHoldS      ? TrialFieldRange{"hold_s", 0.0, kTrialHoldMaxS, false}
-         : f == TrialField::kTimeoutS   ? TrialFieldRange{"timeout_s", 0.0, kTrialTimeoutMaxS, true}
-                                        : TrialFieldRange{"", 0.0, 0.0, false};
+  return f == TrialField::kThresholdDeg
+             ? TrialFieldRange{"threshold_deg", 0.0, kTrialThresholdMaxDeg, false}
+         : f == TrialField::kHoldS    ? TrialFieldRange{"hold_s", 0.0, kTrialHoldMaxS, false}
+         : f == TrialField::kTimeoutS ? TrialFieldRange{"timeout_s", 0.0, kTrialTimeoutMaxS, true}
+                                      : TrialFieldRange{"", 0.0, 0.0, false};
 }
 
 constexpr bool in_trial_range(TrialField f, double v) {
@@ -100,10 +122,14 @@ constexpr bool in_trial_range(TrialField f, double v) {
 // timeout could never succeed, so it is refused as a bad hold_s.
 inline Status validate_trial_config(const TrialConfig& c, TrialField* bad = nullptr) {
   TrialField f = TrialField::kNone;
-  if (!in_trial_range(TrialField::kThresholdDeg, c.threshold_deg)) f = TrialField::kThresholdDeg;
-  else if (!in_trial_range(TrialField::kHoldS, c.hold_s)) f = TrialField::kHoldS;
-  else if (!in_trial_range(TrialField::kTimeoutS, c.timeout_s)) f = TrialField::kTimeoutS;
-  else if (c.hold_s > c.timeout_s) f = TrialField::kHoldS;
+  if (!in_trial_range(TrialField::kThresholdDeg, c.threshold_deg))
+    f = TrialField::kThresholdDeg;
+  else if (!in_trial_range(TrialField::kHoldS, c.hold_s))
+    f = TrialField::kHoldS;
+  else if (!in_trial_range(TrialField::kTimeoutS, c.timeout_s))
+    f = TrialField::kTimeoutS;
+  else if (c.hold_s > c.timeout_s)
+    f = TrialField::kHoldS;
   if (bad) *bad = f;
   return f == TrialField::kNone ? Status::kOk : Status::kBadConfig;
 }

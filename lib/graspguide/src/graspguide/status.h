@@ -28,21 +28,36 @@ inline constexpr int kStatusCount = static_cast<int>(Status::kBadConfig) + 1;
 // Stable snake_case names: they appear in logs, the JSON CLI and the protocol.
 constexpr const char* status_name(Status s) {
   switch (s) {
-    case Status::kOk: return "ok";
-    case Status::kNonFiniteInput: return "non_finite_input";
-    case Status::kBadContactCount: return "bad_contact_count";
-    case Status::kBadAxis: return "bad_axis";
-    case Status::kBadQuaternion: return "bad_quaternion";
-    case Status::kCoincidentContacts: return "coincident_contacts";
-    case Status::kImpreciseContacts: return "imprecise_contacts";
-    case Status::kZeroWrench: return "zero_wrench";
-    case Status::kZeroForce: return "zero_force";
-    case Status::kRankDeficient: return "rank_deficient";
-    case Status::kQpInfeasible: return "qp_infeasible";
-    case Status::kQpIterationLimit: return "qp_iteration_limit";
-    case Status::kNothingToDisplay: return "nothing_to_display";
-    case Status::kTimeWentBackwards: return "time_went_backwards";
-    case Status::kBadConfig: return "bad_config";
+    case Status::kOk:
+      return "ok";
+    case Status::kNonFiniteInput:
+      return "non_finite_input";
+    case Status::kBadContactCount:
+      return "bad_contact_count";
+    case Status::kBadAxis:
+      return "bad_axis";
+    case Status::kBadQuaternion:
+      return "bad_quaternion";
+    case Status::kCoincidentContacts:
+      return "coincident_contacts";
+    case Status::kImpreciseContacts:
+      return "imprecise_contacts";
+    case Status::kZeroWrench:
+      return "zero_wrench";
+    case Status::kZeroForce:
+      return "zero_force";
+    case Status::kRankDeficient:
+      return "rank_deficient";
+    case Status::kQpInfeasible:
+      return "qp_infeasible";
+    case Status::kQpIterationLimit:
+      return "qp_iteration_limit";
+    case Status::kNothingToDisplay:
+      return "nothing_to_display";
+    case Status::kTimeWentBackwards:
+      return "time_went_backwards";
+    case Status::kBadConfig:
+      return "bad_config";
   }
   return "unknown";
 }
@@ -50,7 +65,8 @@ constexpr const char* status_name(Status s) {
 // What is wrong and how to fix it, for people reading an error.
 constexpr const char* status_message(Status s) {
   switch (s) {
-    case Status::kOk: return "ok";
+    case Status::kOk:
+      return "ok";
     case Status::kNonFiniteInput:
       return "an input is NaN or infinite; check the tracker data and the wrench";
     case Status::kBadContactCount:

@@ -13,8 +13,8 @@ enum class TrialState : uint8_t { kIdle = 0, kRunning, kSucceeded, kFailed };
 
 struct TrialResult {
   bool success = false;
-  double completion_s = 0;      // time from start to the end of the trial
-  double first_entry_s = -1;    // first time the error was within the threshold (-1: never)
+  double completion_s = 0;    // time from start to the end of the trial
+  double first_entry_s = -1;  // first time the error was within the threshold (-1: never)
   double final_error_deg = 0;
 };
 
@@ -56,11 +56,15 @@ class Trial {
     return Status::kOk;
   }
 
-  void abort() { if (state_ == TrialState::kRunning) state_ = TrialState::kIdle; }
+  void abort() {
+    if (state_ == TrialState::kRunning) state_ = TrialState::kIdle;
+  }
 
   // Ends a running trial as timed out whatever its timestamps say: the caller's own clock
   // saw the timeout pass (the device's guard against timestamps that stopped advancing).
-  void expire() { if (state_ == TrialState::kRunning) finish(false, timeout_us_); }
+  void expire() {
+    if (state_ == TrialState::kRunning) finish(false, timeout_us_);
+  }
 
   TrialState state() const { return state_; }
   bool running() const { return state_ == TrialState::kRunning; }

@@ -44,7 +44,7 @@ struct Telemetry {
   uint32_t host_time_us = 0;
   Real error_deg = 0;
   Real alpha = 0;
-  Pwm pwm;                       // what the motors were set to
+  Pwm pwm;  // what the motors were set to
   ConstraintModel used = ConstraintModel::kNone;
   Status status = Status::kOk;
   uint8_t iterations = 0;
@@ -67,7 +67,8 @@ struct Counters {
 
 class Application {
  public:
-  Application(MotorOutputs& motors, Clock& clock, uint32_t stale_timeout_us = kDefaultStaleTimeoutUs)
+  Application(MotorOutputs& motors, Clock& clock,
+              uint32_t stale_timeout_us = kDefaultStaleTimeoutUs)
       : motors_(motors), clock_(clock), stale_timeout_us_(stale_timeout_us) {
     motors_off();  // whatever the pins did before boot
   }
@@ -77,7 +78,8 @@ class Application {
   // *bad_field, when given, names the trial field behind a kBadConfig.
   Reply set_scene(const Scene<Real>& scene, TrialField* bad_field = nullptr) {
     if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
-    if (validate_trial_config(scene.trial, bad_field) != Status::kOk) return fail(Status::kBadConfig);
+    if (validate_trial_config(scene.trial, bad_field) != Status::kOk)
+      return fail(Status::kBadConfig);
     Status s = geometry_status<Real>(scene);
     if (s == Status::kOk) s = guidance_.set_scene(scene);
     if (s != Status::kOk) return fail(s);
@@ -145,7 +147,8 @@ class Application {
     const Status s = guidance_.update(in.quat_wxyz, frame);
     out.compute_time_us = clock_.now_us() - t0;
     out.recomputed = frame.recomputed;
-    out.iterations = static_cast<uint8_t>(guidance_.grasp().iterations > 255 ? 255 : guidance_.grasp().iterations);
+    out.iterations = static_cast<uint8_t>(
+        guidance_.grasp().iterations > 255 ? 255 : guidance_.grasp().iterations);
     if (s != Status::kOk) {
       // Back to the last contacts that worked, so the next pose without contacts renders.
       if (in.has_contacts) guidance_.set_contacts(good_contacts_);
@@ -289,7 +292,8 @@ class Application {
   DeviceState state_ = DeviceState::kIdle;
   Counters counters_;
   Status last_error_ = Status::kOk;
-  Eigen::Matrix<Real, 3, kMaxContacts> good_contacts_ = Eigen::Matrix<Real, 3, kMaxContacts>::Zero();
+  Eigen::Matrix<Real, 3, kMaxContacts> good_contacts_ =
+      Eigen::Matrix<Real, 3, kMaxContacts>::Zero();
   uint16_t trial_id_ = 0;
   bool trial_started_ = false;
   bool motors_on_ = false;

@@ -20,7 +20,8 @@ namespace graspguide::device {
 
 namespace link = ::graspguide_link;
 
-inline constexpr uint32_t kPartialFrameTimeoutUs = uint32_t(GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS) * 1000u;
+inline constexpr uint32_t kPartialFrameTimeoutUs =
+    uint32_t(GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS) * 1000u;
 
 // SET_SCENE's field index of a trial field (ERROR.detail of bad_config), found by name in
 // the schema's field list so the two cannot drift apart.
@@ -103,8 +104,10 @@ class LinkDevice {
     uint8_t bad_field = 0;
     const link::LinkStatus s = link::visit_payload(
         f.header.msg_id, f.payload, f.payload_size, [this](const auto& m) { on(m); }, &bad_field);
-    if (s == link::LinkStatus::kBadEnumValue) send_error(request_seq_, link::ErrorCode::kBadEnumValue, bad_field);
-    else if (s != link::LinkStatus::kOk) send_error(request_seq_, link::ErrorCode::kBadLength, f.header.msg_id);
+    if (s == link::LinkStatus::kBadEnumValue)
+      send_error(request_seq_, link::ErrorCode::kBadEnumValue, bad_field);
+    else if (s != link::LinkStatus::kOk)
+      send_error(request_seq_, link::ErrorCode::kBadLength, f.header.msg_id);
   }
 
   // ---- requests
@@ -155,7 +158,8 @@ class LinkDevice {
     }
     PoseIn in;
     in.host_time_us = m.host_time_us;
-    in.quat_wxyz = Eigen::Matrix<Real, 4, 1>(m.quat_wxyz[0], m.quat_wxyz[1], m.quat_wxyz[2], m.quat_wxyz[3]);
+    in.quat_wxyz =
+        Eigen::Matrix<Real, 4, 1>(m.quat_wxyz[0], m.quat_wxyz[1], m.quat_wxyz[2], m.quat_wxyz[3]);
     in.has_contacts = m.has_contacts;
     for (int i = 0; i < kMaxContacts; ++i)
       for (int j = 0; j < 3; ++j) in.contacts(j, i) = m.contacts[i][j];

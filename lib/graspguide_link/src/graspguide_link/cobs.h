@@ -11,7 +11,7 @@
 
 namespace graspguide_link {
 
-inline constexpr uint8_t kCobsMaxCode = 0xFF;        // a block of 254 data bytes, no zero
+inline constexpr uint8_t kCobsMaxCode = 0xFF;  // a block of 254 data bytes, no zero
 inline constexpr size_t kCobsMaxBlockData = 254;
 
 // Upper bound of the encoded size of `size` bytes (without the 0x00 delimiter).
@@ -38,7 +38,7 @@ inline LinkStatus cobs_encode(const uint8_t* in, size_t size, uint8_t* out, size
       continue;  // a full block stands for no zero: the next block starts at in[i]
     }
     if (i == size) break;
-    ++i;  // the zero this block stands for
+    ++i;              // the zero this block stands for
     if (i == size) {  // that zero was the last byte: an empty final block
       if (w >= capacity) return LinkStatus::kBufferTooSmall;
       out[w++] = 1;

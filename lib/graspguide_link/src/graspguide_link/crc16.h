@@ -42,7 +42,8 @@ namespace detail {
 constexpr uint16_t crc16_of_check_string() {
   constexpr char kCheck[] = "123456789";
   uint16_t crc = kCrc16Init;
-  for (size_t i = 0; i + 1 < sizeof kCheck; ++i) crc = crc16_update(crc, static_cast<uint8_t>(kCheck[i]));
+  for (size_t i = 0; i + 1 < sizeof kCheck; ++i)
+    crc = crc16_update(crc, static_cast<uint8_t>(kCheck[i]));
   return crc;
 }
 }  // namespace detail

@@ -47,15 +47,16 @@ struct FrameView {
 enum class Accept : uint8_t { kAll, kHostToDevice, kDeviceToHost };
 
 constexpr bool accepts(Accept accept, uint8_t msg_id) {
-  return accept == Accept::kAll ||
-         (accept == Accept::kHostToDevice ? is_host_to_device_id(msg_id) : is_device_to_host_id(msg_id));
+  return accept == Accept::kAll || (accept == Accept::kHostToDevice ? is_host_to_device_id(msg_id)
+                                                                    : is_device_to_host_id(msg_id));
 }
 
 // Encodes one frame with any header and payload (tests use it to forge bad frames; code
 // that sends messages uses write_frame() of writer.h). kTooLong for a payload above
 // kMaxPayloadSize, kBufferTooSmall if the frame does not fit in capacity.
-inline LinkStatus encode_frame(const FrameHeader& header, const uint8_t* payload, size_t payload_size,
-                               uint8_t* out, size_t capacity, size_t* written) {
+inline LinkStatus encode_frame(const FrameHeader& header, const uint8_t* payload,
+                               size_t payload_size, uint8_t* out, size_t capacity,
+                               size_t* written) {
   if (payload_size > kMaxPayloadSize) return LinkStatus::kTooLong;
   uint8_t raw[kMaxRawFrameSize];
   store_u8(raw + 0, header.version);

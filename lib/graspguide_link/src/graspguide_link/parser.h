@@ -14,29 +14,38 @@
 namespace graspguide_link {
 
 enum class ParseEvent : uint8_t {
-  kNone = 0,   // nothing complete yet (also: an empty frame, i.e. a lone delimiter)
-  kFrame,      // frame() is a good frame
+  kNone = 0,  // nothing complete yet (also: an empty frame, i.e. a lone delimiter)
+  kFrame,     // frame() is a good frame
   kBadCrc,
-  kBadCobs,    // the last COBS block was cut short by the delimiter
-  kTooLong,    // reported when the buffer overflows; the rest of the frame is dropped
+  kBadCobs,  // the last COBS block was cut short by the delimiter
+  kTooLong,  // reported when the buffer overflows; the rest of the frame is dropped
   kTooShort,
-  kBadVersion, // frame().header is valid (its CRC passed): answer ERROR with its seq
-  kUnknownId,  // idem
-  kBadLength,  // idem
+  kBadVersion,  // frame().header is valid (its CRC passed): answer ERROR with its seq
+  kUnknownId,   // idem
+  kBadLength,   // idem
 };
 inline constexpr size_t kParseEventCount = static_cast<size_t>(ParseEvent::kBadLength) + 1;
 
 constexpr const char* parse_event_name(ParseEvent e) {
   switch (e) {
-    case ParseEvent::kNone: return "none";
-    case ParseEvent::kFrame: return "frame";
-    case ParseEvent::kBadCrc: return "bad_crc";
-    case ParseEvent::kBadCobs: return "bad_cobs";
-    case ParseEvent::kTooLong: return "too_long";
-    case ParseEvent::kTooShort: return "too_short";
-    case ParseEvent::kBadVersion: return "bad_version";
-    case ParseEvent::kUnknownId: return "unknown_id";
-    case ParseEvent::kBadLength: return "bad_length";
+    case ParseEvent::kNone:
+      return "none";
+    case ParseEvent::kFrame:
+      return "frame";
+    case ParseEvent::kBadCrc:
+      return "bad_crc";
+    case ParseEvent::kBadCobs:
+      return "bad_cobs";
+    case ParseEvent::kTooLong:
+      return "too_long";
+    case ParseEvent::kTooShort:
+      return "too_short";
+    case ParseEvent::kBadVersion:
+      return "bad_version";
+    case ParseEvent::kUnknownId:
+      return "unknown_id";
+    case ParseEvent::kBadLength:
+      return "bad_length";
   }
   return "unknown";
 }
@@ -45,14 +54,29 @@ constexpr const char* parse_event_name(ParseEvent e) {
 constexpr bool error_code_for(ParseEvent e, ErrorCode* code) {
   switch (e) {
     case ParseEvent::kNone:
-    case ParseEvent::kFrame: return false;
-    case ParseEvent::kBadCrc: *code = ErrorCode::kBadCrc; return true;
-    case ParseEvent::kBadCobs: *code = ErrorCode::kBadCobs; return true;
-    case ParseEvent::kTooLong: *code = ErrorCode::kTooLong; return true;
-    case ParseEvent::kTooShort: *code = ErrorCode::kTooShort; return true;
-    case ParseEvent::kBadVersion: *code = ErrorCode::kBadVersion; return true;
-    case ParseEvent::kUnknownId: *code = ErrorCode::kUnknownId; return true;
-    case ParseEvent::kBadLength: *code = ErrorCode::kBadLength; return true;
+    case ParseEvent::kFrame:
+      return false;
+    case ParseEvent::kBadCrc:
+      *code = ErrorCode::kBadCrc;
+      return true;
+    case ParseEvent::kBadCobs:
+      *code = ErrorCode::kBadCobs;
+      return true;
+    case ParseEvent::kTooLong:
+      *code = ErrorCode::kTooLong;
+      return true;
+    case ParseEvent::kTooShort:
+      *code = ErrorCode::kTooShort;
+      return true;
+    case ParseEvent::kBadVersion:
+      *code = ErrorCode::kBadVersion;
+      return true;
+    case ParseEvent::kUnknownId:
+      *code = ErrorCode::kUnknownId;
+      return true;
+    case ParseEvent::kBadLength:
+      *code = ErrorCode::kBadLength;
+      return true;
   }
   return false;
 }
@@ -116,13 +140,20 @@ class FrameParser {
     if (cobs_status != LinkStatus::kOk) return count(ParseEvent::kBadCobs);
     // buffer_ stays intact until the next push, so frame_ may point into it.
     switch (check_frame(buffer_, size, accept_, &frame_)) {
-      case LinkStatus::kOk: return count(ParseEvent::kFrame);
-      case LinkStatus::kTooShort: return count(ParseEvent::kTooShort);
-      case LinkStatus::kBadCrc: return count(ParseEvent::kBadCrc);
-      case LinkStatus::kBadVersion: return count(ParseEvent::kBadVersion);
-      case LinkStatus::kUnknownId: return count(ParseEvent::kUnknownId);
-      case LinkStatus::kBadLength: return count(ParseEvent::kBadLength);
-      default: return count(ParseEvent::kTooLong);  // check_frame's only other verdict
+      case LinkStatus::kOk:
+        return count(ParseEvent::kFrame);
+      case LinkStatus::kTooShort:
+        return count(ParseEvent::kTooShort);
+      case LinkStatus::kBadCrc:
+        return count(ParseEvent::kBadCrc);
+      case LinkStatus::kBadVersion:
+        return count(ParseEvent::kBadVersion);
+      case LinkStatus::kUnknownId:
+        return count(ParseEvent::kUnknownId);
+      case LinkStatus::kBadLength:
+        return count(ParseEvent::kBadLength);
+      default:
+        return count(ParseEvent::kTooLong);  // check_frame's only other verdict
     }
   }
 

@@ -17,7 +17,8 @@ inline constexpr size_t kWireSizeBound = wire_frame_size_bound(Msg::kPayloadSize
 // Writes Msg as one complete frame (delimiter included) into out. kBadEnumValue if a
 // field holds a value no decoder accepts, kBufferTooSmall if the frame does not fit.
 template <class Msg>
-LinkStatus write_frame(const Msg& msg, uint16_t seq, uint8_t* out, size_t capacity, size_t* written) {
+LinkStatus write_frame(const Msg& msg, uint16_t seq, uint8_t* out, size_t capacity,
+                       size_t* written) {
   static_assert(Msg::kPayloadSize <= kMaxPayloadSize, "generated sizes disagree");
   uint8_t payload[kMaxPayloadSize] = {};
   size_t payload_size = 0;

@@ -1,0 +1,22 @@
+"""The names a user types and a log records, defined once: the force policy, the intensity
+mode, the constraint model and the fingers (docs/algorithm.md). Every parser, file reader
+and enum mapping takes them from here."""
+
+from __future__ import annotations
+
+POLICIES = ("F", "Fperp")
+"""The cue policy: F renders |lambda_i|, Fperp its component normal to the finger pad."""
+
+MODES = ("C", "V")
+"""The intensity mode: C constant, V proportional to the error (alpha)."""
+
+CONSTRAINT_MODELS = ("paper", "normal", "none")
+"""The displayability constraint of the QP, from the strictest to none."""
+
+FINGERS = ("thumb", "index", "middle", "palm")
+"""The contact points, in the order of the motors and of the scene file's contacts."""
+
+
+def modality(policy: str, mode: str) -> str:
+    """The condition's name in the paper's tables, e.g. ``"Fperp+C"``."""
+    return f"{policy}+{mode}"
