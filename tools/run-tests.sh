@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # GraspGuide full test run (what .ci/run executes):
 #   1. tools/bootstrap.sh        (Debian packages, Eigen check, .venv, ./tools)
-#   2. pio test -e native        (GoogleTest suites in test/test_*/, offline)
-#   3. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
+#   2. tools/scripts/check_style.sh  (ruff lint and format, mypy, clang-format, every
+#      generator's --check; each is 1 case)
+#   3. pio test -e native        (GoogleTest suites in test/test_*/, offline)
+#   4. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
 #      pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages and the QEMU
 #      stage counts vs tools/perf/stage_baseline.json (each is 1 case)
-#   4. pytest tools/tests        (if that directory exists; its QEMU firmware test
-#      runs the m4f_firmware image of step 3)
+#   5. pytest tools/tests        (if that directory exists; its QEMU firmware test
+#      runs the m4f_firmware image of step 4)
 # Output of every stage goes to the console. Test cases are counted from
 # machine-readable reports (PlatformIO's JSON report, pytest's JUnit XML), and
 # the run ends with exactly one line "N passed, N failed, N skipped".
@@ -142,7 +144,33 @@ read_report() {
     COUNTS="$(tail -n 1 <<<"$out")"
 }
 
-# --- 2. PlatformIO / GoogleTest ------------------------------------------------
+# Adds a stage's report to the totals. A stage that exits non-zero with no failed case in
+# its report (bad configuration, crash, collection error) still counts as one failure:
+# never "0 failed".   tally LABEL EXIT_CODE REPORT COUNT_FUNCTION
+tally() {
+    local label=$1 rc=$2 report=$3 count=$4 p=0 f=0 s=0
+    if [[ -s $report ]] && read_report "$count" "$report"; then
+        read -r p f s <<<"$COUNTS"
+    else
+        STAGE_ERRORS+=("$label wrote no readable report (exit code $rc)")
+    fi
+    if ((rc != 0 && f == 0)); then
+        STAGE_ERRORS+=("$label exited with code $rc")
+        f=1
+    fi
+    echo "run-tests: $label: $p passed, $f failed, $s skipped"
+    PASSED=$((PASSED + p))
+    FAILED=$((FAILED + f))
+    SKIPPED=$((SKIPPED + s))
+}
+
+# --- 2. style and generated code ---------------------------------------------------
+# The habits, enforced: each check of tools/scripts/check_style.sh is one case.
+for check in ruff-lint ruff-format mypy clang-format generated; do
+    run_case "style: $check" "style-$check" bash "$ROOT/tools/scripts/check_style.sh" "$check"
+done
+
+# --- 3. PlatformIO / GoogleTest ------------------------------------------------
 banner "pio test -e native"
 export PLATFORMIO_CORE_DIR="$ROOT/.pio-core"
 export PLATFORMIO_DISABLE_UPGRADE_CHECK=true
@@ -157,26 +185,10 @@ else
     "$ROOT/.venv/bin/pio" test -e native --json-output-path "$pio_json" 2>&1 | tee "$REPORT_DIR/pio.log"
     pio_rc=${PIPESTATUS[0]}
     set -e
-    p=0
-    f=0
-    s=0
-    if [[ -s $pio_json ]] && read_report count_pio_report "$pio_json"; then
-        read -r p f s <<<"$COUNTS"
-    else
-        STAGE_ERRORS+=("pio test wrote no readable report (exit code $pio_rc)")
-    fi
-    if ((pio_rc != 0 && f == 0)); then
-        # e.g. bad platformio.ini, platform/package problems: never "0 failed"
-        STAGE_ERRORS+=("pio test exited with code $pio_rc")
-        f=1
-    fi
-    echo "run-tests: pio/GoogleTest: $p passed, $f failed, $s skipped"
-    PASSED=$((PASSED + p))
-    FAILED=$((FAILED + f))
-    SKIPPED=$((SKIPPED + s))
+    tally pio/GoogleTest "$pio_rc" "$pio_json" count_pio_report
 fi
 
-# --- 3. Bare-metal ARM builds and QEMU runs -----------------------------------------
+# --- 4. Bare-metal ARM builds and QEMU runs -----------------------------------------
 # Before pytest, because its QEMU firmware test needs the m4f_firmware image. Each build
 # is one test case; the stage counts under QEMU (and their check against
 # tools/perf/stage_baseline.json) are one more. The toolchain and QEMU (about 400 MB)
@@ -211,7 +223,7 @@ else
     firmware_unavailable "QEMU stage counts (tools/scripts/qemu_stages.py)" "$qemu_why"
 fi
 
-# --- 4. pytest -----------------------------------------------------------------
+# --- 5. pytest -----------------------------------------------------------------
 if [[ -d $ROOT/tools/tests ]]; then
     banner "pytest tools/tests"
     junit="$REPORT_DIR/pytest-junit.xml"
@@ -224,25 +236,11 @@ if [[ -d $ROOT/tools/tests ]]; then
         tee "$REPORT_DIR/pytest.log"
     py_rc=${PIPESTATUS[0]}
     set -e
-    p=0
-    f=0
-    s=0
-    if [[ -s $junit ]] && read_report count_junit_report "$junit"; then
-        read -r p f s <<<"$COUNTS"
-    elif ((py_rc != 5)); then
-        STAGE_ERRORS+=("pytest wrote no readable report (exit code $py_rc)")
-    fi
     if ((py_rc == 5)); then
         echo "run-tests: pytest collected no tests: 0 test cases"
-    elif ((py_rc != 0 && f == 0)); then
-        # internal error, usage error, interrupted, ...
-        STAGE_ERRORS+=("pytest exited with code $py_rc")
-        f=1
+    else
+        tally pytest "$py_rc" "$junit" count_junit_report
     fi
-    echo "run-tests: pytest: $p passed, $f failed, $s skipped"
-    PASSED=$((PASSED + p))
-    FAILED=$((FAILED + f))
-    SKIPPED=$((SKIPPED + s))
 else
     echo
     echo "run-tests: no tools/tests directory, skipping pytest"
