@@ -17,7 +17,7 @@ from graspguide.link import messages as m
 from graspguide.link import transport as gt
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCHEMA = os.path.join(_TOOLS, "protocol", "messages.toml")
+SCHEMA = os.path.join(_TOOLS, "codegen", "link_messages.toml")
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]
 

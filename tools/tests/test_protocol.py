@@ -35,11 +35,12 @@ from graspguide.link.codec import (
     encode_frame,
     encode_message,
 )
+from graspguide.link.message_base import INT_RANGES
 
 TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REPO_ROOT = os.path.dirname(TOOLS_DIR)
 GOLDEN = os.path.join(REPO_ROOT, "test", "data", "golden_frames.json")
-GENERATOR = os.path.join(TOOLS_DIR, "scripts", "gen_protocol.py")
+GENERATOR = os.path.join(TOOLS_DIR, "codegen")
 SEED = 20240611
 
 with open(GOLDEN, encoding="utf-8") as _fh:
@@ -67,7 +68,7 @@ def random_value(spec: M.FieldSpec, rng: random.Random):
             return rng.choice(list(spec.enum))
         if spec.kind == "ascii":
             return "".join(chr(rng.randint(0x20, 0x7E)) for _ in range(rng.randint(0, spec.size)))
-        lo, hi = M._INT_RANGES[spec.kind]
+        lo, hi = INT_RANGES[spec.kind]
         return rng.randint(lo, hi)
 
     def shaped(shape):
@@ -170,7 +171,7 @@ def test_ids_are_unique_and_in_their_ranges():
     for cls in M.MESSAGES.values():
         ids = M.HOST_TO_DEVICE_IDS if cls.DIRECTION == "host_to_device" else M.DEVICE_TO_HOST_IDS
         assert cls.MSG_ID in ids
-        assert cls._STRUCT.size == cls.PAYLOAD_SIZE
+        assert cls.STRUCT.size == cls.PAYLOAD_SIZE
     assert max(cls.PAYLOAD_SIZE for cls in M.MESSAGES.values()) == M.MAX_PAYLOAD_SIZE
     assert len(encode_message(M.SetScene(), 0)) == 84  # the largest frame on the wire
 
@@ -444,21 +445,24 @@ def test_generated_code_is_up_to_date():
 
 def test_stale_generated_code_fails_the_check(tmp_path):
     """--check must notice a hand edit of any output: run it on a copy of the tree."""
-    rel = [
-        "tools/scripts/gen_protocol.py",
-        "tools/protocol/messages.toml",
+    generator = [
+        os.path.join("tools", "codegen", name)
+        for name in sorted(os.listdir(os.path.join(TOOLS_DIR, "codegen")))
+        if name.endswith((".py", ".toml"))
+    ]
+    outputs = [
         "lib/graspguide_link/src/graspguide_link/messages.h",
         "tools/graspguide/link/messages.py",
         "test/data/golden_frames.json",
         "test/data/golden_frames.h",
         "docs/protocol.md",
     ]
-    for r in rel:
+    for r in generator + outputs:
         os.makedirs(tmp_path / os.path.dirname(r), exist_ok=True)
         shutil.copy(os.path.join(REPO_ROOT, r), tmp_path / r)
-    gen = str(tmp_path / rel[0])
+    gen = str(tmp_path / "tools" / "codegen")
     assert subprocess.run([sys.executable, gen, "--check"], capture_output=True).returncode == 0
-    for r in rel[2:]:
+    for r in outputs:
         original = (tmp_path / r).read_text(encoding="utf-8")
         # Edit the generated part (docs/protocol.md is hand-written outside its markers).
         start = original.find("Largest payload") if r.endswith(".md") else 0
@@ -470,7 +474,7 @@ def test_stale_generated_code_fails_the_check(tmp_path):
 
 
 def test_the_installed_package_has_the_current_protocol_code():
-    for name in ("messages.py", "codec.py", "errors.py", "__init__.py"):
+    for name in ("messages.py", "message_base.py", "codec.py", "errors.py", "__init__.py"):
         installed = os.path.join(os.path.dirname(gp.__file__), name)
         assert filecmp.cmp(
             installed, os.path.join(TOOLS_DIR, "graspguide", "link", name), shallow=False

@@ -1,7 +1,8 @@
 """The GraspGuide serial link protocol, host side.
 
-* :mod:`.messages` -- GENERATED from ``tools/protocol/messages.toml``: ids, enums and one
-  dataclass per message with ``pack()``/``unpack()``;
+* :mod:`.messages` -- GENERATED from ``tools/codegen/link_messages.toml``: ids, enums and
+  one dataclass per message (data only);
+* :mod:`.message_base` -- what those dataclasses share: field checks, ``pack()``/``unpack()``;
 * :mod:`.codec` -- CRC-16/CCITT-FALSE, COBS, ``encode_frame``/``decode_frame``,
   ``encode_message``/``decode_message`` and the incremental :class:`FrameParser`;
 * :mod:`.errors` -- the typed :class:`ProtocolError` hierarchy.

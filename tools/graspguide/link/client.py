@@ -178,7 +178,7 @@ def _telemetry_fast(payload_view: bytes, offset: int) -> Telemetry | None:
     return tel
 
 
-# What each ErrorCode means: the schema's text (tools/protocol/messages.toml), checked
+# What each ErrorCode means: the schema's text (tools/codegen/link_messages.toml), checked
 # against it by tools/tests/test_device_client.py so the two cannot drift.
 ERROR_MEANINGS: dict[str, str] = {
     "ok": "no error",

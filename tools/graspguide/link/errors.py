@@ -23,30 +23,40 @@ class FrameError(ProtocolError):
 
 
 class BadCrcError(FrameError):
+    """The CRC-16 does not match: some byte changed on the line, so not even the header is
+    trusted and the device does not answer."""
+
     code = "bad_crc"
 
 
 class BadCobsError(FrameError):
-    code = "bad_cobs"
+    code = "bad_cobs"  # the last COBS block runs past the delimiter
 
 
 class TooLongError(FrameError):
+    """More bytes than the largest message's frame; the rest up to the delimiter is dropped."""
+
     code = "too_long"
 
 
 class TooShortError(FrameError):
-    code = "too_short"
+    code = "too_short"  # fewer bytes than header + CRC
 
 
 class BadVersionError(FrameError):
+    """A frame of another protocol version (its CRC passed, so ``header`` names it): the two
+    ends were built from different schemas."""
+
     code = "bad_version"
 
 
 class UnknownIdError(FrameError):
-    code = "unknown_id"
+    code = "unknown_id"  # no message has this id, or it travels the other way
 
 
 class BadLengthError(FrameError):
+    """The payload's size is not the one its message id declares."""
+
     code = "bad_length"
 
 

@@ -1,0 +1,9 @@
+"""The link code generator: from link_messages.toml, the wire messages of both ends.
+
+    python3 tools/codegen           # (re)writes every output
+    python3 tools/codegen --check   # exit 1 naming the stale outputs
+
+One module per job: schema (load and validate the TOML), emit_cpp (messages.h),
+emit_python (link/messages.py), emit_golden (the golden frames, encoded independently),
+emit_docs (docs/protocol.md's message reference); __main__ writes or checks them.
+"""
