@@ -117,7 +117,7 @@ def render(schema: Schema) -> str:
             enum_ref = f.enum if f.kind == "enum" else "None"
             L.append(
                 f'        FieldSpec("{f.name}", "{f.kind}", {tuple(f.shape)!r}, {enum_ref}, '
-                f'{f.size}, "{f.unit}", {json.dumps(f.doc)}),'
+                f'{f.size}, "{f.unit}", {json.dumps(f.doc)}, "{f.struct_code}"),'
             )
         L.append("    )")
         L.append(f'    STRUCT: ClassVar[struct.Struct] = struct.Struct("{m.struct_format}")')

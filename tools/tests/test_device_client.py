@@ -14,6 +14,7 @@ import pytest
 from graspguide.link import client as gd
 from graspguide.link import codec
 from graspguide.link import messages as m
+from graspguide.link import sim as gsim
 from graspguide.link import transport as gt
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -133,7 +134,7 @@ def test_every_write_of_frames_starts_with_a_delimiter():
     c.pose(5, (1, 0, 0, 0))  # the fast path
     c.pose(6, (1, 0, 0, 0), contacts=HAND3)  # the generic path
     c.pose_batch([(7, (1, 0, 0, 0)), (8, (1, 0, 0, 0))])
-    c.stream([(9, (1, 0, 0, 0)), (10, (1, 0, 0, 0))], window=2)
+    c.pose_batch([(9, (1, 0, 0, 0)), (10, (1, 0, 0, 0))])
     c.status()
     c.stop()
     frames = sent[1:]
@@ -356,9 +357,9 @@ def test_wait_trial_result_waits_and_times_out():
 
 
 # --------------------------------------------------------------------------------------
-# Pipelined stream
+# Pipelined POSEs (pose_batch)
 # --------------------------------------------------------------------------------------
-def test_stream_collects_telemetry_and_trial_end():
+def test_pose_batch_answers_in_order_and_queues_the_trial_end():
     state = {"n": 0}
 
     def trial(msg, seq):
@@ -372,52 +373,30 @@ def test_stream_collects_telemetry_and_trial_end():
         return [m.Error(request_seq=seq, code=m.ErrorCode.NOT_ALLOWED_IN_STATE, detail=1)]
 
     c = client_for(trial)
-    res = c.stream(((i * 10_000, (1, 0, 0, 0)) for i in range(1000)), window=8)
-    assert len(res.telemetry) == 50 and res.trial_result.completion_s == pytest.approx(0.49)
-    assert res.sent == 50 + res.refused_after_trial_end and res.refused_after_trial_end <= 8
-    assert [t.host_time_us for t in res.telemetry] == [i * 10_000 for i in range(50)]
-    assert not c.trial_results  # returned by the stream, not queued twice
+    answers = c.pose_batch([(i * 10_000, (1, 0, 0, 0)) for i in range(56)])
+    assert [type(a) for a in answers] == [m.Telemetry] * 50 + [m.Error] * 6
+    assert [t.host_time_us for t in answers[:50]] == [i * 10_000 for i in range(50)]
+    assert all(e.code == m.ErrorCode.NOT_ALLOWED_IN_STATE for e in answers[50:])
+    assert c.wait_trial_result(timeout=0.1).completion_s == pytest.approx(0.49)
+    assert not c.trial_results  # handed out once
 
 
-def test_stream_error_raises_with_the_partial_result():
+def test_pose_batch_returns_a_refusal_in_its_place():
     def refuses_third(msg, seq):
         if isinstance(msg, m.Pose) and msg.host_time_us == 3:
             return [m.Error(request_seq=seq, code=m.ErrorCode.NO_SCENE, detail=3)]
         return good_device(msg, seq)
 
     c = client_for(refuses_third)
-    with pytest.raises(gd.DeviceError, match="no_scene") as info:
-        c.stream([gd.PoseSpec(t) for t in range(10)], window=4)
-    partial = info.value.partial
-    assert [t.host_time_us for t in partial.telemetry][:3] == [0, 1, 2]
-    assert partial.sent < 10  # stopped sending after the error
+    answers = c.pose_batch([(t, (1, 0, 0, 0)) for t in range(6)])
+    assert isinstance(answers[3], m.Error) and answers[3].code == m.ErrorCode.NO_SCENE
+    assert [a.host_time_us for i, a in enumerate(answers) if i != 3] == [0, 1, 2, 4, 5]
 
 
-def test_stream_skips_lost_answers_and_times_out_on_silence():
-    def loses_some(msg, seq):
-        if isinstance(msg, m.Pose) and msg.host_time_us in (2, 5):
-            return []
-        return good_device(msg, seq)
-
-    c = client_for(loses_some)
-    res = c.stream([(t, (1, 0, 0, 0)) for t in range(8)], window=3)
-    assert [t.host_time_us for t in res.telemetry] == [0, 1, 3, 4, 6, 7] and res.lost == 2
-
+def test_pose_batch_times_out_on_silence():
     c = client_for(lambda msg, seq: [], timeout=0.1)
-    with pytest.raises(gt.LinkTimeout, match="unanswered") as info:
-        c.stream([(t, (1, 0, 0, 0)) for t in range(5)])
-    assert info.value.partial.telemetry == []
-
-
-def test_stream_overall_timeout():
-    def slow(msg, seq):
-        time.sleep(0.02)
-        return good_device(msg, seq)
-
-    c = client_for(slow, timeout=1.0)
-    with pytest.raises(gt.LinkTimeout, match="overall timeout") as info:
-        c.stream(((t, (1, 0, 0, 0)) for t in range(10_000)), window=1, overall_timeout=0.2)
-    assert 0 < len(info.value.partial.telemetry) < 10_000
+    with pytest.raises(gt.LinkTimeout, match="no answer to POSE"):
+        c.pose_batch([(t, (1, 0, 0, 0)) for t in range(5)])
 
 
 # --------------------------------------------------------------------------------------
@@ -453,17 +432,17 @@ def test_open_port_of_a_missing_path_says_what_to_do():
 def test_missing_sim_binary_names_the_build_command(tmp_path, monkeypatch):
     (tmp_path / "platformio.ini").write_text("[env:sim]\n")
     (tmp_path / "src" / "sim").mkdir(parents=True)
-    monkeypatch.delenv(gt.SIM_ENV, raising=False)
-    monkeypatch.setattr(gt, "find_repo_root", lambda: str(tmp_path))
+    monkeypatch.delenv(gsim.SIM_ENV, raising=False)
+    monkeypatch.setattr(gsim, "find_repo_root", lambda: str(tmp_path))
     with pytest.raises(gt.SimNotBuilt) as info:
-        gt.SimulatedDevice()
+        gsim.SimulatedDevice()
     text = str(info.value)
     assert "pio run -e sim" in text and "PLATFORMIO_CORE_DIR=.pio-core" in text
     assert str(tmp_path) in text and ".venv/bin/pio" in text
     assert not (tmp_path / ".pio").exists()  # nothing was built
 
-    monkeypatch.setenv(gt.SIM_ENV, str(tmp_path / "nope"))
-    with pytest.raises(gt.SimNotBuilt, match=gt.SIM_ENV):
+    monkeypatch.setenv(gsim.SIM_ENV, str(tmp_path / "nope"))
+    with pytest.raises(gt.SimNotBuilt, match=gsim.SIM_ENV):
         gt.open_port("sim")
 
 

@@ -33,6 +33,7 @@ from graspguide.core import solver
 from graspguide.link import client as gd
 from graspguide.link import codec as framing
 from graspguide.link import messages as m
+from graspguide.link import sim as gsim
 from graspguide.link import transport as gt
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -51,6 +52,24 @@ def _env():
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
     return env
+
+
+def pipelined(client, poses, window):
+    """POSEs sent ``window`` at a time (pose_batch) until the trial ends: the TELEMETRY
+    answers in order and the round trips per second. After the POSE that ended a trial,
+    the rest of its batch must be refused with not_allowed_in_state, and no more are sent."""
+    telemetry = []
+    t0 = time.perf_counter()
+    poses = list(poses)
+    for start in range(0, len(poses), window):
+        answers = client.pose_batch(poses[start : start + window])
+        tel = [a for a in answers if isinstance(a, m.Telemetry)]
+        assert answers[: len(tel)] == tel  # only a trial's end is followed by refusals
+        assert all(a.code == m.ErrorCode.NOT_ALLOWED_IN_STATE for a in answers[len(tel) :])
+        telemetry += tel
+        if len(tel) < len(answers):
+            break
+    return telemetry, len(telemetry) / (time.perf_counter() - t0)
 
 
 def us_after(later: int, earlier: int) -> int:
@@ -111,7 +130,7 @@ def two_pwm_orientations(contacts, wrench, mode="V"):
 @pytest.fixture(scope="module")
 def vsim():
     """One simulated device in virtual time for the module, and a client."""
-    with gt.SimulatedDevice(virtual_clock=True) as sim:
+    with gsim.SimulatedDevice(virtual_clock=True) as sim:
         client = gd.DeviceClient(sim, timeout=2.0)
         client.hello()
         yield client
@@ -131,7 +150,7 @@ def client(vsim):
 def test_sim_starts_in_well_under_a_second(report_figure):
     times = []
     for _ in range(5):
-        with gt.SimulatedDevice() as sim:
+        with gsim.SimulatedDevice() as sim:
             times.append(sim.start_time_s)
             assert sim.alive() and sim.pty_path.startswith("/dev/")
         assert sim.exit_code == 0  # SIGTERM: motors off, clean exit
@@ -197,13 +216,16 @@ def test_random_scenes_stream_matches_core_float(client, report_figure):
                         np.asarray(scene["contacts"]) + rng.uniform(-0.003, 0.003, (scene["k"], 3))
                     ).tolist()
                 t += 10_000
-                poses.append(gd.PoseSpec(t, list(q), moved))
-            res = client.stream(poses, window=8)
-            assert len(res.telemetry) == len(poses) and not res.trial_results
-            for p, tel in zip(poses, res.telemetry):
-                contacts = p.contacts if p.contacts is not None else scene["contacts"]
+                poses.append((t, list(q), moved))
+            # Eight pipelined, then the two with contacts (the generic path) one at a time.
+            telemetry = client.pose_batch([(t, q) for t, q, _ in poses[:8]])
+            telemetry += [client.pose(t, q, contacts=c) for t, q, c in poses[8:]]
+            assert [type(a) for a in telemetry] == [m.Telemetry] * len(poses)
+            assert not client.trial_results
+            for (_, quat, moved), tel in zip(poses, telemetry):
+                contacts = moved if moved is not None else scene["contacts"]
                 ref = solver.solve(
-                    contacts, scene["wrench"], orientation=p.quat, scalar="float", **kw
+                    contacts, scene["wrench"], orientation=quat, scalar="float", **kw
                 )
                 status = tel.solver_status.name.lower()
                 assert status == ref["status"], (scene["name"], status, ref["status"])
@@ -211,7 +233,7 @@ def test_random_scenes_stream_matches_core_float(client, report_figure):
                 if status != "ok":
                     counts["errors_agreed"] += 1
                     continue
-                if p.contacts is not None:
+                if moved is not None:
                     assert tel.flags & m.TELEMETRY_FLAG_GRASP_RECOMPUTED
                 got = list(tel.pwm[: scene["k"]])
                 diff = max(abs(a - b) for a, b in zip(got, ref["pwm"]))
@@ -242,20 +264,20 @@ def test_failing_trial_runs_90_s_in_virtual_time(client, report_figure):
     client.start_trial(41, WRENCH)
     period_us = 10_000
     t0 = time.perf_counter()
-    res = client.stream(
-        ((i * period_us, (1.0, 0, 0, 0)) for i in range(10_000)), window=32
+    telemetry, _ = pipelined(
+        client, ((i * period_us, (1.0, 0, 0, 0)) for i in range(10_000)), window=32
     )  # identity: 57 deg off, never succeeds
     wall = time.perf_counter() - t0
-    r = res.trial_result
-    assert r is not None and r.trial_id == 41
+    r = client.wait_trial_result(timeout=1.0)
+    assert r.trial_id == 41 and not client.trial_results
     assert r.success is False and r.completion_s == 90.0 and r.first_entry_s == -1.0
     assert r.final_error_deg == pytest.approx(57.1, abs=0.1)
-    assert len(res.telemetry) == 9001  # t = 0 .. 90 s
-    assert res.telemetry[-1].pwm == (0, 0, 0, 0)  # the pose that ended it: motors off
+    assert len(telemetry) == 9001  # t = 0 .. 90 s
+    assert telemetry[-1].pwm == (0, 0, 0, 0)  # the pose that ended it: motors off
     assert client.status().state is m.DeviceState.SCENE_SET
     report_figure(
         "90 s failing trial (virtual clock)",
-        f"{wall:.2f} s wall for {len(res.telemetry)} poses, reported {r.completion_s} s",
+        f"{wall:.2f} s wall for {len(telemetry)} poses, reported {r.completion_s} s",
     )
     assert wall < 5.0
 
@@ -265,13 +287,13 @@ def test_succeeding_trial_reports_the_hold(client, report_figure):
     hold = 0.5
     client.set_scene(HAND3, hold_s=hold)
     client.start_trial(42, WRENCH)
-    res = client.stream(((i * 10_000, q) for i in range(1000)), window=16)
-    r = res.trial_result
-    assert r is not None and r.success is True and r.trial_id == 42
+    telemetry, _ = pipelined(client, ((i * 10_000, q) for i in range(1000)), window=16)
+    r = client.wait_trial_result(timeout=1.0)
+    assert r.success is True and r.trial_id == 42 and not client.trial_results
     assert r.first_entry_s == 0.0
     assert abs(r.completion_s - hold) <= 0.0101, r  # within one pose period
     assert r.final_error_deg < 0.01
-    assert 50 <= len(res.telemetry) <= 52
+    assert 50 <= len(telemetry) <= 52
     report_figure(
         "succeeding trial",
         f"completion {r.completion_s:.3f} s for a hold of {hold} s (poses every 10 ms)",
@@ -301,13 +323,15 @@ def test_frames_per_second(client, report_figure):
     rates = {}
     for window in (1, 32):
         base = 1_000_000 * window
-        res = client.stream(((base + i * 1000, quats[i % 64]) for i in range(n)), window=window)
-        assert len(res.telemetry) == n and res.lost == 0
-        rates[window] = res.round_trips_per_s
+        telemetry, rates[window] = pipelined(
+            client, ((base + i * 1000, quats[i % 64]) for i in range(n)), window
+        )
+        assert [t.host_time_us for t in telemetry] == [base + i * 1000 for i in range(n)]
     client.stop()
     report_figure(
         "POSE -> TELEMETRY round trips over the pty (virtual clock)",
-        f"{rates[32]:.0f} frames/s pipelined (window 32), {rates[1]:.0f} frames/s one at a time",
+        f"{rates[32]:.0f} frames/s pipelined (batches of 32), {rates[1]:.0f} frames/s one at a "
+        "time",
     )
     assert rates[32] > 1000
 
@@ -332,7 +356,7 @@ def _start_rendering(client, qa, qb, n, period_s=0.01):
 def test_stale_stream_turns_motors_off_within_the_watchdog(tmp_path, report_figure):
     trace = tmp_path / "motors.csv"
     qa, qb = two_pwm_orientations(HAND3, WRENCH)
-    with gt.SimulatedDevice(trace=str(trace)) as sim:
+    with gsim.SimulatedDevice(trace=str(trace)) as sim:
         c = gd.DeviceClient(sim)
         stale0 = c.status().stale_events
         last_sent = _start_rendering(c, qa, qb, 30)
@@ -371,7 +395,7 @@ while True:
 
 def test_killed_host_turns_motors_off_within_the_watchdog(tmp_path, report_figure):
     trace = tmp_path / "motors.csv"
-    with gt.SimulatedDevice(trace=str(trace)) as sim:
+    with gsim.SimulatedDevice(trace=str(trace)) as sim:
         child = subprocess.Popen(
             [sys.executable, "-c", CHILD, sim.pty_path],
             stdout=subprocess.PIPE,
@@ -409,7 +433,7 @@ def test_killed_host_turns_motors_off_within_the_watchdog(tmp_path, report_figur
 def test_stop_turns_motors_off_at_once(tmp_path, report_figure):
     trace = tmp_path / "motors.csv"
     qa, qb = two_pwm_orientations(HAND3, WRENCH)
-    with gt.SimulatedDevice(trace=str(trace)) as sim:
+    with gsim.SimulatedDevice(trace=str(trace)) as sim:
         c = gd.DeviceClient(sim)
         _start_rendering(c, qa, qb, 10)
         sent = gd.host_time_us()
@@ -439,7 +463,7 @@ def test_stop_after_half_a_frame_and_a_pause_gets_through(tmp_path, pause_s):
     STOP comes."""
     trace = tmp_path / "motors.csv"
     qa, qb = two_pwm_orientations(HAND3, WRENCH)
-    with gt.SimulatedDevice(trace=str(trace)) as sim:
+    with gsim.SimulatedDevice(trace=str(trace)) as sim:
         c = gd.DeviceClient(sim)
         _start_rendering(c, qa, qb, 10)
         bad0 = c.status().bad_frames
@@ -644,7 +668,7 @@ def test_cli_missing_port_and_missing_sim_say_what_to_do():
     proc = run_cli(["info", "--port", "/dev/graspguide-no-such-port"])
     assert proc.returncode == 1 and b"graspguide ports" in proc.stderr
     env = _env()
-    env[gt.SIM_ENV] = "/nonexistent/program"
+    env[gsim.SIM_ENV] = "/nonexistent/program"
     proc = subprocess.run(
         CLI + ["info", "--port", "sim"], capture_output=True, env=env, cwd=_ROOT, timeout=60
     )
@@ -683,7 +707,7 @@ def test_cli_link_failure_mid_stream_keeps_earlier_answers():
     """The device dies while `graspguide solve` runs: the answers so far are out, the
     next request gets a link_error line, and the exit status is 1."""
     good = json.dumps({"contacts": HAND3, "wrench": WRENCH})
-    sim = gt.SimulatedDevice().start()
+    sim = gsim.SimulatedDevice().start()
     proc = subprocess.Popen(
         CLI + ["solve", "--engine", "device", "--port", sim.pty_path],
         stdin=subprocess.PIPE,

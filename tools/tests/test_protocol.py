@@ -172,6 +172,8 @@ def test_ids_are_unique_and_in_their_ranges():
         ids = M.HOST_TO_DEVICE_IDS if cls.DIRECTION == "host_to_device" else M.DEVICE_TO_HOST_IDS
         assert cls.MSG_ID in ids
         assert cls.STRUCT.size == cls.PAYLOAD_SIZE
+        # The per-field formats the fast paths build on spell the whole payload's.
+        assert cls.STRUCT.format == "<" + "".join(spec.format for spec in cls.FIELDS)
     assert max(cls.PAYLOAD_SIZE for cls in M.MESSAGES.values()) == M.MAX_PAYLOAD_SIZE
     assert len(encode_message(M.SetScene(), 0)) == 84  # the largest frame on the wire
 

@@ -18,7 +18,7 @@ import time
 import pytest
 from conftest import REPO_ROOT, subprocess_env
 
-from graspguide.link import transport as gt
+from graspguide.link import sim as gsim
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 
@@ -73,7 +73,7 @@ while True:
 
 HOST = textwrap.dedent("""
     import sys
-    from graspguide.link.transport import SimulatedDevice
+    from graspguide.link.sim import SimulatedDevice
     sim = SimulatedDevice(binary=sys.argv[1] or None).start()
     print(sim.process.pid, flush=True)
     sys.stdin.read()
@@ -163,7 +163,7 @@ def test_interrupted_trial_stops_cleanly_and_leaves_no_simulator(tmp_path, how):
     )
     try:
         _wait_trials(str(out / "U1" / "trials.jsonl"), 2, p)
-        sims = _children(p.pid, gt.find_sim_binary())
+        sims = _children(p.pid, gsim.find_sim_binary())
         assert len(sims) == 1, sims
         if how == "ctrl-c":
             os.killpg(p.pid, signal.SIGINT)  # as the terminal does

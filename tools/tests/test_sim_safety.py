@@ -13,7 +13,7 @@ import time
 
 from graspguide.link import client as gd
 from graspguide.link import messages as m
-from graspguide.link import transport as gt
+from graspguide.link import sim as gsim
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]
@@ -35,7 +35,7 @@ def _rendering(client: gd.DeviceClient, **scene) -> float:
 
 def test_virtual_clock_watchdog_fires_while_other_traffic_flows(report_figure):
     """Once, GET_STATUS or even idle 0x00 bytes kept the virtual clock's motors on forever."""
-    with gt.SimulatedDevice(virtual_clock=True) as sim:
+    with gsim.SimulatedDevice(virtual_clock=True) as sim:
         c = gd.DeviceClient(sim, timeout=2.0)
         stale0 = c.status().stale_events
         last_pose = _rendering(c)
@@ -61,7 +61,7 @@ def test_virtual_clock_watchdog_fires_while_other_traffic_flows(report_figure):
 def test_virtual_clock_trial_of_a_silent_host_ends_in_real_time():
     """A host that stops sending POSEs mid-trial: the trial fails at its timeout once that
     much real time (plus the device's 1 s slack) has passed, with a TRIAL_RESULT."""
-    with gt.SimulatedDevice(virtual_clock=True) as sim:
+    with gsim.SimulatedDevice(virtual_clock=True) as sim:
         c = gd.DeviceClient(sim, timeout=2.0)
         last_pose = _rendering(c, timeout_s=1.0, hold_s=0.5)
         res = c.wait_trial_result(timeout=6.0)
@@ -93,7 +93,7 @@ def _alive(pid: int) -> bool:
 
 def test_simulator_exits_when_its_parent_is_killed(report_figure):
     """Once, 39 simulators piled up after their hosts were SIGKILLed."""
-    binary = gt.find_sim_binary(None)
+    binary = gsim.find_sim_binary(None)
     parent = subprocess.Popen(
         [sys.executable, "-c", PARENT, binary], stdin=subprocess.PIPE, stdout=subprocess.PIPE
     )

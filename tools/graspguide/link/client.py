@@ -8,7 +8,7 @@ of docs/protocol.md.
 ...     dev.set_scene(contacts, policy="F", mode="V")
 ...     dev.start_trial(1, wrench)
 ...     tel = dev.pose(t_us, quat)          # one POSE -> its TELEMETRY
-...     res = dev.stream(poses, window=32)  # pipelined: TELEMETRY list + TRIAL_RESULTs
+...     answers = dev.pose_batch(poses)  # pipelined: each POSE's TELEMETRY or ERROR
 ...     dev.stop()
 
 Requests are numbered by a :class:`SequenceCounter` and their answers matched by seq
@@ -21,37 +21,41 @@ unmatched TELEMETRY in :attr:`DeviceClient.telemetry_backlog`, the rest in
 Errors (all :class:`LinkError` subclasses): :class:`DeviceError` (the device answered
 ERROR: ``code`` is the generated :class:`ErrorCode`, ``code_name`` its schema name,
 ``detail``, ``meaning``), :class:`LinkTimeout` (no answer within the per-request
-``timeout``, or a stream's ``overall_timeout``; the message says what was and was not
-received), :class:`ProtocolMismatch` (the device speaks another protocol version),
-:class:`DeviceDisconnected`, :class:`DeviceNotFound`.
+``timeout``; the message says what was and was not received), :class:`ProtocolMismatch`
+(the device speaks another protocol version), :class:`DeviceDisconnected`,
+:class:`DeviceNotFound`.
 
 Not thread-safe: one thread talks to one client.
 """
 
 from __future__ import annotations
 
-import binascii
 import math
 import struct
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
 from graspguide.link.codec import (
-    CRC16_INIT,
+    CRC,
     FRAME_OVERHEAD,
+    HEADER,
     MAX_RAW_FRAME_SIZE,
     Accept,
     FrameParser,
     ParseEvent,
     SequenceCounter,
     check_frame,
+    cobs_decode,
+    cobs_encode,
+    crc16,
     encode_message,
     message_of,
 )
-from graspguide.link.errors import BadEnumValueError, ProtocolError
+from graspguide.link.errors import BadCobsError, BadEnumValueError, ProtocolError
 from graspguide.link.messages import (
     MAX_CONTACTS,
     MESSAGES,
@@ -90,76 +94,64 @@ DEFAULT_TIMEOUT = 1.0  # s, per request: a board answers in a few ms at 115200 b
 READ_CHUNK = 4096  # bytes per transport read
 POLL_INTERVAL = 0.05  # s, longest single blocking read (keeps deadlines responsive)
 
-# Fast paths of the per-pose traffic (a study streams ~10^6 POSE/TELEMETRY pairs): the
-# POSE frame packed in one struct call, CRC-16/CCITT-FALSE by binascii.crc_hqx (the same
-# polynomial 0x1021, init 0xFFFF, no reflection), COBS by splitting at the zeros (a frame
-# is < 254 bytes, so one block per zero), and TELEMETRY unpacked straight into its
-# dataclass. Anything unusual (a bad CRC, a broken COBS block, an enum value out of its
-# set, another message) goes through the byte-wise FrameParser and the generic codecs,
-# so counters and events are those of the reference path; tests check both agree.
+# Fast paths of the per-pose traffic (a study streams ~10^6 POSE/TELEMETRY pairs): a POSE
+# without contacts packed by the generated Pose.STRUCT with its all-zero tail's COBS blocks
+# precomputed, and a TELEMETRY unpacked by Telemetry.STRUCT straight into its dataclass;
+# framing, CRC and COBS are codec's. Anything unusual (a bad CRC, a broken COBS block, an
+# enum value out of its set, another message) goes through the byte-wise FrameParser and
+# the generic codecs, so counters and events are those of the reference path; tests check
+# both agree.
 _POSE_ID = int(MsgId.POSE)
-_POSE_ZEROS = bytes(1 + 4 * 3 * MAX_CONTACTS)
-_TELEMETRY_PAYLOAD = struct.Struct("<Iff4BBBBBI")
-_HEADER = struct.Struct("<BBH")
-_CRC = struct.Struct("<H")
+# encode_pose_fast packs by position and relies on everything after quat_wxyz being zero.
+assert tuple(s.name for s in Pose.FIELDS) == (
+    "host_time_us",
+    "quat_wxyz",
+    "has_contacts",
+    "contacts",
+)
+_POSE_HEAD = struct.Struct(HEADER.format + Pose.FIELDS[0].format + Pose.FIELDS[1].format)
+_POSE_TAIL_COBS = b"\x01" * (HEADER.size + Pose.STRUCT.size - _POSE_HEAD.size - 1)
+_POSE_ZEROS = bytes(len(_POSE_TAIL_COBS) + 1)
 _TELEMETRY_ID = int(MsgId.TELEMETRY)
+_TELEMETRY_SIZE = Telemetry.STRUCT.size
+# _telemetry_fast assigns the flattened values by position: a schema change must show here.
+assert [spec.name for spec in Telemetry.FIELDS] == [
+    "host_time_us",
+    "error_deg",
+    "alpha",
+    "pwm",
+    "constraints_used",
+    "solver_status",
+    "iterations",
+    "flags",
+    "compute_time_us",
+]
 _CONSTRAINT_BY_VALUE = {int(e): e for e in ConstraintModel}
 _ERRORCODE_BY_VALUE = {int(e): e for e in ErrorCode}
 _set = object.__setattr__
-_CODE = [bytes((n + 1,)) for n in range(254)]
-
-
-def _cobs_small(raw: bytes) -> bytes:
-    """COBS of a frame shorter than 254 bytes (delimiter excluded): the same bytes as
-    codec.cobs_encode for such inputs."""
-    if 0 not in raw:
-        return bytes((len(raw) + 1,)) + raw
-    return b"".join([_CODE[len(part)] + part for part in raw.split(b"\0")])
-
-
-def _uncobs_small(enc: bytes) -> bytes | None:
-    """Inverse of _cobs_small for data without zeros, or None when the reference parser
-    must decide (a 0xFF code, a block running past the end)."""
-    out = bytearray()
-    i, n = 0, len(enc)
-    while i < n:
-        code = enc[i]
-        j = i + code
-        if code == 0xFF or j > n:
-            return None
-        out += enc[i + 1 : j]
-        i = j
-        if i < n:
-            out.append(0)
-    return bytes(out)
-
-
-_POSE_HEAD = struct.Struct("<BBHI4f")  # header, host_time_us, quat_wxyz
-_POSE_TAIL_ZEROS = 1 + 4 * 3 * MAX_CONTACTS  # has_contacts = 0, contacts all zero
-_POSE_TAIL_COBS = b"\x01" * (_POSE_TAIL_ZEROS - 1)
 
 
 def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None:
     """The wire bytes of a POSE without contacts, or None when a value needs the generic
     path (a quaternion component beyond the float32 range, not a number).
 
-    The frame is head (24 bytes) + 49 zero bytes + CRC (2): its COBS blocks are the
-    head's blocks (its last one ended by the first zero), one 0x01 block per further
-    zero, then the CRC's blocks."""
+    The frame is a head (header, host_time_us, quat_wxyz), zero bytes, then the CRC: its
+    COBS is the head's blocks (the last one ended by the first zero), one 0x01 block per
+    further zero, then the CRC's blocks."""
     try:
         w, x, y, z = quat
         head = _POSE_HEAD.pack(PROTOCOL_VERSION, _POSE_ID, seq, int(t_us) & 0xFFFFFFFF, w, x, y, z)
     except (OverflowError, struct.error, TypeError, ValueError):
         return None
-    crc = _CRC.pack(binascii.crc_hqx(head + _POSE_ZEROS, CRC16_INIT))
-    return _cobs_small(head) + _POSE_TAIL_COBS + _cobs_small(crc) + b"\0"
+    crc = CRC.pack(crc16(head + _POSE_ZEROS))
+    return cobs_encode(head) + _POSE_TAIL_COBS + cobs_encode(crc) + b"\0"
 
 
 def _telemetry_fast(payload_view: bytes, offset: int) -> Telemetry | None:
     """TELEMETRY from its payload without the generic field walk; None if an enum value
     is not in its set (the generic path then counts it as undecodable)."""
     (t_us, err, alpha, p0, p1, p2, p3, used, status, iters, flags, compute) = (
-        _TELEMETRY_PAYLOAD.unpack_from(payload_view, offset)
+        Telemetry.STRUCT.unpack_from(payload_view, offset)
     )
     used_e = _CONSTRAINT_BY_VALUE.get(used)
     status_e = _ERRORCODE_BY_VALUE.get(status)
@@ -209,14 +201,10 @@ ERROR_MEANINGS: dict[str, str] = {
     "field's index",
 }
 
-# The names the core and `graspguide solve` use, and the wire enums.
-POLICY_NAMES = {"F": Policy.F, "Fperp": Policy.FPERP}
-MODE_NAMES = {"C": Mode.C, "V": Mode.V}
-CONSTRAINT_NAMES = {
-    "paper": ConstraintModel.PAPER,
-    "normal": ConstraintModel.NORMAL,
-    "none": ConstraintModel.NONE,
-}
+# The names the core and `graspguide solve` use (the vocabulary), and the wire enums.
+POLICY_NAMES = {name: Policy[name.upper()] for name in POLICIES}
+MODE_NAMES = {name: Mode[name.upper()] for name in MODES}
+CONSTRAINT_NAMES = {name: ConstraintModel[name.upper()] for name in CONSTRAINT_MODELS}
 _F32 = struct.Struct("<f")
 
 
@@ -243,10 +231,6 @@ class ProtocolMismatch(LinkError):
     def __init__(self, message: str, device_version: int | None = None):
         super().__init__(message)
         self.device_version = device_version
-
-
-class UnexpectedAnswer(LinkError):
-    """The device answered a request with a message that does not answer it."""
 
 
 class DeviceError(LinkError):
@@ -397,47 +381,10 @@ def host_time_us() -> int:
 
 
 @dataclass
-class PoseSpec:
-    """One POSE of a stream: host time (u32 us), quaternion [w, x, y, z], optional
-    contacts (3 or 4 [x, y, z] that replace the scene's)."""
-
-    t_us: int
-    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
-    contacts: Sequence[Sequence[float]] | None = None
-
-
-@dataclass
-class StreamResult:
-    """What :meth:`DeviceClient.stream` collected, in order."""
-
-    telemetry: list[Telemetry] = field(default_factory=list)
-    trial_results: list[TrialResult] = field(default_factory=list)
-    sent: int = 0
-    refused_after_trial_end: int = 0  # POSEs already in flight when the trial ended
-    lost: int = 0  # POSEs whose answer never came (skipped over)
-    elapsed_s: float = 0.0
-
-    @property
-    def trial_result(self) -> TrialResult | None:
-        return self.trial_results[0] if self.trial_results else None
-
-    @property
-    def round_trips_per_s(self) -> float:
-        return len(self.telemetry) / self.elapsed_s if self.elapsed_s > 0 else 0.0
-
-
-@dataclass
 class _Received:
     seq: int
     message: Any
     t_rx: float
-
-
-@dataclass
-class _Outstanding:
-    seq: int
-    t_us: int
-    index: int
 
 
 # --------------------------------------------------------------------------------------
@@ -446,9 +393,9 @@ class _Outstanding:
 class DeviceClient:
     """Requests to one device through a :class:`Transport`.
 
-    ``timeout``: seconds to wait for each answer (per request; a stream's per-answer
-    progress limit). On creation it sends one 0x00 so the device drops any partial frame
-    (docs/protocol.md), and every write of frames starts with a 0x00 for the same reason.
+    ``timeout``: seconds to wait for each answer (per request; per POSE in a batch). On
+    creation it sends one 0x00 so the device drops any partial frame (docs/protocol.md),
+    and every write of frames starts with a 0x00 for the same reason.
     Counters of what the host saw: :attr:`host_bad_frames` (frames the host's parser or
     decoder rejected), :attr:`device_frames_lost` (gaps in the device's frame numbers),
     :attr:`frames_received`.
@@ -545,17 +492,20 @@ class DeviceClient:
     def _fast_frame(self, enc: bytes, now: float) -> bool:
         """A complete, well-formed frame handled without the byte-wise parser; False when
         the parser must see it (anything unusual), with nothing changed."""
-        raw = _uncobs_small(enc)
-        if raw is None or not FRAME_OVERHEAD <= len(raw) <= MAX_RAW_FRAME_SIZE:
+        try:
+            raw = cobs_decode(enc)
+        except BadCobsError:
             return False
-        body_len = len(raw) - 2
-        if binascii.crc_hqx(raw[:body_len], CRC16_INIT) != _CRC.unpack_from(raw, body_len)[0]:
+        if not FRAME_OVERHEAD <= len(raw) <= MAX_RAW_FRAME_SIZE:
             return False
-        version, msg_id, seq = _HEADER.unpack_from(raw)
+        body_len = len(raw) - CRC.size
+        if crc16(raw[:body_len]) != CRC.unpack_from(raw, body_len)[0]:
+            return False
+        version, msg_id, seq = HEADER.unpack_from(raw)
         if version != PROTOCOL_VERSION:
             return False
-        if msg_id == _TELEMETRY_ID and body_len - 4 == _TELEMETRY_PAYLOAD.size:
-            msg = _telemetry_fast(raw, 4)
+        if msg_id == _TELEMETRY_ID and body_len - HEADER.size == _TELEMETRY_SIZE:
+            msg = _telemetry_fast(raw, HEADER.size)
             if msg is None:
                 return False
             self._parser.counts[ParseEvent.FRAME] += 1
@@ -954,173 +904,20 @@ class DeviceClient:
         item = self._wait(lambda it: isinstance(it.message, TrialResult), "a TRIAL_RESULT", timeout)
         return item.message
 
-    # ---- pipelined stream
-    def stream(
-        self,
-        poses: Iterable[PoseSpec | tuple],
-        window: int = 32,
-        timeout: float | None = None,
-        overall_timeout: float | None = None,
-        stop_at_trial_end: bool = True,
-    ) -> StreamResult:
-        """Send POSEs without waiting for each answer (at most ``window`` unanswered) and
-        collect their TELEMETRY in order, and every TRIAL_RESULT.
-
-        ``poses``: PoseSpec or (t_us, quat[, contacts]) tuples, any iterable (a generator
-        is consumed only as far as needed). With ``stop_at_trial_end`` no POSE is sent
-        after a TRIAL_RESULT arrived, and the ERROR not_allowed_in_state answers of POSEs
-        already in flight are counted (``refused_after_trial_end``), not raised. Any other
-        ERROR stops the stream and raises DeviceError with the result so far in
-        ``.partial``. ``timeout``: longest wait for the next answer; ``overall_timeout``:
-        for the whole stream (LinkTimeout, also with ``.partial``).
-        """
-        if window < 1:
-            raise ValueError("window must be >= 1")
-        step = self.timeout if timeout is None else float(timeout)
-        t_start = time.monotonic()
-        overall_deadline = None if overall_timeout is None else t_start + overall_timeout
-        result = StreamResult()
-        outstanding: deque[_Outstanding] = deque()
-        it = iter(poses)
-        exhausted = False
-        ended = False
-        error: DeviceError | None = None
-        self._pump(0.0)
-        self._settle()
-        last_progress = time.monotonic()
-        b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
-        index = 0
-
-        def fail(exc: LinkError) -> LinkError:
-            result.elapsed_s = time.monotonic() - t_start
-            exc.partial = result  # type: ignore[attr-defined]
-            return exc
-
-        while True:
-            # Fill the window, in one write.
-            if not exhausted and not ended and error is None and len(outstanding) < window:
-                out = bytearray()
-                while len(outstanding) < window:
-                    try:
-                        p = next(it)
-                    except StopIteration:
-                        exhausted = True
-                        break
-                    spec = p if isinstance(p, PoseSpec) else PoseSpec(*p)
-                    msg = self._pose_message(spec.t_us, spec.quat, spec.contacts)
-                    seq = self._seq.next()
-                    out += encode_message(msg, seq)
-                    outstanding.append(_Outstanding(seq, msg.host_time_us, index))
-                    index += 1
-                if out:
-                    self._write(out)
-            if not outstanding:
-                break
-            # Take answers.
-            progressed = False
-            while self._inbox:
-                item = self._inbox.popleft()
-                m = item.message
-                if isinstance(m, Telemetry):
-                    pos = next(
-                        (i for i, o in enumerate(outstanding) if o.t_us == m.host_time_us), None
-                    )
-                    if pos is None:
-                        self.telemetry_backlog.append(m)
-                        continue
-                    for _ in range(pos):  # answers that never came
-                        outstanding.popleft()
-                        result.lost += 1
-                    outstanding.popleft()
-                    result.telemetry.append(m)
-                    progressed = True
-                elif isinstance(m, Error) and any(o.seq == m.request_seq for o in outstanding):
-                    while outstanding and outstanding[0].seq != m.request_seq:
-                        outstanding.popleft()
-                        result.lost += 1
-                    outstanding.popleft()
-                    progressed = True
-                    if ended and m.code == ErrorCode.NOT_ALLOWED_IN_STATE:
-                        result.refused_after_trial_end += 1
-                    elif error is None:
-                        error = DeviceError("POSE", m.request_seq, m.code, m.detail)
-                elif isinstance(m, TrialResult):
-                    result.trial_results.append(m)
-                    if stop_at_trial_end:
-                        ended = True
-                    progressed = True
-                else:
-                    self._park(item)
-            now = time.monotonic()
-            if progressed:
-                last_progress = now
-                b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
-                continue
-            if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
-                raise fail(self._mismatch())
-            if overall_deadline is not None and now >= overall_deadline:
-                raise fail(
-                    LinkTimeout(
-                        f"stream not finished within its overall timeout of {overall_timeout:g} s "
-                        f"({len(result.telemetry)} TELEMETRY received, {len(outstanding)} POSEs "
-                        "unanswered)"
-                    )
-                )
-            left = last_progress + step - now
-            if left <= 0:
-                raise fail(
-                    self._timeout_error(
-                        f"POSE (seq {outstanding[0].seq}, {len(outstanding)} unanswered)",
-                        step,
-                        b0,
-                        f0,
-                        bad0,
-                    )
-                )
-            if overall_deadline is not None:
-                left = min(left, overall_deadline - now)
-            self._pump(min(max(left, 0.0), POLL_INTERVAL))
-        result.sent = index
-        # A TRIAL_RESULT right behind the last TELEMETRY belongs to this stream too.
-        self._pump(0.0)
-        while self._inbox:
-            item = self._inbox.popleft()
-            if isinstance(item.message, TrialResult):
-                result.trial_results.append(item.message)
-            else:
-                self._park(item)
-        result.elapsed_s = time.monotonic() - t_start
-        if error is not None:
-            raise fail(error)
-        return result
-
-
-def telemetry_dict(tel: Telemetry, k: int | None = None) -> dict[str, Any]:
-    """A TELEMETRY as a JSON-friendly dict (``pwm`` cut to ``k`` motors when given)."""
-    d = tel.to_dict()
-    if k is not None:
-        d["pwm"] = d["pwm"][:k]
-    d["flags"] = int(tel.flags)
-    return d
-
 
 __all__ = [
     "DeviceClient",
     "DeviceError",
     "ProtocolMismatch",
-    "UnexpectedAnswer",
     "LinkError",
     "LinkTimeout",
     "DeviceNotFound",
     "DeviceDisconnected",
     "SimNotBuilt",
-    "PoseSpec",
-    "StreamResult",
     "ERROR_MEANINGS",
     "code_name",
     "host_time_us",
     "to_f32",
-    "telemetry_dict",
     "POLICY_NAMES",
     "MODE_NAMES",
     "CONSTRAINT_NAMES",

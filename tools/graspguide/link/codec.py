@@ -9,6 +9,7 @@ with CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF) over version..payload.
 
 from __future__ import annotations
 
+import binascii
 import enum
 import struct
 from dataclasses import dataclass
@@ -43,28 +44,15 @@ COBS_MAX_BLOCK_DATA = 254
 CRC16_POLY = 0x1021
 CRC16_INIT = 0xFFFF
 
-_HEADER = struct.Struct("<BBH")
-_CRC = struct.Struct("<H")
-
-
-def _crc16_table() -> tuple[int, ...]:
-    table = []
-    for i in range(256):
-        crc = i << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ CRC16_POLY) if crc & 0x8000 else crc << 1
-        table.append(crc & 0xFFFF)
-    return tuple(table)
-
-
-_CRC16_TABLE = _crc16_table()
+HEADER = struct.Struct("<BBH")  # version, msg_id, seq
+CRC = struct.Struct("<H")
+_COBS_CODE = [bytes((n + 1,)) for n in range(COBS_MAX_BLOCK_DATA)]
 
 
 def crc16(data: bytes, crc: int = CRC16_INIT) -> int:
-    """CRC-16/CCITT-FALSE; pass a previous result as ``crc`` to continue."""
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC16_TABLE[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection: binascii's crc_hqx, in
+    C); pass a previous result as ``crc`` to continue."""
+    return binascii.crc_hqx(data, crc)
 
 
 def cobs_max_encoded_size(size: int) -> int:
@@ -74,6 +62,8 @@ def cobs_max_encoded_size(size: int) -> int:
 def cobs_encode(data: bytes) -> bytes:
     """COBS without the delimiter. A block of 254 data bytes that ends the input gets no
     extra 0x01 code after it (the rule the C++ side and the golden frames share)."""
+    if len(data) < COBS_MAX_BLOCK_DATA:  # every frame: one block per zero, split in C
+        return b"".join([_COBS_CODE[len(part)] + part for part in data.split(b"\0")])
     out = bytearray()
     i, n = 0, len(data)
     while True:
@@ -101,22 +91,18 @@ def cobs_decode(data: bytes) -> bytes:
     0x00 inside it, or a block that runs past its end."""
     if not data:
         raise BadCobsError("empty COBS data")
+    if 0 in data:  # one scan in C rather than one per block
+        raise BadCobsError(f"0x00 at offset {data.index(0)} of COBS data")
     out = bytearray()
     i, n = 0, len(data)
     while i < n:
-        code = data[i]
-        i += 1
-        if code == 0:
-            raise BadCobsError(f"0x00 at offset {i - 1} of COBS data")
-        block = data[i : i + code - 1]
-        if len(block) != code - 1:
-            raise BadCobsError(f"COBS block at offset {i - 1} runs past the end")
-        if 0 in block:
-            raise BadCobsError(f"0x00 inside the COBS block at offset {i - 1}")
-        out += block
-        i += code - 1
-        if code != COBS_MAX_CODE and i < n:
+        j = i + data[i]
+        if j > n:
+            raise BadCobsError(f"COBS block at offset {i} runs past the end")
+        out += data[i + 1 : j]
+        if j < n and data[i] != COBS_MAX_CODE:
             out.append(0)
+        i = j
     return bytes(out)
 
 
@@ -179,8 +165,8 @@ def encode_frame(
     frames with it); TooLongError for a payload above MAX_PAYLOAD_SIZE."""
     if len(payload) > MAX_PAYLOAD_SIZE:
         raise TooLongError(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_SIZE}")
-    raw = _HEADER.pack(version, msg_id, seq) + bytes(payload)
-    raw += _CRC.pack(crc16(raw))
+    raw = HEADER.pack(version, msg_id, seq) + bytes(payload)
+    raw += CRC.pack(crc16(raw))
     return cobs_encode(raw) + bytes([FRAME_DELIMITER])
 
 
@@ -192,9 +178,9 @@ def check_frame(raw: bytes, accept: Accept = Accept.ALL) -> tuple[ParseEvent, Fr
     if len(raw) > MAX_RAW_FRAME_SIZE:
         return ParseEvent.TOO_LONG, None
     body = raw[:-CRC_SIZE]
-    if crc16(body) != _CRC.unpack_from(raw, len(body))[0]:
+    if crc16(body) != CRC.unpack_from(raw, len(body))[0]:
         return ParseEvent.BAD_CRC, None
-    version, msg_id, seq = _HEADER.unpack_from(body)
+    version, msg_id, seq = HEADER.unpack_from(body)
     frame = Frame(version, msg_id, seq, bytes(body[HEADER_SIZE:]))
     if version != PROTOCOL_VERSION:
         return ParseEvent.BAD_VERSION, frame

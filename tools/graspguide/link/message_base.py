@@ -25,6 +25,7 @@ class FieldSpec(NamedTuple):
     size: int  # bytes of one element
     unit: str
     doc: str
+    format: str  # the field's struct codes: "I", "4f", "12f"; STRUCT is "<" + theirs in order
 
 
 INT_RANGES = {

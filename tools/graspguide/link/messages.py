@@ -122,7 +122,7 @@ class Hello(Message):
     DIRECTION: ClassVar[str] = "host_to_device"
     PAYLOAD_SIZE: ClassVar[int] = 1
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("protocol_version", "u8", (), None, 1, "", "the host's protocol version"),
+        FieldSpec("protocol_version", "u8", (), None, 1, "", "the host's protocol version", "B"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<B")
 
@@ -138,15 +138,15 @@ class SetScene(Message):
     DIRECTION: ClassVar[str] = "host_to_device"
     PAYLOAD_SIZE: ClassVar[int] = 76
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("k", "u8", (), None, 1, "", "contacts in use: 3 (thumb, index, middle) or 4 (+ palm)"),
-        FieldSpec("contacts", "f32", (4, 3), None, 4, "m", "contact positions in the hand frame; slots >= k are zero"),
-        FieldSpec("y_axis", "f32", (3,), None, 4, "", "axis y_O in the hand frame, any non-zero length"),
-        FieldSpec("constraints", "enum", (), ConstraintModel, 1, "", "requested constraint model"),
-        FieldSpec("policy", "enum", (), Policy, 1, "", "F or F-perp"),
-        FieldSpec("mode", "enum", (), Mode, 1, "", "constant (C) or error-proportional (V) intensity"),
-        FieldSpec("threshold_deg", "f32", (), None, 4, "deg", "success threshold of the guidance error"),
-        FieldSpec("hold_s", "f32", (), None, 4, "s", "time the error must stay below the threshold"),
-        FieldSpec("timeout_s", "f32", (), None, 4, "s", "trial timeout (a failed trial reports this time)"),
+        FieldSpec("k", "u8", (), None, 1, "", "contacts in use: 3 (thumb, index, middle) or 4 (+ palm)", "B"),
+        FieldSpec("contacts", "f32", (4, 3), None, 4, "m", "contact positions in the hand frame; slots >= k are zero", "12f"),
+        FieldSpec("y_axis", "f32", (3,), None, 4, "", "axis y_O in the hand frame, any non-zero length", "3f"),
+        FieldSpec("constraints", "enum", (), ConstraintModel, 1, "", "requested constraint model", "B"),
+        FieldSpec("policy", "enum", (), Policy, 1, "", "F or F-perp", "B"),
+        FieldSpec("mode", "enum", (), Mode, 1, "", "constant (C) or error-proportional (V) intensity", "B"),
+        FieldSpec("threshold_deg", "f32", (), None, 4, "deg", "success threshold of the guidance error", "f"),
+        FieldSpec("hold_s", "f32", (), None, 4, "s", "time the error must stay below the threshold", "f"),
+        FieldSpec("timeout_s", "f32", (), None, 4, "s", "trial timeout (a failed trial reports this time)", "f"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<B12f3fBBBfff")
 
@@ -170,10 +170,10 @@ class Pose(Message):
     DIRECTION: ClassVar[str] = "host_to_device"
     PAYLOAD_SIZE: ClassVar[int] = 69
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("host_time_us", "u32", (), None, 4, "us", "host clock when the pose was measured; wraps every 2^32 us (71.6 min)"),
-        FieldSpec("quat_wxyz", "f32", (4,), None, 4, "", "hand orientation in the world, scalar first, any non-zero norm"),
-        FieldSpec("has_contacts", "bool", (), None, 1, "", "1: contacts below replace the scene's (the grasp part is recomputed)"),
-        FieldSpec("contacts", "f32", (4, 3), None, 4, "m", "contact positions in the hand frame when has_contacts; zero otherwise"),
+        FieldSpec("host_time_us", "u32", (), None, 4, "us", "host clock when the pose was measured; wraps every 2^32 us (71.6 min)", "I"),
+        FieldSpec("quat_wxyz", "f32", (4,), None, 4, "", "hand orientation in the world, scalar first, any non-zero norm", "4f"),
+        FieldSpec("has_contacts", "bool", (), None, 1, "", "1: contacts below replace the scene's (the grasp part is recomputed)", "B"),
+        FieldSpec("contacts", "f32", (4, 3), None, 4, "m", "contact positions in the hand frame when has_contacts; zero otherwise", "12f"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<I4fB12f")
 
@@ -192,8 +192,8 @@ class StartTrial(Message):
     DIRECTION: ClassVar[str] = "host_to_device"
     PAYLOAD_SIZE: ClassVar[int] = 26
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("trial_id", "u16", (), None, 2, "", "echoed in TRIAL_RESULT"),
-        FieldSpec("wrench", "f32", (6,), None, 4, "", "fx, fy, fz [N], mx, my, mz [N m] about the contacts' centroid, object frame"),
+        FieldSpec("trial_id", "u16", (), None, 2, "", "echoed in TRIAL_RESULT", "H"),
+        FieldSpec("wrench", "f32", (6,), None, 4, "", "fx, fy, fz [N], mx, my, mz [N m] about the contacts' centroid, object frame", "6f"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<H6f")
 
@@ -223,7 +223,7 @@ class SetMotors(Message):
     DIRECTION: ClassVar[str] = "host_to_device"
     PAYLOAD_SIZE: ClassVar[int] = 4
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("pwm", "u8", (4,), None, 1, "", "8-bit duty of motors 1..4 (thumb, index, middle, palm)"),
+        FieldSpec("pwm", "u8", (4,), None, 1, "", "8-bit duty of motors 1..4 (thumb, index, middle, palm)", "4B"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<4B")
 
@@ -252,7 +252,7 @@ class Ack(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 2
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the accepted request"),
+        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the accepted request", "H"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<H")
 
@@ -268,9 +268,9 @@ class Error(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 4
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the refused request"),
-        FieldSpec("code", "enum", (), ErrorCode, 1, "", "why"),
-        FieldSpec("detail", "u8", (), None, 1, "", "context, see the ErrorCode table (0 when none)"),
+        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the refused request", "H"),
+        FieldSpec("code", "enum", (), ErrorCode, 1, "", "why", "B"),
+        FieldSpec("detail", "u8", (), None, 1, "", "context, see the ErrorCode table (0 when none)", "B"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<HBB")
 
@@ -288,13 +288,13 @@ class HelloReply(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 28
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the HELLO"),
-        FieldSpec("protocol_version", "u8", (), None, 1, "", "the device's protocol version"),
-        FieldSpec("firmware_version", "u8", (3,), None, 1, "", "major, minor, patch"),
-        FieldSpec("board", "ascii", (), None, 16, "", "board name, NUL-padded"),
-        FieldSpec("scalar", "u8", (), None, 1, "bytes", "sizeof(graspguide::Real): 4 float, 8 double"),
-        FieldSpec("max_contacts", "u8", (), None, 1, "", "graspguide::kMaxContacts of the firmware"),
-        FieldSpec("build_id", "u32", (), None, 4, "", "identifies the firmware build (e.g. the first 8 hex digits of its commit)"),
+        FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the HELLO", "H"),
+        FieldSpec("protocol_version", "u8", (), None, 1, "", "the device's protocol version", "B"),
+        FieldSpec("firmware_version", "u8", (3,), None, 1, "", "major, minor, patch", "3B"),
+        FieldSpec("board", "ascii", (), None, 16, "", "board name, NUL-padded", "16s"),
+        FieldSpec("scalar", "u8", (), None, 1, "bytes", "sizeof(graspguide::Real): 4 float, 8 double", "B"),
+        FieldSpec("max_contacts", "u8", (), None, 1, "", "graspguide::kMaxContacts of the firmware", "B"),
+        FieldSpec("build_id", "u32", (), None, 4, "", "identifies the firmware build (e.g. the first 8 hex digits of its commit)", "I"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<HB3B16sBBI")
 
@@ -316,15 +316,15 @@ class Telemetry(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 24
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("host_time_us", "u32", (), None, 4, "us", "the POSE's host_time_us, echoed (latency = now - this)"),
-        FieldSpec("error_deg", "f32", (), None, 4, "deg", "guidance error; 0 when solver_status is not ok"),
-        FieldSpec("alpha", "f32", (), None, 4, "", "mode V gain ||R f - g|| / 2 * 185 (PWM counts); 0 when solver_status is not ok"),
-        FieldSpec("pwm", "u8", (4,), None, 1, "", "duty applied to motors 1..4"),
-        FieldSpec("constraints_used", "enum", (), ConstraintModel, 1, "", "model the QP used after fallbacks (paper -> normal -> none)"),
-        FieldSpec("solver_status", "enum", (), ErrorCode, 1, "", "core status of this POSE (0..14); motors are off unless ok"),
-        FieldSpec("iterations", "u8", (), None, 1, "", "QP iterations, saturated at 255"),
-        FieldSpec("flags", "u8", (), None, 1, "", "TELEMETRY_FLAG_* bits"),
-        FieldSpec("compute_time_us", "u32", (), None, 4, "us", "device time spent on Algorithm 1 for this POSE"),
+        FieldSpec("host_time_us", "u32", (), None, 4, "us", "the POSE's host_time_us, echoed (latency = now - this)", "I"),
+        FieldSpec("error_deg", "f32", (), None, 4, "deg", "guidance error; 0 when solver_status is not ok", "f"),
+        FieldSpec("alpha", "f32", (), None, 4, "", "mode V gain ||R f - g|| / 2 * 185 (PWM counts); 0 when solver_status is not ok", "f"),
+        FieldSpec("pwm", "u8", (4,), None, 1, "", "duty applied to motors 1..4", "4B"),
+        FieldSpec("constraints_used", "enum", (), ConstraintModel, 1, "", "model the QP used after fallbacks (paper -> normal -> none)", "B"),
+        FieldSpec("solver_status", "enum", (), ErrorCode, 1, "", "core status of this POSE (0..14); motors are off unless ok", "B"),
+        FieldSpec("iterations", "u8", (), None, 1, "", "QP iterations, saturated at 255", "B"),
+        FieldSpec("flags", "u8", (), None, 1, "", "TELEMETRY_FLAG_* bits", "B"),
+        FieldSpec("compute_time_us", "u32", (), None, 4, "us", "device time spent on Algorithm 1 for this POSE", "I"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<Iff4BBBBBI")
 
@@ -348,11 +348,11 @@ class TrialResult(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 15
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("trial_id", "u16", (), None, 2, "", "START_TRIAL.trial_id"),
-        FieldSpec("success", "bool", (), None, 1, "", "1: the error stayed below the threshold for hold_s"),
-        FieldSpec("completion_s", "f32", (), None, 4, "s", "time to success, or timeout_s on failure"),
-        FieldSpec("first_entry_s", "f32", (), None, 4, "s", "first time the error went below the threshold; -1 if it never did"),
-        FieldSpec("final_error_deg", "f32", (), None, 4, "deg", "guidance error at the end of the trial"),
+        FieldSpec("trial_id", "u16", (), None, 2, "", "START_TRIAL.trial_id", "H"),
+        FieldSpec("success", "bool", (), None, 1, "", "1: the error stayed below the threshold for hold_s", "B"),
+        FieldSpec("completion_s", "f32", (), None, 4, "s", "time to success, or timeout_s on failure", "f"),
+        FieldSpec("first_entry_s", "f32", (), None, 4, "s", "first time the error went below the threshold; -1 if it never did", "f"),
+        FieldSpec("final_error_deg", "f32", (), None, 4, "deg", "guidance error at the end of the trial", "f"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<HBfff")
 
@@ -372,11 +372,11 @@ class Status(Message):
     DIRECTION: ClassVar[str] = "device_to_host"
     PAYLOAD_SIZE: ClassVar[int] = 14
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("state", "enum", (), DeviceState, 1, "", "device state"),
-        FieldSpec("frames_received", "u32", (), None, 4, "", "good frames since boot (wraps)"),
-        FieldSpec("bad_frames", "u32", (), None, 4, "", "frames dropped by the parser since boot (wraps)"),
-        FieldSpec("stale_events", "u32", (), None, 4, "", "POSE watchdog expiries since boot (wraps)"),
-        FieldSpec("last_error", "enum", (), ErrorCode, 1, "", "code of the last ERROR sent or fault (ok if none)"),
+        FieldSpec("state", "enum", (), DeviceState, 1, "", "device state", "B"),
+        FieldSpec("frames_received", "u32", (), None, 4, "", "good frames since boot (wraps)", "I"),
+        FieldSpec("bad_frames", "u32", (), None, 4, "", "frames dropped by the parser since boot (wraps)", "I"),
+        FieldSpec("stale_events", "u32", (), None, 4, "", "POSE watchdog expiries since boot (wraps)", "I"),
+        FieldSpec("last_error", "enum", (), ErrorCode, 1, "", "code of the last ERROR sent or fault (ok if none)", "B"),
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<BIIIB")
 
