@@ -310,7 +310,7 @@ def _trial_field_text(index: int) -> str:
         return ""
     f = SetScene.FIELDS[index]
     try:
-        from graspguide.core._core import TRIAL_LIMITS
+        from graspguide.core._core import TRIAL_LIMITS  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - host tools without the built extension
         TRIAL_LIMITS = {}
     r = TRIAL_LIMITS.get(f.name)
@@ -515,6 +515,7 @@ class DeviceClient:
                 return False
             self._parser.counts[ParseEvent.FRAME] += 1
             self._parser.frame = frame
+            assert frame is not None  # check_frame's FRAME verdict carries it
             try:
                 msg = message_of(frame)
             except (BadEnumValueError, ProtocolError):
@@ -538,12 +539,14 @@ class DeviceClient:
             event = self._parser.push(byte)
             if event is ParseEvent.NONE:
                 continue
+            frame = self._parser.frame
+            if frame is None:  # set by the first event with a trusted header, never unset
+                continue
             if event is ParseEvent.BAD_VERSION:
-                self.device_version = self._parser.frame.version
+                self.device_version = frame.version
                 continue
             if event is not ParseEvent.FRAME:
                 continue
-            frame = self._parser.frame
             try:
                 msg = message_of(frame)
             except (BadEnumValueError, ProtocolError):
@@ -826,9 +829,9 @@ class DeviceClient:
         device handles them one after the other exactly as if each had been sent after
         the previous answer; a TRIAL_RESULT lands in :attr:`trial_results`. ``timeout``
         applies to each answer."""
-        wires = []
-        seqs = []
-        times = []
+        wires: list[bytes] = []
+        seqs: list[int] = []
+        times: list[int] = []
         for t_us, quat in poses:
             t_us = int(t_us) & 0xFFFFFFFF
             seq = (self._seq._next + len(seqs)) & 0xFFFF
@@ -848,7 +851,7 @@ class DeviceClient:
         for seq, t_us in zip(seqs, times):
             deadline = None
             b0 = f0 = bad0 = 0
-            answer = None
+            answer: Telemetry | Error | None = None
             while answer is None:
                 while inbox:
                     item = inbox.popleft()

@@ -232,6 +232,7 @@ class FrameParser:
             return self._end_of_frame()
         if self._dropping:
             return ParseEvent.NONE
+        appended: int | None
         if self._started and self._remaining > 0:
             appended = byte
             self._remaining -= 1
@@ -251,7 +252,7 @@ class FrameParser:
     def feed(self, data: bytes) -> list[tuple[ParseEvent, Frame | None]]:
         """Pushes every byte; returns the events other than NONE, each with the frame
         (None unless the event is in TRUSTED_HEADER_EVENTS)."""
-        out = []
+        out: list[tuple[ParseEvent, Frame | None]] = []
         for b in data:
             event = self.push(b)
             if event is not ParseEvent.NONE:
@@ -291,6 +292,7 @@ def decode_frame(wire: bytes, accept: Accept = Accept.ALL) -> Frame:
         raise _EVENT_ERRORS[event](f"frame rejected: {event.value}", header)
     if len(events) > 1:
         raise IncompleteFrameError(f"{len(events)} frames where one was expected")
+    assert frame is not None  # a FRAME event always carries its frame
     return frame
 
 

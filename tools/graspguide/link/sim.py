@@ -17,6 +17,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+from typing import IO
 
 from graspguide.link.transport import (
     DEFAULT_BAUDRATE,
@@ -183,7 +184,7 @@ class SimulatedDevice(Transport):
         self.start_time_s: float | None = None
         self.exit_code: int | None = None
         self._serial: SerialTransport | None = None
-        self._stderr = None
+        self._stderr: IO[bytes] | None = None
         self.name = "sim"
         if start:
             self.start()
