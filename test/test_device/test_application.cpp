@@ -124,7 +124,9 @@ TEST(Application, ATrialSucceedsAfterTheHoldAndSwitchesTheMotorsOff) {
   uint32_t t = 1'000'000;
   for (int n = 0; n < 200 && !r.ended; ++n, t += 4 * kMs) {
     ASSERT_TRUE(r.send(pose_at(t)).ok());
-    if (!r.ended) EXPECT_FALSE(r.motors.all_off());  // mode C: on until success
+    if (!r.ended) {
+      EXPECT_FALSE(r.motors.all_off());  // mode C: on until success
+    }
   }
   ASSERT_TRUE(r.ended);
   EXPECT_EQ(r.report.trial_id, 42);

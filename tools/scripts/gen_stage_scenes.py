@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Writes src/stages/stage_scenes.h: the scene set whose instructions are counted under
-QEMU (src/stages/, tools/scripts/qemu_stages.py), in float, from the known answers of
-the float64 reference (test/data/known_answers.json).
+"""Writes src/harness/stage_counts/stage_scenes.h: the scene set whose instructions are
+counted under QEMU (src/harness/stage_counts/, tools/scripts/qemu_stages.py), in float,
+from the known answers of the float64 reference (test/data/known_answers.json).
 
 Every case with k = 3 or 4 is kept: the random hands over all policy/mode/model
 combinations, and the extremes (degenerate geometry, infeasible models, non-finite input),
@@ -21,7 +21,7 @@ import sys
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SRC = ROOT / "test" / "data" / "known_answers.json"
-OUT = ROOT / "src" / "stages" / "stage_scenes.h"
+OUT = ROOT / "src" / "harness" / "stage_counts" / "stage_scenes.h"
 
 POLICY = {"F": "graspguide::Policy::kF", "Fperp": "graspguide::Policy::kFperp"}
 MODE = {"C": "graspguide::Mode::kC", "V": "graspguide::Mode::kV"}

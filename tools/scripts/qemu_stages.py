@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Instruction counts of Algorithm 1 per stage on Cortex-M4F and Cortex-M7, under QEMU.
 
-Runs the stage images (src/stages/, built by `pio run -e m4f_stages -e m7_stages`) on
+Runs the stage images (src/harness/stage_counts/, built by `pio run -e m4f_stages -e m7_stages`) on
 qemu-system-arm with -icount shift=0 and semihosting, reads one line per scene, and
 reports for k = 3 and 4 the median and maximum instructions of each stage (contact
 frames, grasp matrix, decomposition, QP, motor mapping) and of whole frames (cold, warm,

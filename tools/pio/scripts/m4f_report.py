@@ -1,8 +1,9 @@
 # GraspGuide: post-build report of the bare-metal ELF (extra_scripts of [env:cortex_m4f]).
 # Runs after every build, with binutils only:
 #   1. flash and static RAM split into the core (graspguide:: and the Eigen code it
-#      instantiates), the device application, the harness in src/m4f/ and the C/C++
-#      runtime, from the linker map (every input section, padding included);
+#      instantiates), the device application, the harness and its platform
+#      (src/harness/size/, src/platform/cortex_m/) and the C/C++ runtime, from the
+#      linker map (every input section, padding included);
 #   2. runtime helpers worth knowing about on this target (heap, soft-float double,
 #      stdio, exceptions) and which graspguide functions reach them;
 #   3. the worst-case stack depth from Reset_Handler, from -fcallgraph-info=su (.ci
@@ -95,8 +96,9 @@ def _category(section, obj):
         return "device app" if ns[1] == "device" else "core (graspguide)"
     if ns[0] == "Eigen":
         return "core (Eigen)"
-    if "/src/m4f/" in obj or obj.startswith("src/m4f/") or "/src/m4f" in obj:
-        return "harness (src/m4f)"
+    # The image's own sources: src/harness/size/ and the src/platform/cortex_m/ it links.
+    if re.search(r"(^|/)src/(harness|platform)/", obj):
+        return "harness + platform"
     if "libgraspguide_device" in obj:
         return "device app"
     if "libgraspguide" in obj:

@@ -85,6 +85,9 @@ template <typename T, int K>
 Status equilibrium_svd(const GraspMat<T, K>& g, const Vec6<T>& w, Equilibrium<T, K>& out) {
   Eigen::JacobiSVD<GraspMatT<T, K>> svd;
   svd.compute(g.transpose(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+  // On a matrix holding Inf or NaN, compute() returns early with the singular values
+  // unset; the inputs were checked finite, but their products can still overflow.
+  if (svd.info() != Eigen::Success) return Status::kNonFiniteInput;
   const auto& sv = svd.singularValues();
   out.rank_ratio = sv(0) > T(0) ? sv(5) / sv(0) : T(0);
   if (!(out.rank_ratio >= T(kRankRelTol))) return Status::kRankDeficient;

@@ -116,7 +116,10 @@ class LinkDevice {
     r.request_seq = request_seq_;
     r.protocol_version = link::kProtocolVersion;
     std::memcpy(r.firmware_version, info_.firmware_version, sizeof r.firmware_version);
-    std::strncpy(r.board, info_.board, sizeof r.board);
+    // NUL-padded, not NUL-terminated: a 16-character name fills the field (r.board starts
+    // zeroed). A loop, since strncpy with that bound is what -Wstringop-truncation flags.
+    for (size_t i = 0; i < sizeof r.board && info_.board[i] != '\0'; ++i)
+      r.board[i] = info_.board[i];
     r.scalar = sizeof(Real);
     r.max_contacts = kMaxContacts;
     r.build_id = info_.build_id;

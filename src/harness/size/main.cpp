@@ -6,7 +6,7 @@
 // The results are left in volatile words for a debugger or QEMU (mps2-an386).
 #include <cstdint>
 
-#include "board_hal.h"
+#include "cortex_m_hal.h"
 #include "graspguide.h"
 #include "graspguide_device/application.h"
 

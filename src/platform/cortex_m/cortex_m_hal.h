@@ -1,5 +1,5 @@
-// The hardware interfaces of the bare-metal Cortex-M images (src/m4f/ and
-// src/m4f_firmware/): a SysTick clock and four register-like motor outputs. Only
+// The hardware interfaces of the bare-metal Cortex-M images (src/harness/size/ and
+// src/boards/mps2_an386/): a SysTick clock and four register-like motor outputs. Only
 // architectural (ARMv7-M) registers, so no vendor headers.
 #pragma once
 

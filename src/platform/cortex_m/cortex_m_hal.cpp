@@ -1,4 +1,4 @@
-#include "board_hal.h"
+#include "cortex_m_hal.h"
 
 extern "C" {
 volatile uint32_t m4f_pwm_ccr[graspguide::kMaxContacts];

@@ -1,5 +1,5 @@
 // Board wiring and link settings of the wearable controller. Every value is a default:
-// override any of them from platformio.ini `build_flags`, e.g. -DGRASPGUIDE_MOTOR_PIN_0=25.
+// override any of them from platformio.ini `build_flags`, e.g. -DGRASPGUIDE_MOTOR_PINS=25,26,27,33.
 // Motor order is the protocol's contact order: 0 thumb, 1 index, 2 middle, 3 palm.
 #pragma once
 

@@ -1,6 +1,6 @@
 // Just the two semihosting calls the stage counter needs: write a string to QEMU's stdout
 // and exit with a status. newlib's rdimon would also do it, but its stdio allocates a
-// buffer through malloc, which traps here by design (src/m4f/syscalls.cpp).
+// buffer through malloc, which traps here by design (src/platform/cortex_m/syscalls.cpp).
 #pragma once
 
 #include <cstdint>

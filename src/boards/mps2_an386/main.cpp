@@ -2,12 +2,12 @@
 // Application and LinkDevice as every board, over the board's CMSDK UART0, which QEMU
 // connects to a host pseudo-terminal with -serial pty; the host tools drive it like a
 // wearable on a serial port. Motors are four register words (no PWM peripheral on this
-// board model); time is SysTick. Start-up, runtime stubs (trapping malloc) and linker
-// script are src/m4f/'s.
+// board model); time is SysTick. Start-up, runtime stubs (trapping malloc), linker
+// script and HAL are src/platform/cortex_m/'s.
 #include <cstdint>
 
-#include "board_hal.h"
 #include "cmsdk_uart.h"
+#include "cortex_m_hal.h"
 #include "graspguide_device/link_device.h"
 
 // Only sets the divisor: QEMU moves the bytes as fast as the pty takes them.
@@ -71,7 +71,7 @@ dev::Application g_app(g_motors, g_clock);
 dev::LinkDevice g_link(g_uart, g_app, board_info());
 
 // startup.c's table sends every external interrupt to Default_Handler and is in flash,
-// which stays shared with the other src/m4f images; this board's handlers go into a RAM
+// which stays shared with the other Cortex-M images; this board's handlers go into a RAM
 // copy instead. VTOR wants the table aligned to its size rounded up to a power of two.
 constexpr int kVectorCount = 16 + kIrqCount;
 alignas(256) m4f_vector_t g_ram_vectors[kVectorCount];
