@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
+from graspguide import cli
 from graspguide.study import analysis as A
 
 PIDS = [f"U{i}" for i in range(1, 9)]
@@ -388,7 +389,7 @@ def test_real_data_report_has_no_banner(tmp_path):
 
 def test_cli_main_prints_tables_and_writes_default_out(study, capsys):
     root, _, _ = study
-    assert A.main([str(root)]) == 0
+    assert cli.main(["analyze", str(root)]) == 0
     out = capsys.readouterr().out
     assert out.startswith("*** SIMULATED DATA — not human results")
     assert "Table I" in out and "Table II" in out and "Fperp+C" in out
@@ -397,16 +398,12 @@ def test_cli_main_prints_tables_and_writes_default_out(study, capsys):
     for name in ("report.md", "figure4.png", "figure4.svg"):
         assert (root / "analysis" / name).is_file()
     # the analysis/ folder is not mistaken for a participant on the next run
-    assert A.main([str(root)]) == 0
+    assert cli.main(["analyze", str(root)]) == 0
 
 
 def test_register_adds_analyze_subcommand(study, tmp_path, capsys):
-    import argparse
-
     root, _, _ = study
-    parser = argparse.ArgumentParser(prog="graspguide")
-    sub = parser.add_subparsers(dest="command")
-    A.register(sub)
+    parser = cli.build_parser()
     args = parser.parse_args(
         [
             "analyze",
@@ -506,7 +503,7 @@ def test_error_participant_missing_a_modality_says_which(tmp_path):
 def test_one_participant_gives_tables_and_figure_and_says_why_no_tests(tmp_path, capsys):
     """A pilot: Tables I-III, the means and Figure 4; the tests need 2 participants."""
     trials, _ = make_study(tmp_path / "S", n=1)
-    code = A.main([str(tmp_path / "S"), "--out", str(tmp_path / "out")])
+    code = cli.main(["analyze", str(tmp_path / "S"), "--out", str(tmp_path / "out")])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "Table I" in out and "Table II" in out
@@ -657,10 +654,12 @@ def test_mauchly_p_is_the_papers_chi_square_approximation():
 
 
 def test_cli_error_goes_to_stderr_with_exit_1(tmp_path, capsys):
-    assert A.main([str(tmp_path / "missing")]) == 1
+    assert cli.main(["analyze", str(tmp_path / "missing")]) == 1
     err = capsys.readouterr().err
     assert err.startswith("graspguide analyze: error:") and "no such file" in err
-    assert A.main([]) == 2
+    with pytest.raises(SystemExit) as e:
+        cli.main(["analyze"])
+    assert e.value.code == 2
 
 
 def test_pilot_of_one_real_participant_run_is_analysed(tmp_path):

@@ -503,7 +503,7 @@ def test_hands_from_5_mm_to_half_a_metre_are_accepted():
 # Negative numbers as option values, in every subcommand
 # --------------------------------------------------------------------------------------
 def _parse(argv, capsys):
-    from graspguide.cli import app as cli
+    from graspguide import cli
 
     try:
         return cli.build_parser().parse_args(argv), ""
@@ -521,7 +521,7 @@ _REQUIRED = {
 
 def _value_options():
     """(command, option) for every option of every subcommand that takes a value."""
-    from graspguide.cli import app as cli
+    from graspguide import cli
 
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -604,13 +604,13 @@ def test_negative_values_get_the_options_own_message(argv, words, capsys):
 
 
 def test_sweep_lists_and_analyze_main_take_negative_values(capsys):
-    from graspguide.study import analysis, sweep
+    from graspguide import cli
 
     args, err = _parse(["sweep", "--thresholds", "-2,3", "--rates", "-30"], capsys)
     assert (args.thresholds, args.rates) == ("-2,3", "-30"), err
-    assert sweep.main(["--thresholds", "-2,3"]) == 2  # then the range check says why
+    assert cli.main(["sweep", "--thresholds", "-2,3"]) == 2  # then the range check says why
     assert "--thresholds" in capsys.readouterr().err
-    assert analysis.main(["-1,0"]) == 1  # a folder named "-1,0"
+    assert cli.main(["analyze", "-1,0"]) == 1  # a folder named "-1,0"
     assert "-1,0" in capsys.readouterr().err
 
 

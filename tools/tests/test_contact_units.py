@@ -1,6 +1,6 @@
 """Contacts in another unit than stated are refused where poses enter the host (replay
 files, tracker adapters), with the likely unit: the same check as scene and protocol
-files and `graspguide solve` (graspguide.study.scene_file.hand_span_problem)."""
+files and `graspguide solve` (graspguide.core.units.hand_span_problem)."""
 
 from __future__ import annotations
 

@@ -21,6 +21,9 @@ from graspguide.link import codec
 from graspguide.link import messages as m
 from graspguide.study import runner as rn
 from graspguide.study import study_protocol as pf
+from graspguide.study.pose_loop import pipeline_window
+from graspguide.study.progress import Progress
+from graspguide.study.trial_sources import open_runner_source
 
 TINY = """
 [study]
@@ -231,7 +234,7 @@ def _run(protocol, out, pid, pipeline):
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)
-        source = rn.open_runner_source("participant", protocol, pid)
+        source = open_runner_source("participant", protocol, pid)
         runner = rn.StudyRunner(
             protocol,
             pid,
@@ -239,7 +242,7 @@ def _run(protocol, out, pid, pipeline):
             source,
             client,
             True,
-            progress=rn.Progress(out=io.StringIO(), tty=False),
+            progress=Progress(out=io.StringIO(), tty=False),
             pipeline=pipeline,
             err=io.StringIO(),
         )
@@ -277,10 +280,10 @@ def test_pipeline_window_only_for_the_virtual_participant():
     from graspguide.study.participant import VirtualParticipant
 
     vp = VirtualParticipant.from_spec("", 1)
-    assert rn.pipeline_window(vp, 100.0) == 20
-    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.05", 1), 100.0) == 4
-    assert rn.pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.015", 1), 100.0) == 1
-    assert rn.pipeline_window(object(), 100.0) == 1
+    assert pipeline_window(vp, 100.0) == 20
+    assert pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.05", 1), 100.0) == 4
+    assert pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.015", 1), 100.0) == 1
+    assert pipeline_window(object(), 100.0) == 1
 
 
 # --------------------------------------------------------------------------------------

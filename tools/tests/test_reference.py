@@ -18,6 +18,7 @@ if _TOOLS not in sys.path:
 
 from graspguide.core import reference as ref  # noqa: E402
 from graspguide.core import scene_generators as scenes  # noqa: E402
+from graspguide.core.vocabulary import CONSTRAINT_MODELS  # noqa: E402
 
 KNOWN_ANSWERS = os.path.join(_ROOT, "test", "data", "known_answers.json")
 
@@ -63,7 +64,7 @@ def _qmul(p, q):
 
 
 @pytest.mark.parametrize("k", [3, 4])
-@pytest.mark.parametrize("model", ref.MODELS)
+@pytest.mark.parametrize("model", CONSTRAINT_MODELS)
 def test_equilibrium_and_constraints(k, model):
     for sc in _random(k, 25):
         res = _solve(sc, constraints=model)

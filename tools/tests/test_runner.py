@@ -17,10 +17,16 @@ import numpy as np
 import pytest
 from conftest import subprocess_env
 
-from graspguide.cli import app as cli
+from graspguide import cli
+from graspguide.core.rotations import quat_angle_deg, slerp
+from graspguide.exit_codes import EXIT_USAGE
 from graspguide.study import runner as rn
 from graspguide.study import study_protocol as pf
-from graspguide.study.sources import aligned_quaternion, quat_angle_deg, slerp
+from graspguide.study.errors import RunnerError
+from graspguide.study.progress import Progress
+from graspguide.study.sources import aligned_quaternion
+from graspguide.study.tlx import load_tlx_file
+from graspguide.study.trial_sources import ClosedLoopSource, open_runner_source
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 
@@ -160,12 +166,12 @@ def make_runner(
         protocol,
         participant,
         str(out),
-        rn.ClosedLoopSource(source_model, "plugin:test_runner:AligningHand"),
+        ClosedLoopSource(source_model, "plugin:test_runner:AligningHand"),
         client,
         virtual_clock=True,
         tlx=tlx,
         ask=ask,
-        progress=rn.Progress(out=out_text, tty=False),
+        progress=Progress(out=out_text, tty=False),
         protocol_file=path,
         err=err,
     )
@@ -272,7 +278,7 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
     path, protocol = small_protocol(tmp_path, timeout=3.0, fam=0)
     replay = tmp_path / "still.csv"
     replay.write_text("t_s,qw,qx,qy,qz\n" + "".join(f"{i / 100},1,0,0,0\n" for i in range(21)))
-    source = rn.open_runner_source(f"replay:{replay}", protocol, "U1")
+    source = open_runner_source(f"replay:{replay}", protocol, "U1")
     assert source.simulated and not source.closed_loop
     out = tmp_path / "out"
     runner = rn.StudyRunner(
@@ -282,7 +288,7 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
         source,
         DeviceClient(sim),
         True,
-        progress=rn.Progress(out=io.StringIO(), tty=False),
+        progress=Progress(out=io.StringIO(), tty=False),
     )
     runner.run()
     recs = lines(out / "U1" / "trials.jsonl")
@@ -447,7 +453,7 @@ def test_damaged_line_before_the_last_stops_the_run(tmp_path, sim):
     (out / "U1").mkdir(parents=True)
     (out / "U1" / "trials.jsonl").write_text('{"trial_index": 1\n{"trial_index": 2}\n')
     runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
-    with pytest.raises(rn.RunnerError, match="line 1 is damaged"):
+    with pytest.raises(RunnerError, match="line 1 is damaged"):
         runner.run()
 
 
@@ -459,9 +465,9 @@ def test_other_protocol_or_mixed_data_refused(tmp_path, sim):
     runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
     runner.run()
     other = pf.loads_protocol(open(path).read().replace("seed = 11", "seed = 12"))
-    with pytest.raises(rn.RunnerError, match="another protocol"):
+    with pytest.raises(RunnerError, match="another protocol"):
         make_runner(other, out, AligningHand(), DeviceClient(sim))[0].run()
-    with pytest.raises(rn.RunnerError, match="simulated trials"):
+    with pytest.raises(RunnerError, match="simulated trials"):
         make_runner(protocol, out, HumanLike(), DeviceClient(sim))[0].run()
 
 
@@ -486,7 +492,7 @@ def test_tlx_from_file(tmp_path, sim):
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     sessions = pf.session_order(protocol, "U1")
     rows = [_good_tlx(s.session, modality=s.modality, k=3, participant="U1") for s in sessions]
-    given = rn.load_tlx_file(_tlx_file(tmp_path, rows), "U1", sessions)
+    given = load_tlx_file(_tlx_file(tmp_path, rows), "U1", sessions)
     out = tmp_path / "out"
     runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), tlx=given)
     runner.run()
@@ -534,7 +540,7 @@ def test_bad_tlx_values_rejected_with_a_message(tmp_path, capsys, row, needle):
         ]
     )
     err = capsys.readouterr().err
-    assert code == cli.EXIT_USAGE
+    assert code == EXIT_USAGE
     assert f"--tlx {tlx}:1: " in err and needle in err, err
     assert not (tmp_path / "out").exists()  # refused before any trial
 
@@ -572,7 +578,7 @@ def test_tlx_eof_stops_and_resume_asks_again(tmp_path, sim):
 
     out = tmp_path / "out"
     runner, _, _ = make_runner(protocol, out, HumanLike(), DeviceClient(sim), ask=eof)
-    with pytest.raises(rn.RunnerError, match="--tlx FILE"):
+    with pytest.raises(RunnerError, match="--tlx FILE"):
         runner.run()
     assert len(lines(out / "U1" / "trials.jsonl")) == 1
     assert not (out / "U1" / "tlx.jsonl").exists()
@@ -672,10 +678,10 @@ def test_real_time_run_on_the_device_clock(tmp_path):
             protocol,
             "U1",
             str(out),
-            rn.ClosedLoopSource(AligningHand(speed_deg_s=240.0), "test"),
+            ClosedLoopSource(AligningHand(speed_deg_s=240.0), "test"),
             DeviceClient(dev),
             virtual_clock=False,
-            progress=rn.Progress(out=text, tty=False, period_s=0.2),
+            progress=Progress(out=text, tty=False, period_s=0.2),
         )
         runner.run()
     (rec,) = lines(out / "U1" / "trials.jsonl")
@@ -691,7 +697,7 @@ def test_real_time_run_on_the_device_clock(tmp_path):
 
 def test_terminal_progress_line():
     buf = io.StringIO()
-    view = rn.Progress(out=buf, tty=True)
+    view = Progress(out=buf, tty=True)
     trial = pf.PlannedTrial(
         3,
         "U1",

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from graspguide.core import _core
+from graspguide.core import _core, units
 from graspguide.study import scene_file as gs
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
@@ -212,16 +212,16 @@ def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor
 @pytest.mark.parametrize("factor", [0.07, 1.0, 6.0])  # spans of 5.5 mm, 78 mm, 0.47 m
 def test_hands_from_5_mm_to_half_a_metre_load(factor):
     s = gs.loads_scene(_scaled("m", factor))
-    assert gs.HAND_SPAN_M[0] <= gs.hand_span(s.contacts) <= gs.HAND_SPAN_M[1]
+    assert units.HAND_SPAN_M[0] <= units.hand_span(s.contacts) <= units.HAND_SPAN_M[1]
     mm = gs.loads_scene(_scaled("mm", 1000 * factor)).contacts
     assert [x for c in mm for x in c] == pytest.approx([x for c in s.contacts for x in c])
 
 
 def test_moment_unit_check_catches_newton_millimetres():
     hand = gs.loads_scene(MIN3).contacts  # metres, span 78 mm
-    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None  # 5 mm lever
-    assert gs.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None  # 9 spans
-    msg = gs.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])  # 5 N mm as N m
+    assert units.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None  # 5 mm lever
+    assert units.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None  # 9 spans
+    msg = units.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])  # 5 N mm as N m
     assert "looks like N mm" in msg and "divide by 1000" in msg
-    assert "check the moment" in gs.moment_unit_problem(hand, [1, 0, 0, 5000, 0, 0])
-    assert gs.moment_unit_problem(hand, [0, 0, 0, 5, 0, 0]) is None  # the core's zero_force
+    assert "check the moment" in units.moment_unit_problem(hand, [1, 0, 0, 5000, 0, 0])
+    assert units.moment_unit_problem(hand, [0, 0, 0, 5, 0, 0]) is None  # the core's zero_force

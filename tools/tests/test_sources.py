@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from graspguide.core import rotations as rot
 from graspguide.core import solver
 from graspguide.study import sources as src
 
@@ -17,7 +18,7 @@ C, S = math.cos(TH / 2), math.sin(TH / 2)
 
 
 def world(axis):
-    return src.quat_from_axis_angle(axis, TH)
+    return rot.quat_from_axis_angle(axis, TH)
 
 
 # A rotation of 30 degrees about the tracker's up axis and about its x axis, written the
@@ -35,8 +36,8 @@ CASES = {
 def test_preset_converts_known_rotation_to_world(name):
     conv = src.TRACKER_PRESETS[name]
     about_up, about_x, up_point = CASES[name]
-    assert src.quat_angle_deg(conv.quaternion(about_up), world([0, 0, 1])) < 1e-9
-    assert src.quat_angle_deg(conv.quaternion(about_x), world([1, 0, 0])) < 1e-9
+    assert rot.quat_angle_deg(conv.quaternion(about_up), world([0, 0, 1])) < 1e-9
+    assert rot.quat_angle_deg(conv.quaternion(about_x), world([1, 0, 0])) < 1e-9
     assert conv.position(up_point) == pytest.approx([0, 0, 1.0])
 
 
@@ -47,21 +48,21 @@ def test_y_up_forward_axis_and_units():
     assert leap.position([250.0, 0, 0]) == pytest.approx([0.25, 0, 0])
     # a rotation about tracker z becomes one about world -y
     q = leap.quaternion((0, 0, S, C))
-    assert src.quat_angle_deg(q, world([0, -1, 0])) < 1e-9
+    assert rot.quat_angle_deg(q, world([0, -1, 0])) < 1e-9
 
 
 def test_swapped_quaternion_order_is_caught():
     vicon = src.TRACKER_PRESETS["vicon"]
     wrong = src.TrackerConvention("mm", "z", "right", "wxyz")
     about_up = CASES["vicon"][0]
-    assert src.quat_angle_deg(wrong.quaternion(about_up), world([0, 0, 1])) > 1.0
-    assert src.quat_angle_deg(vicon.quaternion(about_up), world([0, 0, 1])) < 1e-9
+    assert rot.quat_angle_deg(wrong.quaternion(about_up), world([0, 0, 1])) > 1.0
+    assert rot.quat_angle_deg(vicon.quaternion(about_up), world([0, 0, 1])) < 1e-9
 
 
 def test_swapped_up_axis_is_caught():
     wrong = src.TrackerConvention("m", "z", "right", "xyzw")  # OptiTrack taken as z-up
     about_up = CASES["optitrack"][0]
-    assert src.quat_angle_deg(wrong.quaternion(about_up), world([0, 0, 1])) > 1.0
+    assert rot.quat_angle_deg(wrong.quaternion(about_up), world([0, 0, 1])) > 1.0
     assert wrong.position(CASES["optitrack"][2]) != pytest.approx([0, 0, 1.0])
 
 
@@ -69,9 +70,9 @@ def test_left_handed_mirror_gives_proper_rotation():
     lh = src.TrackerConvention("m", "y", "left", "wxyz")
     m = lh.matrix
     assert np.linalg.det(m) == pytest.approx(-1.0)
-    q = lh.quaternion(src.quat_from_axis_angle([0, 1, 0], TH))
+    q = lh.quaternion(rot.quat_from_axis_angle([0, 1, 0], TH))
     # a left-handed frame's positive turn about up is a negative turn about world z
-    assert src.quat_angle_deg(q, src.quat_from_axis_angle([0, 0, 1], -TH)) < 1e-9
+    assert rot.quat_angle_deg(q, rot.quat_from_axis_angle([0, 0, 1], -TH)) < 1e-9
 
 
 def test_bad_convention():
@@ -143,7 +144,7 @@ def test_synthetic_converges_to_aligned_orientation():
     tail = [e for (t, _, _), e in zip(samples, err) if t >= 0.65 * 6]
     assert max(tail) < 2.0  # holds below the paper's 3 degree threshold
     # smooth: no jump of more than a few degrees between samples at 50 Hz
-    steps = [src.quat_angle_deg(a[1], b[1]) for a, b in zip(samples, samples[1:])]
+    steps = [rot.quat_angle_deg(a[1], b[1]) for a, b in zip(samples, samples[1:])]
     assert max(steps) < 5
 
 
@@ -185,8 +186,8 @@ def test_replay_with_tracker_converts_a_raw_export(tmp_path):
         + "\n",
     )
     got = list(src.open_source("replay:" + path, tracker="vicon"))
-    assert src.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
-    assert src.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
+    assert rot.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
+    assert rot.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
     assert np.allclose(got[0][2], HAND3)
     # the same file read as if it were already in world convention (metres) is refused:
     # its contacts span 78 "m", no hand
@@ -224,7 +225,7 @@ def test_adapter_converts_every_sample():
     got = list(_FakeOptiTrack())
     assert [round(t, 9) for t, _, _ in got] == [0.0, round(1 / 120, 9), round(2 / 120, 9)]
     for _, q, contacts in got:
-        assert src.quat_angle_deg(q, world([0, 0, 1])) < 1e-9
+        assert rot.quat_angle_deg(q, world([0, 0, 1])) < 1e-9
         assert np.allclose(contacts, [[0, 0, 1.0]] * 3)
     assert _FakeOptiTrack().describe()["tracker_convention"]["up_axis"] == "y"
 
@@ -247,7 +248,7 @@ def test_plugin_source_loads_an_adapter_class(monkeypatch):
     module.NotAnAdapter = dict
     monkeypatch.setitem(sys.modules, "lab_tracker_for_test", module)
     s = src.open_source("plugin:lab_tracker_for_test:Hand:about-x")
-    assert src.quat_angle_deg(next(iter(s))[1], world([1, 0, 0])) < 1e-9
+    assert rot.quat_angle_deg(next(iter(s))[1], world([1, 0, 0])) < 1e-9
     with pytest.raises(src.SourceError, match="TrackerAdapter subclass"):
         src.open_source("plugin:lab_tracker_for_test:NotAnAdapter")
     with pytest.raises(src.SourceError, match="cannot import 'no_such_tracker_mod'"):

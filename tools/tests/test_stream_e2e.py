@@ -128,6 +128,7 @@ def test_source_ending_first_stops_and_exits_0(tmp_path):
 def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     """The synthetic hand written as an OptiTrack export (y up, x,y,z,w): streamed with
     --tracker optitrack it succeeds; streamed as if it were world data it cannot."""
+    from graspguide.core import rotations
     from graspguide.study import sources
 
     scene = gs.load_scene(SCENE3)
@@ -138,7 +139,7 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     m = sources.TRACKER_PRESETS["optitrack"].matrix
     rows = []
     for t, q, _ in hand:
-        w, x, y, z = sources.matrix_to_quat(m.T @ sources.quat_to_matrix(q) @ m)
+        w, x, y, z = rotations.matrix_to_quat(m.T @ rotations.quat_to_matrix(q) @ m)
         rows.append(f"{t:.6f},{x:.17g},{y:.17g},{z:.17g},{w:.17g}\n")  # OptiTrack: x,y,z,w
     assert len(rows) == 601
     csv_path = tmp_path / "optitrack.csv"
@@ -178,18 +179,18 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
 
 
 def test_run_stream_then_stop_leaves_device_idle():
-    from graspguide.cli import app as cli
     from graspguide.link import client as gd
     from graspguide.link import messages as m
     from graspguide.link import transport as gt
     from graspguide.study import sources
+    from graspguide.study.stream_session import run_stream
 
     scene = gs.load_scene(SCENE3)
     src = sources.open_source("synthetic:rate=100,duration=0.5")
     with gt.SimulatedDevice(virtual_clock=True) as sim:
         client = gd.DeviceClient(sim, timeout=2.0)
         client.hello()
-        summary = cli.run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src, virtual_clock=True)
+        summary = run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src, virtual_clock=True)
         assert summary["trial_result"] is None and summary["sent"] == 51
         assert client.status().state is m.DeviceState.TRIAL_RUNNING
         client.stop()

@@ -9,13 +9,14 @@ failure."""
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
 
 import pytest
 
+from graspguide import cli
+from graspguide.cli import sweep as sweep_command
 from graspguide.study import study_protocol as pf
 from graspguide.study import sweep as sw
 
@@ -32,8 +33,9 @@ def _no_pythonpath(monkeypatch):
 
 
 def _sweep(out, *extra):
-    return sw.main(
+    return cli.main(
         [
+            "sweep",
             "--protocol",
             PAPER,
             "--participants",
@@ -188,7 +190,7 @@ def test_larger_threshold_never_makes_the_same_trajectory_take_longer(tmp_path, 
     ],
 )
 def test_bad_arguments_give_a_clear_error(tmp_path, capsys, args, words):
-    code = sw.main(["--protocol", PAPER, "--out", str(tmp_path / "x"), *args])
+    code = cli.main(["sweep", "--protocol", PAPER, "--out", str(tmp_path / "x"), *args])
     err = capsys.readouterr().err
     assert code == 2
     assert err.startswith("graspguide sweep: error: ")
@@ -200,7 +202,7 @@ def test_bad_arguments_give_a_clear_error(tmp_path, capsys, args, words):
 def test_bad_integer_options_are_refused_by_the_parser(capsys):
     for args in (["--participants", "0"], ["--wrenches", "x"], ["--jobs", "-1"]):
         with pytest.raises(SystemExit) as e:
-            sw.main(["--protocol", PAPER, *args])
+            cli.main(["sweep", "--protocol", PAPER, *args])
         assert e.value.code == 2
     assert "must be between" in capsys.readouterr().err
 
@@ -264,9 +266,7 @@ def test_summarize_counts_failures_as_the_timeout():
 
 
 def test_register_adds_the_subcommand():
-    parser = argparse.ArgumentParser(prog="graspguide")
-    sub = parser.add_subparsers(dest="command")
-    sw.register(sub)
+    parser = cli.build_parser()
     args = parser.parse_args(
         [
             "sweep",
@@ -282,7 +282,7 @@ def test_register_adds_the_subcommand():
             "1",
         ]
     )
-    assert args.handler is sw.run
+    assert args.handler is sweep_command.run
     assert (args.thresholds, args.rates, args.participants, args.wrenches, args.jobs) == (
         "1,2",
         "50",

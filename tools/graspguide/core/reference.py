@@ -51,6 +51,9 @@ from typing import Any
 
 import numpy as np
 
+from graspguide.core.rotations import quat_to_matrix
+from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
+
 # --------------------------------------------------------------------------------------
 # Tolerances: the float64 column of the table in docs/algorithm.md.
 # --------------------------------------------------------------------------------------
@@ -103,9 +106,6 @@ STATUSES = (
     "bad_quaternion",
     "nothing_to_display",
 )
-MODELS = ("paper", "normal", "none")
-POLICIES = ("F", "Fperp")
-MODES = ("C", "V")
 FALLBACK_CHAIN = {
     "paper": ("paper", "normal", "none"),
     "normal": ("normal", "none"),
@@ -141,15 +141,7 @@ def fallback_axis(y_o: np.ndarray) -> np.ndarray:
 
 def quaternion_to_matrix(q: Sequence[float]) -> np.ndarray:
     """Rotation matrix of q = [w, x, y, z] (normalised here), hand -> world."""
-    q = _as_float_array(q)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return quat_to_matrix(_as_float_array(q))
 
 
 # --------------------------------------------------------------------------------------
@@ -470,7 +462,7 @@ def solve(
         raise ValueError(f"unknown policy {policy!r}")
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}")
-    if constraints not in MODELS:
+    if constraints not in CONSTRAINT_MODELS:
         raise ValueError(f"unknown constraint model {constraints!r}")
 
     contact_list = [list(c) for c in contacts]
@@ -521,7 +513,7 @@ def solve(
 
     margins: dict[str, float | None] = {}
     if compute_margins:
-        for model in MODELS:
+        for model in CONSTRAINT_MODELS:
             margins[model] = feasibility_margin(G, w_l, constrained_components(model, k), lam0_norm)
 
     used = None
@@ -596,7 +588,7 @@ __all__ = [
     "round_half_away",
     "TOLERANCES",
     "STATUSES",
-    "MODELS",
+    "CONSTRAINT_MODELS",
     "POLICIES",
     "MODES",
 ]

@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
-CONTACT_ORDER = ("thumb", "index", "middle", "palm")
+from graspguide.core.rotations import quat_from_axis_angle
+from graspguide.core.vocabulary import FINGERS
+
 NOMINAL_CONTACTS = {
     "thumb": (0.045, 0.045, 0.035),
     "index": (0.015, 0.095, 0.040),
@@ -45,7 +47,7 @@ RUN_OK = [("F", "C", "paper"), ("Fperp", "V", "normal"), ("F", "V", "none")]
 def nominal_contacts(k: int) -> np.ndarray:
     if k not in (3, 4):
         raise ValueError("k must be 3 or 4")
-    return np.array([NOMINAL_CONTACTS[n] for n in CONTACT_ORDER[:k]], dtype=np.float64)
+    return np.array([NOMINAL_CONTACTS[n] for n in FINGERS[:k]], dtype=np.float64)
 
 
 def random_unit_vector(rng: np.random.Generator, dim: int = 3) -> np.ndarray:
@@ -126,13 +128,6 @@ def _case(
     return scene
 
 
-def _rot_quaternion(axis, angle_rad: float) -> list[float]:
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    s = math.sin(angle_rad / 2)
-    return [math.cos(angle_rad / 2), *(s * a)]
-
-
 def extreme_scenes() -> list[dict[str, Any]]:
     """Named edge cases; each notes its expected status where it is known a priori."""
     cases: list[dict[str, Any]] = []
@@ -142,7 +137,7 @@ def extreme_scenes() -> list[dict[str, Any]]:
     hand3 = nominal_contacts(3)
     hand4 = nominal_contacts(4)
     pure_f = [0.3, -1.2, -0.8, 0.0, 0.0, 0.0]
-    q_tilt = _rot_quaternion([1.0, 2.0, -0.5], 0.7)
+    q_tilt = quat_from_axis_angle([1.0, 2.0, -0.5], 0.7).tolist()
 
     # Dyadic geometry: every sum below is exact in binary floating point, so the
     # centroid and the offsets are exact and boundary cases sit exactly on the boundary.
@@ -520,7 +515,7 @@ def extreme_scenes() -> list[dict[str, Any]]:
                 "rotated_into_gravity",
                 hand3,
                 [1.0, 0, 0, 0, 0, 0],
-                orientation=_rot_quaternion([0, 1, 0], math.pi / 2),
+                orientation=quat_from_axis_angle([0, 1, 0], math.pi / 2).tolist(),
             ),
             "ok",
             "hand rotated +90 deg about y takes +x to -z: error ~0",
@@ -596,7 +591,7 @@ def extreme_scenes() -> list[dict[str, Any]]:
 
 
 __all__ = [
-    "CONTACT_ORDER",
+    "FINGERS",
     "NOMINAL_CONTACTS",
     "nominal_contacts",
     "random_unit_vector",

@@ -21,11 +21,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from graspguide.core import _core
+from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
 
 STATUS_NAMES: tuple[str, ...] = tuple(_core.STATUS_NAMES)
-POLICIES: tuple[str, ...] = tuple(_core.POLICIES)
-MODES: tuple[str, ...] = tuple(_core.MODES)
-CONSTRAINT_MODELS: tuple[str, ...] = tuple(_core.CONSTRAINT_MODELS)
 DECOMPOSITIONS: tuple[str, ...] = tuple(_core.DECOMPOSITIONS)
 SCALARS: tuple[str, ...] = tuple(_core.SCALARS)
 TOLERANCES: dict[str, dict[str, float]] = dict(_core.TOLERANCES)

@@ -20,3 +20,8 @@ FINGERS = ("thumb", "index", "middle", "palm")
 def modality(policy: str, mode: str) -> str:
     """The condition's name in the paper's tables, e.g. ``"Fperp+C"``."""
     return f"{policy}+{mode}"
+
+
+MODALITIES = tuple(modality(policy, mode) for mode in MODES for policy in POLICIES)
+"""The four conditions, in the order of the study protocol and the statistics:
+F+C, Fperp+C, F+V, Fperp+V."""

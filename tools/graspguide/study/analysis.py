@@ -33,19 +33,19 @@ subcommand costs nothing at start-up.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
-import sys
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from graspguide.core.vocabulary import MODALITIES
+from graspguide.study.records import JsonlDamaged, read_jsonl
+
 # Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
-MODALITIES: tuple[str, ...] = ("F+C", "Fperp+C", "F+V", "Fperp+V")
 TABLE_ORDER: tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")
 CONTACT_COUNTS: tuple[int, ...] = (3, 4)
 # Table III column order of the paper.
@@ -129,34 +129,28 @@ def _maybe(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
 
 
 def _read_jsonl(path: Path) -> list[tuple[str, dict[str, Any]]]:
-    """(``FILE:LINE``, object) for every non-blank line; a bad line is an error."""
-    out = []
+    """(``FILE:LINE``, object) for every non-blank line (records.read_jsonl); a bad line
+    is an error, a last line that only lacks its newline is read."""
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise AnalysisError(f"{path}: not UTF-8 text ({e})") from None
+        contents = read_jsonl(path)
+    except JsonlDamaged as e:
+        raise AnalysisError(str(e)) from None
     except OSError as e:
         raise AnalysisError(f"{path}: cannot read ({e.strerror or e})") from None
-    for number, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        where = f"{path}:{number}"
-        try:
-            obj = json.loads(line)
-        except json.JSONDecodeError as e:
+    out = [(f"{path}:{n}", rec) for n, rec in zip(contents.lines, contents.records)]
+    if contents.damaged_tail is not None:
+        where = f"{path}:{contents.tail_line}"
+        if contents.tail_record is not None:
+            out.append((where, contents.tail_record))
+        else:
             hint = ""
-            if number == len(text.splitlines()) and not text.endswith("\n"):
+            if not contents.damaged_tail.endswith(b"\n"):
                 hint = (
                     "; the last line has no newline: a write cut short, e.g. by a crash "
                     "(running the study's participant again with graspguide trial moves "
                     "it aside and redoes that trial)"
                 )
-            raise AnalysisError(
-                f"{where}: malformed JSON ({e.msg} at column {e.colno}){hint}"
-            ) from None
-        if not isinstance(obj, dict):
-            raise AnalysisError(f"{where}: expected a JSON object, got {type(obj).__name__}")
-        out.append((where, obj))
+            raise AnalysisError(f"{where}: {contents.tail_reason}{hint}")
     return out
 
 
@@ -1207,95 +1201,3 @@ def write_outputs(res: Result, out_dir: os.PathLike) -> list[Path]:
     report.write_text(report_markdown(res, [f.name for f in figs]) + "\n", encoding="utf-8")
     written.append(report)
     return written
-
-
-# ======================================================================================
-# Command line
-# ======================================================================================
-
-DESCRIPTION = """\
-The paper's analysis of a study's logs: Table I (successes, failures and success rate
-per condition), Table II (mean and SD of completion time), Table III (NASA-TLX mean and
-SD, C vs V), and the statistics of Section IV: per-participant means per modality
-pooled over contact counts, boxplot outliers (beyond 1.5 IQR) removed with their
-paired values (the participant's row), square-root transform, Shapiro-Wilk, Mauchly's
-test, one-way repeated-measures ANOVA and Bonferroni-corrected paired t-tests; Figure
-4 (mean +- SD with p-values) as PNG and SVG; a Markdown report.
-
-DIR is a study folder (one folder per participant, each with trials.jsonl and
-tlx.jsonl) or a participant folder; give several to pool them. Prints Tables I-II and
-the ANOVA; writes report.md, figure4.png, figure4.svg and CSV tables to --out.
-Simulated records make the report and the output say SIMULATED DATA. With a single
-participant (a pilot), or a single one left after outlier removal, the tables, the
-participant means and Figure 4 are written and the output says that the inferential
-statistics (ANOVA, t-tests) need at least 2 participants.
-
-Exit status: 0 done, 1 bad or insufficient data (the message says what and where),
-2 usage error.
-"""
-
-
-def _configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "dirs", nargs="+", metavar="DIR", help="study folder(s) or participant folder(s)"
-    )
-    p.add_argument(
-        "--out",
-        metavar="DIR",
-        default=None,
-        help="where to write report.md, figure4.png/.svg and the CSV tables "
-        "(default: analysis/ in the first study folder)",
-    )
-    p.add_argument(
-        "--keep-outliers",
-        action="store_true",
-        help="do not remove boxplot outliers before the ANOVA (the paper does)",
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        res = analyze(args.dirs, remove_outliers=not args.keep_outliers)
-        out = Path(args.out) if args.out else default_out_dir(args.dirs)
-        written = write_outputs(res, out)
-    except AnalysisError as e:
-        print(f"graspguide analyze: error: {e}", file=sys.stderr)
-        return EXIT_FAILURE
-    print(summary_text(res))
-    print()
-    print(f"Wrote {', '.join(p.name for p in written)} to {out}")
-    return EXIT_OK
-
-
-def register(subparsers) -> argparse.ArgumentParser:
-    """Add ``analyze`` to an argparse subparsers object (handler: ``run``)."""
-    p = subparsers.add_parser(
-        "analyze",
-        help="the paper's Tables I-III, statistics and Figure 4 from study logs",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    _configure(p)
-    p.set_defaults(handler=run, func=run, command_parser=p)
-    return p
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``graspguide analyze`` on its own: ``main(["STUDY", "--out", "DIR"])``."""
-    from graspguide.cli.app import ArgumentParser
-
-    p = ArgumentParser(
-        prog="graspguide analyze",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    _configure(p)
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as e:
-        return int(e.code) if isinstance(e.code, int) else EXIT_USAGE
-    return run(args)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

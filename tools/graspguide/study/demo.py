@@ -24,100 +24,25 @@ import os
 import sys
 import time
 
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from graspguide.study.jobs import (
-    EXIT_FAILURE,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
-    EXIT_USAGE,
     TrialJob,
     count_lines,
     default_protocol,
-    int_arg,
     run_trial_jobs,
 )
 from graspguide.study.jobs import (
     default_out as _default_out,
 )
 
-DEFAULT_SOURCE = "participant"
-
-DESCRIPTION = """\
-The paper's user study end to end, SIMULATED: the simulated device (virtual clock) and
-N virtual participants U1..UN (graspguide.study.participant; a model, never human data) run
-through a study protocol with `graspguide trial` (--jobs participants at a time, each
-with its own simulated device), then `graspguide analyze`: prints Tables I-II and the
-repeated-measures ANOVA, writes Figure 4 (PNG, SVG), report.md and CSV tables to
-OUT/analysis/.
-
-Killed or interrupted, the same command resumes: completed trials are kept (OUT/PID/
-trials.jsonl, one fsync'ed line per trial) and every trial runs exactly once; a
-completed study is only analysed again. Use another --out (or delete OUT) for a fresh
-study.
-
-Exit status: 0 done, 1 a participant's run or the analysis failed (its log is named),
-2 usage error, 130 interrupted (run the same command again to resume).
-"""
-
 
 def default_out() -> str:
     return _default_out("demo-study")
 
 
-_jobs = int_arg(1, 256)
-
-
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "demo",
-        help="the paper's study end to end, simulated: 8 virtual "
-        "participants, then Tables I-II, the ANOVA and Figure 4",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument(
-        "--participants",
-        type=_jobs,
-        default=8,
-        metavar="N",
-        help="virtual participants U1..UN (default 8, as in the paper)",
-    )
-    p.add_argument(
-        "--protocol",
-        default=None,
-        metavar="FILE",
-        help="study protocol (default: protocols/paper.toml of the repository)",
-    )
-    p.add_argument(
-        "--out",
-        default=None,
-        metavar="DIR",
-        help="study folder (default: logs/demo-study in the repository); "
-        "running again into it resumes or, when complete, re-analyses",
-    )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=_jobs,
-        default=None,
-        metavar="N",
-        help="participants run at a time, each with its own simulated device "
-        "(default: the CPU count)",
-    )
-    p.add_argument(
-        "--source",
-        default=DEFAULT_SOURCE,
-        metavar="SPEC",
-        help="the virtual participant: participant[:key=value,...] "
-        "(graspguide.study.participant parameters; default: the documented "
-        "defaults)",
-    )
-    p.set_defaults(handler=run, command_parser=p)
-    return p
-
-
 def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
     """(completed trials, planned trials, complete incl. TLX) of a participant."""
-    from graspguide.study.runner import read_jsonl
+    from graspguide.study.records import read_jsonl
     from graspguide.study.study_protocol import plan, session_order
 
     planned = len(plan(protocol, pid))
@@ -134,8 +59,9 @@ def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.runner import RunnerError, open_runner_source
+    from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import ProtocolFileError, load_protocol
+    from graspguide.study.trial_sources import open_runner_source
 
     t0 = time.monotonic()
     protocol_path = args.protocol or default_protocol()
@@ -265,4 +191,4 @@ def _analyse(out: str, run_s: float, t0: float) -> int:
     return EXIT_OK
 
 
-__all__ = ["add_parser", "run", "default_out", "default_protocol"]
+__all__ = ["run", "default_out", "default_protocol"]

@@ -4,7 +4,6 @@ folder; the runner inside it resumes, so a killed pool loses no completed trial.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import os
 import signal
@@ -13,8 +12,6 @@ import sys
 import time
 from collections.abc import Callable
 from typing import Any
-
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
 @dataclasses.dataclass
@@ -65,21 +62,6 @@ def default_protocol() -> str:
 def default_out(name: str) -> str:
     root = repo_root()
     return os.path.join(root, "logs", name) if root else name
-
-
-def int_arg(lo: int, hi: int) -> Callable[[str], int]:
-    """An argparse type: an integer in [lo, hi]."""
-
-    def conv(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
-        return v
-
-    return conv
 
 
 def count_lines(path: str) -> int:

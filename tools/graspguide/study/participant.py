@@ -81,9 +81,23 @@ from typing import Any
 
 import numpy as np
 
-from graspguide.study.sources import (
+from graspguide.core.rotations import (
+    Vec3,
+    cross3,
+    dot3,
+    norm3,
+    qconj,
+    qexp,
+    qmul,
+    qnormalize,
+    rotate,
+    rotvec_from_quat,
+    scale3,
+)
+from graspguide.core.rotations import (
     quat_angle_deg as quaternion_angle_deg,  # re-exported: tests, analysis
 )
+from graspguide.core.vocabulary import MODES, POLICIES
 
 # Every number a pose depends on is computed on plain Python floats with `math`, in a
 # fixed order. numpy's linear algebra (norm, dot, @) runs in OpenBLAS, whose kernel -- and
@@ -94,15 +108,11 @@ from graspguide.study.sources import (
 # not depend on the CPU). Left: the last bit of libm's sin/cos/exp/atan2 (glibc has an FMA
 # code path). tools/tests/test_participant.py checks both: the same bits under another
 # OpenBLAS kernel, and a golden record within a tolerance stated there.
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
 
 PWM_FLOOR = 70  # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
 PWM_RANGE = 185  # PWM span above the floor, docs/algorithm.md step 6
 PWM_MAX = 255
 GRAVITY: Vec3 = (0.0, 0.0, -1.0)
-_POLICIES = ("F", "Fperp")
-_MODES = ("C", "V")
 
 
 @dataclass(frozen=True)
@@ -198,75 +208,6 @@ def _validate_params(p: ParticipantParams) -> None:
             )
 
 
-# --------------------------------------------------------------------------------------
-# Rotations (quaternions [w, x, y, z], hand -> world, like POSE)
-# --------------------------------------------------------------------------------------
-def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    """Quaternion product on plain floats (the per-step path)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def _qexp(x: float, y: float, z: float) -> tuple[float, float, float, float]:
-    """Unit quaternion of the rotation vector (x, y, z) [rad], plain floats."""
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        n = math.sqrt(1.0 + 0.25 * angle * angle)
-        return (1.0 / n, 0.5 * x / n, 0.5 * y / n, 0.5 * z / n)
-    s = math.sin(0.5 * angle) / angle
-    return (math.cos(0.5 * angle), x * s, y * s, z * s)
-
-
-def _qnormalize(q: tuple[float, ...]) -> tuple[float, float, float, float]:
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-
-
-def _dot(a: Sequence[float], b: Sequence[float]) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _norm(a: Sequence[float]) -> float:
-    return math.sqrt(_dot(a, a))
-
-
-def _cross(a: Sequence[float], b: Sequence[float]) -> Vec3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _scale(a: Sequence[float], c: float) -> Vec3:
-    return (a[0] * c, a[1] * c, a[2] * c)
-
-
-def _conj(q: Quat) -> Quat:
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def _rotvec_from_quat(q: Quat) -> Vec3:
-    q = _qnormalize(q)
-    if q[0] < 0:
-        q = (-q[0], -q[1], -q[2], -q[3])
-    v = q[1:]
-    s = _norm(v)
-    if s < 1e-15:
-        return _scale(v, 2.0)
-    return _scale(v, 2.0 * math.atan2(s, q[0]) / s)
-
-
-def _rotate(q: Quat, v: Sequence[float]) -> Vec3:
-    """q (hand -> world) applied to the hand-frame vector v."""
-    w, u = q[0], q[1:]
-    t = _scale(_cross(u, v), 2.0)
-    c = _cross(u, t)
-    return (v[0] + w * t[0] + c[0], v[1] + w * t[1] + c[1], v[2] + w * t[2] + c[2])
-
-
 class FeelLagError(RuntimeError):
     """act() was called further ahead of feel() than the model's delay allows (its pose
     could depend on a PWM not felt yet); see :meth:`VirtualParticipant.act`."""
@@ -358,22 +299,22 @@ class VirtualParticipant:
         if not np.all(np.isfinite(c)):
             raise ValueError("contacts must be finite")
         y = _finite_vector(y_axis, 3, "y_axis")
-        if not _norm(y.tolist()) > 0:
+        if not norm3(y.tolist()) > 0:
             raise ValueError("y_axis must be non-zero")
         w = _finite_vector(wrench, 6, "wrench")  # never used for a decision (seed only)
-        if policy not in _POLICIES:
-            raise ValueError(f"policy must be one of {_POLICIES}, got {policy!r}")
-        if mode not in _MODES:
-            raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         q = _finite_vector(start_quat, 4, "start_quat (w, x, y, z)")
         q0 = tuple(q.tolist())
-        if not math.sqrt(_dot(q0[1:], q0[1:]) + q0[0] * q0[0]) > 1e-6:
+        if not math.sqrt(dot3(q0[1:], q0[1:]) + q0[0] * q0[0]) > 1e-6:
             raise ValueError("start_quat must be a non-zero quaternion")
 
         points = c.tolist()
         centroid = [sum(p[a] for p in points) / len(points) for a in range(3)]
         r = [(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]) for p in points]
-        norms = [_norm(v) for v in r]
+        norms = [norm3(v) for v in r]
         if not all(n > 1e-9 * max(1.0, max(norms)) for n in norms):
             raise ValueError("contacts must not coincide with their centroid")
         if noise_seed is None:
@@ -401,7 +342,7 @@ class VirtualParticipant:
         self._k = c.shape[0]
         self.policy = policy
         self.mode = mode
-        self._qt = _qnormalize(q0)  # commanded (proprioceptive) orientation
+        self._qt = qnormalize(q0)  # commanded (proprioceptive) orientation
         self._motor = [0.0] * self._k  # ERM speeds, PWM units
         self._history: deque[tuple[float, list[float]]] = deque()
         self._t_prev: float | None = None  # time of the last motor update
@@ -454,7 +395,7 @@ class VirtualParticipant:
         for wi, y in zip(w, self._radial):
             d = [d[0] + wi * y[0], d[1] + wi * y[1], d[2] + wi * y[2]]
         d = [-d[0], -d[1], -d[2]]
-        n = _norm(d)
+        n = norm3(d)
         if n < 1e-9:
             return None
         return (d[0] / n, d[1] / n, d[2] / n)
@@ -592,25 +533,25 @@ class VirtualParticipant:
             tau = min(1.0, (t - m["t0"]) / m["T"]) if m["T"] > 0 else 1.0
             s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
             rx, ry, rz = m["rotvec_t"]
-            self._qt = _qmul(_qexp(rx * s, ry * s, rz * s), m["q0_t"])
+            self._qt = qmul(qexp(rx * s, ry * s, rz * s), m["q0_t"])
             if tau >= 1.0:
                 self._move = None
                 self._next_decision = t + m["pause"]
-                self._qt = _qnormalize(self._qt)
+                self._qt = qnormalize(self._qt)
 
         # 4. Tremor on top of the commanded orientation.
         q = self._qt
         if self._tremor_amp > 0:
             w = 2.0 * math.pi * self.params.tremor_frequency_hz * t
-            q = _qmul(
-                _qexp(
+            q = qmul(
+                qexp(
                     self._tremor_amp * math.sin(w + self._tremor_phase[0]),
                     self._tremor_amp * math.sin(w + self._tremor_phase[1]),
                     0.0,
                 ),
                 q,
             )
-        return _qnormalize(q)
+        return qnormalize(q)
 
     def _advance(self, t: float, u: list[float]) -> None:
         """The motors from the previous motor time to ``t`` with the PWM ``u`` held (the
@@ -683,11 +624,11 @@ class VirtualParticipant:
 
     def _start_move(self, t: float, rotvec: Vec3, pause: float) -> None:
         p = self.params
-        amp = _norm(rotvec)
+        amp = norm3(rotvec)
         if amp > 0 and p.motor_noise_frac > 0:
-            e = _scale(self._rng.standard_normal(3).tolist(), p.motor_noise_frac * amp)
+            e = scale3(self._rng.standard_normal(3).tolist(), p.motor_noise_frac * amp)
             rotvec = (rotvec[0] + e[0], rotvec[1] + e[1], rotvec[2] + e[2])
-            amp = _norm(rotvec)
+            amp = norm3(rotvec)
         # Minimum jerk: peak speed 1.875 * amp / T <= peak_speed.
         T = 1.875 * amp / math.radians(p.peak_speed_deg_s)
         self._move = {"t0": t, "T": T, "rotvec_t": rotvec, "q0_t": self._qt, "pause": pause}
@@ -697,10 +638,10 @@ class VirtualParticipant:
 
     def _tilt_to_align(self, d_hand: Vec3) -> tuple[Vec3, float]:
         """World rotation vector bringing the hand direction d_hand to gravity, and its angle."""
-        u = _rotate(self._qt, d_hand)
-        axis = _cross(u, GRAVITY)
-        s = _norm(axis)
-        angle = math.atan2(s, _dot(u, GRAVITY))
+        u = rotate(self._qt, d_hand)
+        axis = cross3(u, GRAVITY)
+        s = norm3(axis)
+        angle = math.atan2(s, dot3(u, GRAVITY))
         if s < 1e-12:
             if angle < 1e-6:
                 return (0.0, 0.0, 0.0), 0.0
@@ -761,7 +702,7 @@ class VirtualParticipant:
         r = st["readings"]
         r = st["readings"] = (r[0] + direction[0], r[1] + direction[1], r[2] + direction[2])
         st["n_readings"] += 1
-        n = _norm(r)
+        n = norm3(r)
         centre = (r[0] / n, r[1] / n, r[2] / n)
         grid, tried = st["grid"], st["tried"]
         # The pose just held rules out the candidates within the aim tolerance (a third
@@ -769,7 +710,7 @@ class VirtualParticipant:
         # grid's spacing their whole cells are then inside the threshold cone just tried.
         # A candidate missed by more than that (motor noise) stays untried and is aimed
         # at again, with a small, precise correction.
-        down = _rotate(_conj(self._qt), GRAVITY)
+        down = rotate(qconj(self._qt), GRAVITY)
         tol = math.radians(_C_AIM_TOL * self.params.task_threshold_deg)
         gx, gy, gz = grid  # elementwise only: _hex_directions says why
         tried |= gx * down[0] + gy * down[1] + gz * down[2] >= math.cos(tol)
@@ -830,7 +771,7 @@ class VirtualParticipant:
                 if st["tries"] % 4 == 0:
                     st["step"] = max(0.5 * st["step"], 0.5 * res)
                 st["at_base"] = True
-                delta = _rotvec_from_quat(_qmul(st["base_q"], _conj(self._qt)))
+                delta = rotvec_from_quat(qmul(st["base_q"], qconj(self._qt)))
                 self._start_move(t, delta, pause)
                 return
         base_val = st["base_sum"] / st["base_n"]
@@ -839,8 +780,8 @@ class VirtualParticipant:
             st["held"] = True
             self._hold(t, p.probe_dwell_s)
             return
-        target = _qmul(_qexp(*_scale(st["axis"], math.radians(st["step"]))), st["base_q"])
-        delta = _rotvec_from_quat(_qmul(target, _conj(self._qt)))
+        target = qmul(qexp(*scale3(st["axis"], math.radians(st["step"]))), st["base_q"])
+        delta = rotvec_from_quat(qmul(target, qconj(self._qt)))
         st["at_base"] = False
         self._start_move(t, delta, pause)
 
@@ -864,12 +805,12 @@ def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
     Built with ``math`` on plain floats (see the top of the module): numpy's sin/cos
     depend on the CPU. The arrays are only ever combined elementwise (+, *, compare),
     which is IEEE-exact per element, so the search gives the same bits on every CPU."""
-    n0 = _norm(centre)
+    n0 = norm3(centre)
     c = (centre[0] / n0, centre[1] / n0, centre[2] / n0)
-    e1 = _cross(c, (1.0, 0.0, 0.0) if abs(c[0]) < 0.9 else (0.0, 1.0, 0.0))
-    m = _norm(e1)
+    e1 = cross3(c, (1.0, 0.0, 0.0) if abs(c[0]) < 0.9 else (0.0, 1.0, 0.0))
+    m = norm3(e1)
     e1 = (e1[0] / m, e1[1] / m, e1[2] / m)
-    e2 = _cross(c, e1)
+    e2 = cross3(c, e1)
     s = math.radians(spacing_deg)
     n = int(math.ceil(math.pi / s / 0.8)) + 1
     h = math.sqrt(3.0) / 2.0
@@ -891,7 +832,7 @@ def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
             d = (cr * c[0] + sr * t[0], cr * c[1] + sr * t[1], cr * c[2] + sr * t[2])
         else:
             d = c
-        m = _norm(d)
+        m = norm3(d)
         out.append((d[0] / m, d[1] / m, d[2] / m))
     return tuple(np.array(v, dtype=np.float64) for v in zip(*out))
 

@@ -1,4 +1,7 @@
-"""A session folder: everything one `graspguide stream` run sent and received.
+"""The records on disk: the JSON Lines files of a study (read by :func:`read_jsonl`, one
+reader for the runner, the demo, the sweep and the analysis; appended by
+:func:`append_json_line`), and a session folder: everything one `graspguide stream` run
+sent and received.
 
 Files (all UTF-8; the CSVs and JSON Lines are append-only, one record per line, each line
 flushed to the OS as soon as it is written, so a crash, SIGKILL or Ctrl-C loses nothing
@@ -23,6 +26,7 @@ what to do.
 from __future__ import annotations
 
 import csv
+import datetime as _dt
 import enum
 import errno
 import io
@@ -30,6 +34,7 @@ import json
 import os
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 POSE_COLUMNS = ["send_time_s", "host_time_us", "t_s", "qw", "qx", "qy", "qz", "has_contacts"]
@@ -157,6 +162,127 @@ def write_json_file(path: str, data: Any, hint: str = "", **dump_args: Any) -> N
         raise RecordWriteError(path, e, hint) from e
 
 
+# --------------------------------------------------------------------------------------
+# JSON Lines
+# --------------------------------------------------------------------------------------
+def dumps_record(obj: Any) -> str:
+    """One record as a JSON line's text: sorted keys, ASCII, strict JSON (no NaN)."""
+    return json.dumps(
+        obj, sort_keys=True, ensure_ascii=True, allow_nan=False, separators=(", ", ": ")
+    )
+
+
+def append_json_line(path: str, obj: Any, hint: str = "") -> None:
+    """Append one JSON line, fsync'ed, whole or not at all (RecordWriteError)."""
+    data = (dumps_record(obj) + "\n").encode("utf-8")
+    fd = open_append(path, hint)
+    try:
+        append_record(fd, path, data, sync=True, hint=hint)
+    finally:
+        os.close(fd)
+
+
+class JsonlDamaged(ValueError):
+    """A damaged line with more lines after it: not a cut write, a person must look."""
+
+    def __init__(self, path: str, line: int, reason: str):
+        super().__init__(f"{path}:{line}: {reason}")
+        self.path = path
+        self.line = line
+        self.reason = reason
+
+
+@dataclass
+class JsonlContents:
+    records: list[dict[str, Any]]
+    lines: list[int] = field(default_factory=list)  # each record's line number
+    damaged_tail: bytes | None = None  # a last line cut short or not an object, if any
+    tail_line: int = 0
+    # Why the tail is damaged; None: a whole JSON object that only lacks its newline
+    # (tail_record), which the runner still redoes and the analysis accepts.
+    tail_reason: str | None = None
+    tail_record: dict[str, Any] | None = None
+    good_size: int = 0  # bytes of the complete, valid prefix
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def _parse_line(line: bytes) -> tuple[dict[str, Any] | None, str | None]:
+    """(the object, None), or (None, what is wrong with the line)."""
+    try:
+        text = line.decode("utf-8")
+    except UnicodeDecodeError as e:
+        return None, f"not UTF-8 text ({e})"
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as e:
+        return None, f"malformed JSON ({e.msg} at column {e.colno})"
+    except ValueError as e:
+        return None, f"malformed JSON ({e})"
+    if not isinstance(obj, dict):
+        return None, f"expected a JSON object, got {type(obj).__name__}"
+    return obj, None
+
+
+def read_jsonl(path: str | os.PathLike) -> JsonlContents:
+    """The records of an append-only JSON Lines file (none if it does not exist; blank
+    lines skipped; a UTF-8 BOM ignored). A damaged *last* line (no newline, or not a JSON
+    object) is returned as ``damaged_tail``; a damaged earlier line raises JsonlDamaged;
+    an unreadable file, OSError."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        return JsonlContents([])
+    with open(path, "rb") as f:
+        data = f.read()
+    out = JsonlContents([])
+    pos = len(_BOM) if data.startswith(_BOM) else 0
+    line_no = 0
+    while pos < len(data):
+        line_no += 1
+        nl = data.find(b"\n", pos)
+        end = len(data) if nl == -1 else nl
+        line = data[pos:end]
+        if line.strip():
+            obj, reason = _parse_line(line)
+            if nl == -1 or (reason is not None and nl == len(data) - 1):
+                # the last line: a write cut short (no newline) or a bad last record
+                out.damaged_tail = data[pos:]
+                out.tail_line = line_no
+                out.tail_reason = reason
+                out.tail_record = obj
+                out.good_size = pos
+                return out
+            if obj is None:
+                raise JsonlDamaged(path, line_no, reason or "damaged")
+            out.records.append(obj)
+            out.lines.append(line_no)
+        elif nl == -1:
+            break
+        pos = end + 1
+    out.good_size = min(pos, len(data))
+    return out
+
+
+def set_aside_damaged_tail(path: str, contents: JsonlContents) -> str:
+    """Move a damaged last line to ``PATH.damaged-<time>`` and cut it from the file.
+    Returns the new file's path."""
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S%fZ")
+    aside = f"{path}.damaged-{stamp}"
+    with open(aside, "wb") as f:
+        f.write(contents.damaged_tail or b"")
+        f.flush()
+        os.fsync(f.fileno())
+    with open(path, "r+b") as f:
+        f.truncate(contents.good_size)
+        f.flush()
+        os.fsync(f.fileno())
+    return aside
+
+
+# --------------------------------------------------------------------------------------
+# A session folder (graspguide stream --log)
+# --------------------------------------------------------------------------------------
 _HINT = " (or give another --log folder)"
 
 
@@ -275,6 +401,12 @@ class SessionLog:
 
 
 __all__ = [
+    "read_jsonl",
+    "JsonlContents",
+    "JsonlDamaged",
+    "set_aside_damaged_tail",
+    "append_json_line",
+    "dumps_record",
     "SessionLog",
     "RecordWriteError",
     "append_record",

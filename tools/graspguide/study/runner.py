@@ -40,7 +40,7 @@ rate - 1: 20 at 0.21 s and 100 Hz) go out before their predecessors' TELEMETRY. 
 come from ``model.act(t)`` and each TELEMETRY is given to ``model.feel(t, pwm)`` as it
 arrives: one model step per pose, no copy, no speculation. The model guarantees (and
 checks: FeelLagError) that act(t) depends only on PWM felt a reaction time before t, so
-the poses are bit for bit the lockstep ones (StudyRunner._closed_loop_pipelined); a
+the poses are bit for bit the lockstep ones (graspguide.study.pose_loop.PipelinedPoses); a
 FeelLagError reruns the trial in lockstep. Trials, frames and resume are those of
 lockstep (tools/tests/test_demo.py compares them frame for frame);
 ``StudyRunner(pipeline=1)`` forces lockstep, and a source without feel/act always runs in
@@ -51,42 +51,46 @@ from __future__ import annotations
 
 import datetime as _dt
 import fcntl
-import importlib
 import json
 import os
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
 from typing import Any, TextIO
 
+from graspguide.study.errors import RunnerError
+from graspguide.study.pose_loop import (
+    Diverged,
+    Frame,
+    LockstepPoses,
+    OpenLoopPoses,
+    PipelinedPoses,
+    PoseLoop,
+    PoseLoopError,
+    TrialOverrun,
+    pipeline_window,
+)
+from graspguide.study.progress import Progress
 from graspguide.study.records import (
+    JsonlDamaged,
     RecordWriteError,
-    append_record,
-    open_append,
+    append_json_line,
+    read_jsonl,
+    set_aside_damaged_tail,
     write_json_file,
 )
 from graspguide.study.study_protocol import (
     PlannedTrial,
     Protocol,
     Session,
-    derive_seed,
     draw_familiarization_wrenches,
     draw_wrenches,
     plan,
     session_order,
 )
+from graspguide.study.tlx import TLX_SCALES, ask_tlx
+from graspguide.study.trial_sources import RunnerSource
 
-TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
-TLX_NAMES = {
-    "MD": "Mental Demand",
-    "TD": "Temporal Demand",
-    "PD": "Physical Demand",
-    "PE": "Performance",
-    "EF": "Effort",
-    "FR": "Frustration",
-}
-TLX_MIN, TLX_MAX = 1, 21
 FRAME_COLUMNS = [
     "t_s",
     "host_time_us",
@@ -134,23 +138,8 @@ STUDY_FORMAT = "graspguide-study/1"
 RESULT_MARGIN_S = 2.0
 
 
-class RunnerError(Exception):
-    """The run cannot go on; the message says why and what to do. ``usage`` errors exit
-    2, the others 1."""
-
-    def __init__(self, message: str, usage: bool = False):
-        super().__init__(message)
-        self.usage = usage
-
-
 def _now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
-
-
-def _dumps(obj: Any) -> str:
-    return json.dumps(
-        obj, sort_keys=True, ensure_ascii=True, allow_nan=False, separators=(", ", ": ")
-    )
 
 
 # Said after a disk fault (RecordWriteError): every completed trial is kept.
@@ -158,13 +147,21 @@ _RESUME_HINT = ", then run again (completed trials are kept)"
 
 
 def append_line(path: str, obj: Any) -> None:
-    """Append one JSON line, fsync'ed, whole or not at all (RecordWriteError)."""
-    data = (_dumps(obj) + "\n").encode("utf-8")
-    fd = open_append(path, _RESUME_HINT)
+    """Append one record to a run's JSON Lines file, whole or not at all."""
+    append_json_line(path, obj, _RESUME_HINT)
+
+
+def read_run_jsonl(path: str) -> Any:
+    """The records of a run's JSON Lines file (records.read_jsonl); a damaged line before
+    the last one is a RunnerError: a person must look."""
     try:
-        append_record(fd, path, data, sync=True, hint=_RESUME_HINT)
-    finally:
-        os.close(fd)
+        return read_jsonl(path)
+    except JsonlDamaged as e:
+        raise RunnerError(
+            f"{path}: line {e.line} is damaged (not a JSON object) "
+            "and more lines follow it; this is not a cut write: "
+            "inspect the file, repair or move it, and run again"
+        ) from None
 
 
 def write_json_atomic(path: str, data: Any) -> None:
@@ -221,443 +218,6 @@ class _FramesFile:
                 pass
 
 
-@dataclass
-class JsonlContents:
-    records: list[dict[str, Any]]
-    damaged_tail: bytes | None = None  # a half-written last line, if any
-    good_size: int = 0  # bytes of the complete, valid prefix
-
-
-def read_jsonl(path: str) -> JsonlContents:
-    """The records of an append-only JSON Lines file. A damaged *last* line (no newline,
-    or not a JSON object) is returned in ``damaged_tail``; a damaged earlier line raises
-    RunnerError."""
-    if not os.path.exists(path):
-        return JsonlContents([])
-    with open(path, "rb") as f:
-        data = f.read()
-    records: list[dict[str, Any]] = []
-    pos = 0
-    line_no = 0
-    while pos < len(data):
-        line_no += 1
-        nl = data.find(b"\n", pos)
-        if nl == -1:  # no newline: a cut write
-            return JsonlContents(records, data[pos:], pos)
-        line = data[pos:nl]
-        if line.strip():
-            try:
-                obj = json.loads(line.decode("utf-8"))
-                if not isinstance(obj, dict):
-                    raise ValueError("not an object")
-            except (ValueError, UnicodeDecodeError):
-                if nl == len(data) - 1:  # the last line
-                    return JsonlContents(records, data[pos:], pos)
-                raise RunnerError(
-                    f"{path}: line {line_no} is damaged (not a JSON object) "
-                    "and more lines follow it; this is not a cut write: "
-                    "inspect the file, repair or move it, and run again"
-                ) from None
-            records.append(obj)
-        pos = nl + 1
-    return JsonlContents(records, None, pos)
-
-
-def set_aside_damaged_tail(path: str, contents: JsonlContents) -> str:
-    """Move a damaged last line to ``PATH.damaged-<time>`` and cut it from the file.
-    Returns the new file's path."""
-    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S%fZ")
-    aside = f"{path}.damaged-{stamp}"
-    with open(aside, "wb") as f:
-        f.write(contents.damaged_tail or b"")
-        f.flush()
-        os.fsync(f.fileno())
-    with open(path, "r+b") as f:
-        f.truncate(contents.good_size)
-        f.flush()
-        os.fsync(f.fileno())
-    return aside
-
-
-# --------------------------------------------------------------------------------------
-# NASA-TLX
-# --------------------------------------------------------------------------------------
-def check_tlx_value(scale: str, value: Any) -> int:
-    """An integer 1..21, else ValueError saying what is wrong."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(
-            f"{scale} ({TLX_NAMES[scale]}) must be an integer {TLX_MIN}..{TLX_MAX}, got {value!r}"
-        )
-    if not TLX_MIN <= value <= TLX_MAX:
-        raise ValueError(
-            f"{scale} ({TLX_NAMES[scale]}) must be in {TLX_MIN}..{TLX_MAX}, got {value}"
-        )
-    return int(value)
-
-
-def load_tlx_file(
-    path: str, participant: str, sessions: Sequence[Session]
-) -> dict[int, dict[str, int]]:
-    """``--tlx FILE``: JSON Lines, one object per session: ``{"session": 1, "MD": 5,
-    "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}``, optionally ``"participant"``,
-    ``"modality"`` and ``"k"`` (checked against the plan when present). Blank lines are
-    skipped. Returns session -> scales; RunnerError (usage) naming the line otherwise."""
-    by_session = {s.session: s for s in sessions}
-    out: dict[int, dict[str, int]] = {}
-    try:
-        with open(path, encoding="utf-8") as f:
-            lines = f.read().splitlines()
-    except OSError as e:
-        raise RunnerError(f"--tlx {path}: cannot read it: {e.strerror}", usage=True) from None
-    except UnicodeDecodeError:
-        raise RunnerError(f"--tlx {path}: not UTF-8 text", usage=True) from None
-    allowed = set(TLX_SCALES) | {"session", "participant", "modality", "k"}
-    for no, line in enumerate(lines, start=1):
-        if not line.strip():
-            continue
-        where = f"--tlx {path}:{no}"
-        try:
-            obj = json.loads(line)
-        except ValueError as e:
-            raise RunnerError(
-                f"{where}: not JSON ({e}); one object per line such as "
-                '{"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, '
-                '"FR": 3}',
-                usage=True,
-            ) from None
-        if not isinstance(obj, dict):
-            raise RunnerError(f"{where}: must be a JSON object", usage=True)
-        unknown = sorted(set(obj) - allowed)
-        if unknown:
-            raise RunnerError(
-                f"{where}: unknown key {unknown[0]!r}; keys: session, "
-                f"{', '.join(TLX_SCALES)} (and optionally participant, "
-                "modality, k)",
-                usage=True,
-            )
-        s = obj.get("session")
-        if isinstance(s, bool) or not isinstance(s, int) or s not in by_session:
-            raise RunnerError(
-                f"{where}: session must be one of this participant's sessions "
-                f"1..{len(sessions)}, got {s!r}",
-                usage=True,
-            )
-        if s in out:
-            raise RunnerError(f"{where}: session {s} is given twice", usage=True)
-        if "participant" in obj and obj["participant"] != participant:
-            raise RunnerError(
-                f"{where}: participant {obj['participant']!r} is not "
-                f"{participant!r}: is this the right file?",
-                usage=True,
-            )
-        sess = by_session[s]
-        if "modality" in obj and obj["modality"] != sess.modality:
-            raise RunnerError(
-                f"{where}: session {s} of {participant} is {sess.modality}, "
-                f"the file says {obj['modality']!r}",
-                usage=True,
-            )
-        if "k" in obj and obj["k"] != sess.k:
-            raise RunnerError(
-                f"{where}: session {s} of {participant} has k = {sess.k}, the "
-                f"file says {obj['k']!r}",
-                usage=True,
-            )
-        missing = [sc for sc in TLX_SCALES if sc not in obj]
-        if missing:
-            raise RunnerError(
-                f"{where}: missing {', '.join(missing)} (the six scales "
-                f"{', '.join(TLX_SCALES)}, integers {TLX_MIN}..{TLX_MAX})",
-                usage=True,
-            )
-        scales = {}
-        for sc in TLX_SCALES:
-            try:
-                scales[sc] = check_tlx_value(sc, obj[sc])
-            except ValueError as e:
-                raise RunnerError(f"{where}: {e}", usage=True) from None
-        out[s] = scales
-    return out
-
-
-def ask_tlx(
-    session: Session, ask: Callable[[str], str], out: TextIO, attempts: int = 5
-) -> dict[str, int]:
-    """The six scales asked one by one (``ask`` is input()); a bad answer is asked again
-    (at most ``attempts`` times); EOF raises RunnerError."""
-    print(
-        f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
-        f"answer each scale with an integer {TLX_MIN} (very low) .. {TLX_MAX} (very high)",
-        file=out,
-        flush=True,
-    )
-    scales: dict[str, int] = {}
-    for sc in TLX_SCALES:
-        for _ in range(attempts):
-            try:
-                text = ask(f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
-            except EOFError:
-                raise RunnerError(
-                    "the NASA-TLX answers ended (stdin closed); give them with "
-                    "--tlx FILE and run again (completed trials are kept)"
-                ) from None
-            text = text.strip()
-            try:
-                scales[sc] = check_tlx_value(sc, int(text))
-                break
-            except ValueError as e:
-                msg = (
-                    str(e)
-                    if text.lstrip("+-").isdigit()
-                    else f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
-                )
-                print(f"  {msg}; try again", file=out, flush=True)
-        else:
-            raise RunnerError(f"no valid answer for {sc} after {attempts} attempts")
-    return scales
-
-
-# --------------------------------------------------------------------------------------
-# Sources
-# --------------------------------------------------------------------------------------
-class RunnerSource:
-    """What the runner needs of a source. ``closed_loop``: begin_trial/step in lockstep;
-    else ``samples(trial)`` yields (t_s, quat, contacts). ``simulated``: no person (TLX
-    recorded as absent unless --tlx). ``live``: real-time (a tracker)."""
-
-    closed_loop = False
-    simulated = True
-    live = False
-    rate_hz: float = 100.0
-
-    def describe(self) -> dict[str, Any]:  # pragma: no cover - interface
-        raise NotImplementedError
-
-
-class ClosedLoopSource(RunnerSource):
-    closed_loop = True
-
-    def __init__(self, model: Any, spec: str):
-        for attr in ("rate_hz", "begin_trial", "step"):
-            if not hasattr(model, attr):
-                raise RunnerError(
-                    f"--source {spec}: {type(model).__name__} has no {attr}; a "
-                    "closed-loop source needs rate_hz, SIMULATED, "
-                    "begin_trial(...) and step(t_s, pwm)",
-                    usage=True,
-                )
-        self.model = model
-        self.spec = spec
-        self.rate_hz = float(model.rate_hz)
-        if not 0 < self.rate_hz <= 10000:
-            raise RunnerError(
-                f"--source {spec}: rate_hz must be in (0, 10000], got {model.rate_hz!r}", usage=True
-            )
-        self.simulated = bool(getattr(model, "SIMULATED", True))
-
-    def describe(self) -> dict[str, Any]:
-        d = {
-            "source": self.spec,
-            "kind": "closed_loop",
-            "class": type(self.model).__name__,
-            "source_rate_hz": self.rate_hz,
-            "simulated": self.simulated,
-        }
-        extra = getattr(self.model, "describe", None)
-        if callable(extra):
-            try:
-                d["model"] = extra()
-            except Exception:  # pragma: no cover - a model's describe is informational
-                pass
-        return d
-
-
-class OpenLoopSource(RunnerSource):
-    def __init__(
-        self,
-        spec: str,
-        make: Callable[[PlannedTrial], Any],
-        rate_hz: float,
-        simulated: bool,
-        live: bool,
-        info: dict[str, Any],
-    ):
-        self.spec = spec
-        self.make = make
-        self.rate_hz = float(rate_hz)
-        self.simulated = simulated
-        self.live = live
-        self.info = info
-
-    def samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
-        return iter(self.make(trial))
-
-    def describe(self) -> dict[str, Any]:
-        return {
-            **self.info,
-            "source": self.spec,
-            "kind": "open_loop",
-            "rate_hz": self.rate_hz,
-            "simulated": self.simulated,
-        }
-
-
-def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
-    """The source of ``--source SPEC`` for this protocol and participant."""
-    from graspguide.study.sources import (
-        SourceError,
-        SyntheticSource,
-        TrackerAdapter,
-        open_source,
-    )
-
-    kind, _, rest = spec.partition(":")
-    seed = derive_seed(protocol.seed, "source", participant) % 2**32
-    if kind == "participant":
-        try:
-            mod = importlib.import_module(".participant", __package__)
-            cls = mod.VirtualParticipant
-        except (ImportError, AttributeError) as e:
-            raise RunnerError(
-                f"--source {spec}: the virtual participant "
-                f"(graspguide.study.participant.VirtualParticipant) is not available: "
-                f"{e}",
-                usage=True,
-            ) from None
-        try:
-            model = cls.from_spec(rest, seed)
-        except (ValueError, TypeError) as e:
-            raise RunnerError(f"--source {spec}: {e}", usage=True) from None
-        return ClosedLoopSource(model, spec)
-    if kind == "plugin":
-        module_name, _, tail = rest.partition(":")
-        class_name, _, arg = tail.partition(":")
-        if not module_name or not class_name:
-            raise RunnerError(
-                "--source plugin needs a module and a class: plugin:MODULE:CLASS[:ARG]", usage=True
-            )
-        try:
-            cls = getattr(importlib.import_module(module_name), class_name)
-        except (ImportError, AttributeError) as e:
-            raise RunnerError(
-                f"--source {spec}: cannot load {module_name}.{class_name}: {e}", usage=True
-            ) from None
-        if isinstance(cls, type) and issubclass(cls, TrackerAdapter):
-            adapter = cls(arg) if arg else cls()
-            return OpenLoopSource(
-                spec,
-                lambda trial: adapter,
-                adapter.rate_hz or 100.0,
-                simulated=bool(getattr(adapter, "SIMULATED", False)),
-                live=True,
-                info=adapter.describe(),
-            )
-        try:
-            model = (
-                cls.from_spec(arg, seed)
-                if hasattr(cls, "from_spec")
-                else (cls(arg) if arg else cls())
-            )
-        except (ValueError, TypeError) as e:
-            raise RunnerError(f"--source {spec}: {e}", usage=True) from None
-        return ClosedLoopSource(model, spec)
-    if kind in ("synthetic", "replay"):
-        try:
-            base = open_source(spec)
-        except SourceError as e:
-            raise RunnerError(f"--source: {e}", usage=True) from None
-        if isinstance(base, SyntheticSource):
-            rate = base.rate_hz if "rate=" in rest else protocol.pose_rate_hz
-
-            def make(trial: PlannedTrial) -> SyntheticSource:
-                s = SyntheticSource(
-                    rate=rate,
-                    duration=base.duration,
-                    seed=derive_seed(base.seed, participant, trial.trial_index) % 2**32,
-                    tremor_deg=base.tremor_deg,
-                )
-                return s.aim(
-                    [list(c) for c in protocol.hands[trial.k]],
-                    list(trial.wrench),
-                    trial.policy,
-                    protocol.constraints,
-                    list(protocol.y_axis),
-                )
-
-            return OpenLoopSource(spec, make, rate, True, False, base.describe())
-        return OpenLoopSource(
-            spec,
-            lambda trial: base,
-            base.rate_hz or protocol.pose_rate_hz,
-            True,
-            False,
-            base.describe(),
-        )
-    raise RunnerError(
-        f"unknown --source {spec!r}: use participant[:PARAMS], "
-        "synthetic[:rate=..,duration=..,seed=..], replay:FILE.csv or "
-        "plugin:MODULE:CLASS[:ARG]",
-        usage=True,
-    )
-
-
-# --------------------------------------------------------------------------------------
-# Progress
-# --------------------------------------------------------------------------------------
-class Progress:
-    """Trial n of N, the condition and the live error: one rewritten line on a terminal,
-    plain lines (one per trial; every ``period_s`` of a real-time trial) otherwise."""
-
-    def __init__(self, out: TextIO | None = None, tty: bool | None = None, period_s: float = 5.0):
-        self.out = out or sys.stdout
-        self.tty = self.out.isatty() if tty is None else tty
-        self.period_s = period_s
-        self._last = 0.0
-        self._next_t = 0.0
-        self._head = ""
-
-    def line(self, text: str) -> None:
-        if self.tty:
-            self.out.write("\r\x1b[K")
-        print(text, file=self.out, flush=True)
-
-    def trial_start(self, trial: PlannedTrial, total: int, sessions: int) -> None:
-        sess = "familiarization" if trial.familiarization else f"session {trial.session}/{sessions}"
-        self._head = (
-            f"[{trial.trial_index}/{total}] {sess} {trial.modality} k={trial.k} {trial.wrench_id}"
-        )
-        self._next_t = self.period_s
-        if self.tty:
-            self.out.write(f"\r\x1b[K{self._head} ...")
-            self.out.flush()
-
-    def frame(self, t_s: float, error_deg: float, pwm: Sequence[int], real_time: bool) -> None:
-        if self.tty:
-            now = time.monotonic()
-            if now - self._last >= 0.1:
-                self._last = now
-                self.out.write(
-                    f"\r\x1b[K{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg pwm={list(pwm)}"
-                )
-                self.out.flush()
-        elif real_time and t_s >= self._next_t:
-            self._next_t = t_s + self.period_s
-            print(
-                f"{self._head} t={t_s:6.2f}s error={error_deg:6.2f}deg", file=self.out, flush=True
-            )
-
-    def trial_end(self, record: dict[str, Any]) -> None:
-        outcome = (
-            f"success {record['completion_s']:.2f} s"
-            if record["success"]
-            else f"failure ({record['completion_s']:g} s)"
-        )
-        self.line(f"{self._head} {outcome}, final error {record['final_error_deg']:.2f} deg")
-
-
-# --------------------------------------------------------------------------------------
-# The run
-# --------------------------------------------------------------------------------------
 class StudyRunner:
     """One participant's run into ``out_dir``. :meth:`run` goes through the plan; the
     caller owns the device client (HELLO is sent here, STOP in :meth:`run`'s finally)."""
@@ -793,7 +353,7 @@ class StudyRunner:
             self._lock_fd = None
 
     def _read_checked(self, path: str) -> list[dict[str, Any]]:
-        contents = read_jsonl(path)
+        contents = read_run_jsonl(path)
         if contents.damaged_tail is not None:
             try:
                 aside = set_aside_damaged_tail(path, contents)
@@ -916,20 +476,6 @@ class StudyRunner:
             start_quat=list(p.start_quat),
         )
 
-    def _trial_result(self, trial: PlannedTrial) -> Any:
-        """The TRIAL_RESULT of a trial the device has ended (already queued, or awaited)."""
-        from graspguide.link.client import LinkTimeout
-
-        client = self.client
-        if client.trial_results:
-            return client.trial_results.popleft()
-        try:
-            return client.wait_trial_result(client.timeout)
-        except LinkTimeout:
-            raise RunnerError(
-                f"trial {trial.trial_index}: the device ended the trial but no TRIAL_RESULT arrived"
-            ) from None
-
     def _no_result_error(self, trial: PlannedTrial, t_s: float) -> RunnerError:
         return RunnerError(
             f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s into a "
@@ -937,92 +483,24 @@ class StudyRunner:
             "following the poses?"
         )
 
-    def _closed_loop_pipelined(
-        self, trial: PlannedTrial, model: Any, rate: float, window: int, fh: Any
-    ) -> tuple[Any, int, float]:
-        """The closed loop with up to ``window`` POSEs in flight, giving exactly what
-        lockstep gives, for a source that separates feeling from acting (``feel``/``act``,
-        the virtual participant: docs/participant.md, "feel and act").
-
-        Lockstep: ``quat_i = model.step(t_i, pwm of TELEMETRY i-1)``, which is
-        ``model.feel(t_{i-1}, pwm of TELEMETRY i-1)`` then ``model.act(t_i)``. Here, in
-        batches: the poses i .. i+window-1 are ``model.act(t)`` with the TELEMETRY up to
-        i-1 felt, the batch goes out in one write (:meth:`DeviceClient.pose_batch`), and
-        each answer is felt (``model.feel``) as it comes, in order. The model guarantees
-        that act(t) depends only on PWM felt a reaction time before t, so with window <=
-        ``model.max_lead(rate)`` every pose equals, bit for bit, the lockstep one, with
-        one model step per pose and no copy; the device handles POSEs one after the
-        other (the answer to one does not depend on the later ones), so it answers as in
-        lockstep. POSEs sent after the one that ends the trial are refused (ERROR
-        not_allowed_in_state) and not recorded. An act() too far ahead raises the
-        model's FeelLagError, turned into _Diverged (the caller runs the trial again in
-        lockstep): a broken source cannot give a wrong record."""
-        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
-
-        p = self.protocol
-        k = trial.k
-        base = self._vt_base_us
-        client = self.client
-        write = fh.write
-        frame = self.progress.frame
-        act = model.act
-        feel = model.feel
-        lag_error = _feel_lag_error()
-        i = 0
-        poses = 0
-        limit = p.timeout_s + RESULT_MARGIN_S
-        while True:
-            batch = []
-            try:
-                for j in range(i, i + window):
-                    t = j / rate
-                    batch.append((t, tuple(map(float, act(t)))))
-            except lag_error as e:
-                raise _Diverged(f"pose {i + len(batch)} could not be acted ahead: {e}") from None
-            stamped = [(t, _virtual_us(base, t), q) for t, q in batch]
-            answers = client.pose_batch([(t_us, q) for _, t_us, q in stamped])
-            for j, ((t_s, t_us, quat), tel) in enumerate(zip(stamped, answers)):
-                if isinstance(tel, Error):
-                    raise RunnerError(
-                        f"trial {trial.trial_index}: the device refused pose "
-                        f"{i + j} ({ErrorCode(tel.code).name.lower()}) while "
-                        "the trial was running"
-                    )
-                poses += 1
-                pwm = tel.pwm[:k]
-                write(_frame_row(t_s, t_us, quat, tel))
-                frame(t_s, float(tel.error_deg), pwm, False)
-                if not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
-                    # The trial ended with this pose; the rest of the batch was refused.
-                    for rest in answers[j + 1 :]:
-                        if not isinstance(rest, Error):
-                            raise RunnerError(
-                                f"trial {trial.trial_index}: the device "
-                                "answered a POSE after the trial ended"
-                            )
-                    return self._trial_result(trial), poses, t_s
-                if t_s > limit:
-                    raise self._no_result_error(trial, t_s)
-                try:
-                    feel(t_s, list(pwm))
-                except ValueError as e:
-                    raise RunnerError(
-                        f"trial {trial.trial_index}: pose {i + j}: the model "
-                        f"refused the TELEMETRY's PWM: {e}"
-                    ) from None
-            i += len(batch)
+    def _trial_poses(self, trial: PlannedTrial, model: Any, window: int) -> Any:
+        """Where the trial's poses come from (pose_loop): the open-loop samples, the
+        closed loop in lockstep, or pipelined ``window`` deep."""
+        rate = self.protocol.pose_rate_hz  # the study's pose rate (the tracker's)
+        if model is None:
+            return OpenLoopPoses(self._poses(trial))
+        if window > 1:
+            return PipelinedPoses(model, rate, trial.k, window, _feel_lag_error())
+        return LockstepPoses(model.step, rate, trial.k)
 
     def run_trial(self, trial: PlannedTrial) -> dict[str, Any]:
-        from graspguide.link.client import host_time_us
-        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
-
         p = self.protocol
         self._scene(trial)
         self.client.trial_results.clear()
         self.client.start_trial(trial.trial_index & 0xFFFF, list(trial.wrench))
         contacts = [list(c) for c in p.hands[trial.k]]
-        closed = self.source.closed_loop
-        if closed:
+        model = None
+        if self.source.closed_loop:
             model = self.source.model  # type: ignore[attr-defined]
             model.begin_trial(
                 contacts=contacts,
@@ -1032,28 +510,36 @@ class StudyRunner:
                 mode=trial.mode,
                 start_quat=list(p.start_quat),
             )
-            rate = p.pose_rate_hz  # the study's pose rate (the tracker's)
-            it = None
-        else:
-            it = self._poses(trial)
         frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
         frames_path = frames_tmp[:-4]
         f = _FramesFile(frames_tmp)
         f.write(_FRAME_HEADER)
-        result = None
-        poses = 0
-        pwm: list[int] = [0] * trial.k
-        t_s = 0.0
+        k = trial.k
+        real_time = not self.virtual_clock
+        progress_frame = self.progress.frame
+
+        def on_frame(fr: Frame) -> None:
+            tel = fr.tel
+            f.write(_frame_row(fr.t_s, fr.t_us, fr.quat, tel))
+            progress_frame(fr.t_s, float(tel.error_deg), tel.pwm[:k], real_time)
+
         wall0 = time.monotonic()
-        window = self._window(closed)
+        window = self._window(model is not None)
         try:
-            i = 0
-            while window > 1:
+            while True:
+                loop = PoseLoop(
+                    self.client,
+                    self.virtual_clock,
+                    base_us=self._vt_base_us,
+                    limit_s=p.timeout_s + RESULT_MARGIN_S,
+                    wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
+                    on_frame=on_frame,
+                )
                 try:
-                    result, poses, t_s = self._closed_loop_pipelined(trial, model, rate, window, f)
+                    done = loop.run(self._trial_poses(trial, model, window))
                     break
-                except _Diverged as e:
-                    # Never expected (see _closed_loop_pipelined); the poses the device
+                except Diverged as e:
+                    # Never expected (see pose_loop.PipelinedPoses); the poses the device
                     # got are not the lockstep ones: run the whole trial again in lockstep.
                     self.pipeline_fallbacks += 1
                     print(
@@ -1065,43 +551,24 @@ class StudyRunner:
                     f.restart()
                     self._restart_trial(trial, model, contacts)
                     window = 1
-            while window <= 1:
-                if closed:
-                    t_s = i / rate
-                    quat = model.step(t_s, list(pwm))
-                    pose_contacts = None
-                else:
-                    t_s, quat, pose_contacts = next(it)  # type: ignore[arg-type]
-                quat = [float(x) for x in quat]
-                if self.virtual_clock:
-                    t_us = _virtual_us(self._vt_base_us, t_s)
-                else:
-                    wait = wall0 + t_s - time.monotonic()
-                    if wait > 0:
-                        time.sleep(wait)
-                    t_us = host_time_us()
-                tel = self.client.pose(t_us, quat, pose_contacts)
-                poses += 1
-                i += 1
-                pwm = [int(x) for x in tel.pwm[: trial.k]]
-                f.write(_frame_row(t_s, t_us, quat, tel))
-                self.progress.frame(t_s, float(tel.error_deg), pwm, not self.virtual_clock)
-                if self.client.trial_results or not int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING:
-                    result = self._trial_result(trial)
-                    break
-                if t_s > p.timeout_s + RESULT_MARGIN_S and self.virtual_clock:
-                    raise self._no_result_error(trial, t_s)
-                if (
-                    not self.virtual_clock
-                    and time.monotonic() - wall0 > p.timeout_s + 10 * RESULT_MARGIN_S
-                ):
-                    raise RunnerError(
-                        f"trial {trial.trial_index}: no TRIAL_RESULT after "
-                        f"{time.monotonic() - wall0:.1f} s"
-                    )
+                except TrialOverrun as e:
+                    if e.real_time:
+                        raise RunnerError(
+                            f"trial {trial.trial_index}: no TRIAL_RESULT after {e.wall_s:.1f} s"
+                        ) from None
+                    raise self._no_result_error(trial, e.t_s) from None
+                except PoseLoopError as e:
+                    raise RunnerError(f"trial {trial.trial_index}: {e}") from None
             f.sync()
         finally:
             f.close()
+        result = done.trial_result
+        t_s = done.t_s
+        poses = done.frames
+        if result is None:
+            raise RunnerError(
+                f"trial {trial.trial_index}: the device ended the trial but no TRIAL_RESULT arrived"
+            )
         if int(result.trial_id) != trial.trial_index & 0xFFFF:
             raise RunnerError(
                 f"trial {trial.trial_index}: the device answered with the "
@@ -1278,19 +745,6 @@ def _frame_row(t_s: float, t_us: int, quat: Sequence[float], tel: Any) -> str:
     )
 
 
-def _virtual_us(base_us: int, t_s: float) -> int:
-    """The POSE timestamp of trial time t_s on the virtual clock (32-bit, wrapping)."""
-    return (base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
-
-
-class _Diverged(Exception):
-    """A pose sent ahead is not the lockstep one (the trial is run again in lockstep)."""
-
-
-#: Most POSEs ever in flight.
-MAX_PIPELINE = 32
-
-
 def _feel_lag_error() -> Any:
     try:
         from graspguide.study.participant import FeelLagError
@@ -1299,27 +753,9 @@ def _feel_lag_error() -> Any:
     return FeelLagError
 
 
-def pipeline_window(model: Any, pose_rate_hz: float) -> int:
-    """How many POSEs a closed-loop source may have in flight (1 = lockstep).
-
-    A source that separates feeling from acting (callable ``feel``, ``act`` and
-    ``max_lead``, like the virtual participant: docs/participant.md, "feel and act") is
-    pipelined ``model.max_lead(pose_rate_hz)`` poses deep (at most MAX_PIPELINE); for
-    the virtual participant floor(reaction_time_s * rate) - 1, 20 at 0.21 s and 100 Hz
-    (its pose at t depends only on PWM felt a reaction time earlier). Any other source
-    runs in lockstep."""
-    if not all(callable(getattr(model, name, None)) for name in ("feel", "act", "max_lead")):
-        return 1
-    try:
-        n = int(model.max_lead(float(pose_rate_hz)))
-    except Exception:
-        return 1
-    return max(1, min(MAX_PIPELINE, n))
-
-
 def summary_lines(out_dir: str, participant: str) -> list[str]:
     """Per-modality successes and mean completion time of a participant (main trials)."""
-    recs = read_jsonl(os.path.join(out_dir, participant, "trials.jsonl")).records
+    recs = read_run_jsonl(os.path.join(out_dir, participant, "trials.jsonl")).records
     rows: dict[tuple[int, str], list[dict[str, Any]]] = {}
     for r in recs:
         if not r.get("familiarization"):
@@ -1334,18 +770,8 @@ def summary_lines(out_dir: str, participant: str) -> list[str]:
 
 __all__ = [
     "StudyRunner",
-    "RunnerError",
-    "RunnerSource",
-    "ClosedLoopSource",
-    "OpenLoopSource",
-    "open_runner_source",
-    "load_tlx_file",
-    "ask_tlx",
-    "check_tlx_value",
-    "read_jsonl",
-    "Progress",
-    "TLX_SCALES",
     "FRAME_COLUMNS",
     "TRIAL_FIELDS",
+    "read_run_jsonl",
     "summary_lines",
 ]

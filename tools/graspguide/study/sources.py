@@ -38,88 +38,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graspguide.core.rotations import (
+    matrix_to_quat,
+    quat_angle_deg,
+    quat_from_axis_angle,
+    quat_mul,
+    quat_to_matrix,
+    slerp,
+)
+from graspguide.core.vocabulary import FINGERS
+
 Sample = tuple[float, tuple[float, float, float, float], list[list[float]] | None]
-FINGERS = ("thumb", "index", "middle", "palm")
 QUAT_COLUMNS = ["t_s", "qw", "qx", "qy", "qz"]
 
 
 class SourceError(ValueError):
     """A pose source that cannot be used (bad spec, bad file); says what to fix."""
-
-
-# --------------------------------------------------------------------------------------
-# Quaternion helpers (w, x, y, z; Hamilton product; active rotations)
-# --------------------------------------------------------------------------------------
-def quat_mul(a, b) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
-
-
-def quat_from_axis_angle(axis, angle_rad: float) -> np.ndarray:
-    axis = np.asarray(axis, dtype=float)
-    n = np.linalg.norm(axis)
-    if n < 1e-15:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    axis = axis / n
-    return np.concatenate([[math.cos(angle_rad / 2)], math.sin(angle_rad / 2) * axis])
-
-
-def quat_to_matrix(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_quat(m) -> np.ndarray:
-    m = np.asarray(m, dtype=float)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0 else -q
-
-
-def quat_angle_deg(a, b) -> float:
-    """The rotation angle between two orientations, in degrees."""
-    d = abs(float(np.dot(np.asarray(a) / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b))))
-    return math.degrees(2 * math.acos(min(1.0, d)))
-
-
-def slerp(a, b, u: float) -> np.ndarray:
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    d = float(np.dot(a, b))
-    if d < 0:
-        b, d = -b, -d
-    if d > 0.9995:
-        q = a + u * (b - a)
-        return q / np.linalg.norm(q)
-    th = math.acos(d)
-    return (math.sin((1 - u) * th) * a + math.sin(u * th) * b) / math.sin(th)
 
 
 # --------------------------------------------------------------------------------------
@@ -374,7 +308,7 @@ def _contact_units_problem(
 ) -> str | None:
     """What is wrong with a pose's contacts in the convention's unit (a hand spans 5 mm to
     0.5 m), or None. All contacts at one point are left to the device (coincident)."""
-    from graspguide.study.scene_file import hand_span, hand_span_problem
+    from graspguide.core.units import hand_span, hand_span_problem
 
     if hand_span(positions) == 0.0:
         return None

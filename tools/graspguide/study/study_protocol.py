@@ -35,21 +35,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from graspguide.core.units import UNITS, hand_span_problem, moment_unit_problem
+from graspguide.core.vocabulary import CONSTRAINT_MODELS, FINGERS, MODALITIES
 from graspguide.study.scene_file import (
-    CONSTRAINTS,
-    FINGERS,
     TRIAL_DEFAULTS,
-    UNITS,
     canonical_json,
     check_trial_fields,
     config_hash,
     file_unit_fix,
-    hand_span_problem,
-    moment_unit_problem,
 )
 from graspguide.study.toml_file import load_toml, loads_toml
 
-MODALITIES = ("F+C", "Fperp+C", "F+V", "Fperp+V")
 MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
 CONTACT_ORDERS = ("alternate", "fixed")
 WRENCH_ORDERS = ("shuffle", "fixed")
@@ -337,7 +333,7 @@ def parse_protocol(data: dict[str, Any], source: str = "<protocol>") -> Protocol
         lambda key, message: c.fail(f"[trial] {key}", message),
     )
     threshold, hold, timeout = (trial[k] for k in ("threshold_deg", "hold_s", "timeout_s"))
-    constraints = c.choice("[trial] constraints", get("trial", "constraints"), CONSTRAINTS)
+    constraints = c.choice("[trial] constraints", get("trial", "constraints"), CONSTRAINT_MODELS)
     start_quat = c.vector("[trial] start_quat", get("trial", "start_quat"), 4)
     qn = math.sqrt(sum(x * x for x in start_quat))
     if abs(qn - 1.0) > 1e-6:

@@ -44,11 +44,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from graspguide.study.jobs import (
-    EXIT_FAILURE,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
-    EXIT_USAGE,
     TrialJob,
     count_lines,
     default_protocol,
@@ -56,9 +53,6 @@ from graspguide.study.jobs import (
 )
 from graspguide.study.jobs import (
     default_out as _default_out,
-)
-from graspguide.study.jobs import (
-    int_arg as _int_arg,
 )
 from graspguide.study.jobs import (
     repo_root as _repo_root,
@@ -72,21 +66,6 @@ SIMULATED_NOTE = (
     "SIMULATED: virtual participants (graspguide.study.participant, a model of a "
     "person) on the simulated device; not human data"
 )
-
-DESCRIPTION = """\
-The guidance speed-accuracy trade, SIMULATED: runs the study protocol with the virtual
-participant on the simulated device at other alignment thresholds (--thresholds, at the
-protocol's pose rate) and other pose rates (--rates, at the protocol's threshold), for
-every modality, and reports success rate and completion time (failures counted as the
-timeout, as the paper does) against each: OUT/sweep.json, OUT/sweep.png and a table.
-
-Each point runs a derived protocol (same geometry, seed, conditions; --wrenches of the
-seeded wrench set; no familiarization) through `graspguide trial --port sim`, one
-process per (point, participant), --jobs at a time. Interrupted, the same command
-resumes (completed trials are kept in OUT/points/).
-
-Exit status: 0 done, 1 a run failed (its log is named), 2 usage error, 130 interrupted.
-"""
 
 
 class SweepError(ValueError):
@@ -120,7 +99,7 @@ def parse_values(text: str, what: str, lo: float, hi: float) -> tuple[float, ...
 
 
 def parse_modalities(text: str) -> tuple[str, ...]:
-    from graspguide.study.study_protocol import MODALITIES
+    from graspguide.core.vocabulary import MODALITIES
 
     items = [s.strip() for s in str(text).split(",") if s.strip()]
     if not items:
@@ -143,102 +122,6 @@ def parse_modalities(text: str) -> tuple[str, ...]:
 
 def default_out() -> str:
     return _default_out("guidance-sweep")
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--protocol",
-        default=None,
-        metavar="FILE",
-        help="study protocol (default: protocols/paper.toml of the repository)",
-    )
-    p.add_argument(
-        "--thresholds",
-        default=",".join(f"{v:g}" for v in DEFAULT_THRESHOLDS),
-        metavar="LIST",
-        help="alignment thresholds in degrees, each in (0, 90), "
-        "run at the protocol's pose rate (default 1,2,3,5,7,10)",
-    )
-    p.add_argument(
-        "--rates",
-        default=",".join(f"{v:g}" for v in DEFAULT_RATES),
-        metavar="LIST",
-        help="pose rates in Hz, each in [5, 2000], run at the "
-        "protocol's threshold (default 30,60,100,240)",
-    )
-    p.add_argument(
-        "--grid",
-        action="store_true",
-        help="also run every threshold x rate pair (else one factor at a time)",
-    )
-    p.add_argument(
-        "--modalities",
-        default=None,
-        metavar="LIST",
-        help="modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both "
-        "policies); default: the protocol's",
-    )
-    p.add_argument(
-        "--contacts",
-        default=None,
-        metavar="LIST",
-        help="contact counts, 3 and/or 4 (default: the protocol's)",
-    )
-    p.add_argument(
-        "--participants",
-        type=_int_arg(1, 1000),
-        default=2,
-        metavar="N",
-        help="virtual participants U1..UN per point (default 2)",
-    )
-    p.add_argument(
-        "--wrenches",
-        type=_int_arg(1, 1000),
-        default=4,
-        metavar="N",
-        help="target wrenches per session: the first N of the protocol's seeded "
-        "draw, its single/multi split scaled (default 4)",
-    )
-    p.add_argument(
-        "--source",
-        default=DEFAULT_SOURCE,
-        metavar="SPEC",
-        help="participant[:key=value,...] (default; told each point's threshold, "
-        "hold and rate unless given here) or another simulated source of "
-        "`graspguide trial` (synthetic[:...]: open loop, the same trajectory "
-        "at every threshold)",
-    )
-    p.add_argument(
-        "--out",
-        default=None,
-        metavar="DIR",
-        help="sweep folder (default logs/guidance-sweep in the repository): "
-        "points/, sweep.json, sweep.png; running again resumes",
-    )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=_int_arg(1, 256),
-        default=None,
-        metavar="N",
-        help="runner processes at a time, each with its own simulated device "
-        "(default: the CPU count)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
-
-
-def register(subparsers) -> argparse.ArgumentParser:
-    """Add `graspguide sweep` to the CLI's subparsers."""
-    p = subparsers.add_parser(
-        "sweep",
-        help="the speed-accuracy trade, simulated: success rate and completion "
-        "time against the threshold and the pose rate, per modality",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    add_arguments(p)
-    p.set_defaults(handler=run, command_parser=p)
-    return p
 
 
 # --------------------------------------------------------------------------------------
@@ -341,7 +224,7 @@ def _toml_value(v: Any) -> str:
 
 def protocol_toml(protocol) -> str:
     """A protocol file (metres) that loads back to ``protocol`` (same config hash)."""
-    from graspguide.study.study_protocol import FINGERS
+    from graspguide.core.vocabulary import FINGERS
 
     d = protocol.to_dict()
     lines = [f"# A point of `graspguide sweep` (SIMULATED): derived from {protocol.source}", ""]
@@ -417,7 +300,7 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def read_point_trials(study_dir: str, participants: Sequence[str]) -> list[dict[str, Any]]:
-    from graspguide.study.runner import read_jsonl
+    from graspguide.study.records import read_jsonl
 
     out: list[dict[str, Any]] = []
     for pid in participants:
@@ -648,8 +531,9 @@ def run_sweep(
     err=None,
 ) -> tuple[int, dict[str, Any] | None]:
     """Run (or resume) the sweep into ``out``; returns (exit status, result dict)."""
-    from graspguide.study.runner import RunnerError, open_runner_source
+    from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import load_protocol, plan
+    from graspguide.study.trial_sources import open_runner_source
 
     err = err or sys.stderr
     t0 = time.monotonic()
@@ -817,7 +701,7 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.runner import RunnerError
+    from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
 
     prog = "graspguide sweep"
@@ -894,27 +778,7 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """`graspguide sweep` on its own (``python -m graspguide.study.sweep ...``)."""
-    from graspguide.cli.app import ArgumentParser
-
-    parser = ArgumentParser(
-        prog="graspguide sweep",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    add_arguments(parser)
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(argv)
-    try:
-        return run(args)
-    except KeyboardInterrupt:
-        return EXIT_INTERRUPTED
-
-
 __all__ = [
-    "register",
-    "main",
     "run",
     "run_sweep",
     "sweep_points",
@@ -929,7 +793,3 @@ __all__ = [
     "parse_modalities",
     "SweepError",
 ]
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,0 +1,73 @@
+"""`graspguide analyze`: the paper's tables, statistics and Figure 4 from study logs
+(graspguide.study.analysis)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK
+
+HELP = "the paper's Tables I-III, statistics and Figure 4 from study logs"
+
+DESCRIPTION = """\
+The paper's analysis of a study's logs: Table I (successes, failures and success rate
+per condition), Table II (mean and SD of completion time), Table III (NASA-TLX mean and
+SD, C vs V), and the statistics of Section IV: per-participant means per modality
+pooled over contact counts, boxplot outliers (beyond 1.5 IQR) removed with their
+paired values (the participant's row), square-root transform, Shapiro-Wilk, Mauchly's
+test, one-way repeated-measures ANOVA and Bonferroni-corrected paired t-tests; Figure
+4 (mean +- SD with p-values) as PNG and SVG; a Markdown report.
+
+DIR is a study folder (one folder per participant, each with trials.jsonl and
+tlx.jsonl) or a participant folder; give several to pool them. Prints Tables I-II and
+the ANOVA; writes report.md, figure4.png, figure4.svg and CSV tables to --out.
+Simulated records make the report and the output say SIMULATED DATA. With a single
+participant (a pilot), or a single one left after outlier removal, the tables, the
+participant means and Figure 4 are written and the output says that the inferential
+statistics (ANOVA, t-tests) need at least 2 participants.
+
+Exit status: 0 done, 1 bad or insufficient data (the message says what and where),
+2 usage error.
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "dirs", nargs="+", metavar="DIR", help="study folder(s) or participant folder(s)"
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help="where to write report.md, figure4.png/.svg and the CSV tables "
+        "(default: analysis/ in the first study folder)",
+    )
+    p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="do not remove boxplot outliers before the ANOVA (the paper does)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from graspguide.study.analysis import (
+        AnalysisError,
+        analyze,
+        default_out_dir,
+        summary_text,
+        write_outputs,
+    )
+
+    try:
+        res = analyze(args.dirs, remove_outliers=not args.keep_outliers)
+        out = Path(args.out) if args.out else default_out_dir(args.dirs)
+        written = write_outputs(res, out)
+    except AnalysisError as e:
+        print(f"graspguide analyze: error: {e}", file=sys.stderr)
+        return EXIT_FAILURE
+    print(summary_text(res))
+    print()
+    print(f"Wrote {', '.join(p.name for p in written)} to {out}")
+    return EXIT_OK

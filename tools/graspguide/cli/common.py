@@ -1,0 +1,129 @@
+"""What every command's parser shares: the argument parser that takes negative numbers
+as values, the numeric argument types, the port arguments, connecting to a device,
+SIGTERM/SIGHUP as Ctrl-C, and the one-line error report."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import re
+import signal
+import sys
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from graspguide.exit_codes import EXIT_FAILURE
+from graspguide.link.transport import DEFAULT_BAUDRATE
+
+_NUM = r"(?:(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?|inf(?:inity)?|nan)"
+# A word that starts with a negative number and goes on as a comma-separated list of
+# numbers: "-1,0,0", "-1e-3", "-.5,2", "-inf".
+_NEGATIVE_VALUE = re.compile(rf"-{_NUM}(?:\s*,\s*[-+]?{_NUM})*", re.IGNORECASE)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse takes a word that starts with "-" for an option unless it is a plain
+    negative number, so `--wrench -1,0,0` failed with "expected one argument". Here every
+    negative number or list of numbers is a value (no option of these commands looks like
+    one); the option's type then checks it. Subparsers are made of this class too."""
+
+    def _parse_optional(self, arg_string):
+        if _NEGATIVE_VALUE.fullmatch(arg_string) and arg_string not in self._option_string_actions:
+            return None
+        return super()._parse_optional(arg_string)
+
+
+def int_arg(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: an integer in [lo, hi]."""
+
+    def conv(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
+        return v
+
+    return conv
+
+
+positive_int = int_arg(1, 1_000_000)
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: seconds in (0, 3600]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 < value <= 3600:
+        raise argparse.ArgumentTypeError(f"must be in (0, 3600] seconds, got {value}")
+    return value
+
+
+def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
+    p.add_argument(
+        "--port",
+        "-p",
+        metavar="PORT",
+        required=required,
+        help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
+        "`graspguide ports` lists them), or 'sim' to start the simulated "
+        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM)",
+    )
+    p.add_argument(
+        "--baud",
+        type=positive_int,
+        default=DEFAULT_BAUDRATE,
+        metavar="RATE",
+        help=f"baud rate (default {DEFAULT_BAUDRATE})",
+    )
+    p.add_argument(
+        "--timeout",
+        type=positive_float,
+        default=1.0,
+        metavar="S",
+        help="seconds to wait for each answer of the device (default 1)",
+    )
+
+
+@contextlib.contextmanager
+def signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP (a `kill`, a closed terminal, a supervisor stopping the run)
+    raise KeyboardInterrupt in the main thread, as Ctrl-C does, so every command leaves
+    through the same path: STOP sent, logs closed, exit status 130. Only the first one
+    interrupts: a second signal must not cut the STOP on the way out short."""
+    fired = []
+
+    def interrupt(signum, frame):
+        if not fired:
+            fired.append(signum)
+            raise KeyboardInterrupt
+
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def connect(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(transport, client) for --port after HELLO, or raise LinkError."""
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.transport import open_port
+
+    transport = open_port(args.port, baudrate=args.baud)
+    try:
+        client = DeviceClient(transport, timeout=args.timeout)
+        client.hello()
+    except BaseException:
+        transport.close()
+        raise
+    return transport, client
+
+
+def fail(command: str, e: BaseException) -> int:
+    print(f"graspguide {command}: error: {e}", file=sys.stderr)
+    return EXIT_FAILURE

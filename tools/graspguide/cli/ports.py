@@ -1,0 +1,51 @@
+"""`graspguide ports`: the serial ports, and the simulated device 'sim'."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from graspguide.cli.common import fail
+from graspguide.exit_codes import EXIT_OK
+from graspguide.link.transport import SIM_PORT, LinkError
+
+HELP = "list serial ports (and the simulated device 'sim')"
+DESCRIPTION = (
+    "List the serial ports pyserial finds, plus the pseudo-port 'sim' (the "
+    "simulated device, started on demand by --port sim)."
+)
+RAW_DESCRIPTION = False
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+
+
+def run(args: argparse.Namespace) -> int:
+    from graspguide.link.transport import find_sim_binary, list_serial_ports
+
+    try:
+        ports = list_serial_ports()
+    except LinkError as e:
+        return fail("ports", e)
+    try:
+        sim = {"device": SIM_PORT, "description": "simulated device", "hwid": find_sim_binary()}
+    except LinkError as e:
+        sim = {
+            "device": SIM_PORT,
+            "description": "simulated device (not available)",
+            "hwid": str(e).replace("\n", " "),
+        }
+    rows = ports + [sim]
+    if args.json:
+        for row in rows:
+            print(json.dumps(row))
+        return EXIT_OK
+    width = max(len(r["device"]) for r in rows)
+    for row in rows:
+        extra = f"  [{row['hwid']}]" if row["hwid"] and row["hwid"] != "n/a" else ""
+        print(f"{row['device']:<{width}}  {row['description']}{extra}")
+    if not ports:
+        print("(no serial ports found: is the board plugged in?)", file=sys.stderr)
+    return EXIT_OK

@@ -1,0 +1,334 @@
+"""The one pose loop: poses to a device in a started trial, TELEMETRY back, until the trial
+ends (TRIAL_RESULT) or the poses do. `graspguide stream`, `graspguide trial` and the demo
+all run their trials through :meth:`PoseLoop.run`.
+
+What varies is given, not re-implemented:
+
+* where the poses come from (:class:`OpenLoopPoses`: samples that ignore the motors;
+  :class:`LockstepPoses`: ``step(t_s, pwm)`` of a closed-loop source, fed the previous
+  TELEMETRY's PWM; :class:`PipelinedPoses`: ``act``/``feel`` of a source that separates
+  them, up to ``window`` POSEs in flight, bit for bit the lockstep poses);
+* the clock: the virtual one (the POSE's timestamp is the pose's trial time, plus
+  ``base_us``, so a simulated device runs as fast as the link allows) or real time (each
+  pose waits for its time; ``skip_late`` drops a pose more than two periods late);
+* what is done with each pose and its TELEMETRY (``on_send``, ``on_frame``: the logs,
+  the frame CSV, the live view);
+* when to give up without a TRIAL_RESULT (``limit_s`` of trial time on the virtual
+  clock, ``wall_limit_s`` in real time): :class:`TrialOverrun`.
+
+STOP is the caller's job, as are SET_SCENE and START_TRIAL.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+Pose = tuple[float, Sequence[float], Any]  # (t_s, quat w, x, y, z, contacts or None)
+
+
+class PoseLoopError(Exception):
+    """The trial cannot go on; the message says why (the caller names the trial)."""
+
+
+class TrialOverrun(PoseLoopError):
+    """No TRIAL_RESULT by the limit: ``t_s`` of trial time, ``wall_s`` of wall time."""
+
+    def __init__(self, t_s: float, wall_s: float, real_time: bool):
+        super().__init__(f"no TRIAL_RESULT after {wall_s:.1f} s")
+        self.t_s = t_s
+        self.wall_s = wall_s
+        self.real_time = real_time
+
+
+class Diverged(PoseLoopError):
+    """A pose sent ahead would not be the lockstep one (the caller runs the trial again
+    in lockstep)."""
+
+
+@dataclass(slots=True)
+class Frame:
+    """One POSE sent and its TELEMETRY."""
+
+    index: int  # the pose's number in the trial, 0, 1, ...
+    t_s: float
+    t_us: int
+    quat: Sequence[float]
+    contacts: Any
+    tel: Any
+
+
+@dataclass
+class LoopResult:
+    trial_result: Any  # the TRIAL_RESULT, or None (the poses ended first)
+    frames: int  # TELEMETRY received
+    sent: int  # POSEs sent (one more than frames when the device refused the last)
+    late_skipped: int  # poses dropped in real time for being too late
+    t_s: float  # the last frame's trial time
+    last_tel: Any  # the last TELEMETRY, or None
+    ended: bool  # the device said the trial ended
+
+
+# --------------------------------------------------------------------------------------
+# Where the poses come from
+# --------------------------------------------------------------------------------------
+class OpenLoopPoses:
+    """Samples ``(t_s, quat, contacts)`` that do not depend on the motors."""
+
+    window = 1
+
+    def __init__(self, samples: Iterable[Pose]):
+        self._it: Iterator[Pose] = iter(samples)
+
+    def next_batch(self, index: int) -> list[Pose]:
+        for t_s, quat, contacts in self._it:
+            return [(t_s, [float(x) for x in quat], contacts)]
+        return []
+
+    def feel(self, index: int, t_s: float, pwm: Sequence[int]) -> None:
+        pass
+
+
+class LockstepPoses:
+    """A closed-loop source: pose i is ``step(i / rate_hz, pwm of TELEMETRY i-1)`` (zeros
+    for i = 0), one POSE in flight."""
+
+    window = 1
+
+    def __init__(self, step: Callable[[float, list[int]], Sequence[float]], rate_hz: float, k: int):
+        self.step = step
+        self.rate_hz = rate_hz
+        self.pwm: list[int] = [0] * k
+
+    def next_batch(self, index: int) -> list[Pose]:
+        t_s = index / self.rate_hz
+        return [(t_s, [float(x) for x in self.step(t_s, list(self.pwm))], None)]
+
+    def feel(self, index: int, t_s: float, pwm: Sequence[int]) -> None:
+        self.pwm = [int(x) for x in pwm[: len(self.pwm)]]
+
+
+class PipelinedPoses:
+    """A closed-loop source that separates feeling from acting (``feel``/``act``, the
+    virtual participant: docs/participant.md, "feel and act"), ``window`` POSEs in flight.
+
+    Lockstep: ``quat_i = model.step(t_i, pwm of TELEMETRY i-1)``, which is
+    ``model.feel(t_{i-1}, pwm of TELEMETRY i-1)`` then ``model.act(t_i)``. Here, in
+    batches: the poses i .. i+window-1 are ``model.act(t)`` with the TELEMETRY up to i-1
+    felt, the batch goes out in one write (:meth:`DeviceClient.pose_batch`), and each
+    answer is felt as it comes, in order. The model guarantees that act(t) depends only
+    on PWM felt a reaction time before t, so with window <= ``model.max_lead(rate)``
+    every pose equals, bit for bit, the lockstep one, with one model step per pose and no
+    copy; the device handles POSEs one after the other (the answer to one does not
+    depend on the later ones), so it answers as in lockstep. An act() too far ahead
+    raises the model's ``lag_error``, turned into :class:`Diverged`: a broken source
+    cannot give a wrong record."""
+
+    def __init__(
+        self, model: Any, rate_hz: float, k: int, window: int, lag_error: type[BaseException]
+    ):
+        self.act = model.act
+        self._feel = model.feel
+        self.rate_hz = rate_hz
+        self.k = k
+        self.window = window
+        self.lag_error = lag_error
+
+    def next_batch(self, index: int) -> list[Pose]:
+        batch: list[Pose] = []
+        try:
+            for j in range(index, index + self.window):
+                t = j / self.rate_hz
+                batch.append((t, tuple(map(float, self.act(t))), None))
+        except self.lag_error as e:
+            raise Diverged(f"pose {index + len(batch)} could not be acted ahead: {e}") from None
+        return batch
+
+    def feel(self, index: int, t_s: float, pwm: Sequence[int]) -> None:
+        try:
+            self._feel(t_s, list(pwm[: self.k]))
+        except ValueError as e:
+            raise PoseLoopError(
+                f"pose {index}: the model refused the TELEMETRY's PWM: {e}"
+            ) from None
+
+
+#: Most POSEs ever in flight.
+MAX_PIPELINE = 32
+
+
+def pipeline_window(model: Any, pose_rate_hz: float) -> int:
+    """How many POSEs a closed-loop source may have in flight (1 = lockstep).
+
+    A source that separates feeling from acting (callable ``feel``, ``act`` and
+    ``max_lead``, like the virtual participant: docs/participant.md, "feel and act") is
+    pipelined ``model.max_lead(pose_rate_hz)`` poses deep (at most MAX_PIPELINE); for
+    the virtual participant floor(reaction_time_s * rate) - 1, 20 at 0.21 s and 100 Hz
+    (its pose at t depends only on PWM felt a reaction time earlier). Any other source
+    runs in lockstep."""
+    if not all(callable(getattr(model, name, None)) for name in ("feel", "act", "max_lead")):
+        return 1
+    try:
+        n = int(model.max_lead(float(pose_rate_hz)))
+    except Exception:
+        return 1
+    return max(1, min(MAX_PIPELINE, n))
+
+
+# --------------------------------------------------------------------------------------
+# The loop
+# --------------------------------------------------------------------------------------
+class PoseLoop:
+    """Runs one started trial on ``client`` (see the module's docstring)."""
+
+    def __init__(
+        self,
+        client: Any,
+        virtual_clock: bool,
+        base_us: int = 0,
+        skip_late: bool = False,
+        period_s: float = 0.0,
+        limit_s: float | None = None,
+        wall_limit_s: float | None = None,
+        on_send: Callable[[int, float, Sequence[float], Any], None] | None = None,
+        on_frame: Callable[[Frame], None] | None = None,
+    ):
+        self.client = client
+        self.virtual_clock = virtual_clock
+        self.base_us = base_us
+        self.skip_late = skip_late
+        self.period_s = period_s
+        self.limit_s = limit_s
+        self.wall_limit_s = wall_limit_s
+        self.on_send = on_send
+        self.on_frame = on_frame
+        self.sent = 0
+        self.frames = 0
+        self.late_skipped = 0
+        self.wall0 = time.monotonic()
+
+    def _stamp(self, t_s: float) -> int | None:
+        """The POSE timestamp of trial time t_s, after waiting for it in real time; None
+        for a pose too late to send."""
+        if self.virtual_clock:
+            return (self.base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
+        from graspguide.link.client import host_time_us
+
+        wait = self.wall0 + t_s - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        elif self.skip_late and self.period_s and -wait > 2 * self.period_s:
+            return None  # too late for this sample: skip it, keep the pace
+        return host_time_us()
+
+    def _send(self, stamped: list[tuple[float, int, Sequence[float], Any]]) -> list[Any] | None:
+        """The answers to the stamped poses, or None when the device refused the only one
+        because the trial had already ended (its TRIAL_RESULT is queued)."""
+        from graspguide.link.client import DeviceError
+        from graspguide.link.messages import ErrorCode
+
+        client = self.client
+        if len(stamped) > 1:
+            answers = client.pose_batch([(t_us, q) for _, t_us, q, _ in stamped])
+            self.sent += len(stamped)
+            return answers
+        _, t_us, quat, contacts = stamped[0]
+        try:
+            tel = client.pose(t_us, quat, contacts)
+        except DeviceError as e:
+            client.drain(0.05)
+            if e.code == ErrorCode.NOT_ALLOWED_IN_STATE and client.trial_results:
+                self.sent += 1
+                return None
+            raise
+        self.sent += 1
+        return [tel]
+
+    def run(self, poses: Any) -> LoopResult:
+        """The trial until it ends or ``poses`` run out; raises PoseLoopError, LinkError."""
+        from graspguide.link.client import LinkTimeout
+        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
+
+        client = self.client
+        lockstep = poses.window <= 1
+        on_frame = self.on_frame
+        feel = poses.feel
+        # trial time beyond which to give up, on the virtual clock (real time: the wall)
+        limit_s = self.limit_s if self.virtual_clock and self.limit_s is not None else None
+        index = 0
+        t_s = 0.0
+        last_tel = None
+        ended = False
+        while not ended:
+            batch = poses.next_batch(index)
+            if not batch:
+                break
+            stamped = []
+            for t, quat, contacts in batch:
+                t_us = self._stamp(t)
+                if t_us is None:
+                    self.late_skipped += 1
+                    continue
+                if self.on_send is not None:
+                    self.on_send(t_us, t, quat, contacts)
+                stamped.append((t, t_us, quat, contacts))
+            if not stamped:
+                continue
+            answers = self._send(stamped)
+            if answers is None:
+                ended = True
+                break
+            for j, ((t_s, t_us, quat, contacts), tel) in enumerate(zip(stamped, answers)):
+                if isinstance(tel, Error):
+                    raise PoseLoopError(
+                        f"the device refused pose {index + j} "
+                        f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
+                    )
+                self.frames += 1
+                last_tel = tel
+                if on_frame is not None:
+                    on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
+                running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
+                if not running or (lockstep and client.trial_results):
+                    # The trial ended with this pose; the rest of the batch was refused.
+                    for rest in answers[j + 1 :]:
+                        if not isinstance(rest, Error):
+                            raise PoseLoopError("the device answered a POSE after the trial ended")
+                    ended = True
+                    break
+                if limit_s is not None:
+                    if t_s > limit_s:
+                        raise TrialOverrun(t_s, time.monotonic() - self.wall0, False)
+                elif self.wall_limit_s is not None and not self.virtual_clock:
+                    wall = time.monotonic() - self.wall0
+                    if wall > self.wall_limit_s:
+                        raise TrialOverrun(t_s, wall, True)
+                feel(index + j, t_s, tel.pwm)
+            index += len(batch)
+        if ended and not client.trial_results:
+            # the pose that ended the trial: its TRIAL_RESULT follows the TELEMETRY
+            try:
+                client.trial_results.appendleft(client.wait_trial_result(client.timeout))
+            except LinkTimeout:
+                pass
+        if not client.trial_results:
+            client.drain(0.05)
+        result = client.trial_results.popleft() if client.trial_results else None
+        return LoopResult(result, self.frames, self.sent, self.late_skipped, t_s, last_tel, ended)
+
+
+__all__ = [
+    "PoseLoop",
+    "PoseLoopError",
+    "TrialOverrun",
+    "Diverged",
+    "Frame",
+    "LoopResult",
+    "OpenLoopPoses",
+    "LockstepPoses",
+    "PipelinedPoses",
+    "pipeline_window",
+    "MAX_PIPELINE",
+]

@@ -1,0 +1,168 @@
+"""The NASA-TLX questionnaire after each session: its six scales, asked on a terminal or
+read from a --tlx file, checked against the participant's plan."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from typing import Any, TextIO
+
+from graspguide.study.errors import RunnerError
+from graspguide.study.study_protocol import Session
+
+TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
+TLX_NAMES = {
+    "MD": "Mental Demand",
+    "TD": "Temporal Demand",
+    "PD": "Physical Demand",
+    "PE": "Performance",
+    "EF": "Effort",
+    "FR": "Frustration",
+}
+TLX_MIN, TLX_MAX = 1, 21
+
+
+def check_tlx_value(scale: str, value: Any) -> int:
+    """An integer 1..21, else ValueError saying what is wrong."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(
+            f"{scale} ({TLX_NAMES[scale]}) must be an integer {TLX_MIN}..{TLX_MAX}, got {value!r}"
+        )
+    if not TLX_MIN <= value <= TLX_MAX:
+        raise ValueError(
+            f"{scale} ({TLX_NAMES[scale]}) must be in {TLX_MIN}..{TLX_MAX}, got {value}"
+        )
+    return int(value)
+
+
+def load_tlx_file(
+    path: str, participant: str, sessions: Sequence[Session]
+) -> dict[int, dict[str, int]]:
+    """``--tlx FILE``: JSON Lines, one object per session: ``{"session": 1, "MD": 5,
+    "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}``, optionally ``"participant"``,
+    ``"modality"`` and ``"k"`` (checked against the plan when present). Blank lines are
+    skipped. Returns session -> scales; RunnerError (usage) naming the line otherwise."""
+    by_session = {s.session: s for s in sessions}
+    out: dict[int, dict[str, int]] = {}
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except OSError as e:
+        raise RunnerError(f"--tlx {path}: cannot read it: {e.strerror}", usage=True) from None
+    except UnicodeDecodeError:
+        raise RunnerError(f"--tlx {path}: not UTF-8 text", usage=True) from None
+    allowed = set(TLX_SCALES) | {"session", "participant", "modality", "k"}
+    for no, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        where = f"--tlx {path}:{no}"
+        try:
+            obj = json.loads(line)
+        except ValueError as e:
+            raise RunnerError(
+                f"{where}: not JSON ({e}); one object per line such as "
+                '{"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, '
+                '"FR": 3}',
+                usage=True,
+            ) from None
+        if not isinstance(obj, dict):
+            raise RunnerError(f"{where}: must be a JSON object", usage=True)
+        unknown = sorted(set(obj) - allowed)
+        if unknown:
+            raise RunnerError(
+                f"{where}: unknown key {unknown[0]!r}; keys: session, "
+                f"{', '.join(TLX_SCALES)} (and optionally participant, "
+                "modality, k)",
+                usage=True,
+            )
+        s = obj.get("session")
+        if isinstance(s, bool) or not isinstance(s, int) or s not in by_session:
+            raise RunnerError(
+                f"{where}: session must be one of this participant's sessions "
+                f"1..{len(sessions)}, got {s!r}",
+                usage=True,
+            )
+        if s in out:
+            raise RunnerError(f"{where}: session {s} is given twice", usage=True)
+        if "participant" in obj and obj["participant"] != participant:
+            raise RunnerError(
+                f"{where}: participant {obj['participant']!r} is not "
+                f"{participant!r}: is this the right file?",
+                usage=True,
+            )
+        sess = by_session[s]
+        if "modality" in obj and obj["modality"] != sess.modality:
+            raise RunnerError(
+                f"{where}: session {s} of {participant} is {sess.modality}, "
+                f"the file says {obj['modality']!r}",
+                usage=True,
+            )
+        if "k" in obj and obj["k"] != sess.k:
+            raise RunnerError(
+                f"{where}: session {s} of {participant} has k = {sess.k}, the "
+                f"file says {obj['k']!r}",
+                usage=True,
+            )
+        missing = [sc for sc in TLX_SCALES if sc not in obj]
+        if missing:
+            raise RunnerError(
+                f"{where}: missing {', '.join(missing)} (the six scales "
+                f"{', '.join(TLX_SCALES)}, integers {TLX_MIN}..{TLX_MAX})",
+                usage=True,
+            )
+        scales = {}
+        for sc in TLX_SCALES:
+            try:
+                scales[sc] = check_tlx_value(sc, obj[sc])
+            except ValueError as e:
+                raise RunnerError(f"{where}: {e}", usage=True) from None
+        out[s] = scales
+    return out
+
+
+def ask_tlx(
+    session: Session, ask: Callable[[str], str], out: TextIO, attempts: int = 5
+) -> dict[str, int]:
+    """The six scales asked one by one (``ask`` is input()); a bad answer is asked again
+    (at most ``attempts`` times); EOF raises RunnerError."""
+    print(
+        f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
+        f"answer each scale with an integer {TLX_MIN} (very low) .. {TLX_MAX} (very high)",
+        file=out,
+        flush=True,
+    )
+    scales: dict[str, int] = {}
+    for sc in TLX_SCALES:
+        for _ in range(attempts):
+            try:
+                text = ask(f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
+            except EOFError:
+                raise RunnerError(
+                    "the NASA-TLX answers ended (stdin closed); give them with "
+                    "--tlx FILE and run again (completed trials are kept)"
+                ) from None
+            text = text.strip()
+            try:
+                scales[sc] = check_tlx_value(sc, int(text))
+                break
+            except ValueError as e:
+                msg = (
+                    str(e)
+                    if text.lstrip("+-").isdigit()
+                    else f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
+                )
+                print(f"  {msg}; try again", file=out, flush=True)
+        else:
+            raise RunnerError(f"no valid answer for {sc} after {attempts} attempts")
+    return scales
+
+
+__all__ = [
+    "TLX_SCALES",
+    "TLX_NAMES",
+    "TLX_MIN",
+    "TLX_MAX",
+    "check_tlx_value",
+    "load_tlx_file",
+    "ask_tlx",
+]

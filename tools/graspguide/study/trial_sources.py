@@ -1,0 +1,197 @@
+"""The pose sources of `graspguide trial`: ``--source SPEC`` opened for a protocol and a
+participant, as a closed loop (the virtual participant, a plugin class with
+begin_trial/step) or an open loop (synthetic, replay, a tracker adapter), each with what
+the runner needs to know of it (simulated, live, rate, describe())."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from graspguide.study.errors import RunnerError
+from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
+
+
+class RunnerSource:
+    """What the runner needs of a source. ``closed_loop``: begin_trial/step in lockstep;
+    else ``samples(trial)`` yields (t_s, quat, contacts). ``simulated``: no person (TLX
+    recorded as absent unless --tlx). ``live``: real-time (a tracker)."""
+
+    closed_loop = False
+    simulated = True
+    live = False
+    rate_hz: float = 100.0
+
+    def describe(self) -> dict[str, Any]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class ClosedLoopSource(RunnerSource):
+    closed_loop = True
+
+    def __init__(self, model: Any, spec: str):
+        for attr in ("rate_hz", "begin_trial", "step"):
+            if not hasattr(model, attr):
+                raise RunnerError(
+                    f"--source {spec}: {type(model).__name__} has no {attr}; a "
+                    "closed-loop source needs rate_hz, SIMULATED, "
+                    "begin_trial(...) and step(t_s, pwm)",
+                    usage=True,
+                )
+        self.model = model
+        self.spec = spec
+        self.rate_hz = float(model.rate_hz)
+        if not 0 < self.rate_hz <= 10000:
+            raise RunnerError(
+                f"--source {spec}: rate_hz must be in (0, 10000], got {model.rate_hz!r}", usage=True
+            )
+        self.simulated = bool(getattr(model, "SIMULATED", True))
+
+    def describe(self) -> dict[str, Any]:
+        d = {
+            "source": self.spec,
+            "kind": "closed_loop",
+            "class": type(self.model).__name__,
+            "source_rate_hz": self.rate_hz,
+            "simulated": self.simulated,
+        }
+        extra = getattr(self.model, "describe", None)
+        if callable(extra):
+            try:
+                d["model"] = extra()
+            except Exception:  # pragma: no cover - a model's describe is informational
+                pass
+        return d
+
+
+class OpenLoopSource(RunnerSource):
+    def __init__(
+        self,
+        spec: str,
+        make: Callable[[PlannedTrial], Any],
+        rate_hz: float,
+        simulated: bool,
+        live: bool,
+        info: dict[str, Any],
+    ):
+        self.spec = spec
+        self.make = make
+        self.rate_hz = float(rate_hz)
+        self.simulated = simulated
+        self.live = live
+        self.info = info
+
+    def samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
+        return iter(self.make(trial))
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            **self.info,
+            "source": self.spec,
+            "kind": "open_loop",
+            "rate_hz": self.rate_hz,
+            "simulated": self.simulated,
+        }
+
+
+def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
+    """The source of ``--source SPEC`` for this protocol and participant."""
+    from graspguide.study.sources import (
+        SourceError,
+        SyntheticSource,
+        TrackerAdapter,
+        open_source,
+    )
+
+    kind, _, rest = spec.partition(":")
+    seed = derive_seed(protocol.seed, "source", participant) % 2**32
+    if kind == "participant":
+        try:
+            mod = importlib.import_module(".participant", __package__)
+            cls = mod.VirtualParticipant
+        except (ImportError, AttributeError) as e:
+            raise RunnerError(
+                f"--source {spec}: the virtual participant "
+                f"(graspguide.study.participant.VirtualParticipant) is not available: "
+                f"{e}",
+                usage=True,
+            ) from None
+        try:
+            model = cls.from_spec(rest, seed)
+        except (ValueError, TypeError) as e:
+            raise RunnerError(f"--source {spec}: {e}", usage=True) from None
+        return ClosedLoopSource(model, spec)
+    if kind == "plugin":
+        module_name, _, tail = rest.partition(":")
+        class_name, _, arg = tail.partition(":")
+        if not module_name or not class_name:
+            raise RunnerError(
+                "--source plugin needs a module and a class: plugin:MODULE:CLASS[:ARG]", usage=True
+            )
+        try:
+            cls = getattr(importlib.import_module(module_name), class_name)
+        except (ImportError, AttributeError) as e:
+            raise RunnerError(
+                f"--source {spec}: cannot load {module_name}.{class_name}: {e}", usage=True
+            ) from None
+        if isinstance(cls, type) and issubclass(cls, TrackerAdapter):
+            adapter = cls(arg) if arg else cls()
+            return OpenLoopSource(
+                spec,
+                lambda trial: adapter,
+                adapter.rate_hz or 100.0,
+                simulated=bool(getattr(adapter, "SIMULATED", False)),
+                live=True,
+                info=adapter.describe(),
+            )
+        try:
+            model = (
+                cls.from_spec(arg, seed)
+                if hasattr(cls, "from_spec")
+                else (cls(arg) if arg else cls())
+            )
+        except (ValueError, TypeError) as e:
+            raise RunnerError(f"--source {spec}: {e}", usage=True) from None
+        return ClosedLoopSource(model, spec)
+    if kind in ("synthetic", "replay"):
+        try:
+            base = open_source(spec)
+        except SourceError as e:
+            raise RunnerError(f"--source: {e}", usage=True) from None
+        if isinstance(base, SyntheticSource):
+            rate = base.rate_hz if "rate=" in rest else protocol.pose_rate_hz
+
+            def make(trial: PlannedTrial) -> SyntheticSource:
+                s = SyntheticSource(
+                    rate=rate,
+                    duration=base.duration,
+                    seed=derive_seed(base.seed, participant, trial.trial_index) % 2**32,
+                    tremor_deg=base.tremor_deg,
+                )
+                return s.aim(
+                    [list(c) for c in protocol.hands[trial.k]],
+                    list(trial.wrench),
+                    trial.policy,
+                    protocol.constraints,
+                    list(protocol.y_axis),
+                )
+
+            return OpenLoopSource(spec, make, rate, True, False, base.describe())
+        return OpenLoopSource(
+            spec,
+            lambda trial: base,
+            base.rate_hz or protocol.pose_rate_hz,
+            True,
+            False,
+            base.describe(),
+        )
+    raise RunnerError(
+        f"unknown --source {spec!r}: use participant[:PARAMS], "
+        "synthetic[:rate=..,duration=..,seed=..], replay:FILE.csv or "
+        "plugin:MODULE:CLASS[:ARG]",
+        usage=True,
+    )
+
+
+__all__ = ["RunnerSource", "ClosedLoopSource", "OpenLoopSource", "open_runner_source"]
