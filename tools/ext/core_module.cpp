@@ -329,18 +329,26 @@ void check_count(const V& v, std::size_t n, const char* what) {
                               .c_str());
 }
 
-// Every per-instance list of time_frames / time_stages has one entry per instance.
-void check_instance_lists(std::size_t n, const std::vector<Wrench>& wrenches,
-                          const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
-                          const std::vector<std::string>& policies,
-                          const std::vector<std::string>& modes,
-                          const std::vector<std::string>& constraints) {
+// The options of each instance of time_frames / time_stages, once every per-instance list
+// is checked to have one entry per instance.
+std::vector<SceneOptions> instance_options(std::size_t n, const std::vector<Wrench>& wrenches,
+                                           const std::vector<Quat4>& orientations,
+                                           const std::vector<Axis3>& y_axes,
+                                           const std::vector<std::string>& policies,
+                                           const std::vector<std::string>& modes,
+                                           const std::vector<std::string>& constraints,
+                                           const std::string& decomposition, int max_iterations) {
   check_count(wrenches, n, "wrenches");
   check_count(orientations, n, "orientations");
   check_count(y_axes, n, "y_axes");
   check_count(policies, n, "policies");
   check_count(modes, n, "modes");
   check_count(constraints, n, "constraints");
+  std::vector<SceneOptions> options;
+  for (std::size_t i = 0; i < n; ++i)
+    options.push_back(
+        parse_options(policies[i], modes[i], constraints[i], decomposition, max_iterations));
+  return options;
 }
 
 // The contacts moved by one unit in the last place: enough for Guidance to see new
@@ -454,13 +462,10 @@ nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector
                      const std::vector<std::string>& constraints, const std::string& scalar,
                      const std::string& decomposition, bool warm_start, int max_iterations,
                      bool fixed_posture, int reps, int batches, int warmup) {
-  const std::size_t n = contacts.size();
-  check_instance_lists(n, wrenches, orientations, y_axes, policies, modes, constraints);
+  const std::vector<SceneOptions> options =
+      instance_options(contacts.size(), wrenches, orientations, y_axes, policies, modes,
+                       constraints, decomposition, max_iterations);
   check_timing_args(reps, batches, warmup);
-  std::vector<SceneOptions> options;
-  for (std::size_t i = 0; i < n; ++i)
-    options.push_back(
-        parse_options(policies[i], modes[i], constraints[i], decomposition, max_iterations));
   if (is_float_scalar(scalar))
     return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, warm_start,
                                 fixed_posture, reps, batches, warmup);
@@ -659,14 +664,14 @@ nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector
                      const std::vector<std::string>& modes,
                      const std::vector<std::string>& constraints, const std::string& scalar,
                      const std::string& decomposition, int reps, int batches, int warmup) {
-  const std::size_t n = contacts.size();
-  check_instance_lists(n, wrenches, orientations, y_axes, policies, modes, constraints);
+  const std::vector<SceneOptions> options =
+      instance_options(contacts.size(), wrenches, orientations, y_axes, policies, modes,
+                       constraints, decomposition, gg::kDefaultMaxIterations);
   check_timing_args(reps, batches, warmup);
   const bool is_float = is_float_scalar(scalar);
   nb::list out;
-  for (std::size_t i = 0; i < n; ++i) {
-    const SceneOptions o = parse_options(policies[i], modes[i], constraints[i], decomposition,
-                                         gg::kDefaultMaxIterations);
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const SceneOptions& o = options[i];
     const int k = contact_count(contacts[i]);
     if (k == 3 && is_float)
       out.append(time_stages_k<float, 3>(contacts[i], wrenches[i], orientations[i], y_axes[i], o,
