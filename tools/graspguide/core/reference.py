@@ -139,7 +139,7 @@ def fallback_axis(y_o: np.ndarray) -> np.ndarray:
     return _unit(np.cross(y_o, e))
 
 
-def quaternion_to_matrix(q: Sequence[float]) -> np.ndarray:
+def quaternion_to_matrix(q: Sequence[float] | np.ndarray) -> np.ndarray:
     """Rotation matrix of q = [w, x, y, z] (normalised here), hand -> world."""
     return quat_to_matrix(_as_float_array(q))
 
@@ -415,7 +415,7 @@ def guidance(q: np.ndarray, f: np.ndarray) -> tuple[float, float]:
 # The whole pipeline
 # --------------------------------------------------------------------------------------
 def _result(status: str, k: int, **kw) -> dict[str, Any]:
-    out = {
+    out: dict[str, Any] = {
         "status": status,
         "pwm": [0] * k,
         "levels": None,
@@ -491,7 +491,7 @@ def solve(
         return _result("bad_quaternion", k)
 
     status, frames = contact_frames(C, y_o)
-    if status != "ok":
+    if status != "ok" or frames is None:
         return _result(status, k)
     mask = frames["fallback_mask"]
 
@@ -526,7 +526,7 @@ def solve(
         if feasible:
             used, lam, active = model, lam_m, active_m
             break
-    assert used is not None, "the 'none' model is always feasible"
+    assert used is not None and lam is not None, "the 'none' model is always feasible"
 
     err, alpha = guidance(q, f)
     m = motor_levels(lam, policy)
