@@ -3,7 +3,8 @@
 #   1. tools/bootstrap.sh        (Debian packages, Eigen check, .venv, ./tools)
 #   2. tools/scripts/check_style.sh  (ruff lint and format, mypy, clang-format, every
 #      generator's --check; each is 1 case)
-#   3. pio test -e native        (GoogleTest suites in test/test_*/, offline)
+#   3. pio test -e native        (GoogleTest suites in test/test_*/, offline), and the
+#      Arduino board compiled on the host against a stub of the Arduino API (1 case)
 #   4. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
 #      pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages and the QEMU
 #      stage counts vs tools/perf/stage_baseline.json (each is 1 case)
@@ -187,6 +188,14 @@ else
     set -e
     tally pio/GoogleTest "$pio_rc" "$pio_json" count_pio_report
 fi
+
+# The Arduino board (src/boards/arduino) cannot be built for its real cores here (their
+# toolchains are not obtainable offline); it is compiled and linked on the host against a
+# minimal stub of the Arduino API (src/harness/arduino_api_check), once per board variant.
+# That proves it compiles, not that it runs.
+run_case "Arduino board compile check (host, Arduino API stub)" arduino_check \
+    "$ROOT/.venv/bin/pio" run -e arduino_check_generic -e arduino_check_featheresp32 \
+    -e arduino_check_teensy40
 
 # --- 4. Bare-metal ARM builds and QEMU runs -----------------------------------------
 # Before pytest, because its QEMU firmware test needs the m4f_firmware image. Each build
