@@ -3,7 +3,7 @@
     python3 tools/codegen           # (re)writes every output
     python3 tools/codegen --check   # exit 1 naming the stale outputs
 
-One module per job: schema (load and validate the TOML), emit_cpp (messages.h),
+One module per job: schema (load and validate the TOML), emit_cpp (messages.h, core_status.h),
 emit_python (link/messages.py), emit_golden (the golden frames, encoded independently),
 emit_docs (docs/protocol.md's message reference); __main__ writes or checks them.
 """

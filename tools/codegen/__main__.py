@@ -15,7 +15,9 @@ from codegen import emit_cpp, emit_docs, emit_golden, emit_python  # noqa: E402
 from codegen.schema import REGEN, Schema, SchemaError, load_schema  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-CPP_PATH = os.path.join(ROOT, "lib", "graspguide_link", "src", "graspguide_link", "messages.h")
+LINK_SRC = os.path.join(ROOT, "lib", "graspguide_link", "src", "graspguide_link")
+CPP_PATH = os.path.join(LINK_SRC, "messages.h")
+CORE_STATUS_PATH = os.path.join(LINK_SRC, "core_status.h")
 PY_PATH = os.path.join(ROOT, "tools", "graspguide", "link", "messages.py")
 GOLDEN_JSON_PATH = os.path.join(ROOT, "test", "data", "golden_frames.json")
 GOLDEN_H_PATH = os.path.join(ROOT, "test", "data", "golden_frames.h")
@@ -25,6 +27,7 @@ DOC_PATH = os.path.join(ROOT, "docs", "protocol.md")
 def outputs(schema: Schema) -> dict[str, str]:
     out = {
         CPP_PATH: emit_cpp.render(schema),
+        CORE_STATUS_PATH: emit_cpp.render_core_status(schema),
         PY_PATH: emit_python.render(schema),
         GOLDEN_JSON_PATH: emit_golden.render_json(schema),
         GOLDEN_H_PATH: emit_golden.render_h(schema),

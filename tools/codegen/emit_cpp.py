@@ -13,7 +13,6 @@ from codegen.schema import (
     SCALARS,
     SOURCE,
     Field,
-    Message,
     Schema,
     camel,
     f32,
@@ -58,173 +57,21 @@ def cpp_member(schema: Schema, f: Field) -> str:
     return f"{ctype} {f.name}{dims} = {init};"
 
 
-def _loops(f: Field, body: str, indent: str) -> list[str]:
-    """Nested index loops over f.shape around body (which uses i0, i1 and `flat`)."""
-    lines = []
-    idx = ["i0", "i1"][: len(f.shape)]
-    for d, (var, n) in enumerate(zip(idx, f.shape)):
-        lines.append(f"{indent}{'  ' * d}for (size_t {var} = 0; {var} < {n}; ++{var}) {{")
-    lines.append(f"{indent}{'  ' * len(idx)}{body}")
-    for d in reversed(range(len(idx))):
-        lines.append(f"{indent}{'  ' * d}}}")
-    return lines
-
-
-def _flat_index(f: Field) -> str:
-    if len(f.shape) == 1:
-        return "i0"
-    return f"(i0 * {f.shape[1]} + i1)"
-
-
-def _element(f: Field) -> str:
-    return f.name + "".join(f"[{v}]" for v in ["i0", "i1"][: len(f.shape)])
-
-
-def cpp_pack(m: Message) -> list[str]:
-    L = [
-        f"inline LinkStatus pack(const {m.class_name}& m, uint8_t* out, size_t capacity,"
-        " size_t* written) {"
-    ]
-    if not m.fields:
-        L.append("  (void)m;")
-        L.append("  (void)out;")
-    L.append(f"  if (capacity < {m.class_name}::kPayloadSize) return LinkStatus::kBufferTooSmall;")
-    # Refuse to emit what no decoder accepts, so every frame we write parses back.
-    for f in m.fields:
-        if f.kind == "enum":
-            if f.shape:
-                L += _loops(
-                    f, f"if (!is_valid(m.{_element(f)})) return LinkStatus::kBadEnumValue;", "  "
-                )
-            else:
-                L.append(f"  if (!is_valid(m.{f.name})) return LinkStatus::kBadEnumValue;")
-        if f.kind == "ascii":
-            L.append(
-                "  if (!ascii_field_valid("
-                f"reinterpret_cast<const uint8_t*>(m.{f.name}), {f.size})) "
-                "return LinkStatus::kBadEnumValue;"
-            )
-    off = 0
-    for f in m.fields:
-        if f.kind == "ascii":
-            L.append(f"  std::memcpy(out + {off}, m.{f.name}, {f.size});")
-        else:
-            suffix = "u8" if f.kind in ("enum", "bool") else SCALARS[f.kind][3]
-            if f.kind == "enum":
-                conv = lambda e: f"static_cast<uint8_t>(m.{e})"  # noqa: E731
-            elif f.kind == "bool":
-                conv = lambda e: f"static_cast<uint8_t>(m.{e} ? 1 : 0)"  # noqa: E731
-            else:
-                conv = lambda e: f"m.{e}"  # noqa: E731
-            if f.shape:
-                at = f"out + {off} + {f.size} * {_flat_index(f)}"
-                body = f"store_{suffix}({at}, {conv(_element(f))});"
-                L += _loops(f, body, "  ")
-            else:
-                L.append(f"  store_{suffix}(out + {off}, {conv(f.name)});")
-        off += f.wire_size
-    L.append(f"  *written = {m.class_name}::kPayloadSize;")
-    L.append("  return LinkStatus::kOk;")
-    L.append("}")
-    return L
-
-
-def cpp_unpack(m: Message) -> list[str]:
-    L = [
-        f"inline LinkStatus unpack(const uint8_t* in, size_t size, {m.class_name}* out,",
-        "                         uint8_t* bad_field = nullptr) {",
-    ]
-    if not m.fields:
-        L.append("  (void)in;")
-        L.append("  (void)out;")
-    if not any(f.kind in ("enum", "bool", "ascii") for f in m.fields):
-        L.append("  (void)bad_field;")
-    L.append(f"  if (size != {m.class_name}::kPayloadSize) return LinkStatus::kBadLength;")
-    if m.fields:
-        L.append(f"  {m.class_name} m;")
-    off = 0
-    for index, f in enumerate(m.fields):
-        bad = (
-            f"{{ if (bad_field != nullptr) *bad_field = {index}; "
-            "return LinkStatus::kBadEnumValue; }"
-        )
-        if f.kind == "ascii":
-            L.append(f"  if (!ascii_field_valid(in + {off}, {f.size})) {bad}")
-            L.append(f"  std::memcpy(m.{f.name}, in + {off}, {f.size});")
-        elif f.kind in ("enum", "bool"):
-            at = f"in + {off}" + (f" + {_flat_index(f)}" if f.shape else "")
-            if f.kind == "enum":
-                body = [
-                    f"const {f.enum} v = static_cast<{f.enum}>(load_u8({at}));",
-                    f"if (!is_valid(v)) {bad}",
-                    f"m.{_element(f) if f.shape else f.name} = v;",
-                ]
-            else:
-                body = [
-                    f"const uint8_t v = load_u8({at});",
-                    f"if (v > 1) {bad}",
-                    f"m.{_element(f) if f.shape else f.name} = v == 1;",
-                ]
-            if f.shape:
-                L += _loops(f, "{ " + " ".join(body) + " }", "  ")
-            else:
-                L.append("  {")
-                L += ["    " + b for b in body]
-                L.append("  }")
-        else:
-            suffix = SCALARS[f.kind][3]
-            if f.shape:
-                body = f"m.{_element(f)} = load_{suffix}(in + {off} + {f.size} * {_flat_index(f)});"
-                L += _loops(f, body, "  ")
-            else:
-                L.append(f"  m.{f.name} = load_{suffix}(in + {off});")
-        off += f.wire_size
-    if m.fields:
-        L.append("  *out = m;")
-    L.append("  return LinkStatus::kOk;")
-    L.append("}")
-    return L
-
-
-def cpp_equal(m: Message) -> list[str]:
-    c = m.class_name
-    L = [f"inline bool operator==(const {c}& a, const {c}& b) {{"]
-    if not m.fields:
-        L += ["  (void)a;", "  (void)b;", "  return true;", "}"]
-    else:
-        L.append("  bool same = true;")
-        for f in m.fields:
-            if f.kind == "ascii":
-                L.append(f"  same = same && std::memcmp(a.{f.name}, b.{f.name}, {f.size}) == 0;")
-                continue
-            if f.kind == "f32":
-                cmp = lambda e: f"f32_bits(a.{e}) == f32_bits(b.{e})"  # noqa: E731
-            else:
-                cmp = lambda e: f"a.{e} == b.{e}"  # noqa: E731
-            if f.shape:
-                L += _loops(f, f"same = same && {cmp(_element(f))};", "  ")
-            else:
-                L.append(f"  same = same && {cmp(f.name)};")
-        L += ["  return same;", "}"]
-    L += [f"inline bool operator!=(const {c}& a, const {c}& b) {{ return !(a == b); }}"]
-    return L
-
-
 def render(schema: Schema) -> str:
     s = schema
     L: list[str] = [
         f"// GENERATED by {GENERATOR} from {SOURCE}.",
         f"// DO NOT EDIT: change the schema, then run `{REGEN}`.",
-        "// The GraspGuide link messages: ids, enums, payload structs, and their wire codecs",
-        "// (little-endian, float32). See docs/protocol.md.",
+        "// The GraspGuide link messages: ids, enums, payload structs and their field lists; the",
+        "// wire codec over those lists (little-endian, float32) is message_io.h. See",
+        "// docs/protocol.md.",
         "#pragma once",
         "",
         "#include <cstddef>",
         "#include <cstdint>",
-        "#include <cstring>",
         "",
-        '#include "graspguide_link/byte_order.h"',
         '#include "graspguide_link/link_status.h"',
+        '#include "graspguide_link/message_io.h"',
         "",
         "namespace graspguide_link {",
         "",
@@ -319,18 +166,8 @@ def render(schema: Schema) -> str:
             L.append(f"  {cpp_member(s, f)}  // {cpp_comment(f)}")
         L.append("};")
         L.append("")
-        L.append(f"// Writes the {m.payload_size}-byte payload; refuses values no decoder accepts.")
-        L += cpp_pack(m)
-        L.append(
-            "// kBadLength for a wrong size; kBadEnumValue (and *bad_field = the field's index)"
-        )
-        L.append(
-            "// for an enum, bool or ascii field outside its declared set. *out is untouched then."
-        )
-        L += cpp_unpack(m)
-        L.append("// Wire equality: floats compare by bit pattern (NaN == same NaN, -0 != +0).")
-        L += cpp_equal(m)
-        L.append('// Calls fn("name", member) for every field, in wire order.')
+        L.append('// Calls fn("name", member) for every field, in wire order: pack, unpack and ==')
+        L.append("// (message_io.h) are written once over it.")
         for const in ("const ", ""):
             L.append("template <class Fn>")
             L.append(f"void for_each_field({const}{m.class_name}& m, Fn&& fn) {{")
@@ -393,3 +230,48 @@ def cpp_value(schema: Schema, f: Field, v: Any, ns: str = "gl::") -> str:
     if f.kind.startswith("u"):
         return f"{v}u"
     return str(v)
+
+
+def render_core_status(schema: Schema) -> str:
+    """core_status.h: compile-time proof that the ErrorCode values below link_error_base are
+    the core's graspguide::Status, name for name and value for value, and the one
+    conversion between them."""
+    core = [v for v in schema.enums["ErrorCode"].values if v.value < schema.link_error_base]
+    L = [
+        f"// GENERATED by {GENERATOR} from {SOURCE}.",
+        f"// DO NOT EDIT: change the schema, then run `{REGEN}`.",
+        "// The core's graspguide::Status is the first part of the link's ErrorCode: checked here",
+        "// at compile time (every status has the ErrorCode of the same name and value, and no",
+        "// status is missing), so a device reports a core status by converting it.",
+        "#pragma once",
+        "",
+        "#include <cstdint>",
+        "",
+        '#include "graspguide/status.h"',
+        '#include "graspguide_link/messages.h"',
+        "",
+        "namespace graspguide_link {",
+        "",
+        f"static_assert(graspguide::kStatusCount == {len(core)},",
+        '              "graspguide::Status and the schema\'s core ErrorCodes differ in number");',
+    ]
+    L += [
+        "constexpr bool same_value(graspguide::Status s, ErrorCode e) {",
+        "  return static_cast<uint8_t>(s) == static_cast<uint8_t>(e);",
+        "}",
+    ]
+    for v in core:
+        e = cpp_enumerator(v.name)
+        L.append(f"static_assert(same_value(graspguide::Status::{e}, ErrorCode::{e}),")
+        L.append(f'              "graspguide::Status::{e} is not ErrorCode::{e}");')
+    L += [
+        "",
+        "// The ErrorCode that reports a core status (the same name and value, checked above).",
+        "constexpr ErrorCode error_code_of(graspguide::Status s) {",
+        "  return static_cast<ErrorCode>(static_cast<uint8_t>(s));",
+        "}",
+        "",
+        "}  // namespace graspguide_link",
+        "",
+    ]
+    return "\n".join(L)

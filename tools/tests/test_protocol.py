@@ -454,6 +454,7 @@ def test_stale_generated_code_fails_the_check(tmp_path):
     ]
     outputs = [
         "lib/graspguide_link/src/graspguide_link/messages.h",
+        "lib/graspguide_link/src/graspguide_link/core_status.h",
         "tools/graspguide/link/messages.py",
         "test/data/golden_frames.json",
         "test/data/golden_frames.h",
@@ -469,6 +470,8 @@ def test_stale_generated_code_fails_the_check(tmp_path):
         # Edit the generated part (docs/protocol.md is hand-written outside its markers).
         start = original.find("Largest payload") if r.endswith(".md") else 0
         edited = original[:start] + original[start:].replace("0", "1", 1)
+        if edited == original:  # a file without a 0 (core_status.h): one more line
+            edited = original + "\n"
         (tmp_path / r).write_text(edited, encoding="utf-8")
         res = subprocess.run([sys.executable, gen, "--check"], capture_output=True, text=True)
         assert res.returncode == 1 and r in res.stderr, r

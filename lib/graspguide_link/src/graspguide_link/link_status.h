@@ -1,6 +1,7 @@
 // Status of every fallible link operation (encode, decode, pack, unpack).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 namespace graspguide_link {
@@ -19,32 +20,17 @@ enum class LinkStatus : uint8_t {
   kWrongMessage,  // asked to read a message of one type from a frame of another
 };
 
+inline constexpr const char* kLinkStatusNames[] = {
+    "ok",          "buffer_too_small", "bad_cobs",   "too_long",       "too_short",     "bad_crc",
+    "bad_version", "unknown_id",       "bad_length", "bad_enum_value", "wrong_message",
+};
+static_assert(sizeof kLinkStatusNames / sizeof kLinkStatusNames[0] ==
+                  static_cast<size_t>(LinkStatus::kWrongMessage) + 1,
+              "one name per LinkStatus");
+
 constexpr const char* link_status_name(LinkStatus s) {
-  switch (s) {
-    case LinkStatus::kOk:
-      return "ok";
-    case LinkStatus::kBufferTooSmall:
-      return "buffer_too_small";
-    case LinkStatus::kBadCobs:
-      return "bad_cobs";
-    case LinkStatus::kTooLong:
-      return "too_long";
-    case LinkStatus::kTooShort:
-      return "too_short";
-    case LinkStatus::kBadCrc:
-      return "bad_crc";
-    case LinkStatus::kBadVersion:
-      return "bad_version";
-    case LinkStatus::kUnknownId:
-      return "unknown_id";
-    case LinkStatus::kBadLength:
-      return "bad_length";
-    case LinkStatus::kBadEnumValue:
-      return "bad_enum_value";
-    case LinkStatus::kWrongMessage:
-      return "wrong_message";
-  }
-  return "unknown";
+  const size_t i = static_cast<size_t>(s);
+  return i < sizeof kLinkStatusNames / sizeof kLinkStatusNames[0] ? kLinkStatusNames[i] : "unknown";
 }
 
 }  // namespace graspguide_link

@@ -26,59 +26,27 @@ enum class ParseEvent : uint8_t {
 };
 inline constexpr size_t kParseEventCount = static_cast<size_t>(ParseEvent::kBadLength) + 1;
 
+// The ERROR code a device reports for each event, by ParseEvent value (kOk: none). The
+// error events share their names with these codes.
+inline constexpr ErrorCode kParseEventErrors[kParseEventCount] = {
+    ErrorCode::kOk,         ErrorCode::kOk,        ErrorCode::kBadCrc,
+    ErrorCode::kBadCobs,    ErrorCode::kTooLong,   ErrorCode::kTooShort,
+    ErrorCode::kBadVersion, ErrorCode::kUnknownId, ErrorCode::kBadLength,
+};
+
 constexpr const char* parse_event_name(ParseEvent e) {
-  switch (e) {
-    case ParseEvent::kNone:
-      return "none";
-    case ParseEvent::kFrame:
-      return "frame";
-    case ParseEvent::kBadCrc:
-      return "bad_crc";
-    case ParseEvent::kBadCobs:
-      return "bad_cobs";
-    case ParseEvent::kTooLong:
-      return "too_long";
-    case ParseEvent::kTooShort:
-      return "too_short";
-    case ParseEvent::kBadVersion:
-      return "bad_version";
-    case ParseEvent::kUnknownId:
-      return "unknown_id";
-    case ParseEvent::kBadLength:
-      return "bad_length";
-  }
-  return "unknown";
+  const size_t i = static_cast<size_t>(e);
+  if (e == ParseEvent::kNone) return "none";
+  if (e == ParseEvent::kFrame) return "frame";
+  return i < kParseEventCount ? enum_name(kParseEventErrors[i]) : "unknown";
 }
 
 // The ERROR code a device reports for a parse event; false for kNone and kFrame.
 constexpr bool error_code_for(ParseEvent e, ErrorCode* code) {
-  switch (e) {
-    case ParseEvent::kNone:
-    case ParseEvent::kFrame:
-      return false;
-    case ParseEvent::kBadCrc:
-      *code = ErrorCode::kBadCrc;
-      return true;
-    case ParseEvent::kBadCobs:
-      *code = ErrorCode::kBadCobs;
-      return true;
-    case ParseEvent::kTooLong:
-      *code = ErrorCode::kTooLong;
-      return true;
-    case ParseEvent::kTooShort:
-      *code = ErrorCode::kTooShort;
-      return true;
-    case ParseEvent::kBadVersion:
-      *code = ErrorCode::kBadVersion;
-      return true;
-    case ParseEvent::kUnknownId:
-      *code = ErrorCode::kUnknownId;
-      return true;
-    case ParseEvent::kBadLength:
-      *code = ErrorCode::kBadLength;
-      return true;
-  }
-  return false;
+  const size_t i = static_cast<size_t>(e);
+  if (i >= kParseEventCount || kParseEventErrors[i] == ErrorCode::kOk) return false;
+  *code = kParseEventErrors[i];
+  return true;
 }
 
 // Whether a parse event leaves a header that can be trusted (answerable with ERROR).
