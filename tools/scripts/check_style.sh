@@ -49,7 +49,7 @@ check() {
             fi
             ;;
         generated)
-            "$BIN/python" tools/scripts/gen_protocol.py --check
+            "$BIN/python" tools/codegen --check
             "$BIN/python" tools/scripts/gen_stage_scenes.py --check
             "$BIN/python" tools/scripts/gen_known_answers.py --check
             ;;

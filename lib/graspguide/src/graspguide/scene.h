@@ -20,44 +20,26 @@ constexpr const char* constraint_model_name(ConstraintModel m) {
 constexpr const char* policy_name(Policy p) { return p == Policy::kF ? "F" : "Fperp"; }
 constexpr const char* mode_name(Mode m) { return m == Mode::kC ? "C" : "V"; }
 
-// Parsers return false on unknown names so callers can say what is accepted.
-inline bool parse_constraint_model(const char* s, ConstraintModel* out) {
-  if (std::strcmp(s, "paper") == 0) {
-    *out = ConstraintModel::kPaper;
-    return true;
-  }
-  if (std::strcmp(s, "normal") == 0) {
-    *out = ConstraintModel::kNormal;
-    return true;
-  }
-  if (std::strcmp(s, "none") == 0) {
-    *out = ConstraintModel::kNone;
-    return true;
+// Parsers return false on unknown names so callers can say what is accepted. Each one
+// asks the *_name function above for every value, so a name is written in one place only.
+template <typename E, int kCount>
+bool parse_name(const char* s, const char* (*name_of)(E), E* out) {
+  for (int i = 0; i < kCount; ++i) {
+    const E e = static_cast<E>(i);
+    if (std::strcmp(s, name_of(e)) == 0) {
+      *out = e;
+      return true;
+    }
   }
   return false;
+}
+inline bool parse_constraint_model(const char* s, ConstraintModel* out) {
+  return parse_name<ConstraintModel, 3>(s, constraint_model_name, out);
 }
 inline bool parse_policy(const char* s, Policy* out) {
-  if (std::strcmp(s, "F") == 0) {
-    *out = Policy::kF;
-    return true;
-  }
-  if (std::strcmp(s, "Fperp") == 0) {
-    *out = Policy::kFperp;
-    return true;
-  }
-  return false;
+  return parse_name<Policy, 2>(s, policy_name, out);
 }
-inline bool parse_mode(const char* s, Mode* out) {
-  if (std::strcmp(s, "C") == 0) {
-    *out = Mode::kC;
-    return true;
-  }
-  if (std::strcmp(s, "V") == 0) {
-    *out = Mode::kV;
-    return true;
-  }
-  return false;
-}
+inline bool parse_mode(const char* s, Mode* out) { return parse_name<Mode, 2>(s, mode_name, out); }
 
 struct SolverSettings {
   int max_iterations = kDefaultMaxIterations;

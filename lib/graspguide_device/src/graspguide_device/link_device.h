@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "graspguide_device/application.h"
+#include "graspguide_link/core_status.h"
 #include "graspguide_link/parser.h"
 #include "graspguide_link/writer.h"
 
@@ -180,7 +181,7 @@ class LinkDevice {
     t.alpha = tel.alpha;
     for (int i = 0; i < kMaxContacts; ++i) t.pwm[i] = tel.pwm.duty[i];
     t.constraints_used = static_cast<link::ConstraintModel>(tel.used);
-    t.solver_status = static_cast<link::ErrorCode>(tel.status);
+    t.solver_status = link::error_code_of(tel.status);
     t.iterations = tel.iterations;
     t.flags = uint8_t((tel.recomputed ? link::kTelemetryFlagGraspRecomputed : 0) |
                       (tel.trial_running ? link::kTelemetryFlagTrialRunning : 0));
@@ -236,9 +237,9 @@ class LinkDevice {
     } else if (reply.refusal == Refusal::kNotAllowedInState) {
       send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
     } else if (reply.refusal == Refusal::kTrialEnded) {
-      send_error(request_seq_, static_cast<link::ErrorCode>(reply.status), uint8_t(app_.state()));
+      send_error(request_seq_, link::error_code_of(reply.status), uint8_t(app_.state()));
     } else {
-      send_error(request_seq_, static_cast<link::ErrorCode>(reply.status), 0);
+      send_error(request_seq_, link::error_code_of(reply.status), 0);
     }
   }
 
