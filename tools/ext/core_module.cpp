@@ -271,9 +271,9 @@ nb::dict tolerances(bool is_float) {
   d["kRelevanceCosTol"] = gg::kRelevanceCosTol;
   d["kTinyRel"] = gg::kTinyRel;
   d["kFeasRelTol"] =
-      is_float ? double(gg::Tolerances<float>::kFeasRel) : gg::Tolerances<double>::kFeasRel;
-  d["kDependentRelTol"] = is_float ? double(gg::Tolerances<float>::kDependentRel)
-                                   : gg::Tolerances<double>::kDependentRel;
+      is_float ? double(gg::Tolerances<float>::kFeasRelTol) : gg::Tolerances<double>::kFeasRelTol;
+  d["kDependentRelTol"] = is_float ? double(gg::Tolerances<float>::kDependentRelTol)
+                                   : gg::Tolerances<double>::kDependentRelTol;
   d["kMotorOffLevel"] = gg::kMotorOffLevel;
   d["kMinQuaternionNorm"] = gg::kMinQuaternionNorm;
   return d;
@@ -492,7 +492,7 @@ void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& nu
     for (int j = 0; j < kVars; ++j)
       eq->null_basis(i, j) = static_cast<T>(null_basis[std::size_t(i) * kVars + j]);
   }
-  const T tol = violation_rel > 0 ? static_cast<T>(violation_rel) : gg::Tolerances<T>::kFeasRel;
+  const T tol = violation_rel > 0 ? static_cast<T>(violation_rel) : gg::Tolerances<T>::kFeasRelTol;
   auto solve = [&](gg::ConstraintModel wm, std::uint16_t wa, gg::ForceSolution<T, K>& out) {
     return gg::solve_forces<T, K>(*eq, des, model, max_iterations, wm, wa, out, tol);
   };
@@ -532,7 +532,7 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
   check_timing_args(reps, batches, warmup);
   if (max_iterations < 1) throw nb::value_error("max_iterations must be >= 1");
   if (!(violation_rel >= 0) || !std::isfinite(violation_rel))
-    throw nb::value_error("violation_rel must be finite and >= 0 (0: the core's kFeasRel)");
+    throw nb::value_error("violation_rel must be finite and >= 0 (0: the core's kFeasRelTol)");
   const bool is_float = is_float_scalar(scalar);
   nb::list ns, status, lambda, used, iterations;
   for (std::size_t i = 0; i < n; ++i) {
@@ -809,7 +809,7 @@ NB_MODULE(_core, m) {
         "the fallback paper -> normal -> none) in a C++ loop, on given float64 data: per "
         "instance lambda0 (3k), null_basis (3k x (3k-6), row-major, orthonormal columns), "
         "lambda_des (3k) and the requested model. warm_start: start from this instance's "
-        "own previous active set. violation_rel > 0 replaces kFeasRel (feasibility "
+        "own previous active set. violation_rel > 0 replaces kFeasRelTol (feasibility "
         "tolerance relative to |lambda0|). Returns a dict: ns, status, lambda, "
         "constraints_used, iterations.");
 }

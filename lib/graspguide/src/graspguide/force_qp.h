@@ -36,12 +36,12 @@ template <typename T, int K>
 Status solve_forces(const Equilibrium<T, K>& eq, const ForceVec<T, K>& lambda_des,
                     ConstraintModel requested, int max_iterations, ConstraintModel warm_model,
                     uint16_t warm_active, ForceSolution<T, K>& out,
-                    T feasibility_rel = Tolerances<T>::kFeasRel) {
+                    T feasibility_rel = Tolerances<T>::kFeasRelTol) {
   constexpr int kVars = 3 * K - 6;
   ProjectionQp<T, kVars, 3 * K> qp;
   qp.x_unconstrained.noalias() = eq.null_basis.transpose() * (lambda_des - eq.lambda0);
   qp.violation_tol = feasibility_rel * eq.lambda0.norm();
-  qp.dependent_tol = Tolerances<T>::kDependentRel;
+  qp.dependent_tol = Tolerances<T>::kDependentRelTol;
   out.iterations = 0;
 
   for (int model = static_cast<int>(requested); model <= static_cast<int>(ConstraintModel::kNone);

@@ -10,14 +10,14 @@ struct Tolerances;
 
 template <>
 struct Tolerances<float> {
-  static constexpr float kFeasRel = 1e-4f;
-  static constexpr float kDependentRel = 1e-4f;
+  static constexpr float kFeasRelTol = 1e-4f;
+  static constexpr float kDependentRelTol = 1e-4f;
 };
 
 template <>
 struct Tolerances<double> {
-  static constexpr double kFeasRel = 1e-9;
-  static constexpr double kDependentRel = 1e-9;
+  static constexpr double kFeasRelTol = 1e-9;
+  static constexpr double kDependentRelTol = 1e-9;
 };
 
 inline constexpr double kCoincidentRelTol = 1e-4;
