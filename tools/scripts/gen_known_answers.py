@@ -35,13 +35,14 @@ import numpy as np  # noqa: E402
 
 from graspguide.core import reference as ref  # noqa: E402
 from graspguide.core import scene_generators as scenes  # noqa: E402
+from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES  # noqa: E402
 
 JSON_PATH = os.path.join(_ROOT, "test", "data", "known_answers.json")
 HEADER_PATH = os.path.join(_ROOT, "test", "data", "known_answers.h")
 
 BASE_SEED = 20240611
 RANDOM_PER_K = 160
-COMBOS = [(p, m, c) for p in ref.POLICIES for m in ref.MODES for c in ref.MODELS]
+COMBOS = [(p, m, c) for p in POLICIES for m in MODES for c in CONSTRAINT_MODELS]
 
 # Random cases whose decisions sit near a threshold are redrawn, so that an
 # implementation with different rounding (or float) makes the same discrete decisions.
