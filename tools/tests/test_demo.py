@@ -230,7 +230,7 @@ def test_demo_usage_errors(tmp_path):
 # Pipelined closed loop == lockstep
 # --------------------------------------------------------------------------------------
 def _run(protocol, out, pid, pipeline):
-    from graspguide.link.transport import SimulatedDevice
+    from graspguide.link.sim import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)

@@ -151,7 +151,7 @@ class RecordingClient:
 
 @pytest.fixture
 def sim():
-    from graspguide.link.transport import SimulatedDevice
+    from graspguide.link.sim import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         yield dev
@@ -661,7 +661,7 @@ def test_real_time_run_on_the_device_clock(tmp_path):
     """Without the virtual clock (a board, or a person): poses paced by the host clock,
     host_time_us from it, a progress line every period."""
     from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import SimulatedDevice
+    from graspguide.link.sim import SimulatedDevice
 
     path = tmp_path / "rt.toml"
     path.write_text(
@@ -726,7 +726,8 @@ def test_device_lost_mid_trial_keeps_the_link_error(tmp_path):
     """The simulated device dies in trial 2: the run ends with the link error (not the
     failed STOP's), trial 1 is kept, the end of the run is logged."""
     from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import LinkError, SimulatedDevice
+    from graspguide.link.sim import SimulatedDevice
+    from graspguide.link.transport import LinkError
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)
     out = tmp_path / "out"

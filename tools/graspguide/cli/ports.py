@@ -8,7 +8,8 @@ import sys
 
 from graspguide.cli.common import fail
 from graspguide.exit_codes import EXIT_OK
-from graspguide.link.transport import SIM_PORT, LinkError
+from graspguide.link.sim import SIM_PORT
+from graspguide.link.transport import LinkError
 
 HELP = "list serial ports (and the simulated device 'sim')"
 DESCRIPTION = (
@@ -23,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.link.transport import find_sim_binary, list_serial_ports
+    from graspguide.link.sim import find_sim_binary
+    from graspguide.link.transport import list_serial_ports
 
     try:
         ports = list_serial_ports()

@@ -9,7 +9,8 @@ import sys
 
 from graspguide.cli.common import add_port_arguments, fail, signals_interrupt
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from graspguide.link.transport import SIM_PORT, LinkError
+from graspguide.link.sim import SIM_PORT
+from graspguide.link.transport import LinkError
 
 HELP = "run a trial: stream poses from a source to a device"
 
