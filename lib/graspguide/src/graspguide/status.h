@@ -54,26 +54,25 @@ enum class Status : uint8_t {
 
 inline constexpr int kStatusCount = static_cast<int>(Status::kBadConfig) + 1;
 
-constexpr const char* status_name(Status s) {
-  switch (s) {
-#define GRASPGUIDE_STATUS_NAME(id, name, message) \
-  case Status::id:                                \
-    return name;
-    GRASPGUIDE_STATUSES(GRASPGUIDE_STATUS_NAME)
+// Tables, not switches: each is linked only where it is used (the messages stay out of
+// images that only log names).
+namespace status_detail {
+#define GRASPGUIDE_STATUS_NAME(id, name, message) name,
+inline constexpr const char* kNames[] = {GRASPGUIDE_STATUSES(GRASPGUIDE_STATUS_NAME)};
 #undef GRASPGUIDE_STATUS_NAME
-  }
-  return "unknown";
+#define GRASPGUIDE_STATUS_MESSAGE(id, name, message) message,
+inline constexpr const char* kMessages[] = {GRASPGUIDE_STATUSES(GRASPGUIDE_STATUS_MESSAGE)};
+#undef GRASPGUIDE_STATUS_MESSAGE
+}  // namespace status_detail
+
+constexpr const char* status_name(Status s) {
+  const int i = static_cast<int>(s);
+  return i < kStatusCount ? status_detail::kNames[i] : "unknown";
 }
 
 constexpr const char* status_message(Status s) {
-  switch (s) {
-#define GRASPGUIDE_STATUS_MESSAGE(id, name, message) \
-  case Status::id:                                   \
-    return message;
-    GRASPGUIDE_STATUSES(GRASPGUIDE_STATUS_MESSAGE)
-#undef GRASPGUIDE_STATUS_MESSAGE
-  }
-  return "unknown status";
+  const int i = static_cast<int>(s);
+  return i < kStatusCount ? status_detail::kMessages[i] : "unknown status";
 }
 
 }  // namespace graspguide

@@ -107,22 +107,28 @@ class FrameParser {
     if (was_dropping || !started) return ParseEvent::kNone;
     if (cobs_status != LinkStatus::kOk) return count(ParseEvent::kBadCobs);
     // buffer_ stays intact until the next push, so frame_ may point into it.
-    switch (check_frame(buffer_, size, accept_, &frame_)) {
-      case LinkStatus::kOk:
-        return count(ParseEvent::kFrame);
-      case LinkStatus::kTooShort:
-        return count(ParseEvent::kTooShort);
-      case LinkStatus::kBadCrc:
-        return count(ParseEvent::kBadCrc);
-      case LinkStatus::kBadVersion:
-        return count(ParseEvent::kBadVersion);
-      case LinkStatus::kUnknownId:
-        return count(ParseEvent::kUnknownId);
-      case LinkStatus::kBadLength:
-        return count(ParseEvent::kBadLength);
-      default:
-        return count(ParseEvent::kTooLong);  // check_frame's only other verdict
-    }
+    return count(event_of(check_frame(buffer_, size, accept_, &frame_)));
+  }
+
+  // The event that reports each verdict of check_frame, by LinkStatus value: the error
+  // events are named after the verdicts.
+  static constexpr ParseEvent event_of(LinkStatus verdict) {
+    constexpr ParseEvent kByVerdict[] = {
+        ParseEvent::kFrame,       // kOk
+        ParseEvent::kTooLong,     // kBufferTooSmall (not a verdict of check_frame)
+        ParseEvent::kBadCobs,     // kBadCobs (idem: the COBS decoder reports it)
+        ParseEvent::kTooLong,     // kTooLong
+        ParseEvent::kTooShort,    // kTooShort
+        ParseEvent::kBadCrc,      // kBadCrc
+        ParseEvent::kBadVersion,  // kBadVersion
+        ParseEvent::kUnknownId,   // kUnknownId
+        ParseEvent::kBadLength,   // kBadLength
+    };
+    static_assert(static_cast<size_t>(LinkStatus::kBadLength) + 1 ==
+                      sizeof(kByVerdict) / sizeof(kByVerdict[0]),
+                  "one event per LinkStatus up to kBadLength");
+    const size_t i = static_cast<size_t>(verdict);
+    return i <= static_cast<size_t>(LinkStatus::kBadLength) ? kByVerdict[i] : ParseEvent::kTooLong;
   }
 
   ParseEvent count(ParseEvent e) {
