@@ -129,6 +129,14 @@ assert [spec.name for spec in Telemetry.FIELDS] == [
 _CONSTRAINT_BY_VALUE = {int(e): e for e in ConstraintModel}
 _ERRORCODE_BY_VALUE = {int(e): e for e in ErrorCode}
 _set = object.__setattr__
+# DeviceClient.counters(): the totals by attribute name, and each queue's count by the name
+# it is reported under.
+_TOTALS = ("bytes_received", "frames_received", "host_bad_frames", "device_frames_lost")
+_QUEUES = {
+    "trial_results_queued": "trial_results",
+    "unmatched": "unmatched",
+    "telemetry_backlog": "telemetry_backlog",
+}
 
 
 def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None:
@@ -387,6 +395,19 @@ class _Received:
     t_rx: float
 
 
+def _pose_answer(seq: int, t_us: int) -> Callable[[_Received], bool]:
+    """What answers the POSE sent as ``seq`` at ``t_us``: its TELEMETRY (which carries the
+    POSE's timestamp, not its seq) or the ERROR that refused it."""
+
+    def is_answer(item: _Received) -> bool:
+        m = item.message
+        if type(m) is Telemetry:
+            return m.host_time_us == t_us
+        return isinstance(m, Error) and m.request_seq == seq
+
+    return is_answer
+
+
 # --------------------------------------------------------------------------------------
 # Client
 # --------------------------------------------------------------------------------------
@@ -449,15 +470,11 @@ class DeviceClient:
         return counts
 
     def counters(self) -> dict[str, int]:
-        return {
-            "bytes_received": self.bytes_received,
-            "frames_received": self.frames_received,
-            "host_bad_frames": self.host_bad_frames,
-            "device_frames_lost": self.device_frames_lost,
-            "trial_results_queued": len(self.trial_results),
-            "unmatched": len(self.unmatched),
-            "telemetry_backlog": len(self.telemetry_backlog),
-        }
+        """The totals under their attributes' names, then how many frames wait in each
+        queue."""
+        counts = {name: getattr(self, name) for name in _TOTALS}
+        counts.update((name, len(getattr(self, queue))) for name, queue in _QUEUES.items())
+        return counts
 
     # ---- receiving
     def _pump(self, timeout: float) -> int:
@@ -793,32 +810,13 @@ class DeviceClient:
         self._settle()
         self._seq.next()
         self._write(wire)
-        inbox = self._inbox
-        timeout = self.timeout if timeout is None else float(timeout)
-        deadline = None
-        b0 = f0 = bad0 = 0
-        while True:
-            while inbox:
-                item = inbox.popleft()
-                m = item.message
-                if type(m) is Telemetry and m.host_time_us == t_us:
-                    if not m.flags & TELEMETRY_FLAG_TRIAL_RUNNING:
-                        self._pump(0.0)  # a TRIAL_RESULT right behind it, as _request
-                    self._settle()
-                    return m
-                if isinstance(m, Error) and m.request_seq == seq:
-                    raise DeviceError("POSE", seq, m.code, m.detail)
-                self._park(item)
-            if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
-                raise self._mismatch()
-            now = time.monotonic()
-            if deadline is None:
-                deadline = now + timeout
-                b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
-            left = deadline - now
-            if left <= 0:
-                raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
-            self._pump(min(left, POLL_INTERVAL))
+        m = self._wait(_pose_answer(seq, t_us), f"POSE (seq {seq})", timeout).message
+        if isinstance(m, Error):
+            raise DeviceError("POSE", seq, m.code, m.detail)
+        if not m.flags & TELEMETRY_FLAG_TRIAL_RUNNING:
+            self._pump(0.0)  # a TRIAL_RESULT right behind it, as _request
+        self._settle()
+        return m
 
     def pose_batch(
         self, poses: Sequence[tuple[int, Sequence[float]]], timeout: float | None = None
@@ -845,37 +843,11 @@ class DeviceClient:
         for _ in seqs:
             self._seq.next()
         self._write(b"".join(wires))
-        timeout = self.timeout if timeout is None else float(timeout)
-        out: list[Any] = []
-        inbox = self._inbox
-        for seq, t_us in zip(seqs, times):
-            deadline = None
-            b0 = f0 = bad0 = 0
-            answer: Telemetry | Error | None = None
-            while answer is None:
-                while inbox:
-                    item = inbox.popleft()
-                    m = item.message
-                    if type(m) is Telemetry and m.host_time_us == t_us:
-                        answer = m
-                        break
-                    if isinstance(m, Error) and m.request_seq == seq:
-                        answer = m
-                        break
-                    self._park(item)
-                if answer is not None:
-                    break
-                if self.device_version is not None and self.device_version != PROTOCOL_VERSION:
-                    raise self._mismatch()
-                now = time.monotonic()
-                if deadline is None:  # the answer's wait starts when it is needed
-                    deadline = now + timeout
-                    b0, f0, bad0 = self.bytes_received, self.frames_received, self.host_bad_frames
-                left = deadline - now
-                if left <= 0:
-                    raise self._timeout_error(f"POSE (seq {seq})", timeout, b0, f0, bad0)
-                self._pump(min(left, POLL_INTERVAL))
-            out.append(answer)
+        # Each answer's wait starts when it is needed, as if its POSE had just been sent.
+        out = [
+            self._wait(_pose_answer(seq, t_us), f"POSE (seq {seq})", timeout).message
+            for seq, t_us in zip(seqs, times)
+        ]
         self._settle()
         return out
 
