@@ -145,6 +145,17 @@ def die_with_parent() -> Callable[[], None] | None:
     return preexec
 
 
+def _sim_options(virtual_clock: bool, trace: str | None, stale_ms: int | None) -> list[str]:
+    """The simulated device's command-line options for these settings (see
+    :class:`SimulatedDevice`)."""
+    options = ["--virtual-clock"] if virtual_clock else []
+    if trace:
+        options += ["--trace", os.fspath(trace)]
+    if stale_ms is not None:
+        options += ["--stale-ms", str(int(stale_ms))]
+    return options
+
+
 class SimulatedDevice(Transport):
     """The simulated device as a process on a pseudo-terminal, and a Transport to it.
 
@@ -172,13 +183,10 @@ class SimulatedDevice(Transport):
         start: bool = False,
     ):
         self.binary = find_sim_binary(binary)
-        self.virtual_clock = virtual_clock
-        self.trace = trace
-        self.stale_ms = stale_ms
+        self.command = [self.binary, *_sim_options(virtual_clock, trace, stale_ms), *extra_args]
         self.start_timeout = start_timeout
         self.grace = grace
         self.baudrate = baudrate
-        self.extra_args = list(extra_args)
         self.process: subprocess.Popen | None = None
         self.pty_path: str | None = None
         self.start_time_s: float | None = None
@@ -188,17 +196,6 @@ class SimulatedDevice(Transport):
         self.name = "sim"
         if start:
             self.start()
-
-    @property
-    def command(self) -> list[str]:
-        cmd = [self.binary]
-        if self.virtual_clock:
-            cmd.append("--virtual-clock")
-        if self.trace:
-            cmd += ["--trace", os.fspath(self.trace)]
-        if self.stale_ms is not None:
-            cmd += ["--stale-ms", str(int(self.stale_ms))]
-        return cmd + self.extra_args
 
     def start(self) -> SimulatedDevice:
         if self.process is not None:
