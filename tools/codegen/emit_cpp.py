@@ -17,6 +17,7 @@ from codegen.schema import (
     camel,
     f32,
 )
+from codegen.text import documented
 
 
 def cpp_enumerator(name: str) -> str:
@@ -76,9 +77,11 @@ def render(schema: Schema) -> str:
         "namespace graspguide_link {",
         "",
     ]
-    for c in s.named_constants:
-        L.append(f"// {c.doc}")
-        L.append(f"inline constexpr {c.ctype} k{camel(c.name)} = {c.literal};")
+    L += documented(
+        s.named_constants,
+        "//",
+        lambda c: f"inline constexpr {c.ctype} k{camel(c.name)} = {c.literal};",
+    )
     L += [
         "",
         "// Every schema enum has an EnumInfo: its values in schema order.",

@@ -15,6 +15,7 @@ from codegen.schema import (
     Field,
     Schema,
 )
+from codegen.text import documented
 
 
 def _py_literal(schema: Schema, f: Field, v: Any) -> str:
@@ -78,9 +79,7 @@ def render(schema: Schema) -> str:
         "from graspguide.link.message_base import FieldSpec, Message",
         "",
     ]
-    for c in s.named_constants:
-        L.append(f"# {c.doc}")
-        L.append(f"{c.name.upper()} = {c.literal}")
+    L += documented(s.named_constants, "#", lambda c: f"{c.name.upper()} = {c.literal}")
     L += [
         f"MAX_PAYLOAD_SIZE = {s.max_payload}",
         _py_range("HOST_TO_DEVICE_IDS", HOST_TO_DEVICE_IDS),
