@@ -266,6 +266,14 @@ class Outcome:
     pwm: list[int] | None = None
 
 
+def binding_outcome(d: dict[str, Any]) -> Outcome:
+    """The Outcome of one answer dict of the binding (_core.solve, Guidance.update)."""
+    lam = d["lambda"]
+    return Outcome(
+        d["status"], d["constraints_used"], None if lam is None else np.asarray(lam), d["pwm"]
+    )
+
+
 def judge(inst: Instance, out: Outcome, scalar: str = "double") -> dict[str, Any]:
     """Compare one outcome with the reference. `failure` is None or the reason: the
     solver's own error, a constraint model other than the reference's (a wrong
@@ -813,14 +821,7 @@ def py_guidance_config(name, insts, k, calls) -> Config:
             g.update(q)
             g.set_contacts(inst.contacts)
             d = g.update(q)
-            outcomes.append(
-                Outcome(
-                    d["status"],
-                    d["constraints_used"],
-                    None if d["lambda"] is None else np.asarray(d["lambda"]),
-                    d["pwm"],
-                )
-            )
+            outcomes.append(binding_outcome(d))
         cfg.serie("py", "Python call").add(samples)
         cfg.outcomes = outcomes
 
@@ -860,14 +861,7 @@ def py_solve_config(name, insts, k, scalar, calls) -> Config:
                     scalar,
                 )
                 samples.append(time.perf_counter_ns() - t0)
-            outcomes.append(
-                Outcome(
-                    d["status"],
-                    d["constraints_used"],
-                    None if d["lambda"] is None else np.asarray(d["lambda"]),
-                    d["pwm"],
-                )
-            )
+            outcomes.append(binding_outcome(d))
         cfg.serie("py", "Python call").add(samples)
         cfg.outcomes = outcomes
 

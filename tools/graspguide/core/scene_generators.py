@@ -355,36 +355,14 @@ def extreme_scenes() -> list[dict[str, Any]]:
     # ---- relevance boundary ---------------------------------------------------------------------
     # r_1 = (4d, 0, 0) exactly (O = 0); f = (0, 0, 1) is exactly perpendicular to r_1.
     rb = [[4 * d, 0.0, 0.0], [-2 * d, 4 * d, d], [-2 * d, -4 * d, -d]]
-    add(
-        _case(
-            _scene(
-                "relevance_boundary_exact", rb, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], orientation=q_tilt
-            ),
-            "ok",
-            "f . r_1 = 0 exactly: contact 0 is relevant (<= 0 counts)",
-            expect={"relevant0": True},
-        )
-    )
-    add(
-        _case(
-            _scene(
-                "relevance_boundary_inside_band", rb, [1e-7, 0.0, 1.0, 0, 0, 0], orientation=q_tilt
-            ),
-            "ok",
-            "cos(f, r_1) = 1e-7 <= kRelevanceCosTol: relevant",
-            expect={"relevant0": True},
-        )
-    )
-    add(
-        _case(
-            _scene(
-                "relevance_boundary_outside_band", rb, [1e-4, 0.0, 1.0, 0, 0, 0], orientation=q_tilt
-            ),
-            "ok",
-            "cos(f, r_1) = 1e-4 > kRelevanceCosTol: not relevant",
-            expect={"relevant0": False},
-        )
-    )
+    for name, fx, why, relevant in (
+        ("exact", 0.0, "f . r_1 = 0 exactly: contact 0 is relevant (<= 0 counts)", True),
+        ("inside_band", 1e-7, "cos(f, r_1) = 1e-7 <= kRelevanceCosTol: relevant", True),
+        ("outside_band", 1e-4, "cos(f, r_1) = 1e-4 > kRelevanceCosTol: not relevant", False),
+    ):
+        wrench = [fx, 0.0, 1.0, 0.0, 0.0, 0.0]
+        scene = _scene(f"relevance_boundary_{name}", rb, wrench, orientation=q_tilt)
+        add(_case(scene, "ok", why, expect={"relevant0": relevant}))
 
     # ---- constraint models ----------------------------------------------------------------------
     add(
