@@ -1,18 +1,18 @@
 """What every command's parser shares: the argument parser that takes negative numbers
 as values, the numeric argument types, the port arguments, connecting to a device,
-SIGTERM/SIGHUP as Ctrl-C, and the one-line error report."""
+SIGTERM/SIGHUP as Ctrl-C, and the call of a command's library function with its options
+(the one-line error report is graspguide.study.device_session's)."""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import inspect
 import re
 import signal
-import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from graspguide.exit_codes import EXIT_FAILURE
 from graspguide.link.transport import DEFAULT_BAUDRATE
 
 _NUM = r"(?:(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?|inf(?:inity)?|nan)"
@@ -109,6 +109,17 @@ def signals_interrupt() -> Iterator[None]:
             signal.signal(s, h)
 
 
+def call_with_options(fn: Callable[..., int], args: argparse.Namespace) -> int:
+    """``fn(name=args.name, ...)`` for every keyword-only parameter of ``fn``: the library
+    functions of the commands name their parameters as the options' dests."""
+    names = [
+        p.name
+        for p in inspect.signature(fn).parameters.values()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY
+    ]
+    return fn(**{name: getattr(args, name) for name in names})
+
+
 def connect(args: argparse.Namespace) -> tuple[Any, Any]:
     """(transport, client) for --port after HELLO, or raise LinkError."""
     from graspguide.link.client import DeviceClient
@@ -122,8 +133,3 @@ def connect(args: argparse.Namespace) -> tuple[Any, Any]:
         transport.close()
         raise
     return transport, client
-
-
-def fail(command: str, e: BaseException) -> int:
-    print(f"graspguide {command}: error: {e}", file=sys.stderr)
-    return EXIT_FAILURE

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from graspguide.cli.common import int_arg
+from graspguide.cli.common import call_with_options, int_arg
 
 HELP = (
     "the paper's study end to end, simulated: 8 virtual "
@@ -75,4 +75,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from graspguide.study import demo
 
-    return demo.run(args)
+    return call_with_options(demo.run, args)

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 
-from graspguide.cli.common import add_port_arguments, connect, fail
+from graspguide.cli.common import add_port_arguments, connect
 from graspguide.exit_codes import EXIT_OK
 from graspguide.link.transport import LinkError
+from graspguide.study.device_session import fail
 
 HELP = "identify a device: HELLO_REPLY and STATUS"
 DESCRIPTION = (

@@ -11,12 +11,12 @@ from typing import BinaryIO, TextIO
 from graspguide.cli.common import (
     add_port_arguments,
     connect,
-    fail,
     positive_int,
     signals_interrupt,
 )
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK
 from graspguide.link.transport import LinkError
+from graspguide.study.device_session import fail
 
 HELP = "answer JSON Lines requests (contacts, wrench -> PWM) with the C++ core"
 

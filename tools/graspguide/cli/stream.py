@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 
-from graspguide.cli.common import add_port_arguments, fail, signals_interrupt
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from graspguide.cli.common import add_port_arguments, call_with_options, signals_interrupt
 from graspguide.link.sim import SIM_PORT
-from graspguide.link.transport import LinkError
 
 HELP = "run a trial: stream poses from a source to a device"
 
@@ -112,105 +109,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
 def run(args: argparse.Namespace) -> int:
-    from graspguide.core.units import moment_unit_problem
-    from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import open_port
-    from graspguide.study.live_view import StatusView
-    from graspguide.study.records import SessionLog
-    from graspguide.study.scene_file import SceneError, config_hash, load_scene
-    from graspguide.study.sources import SourceError, SyntheticSource, open_source
-    from graspguide.study.stream_session import run_stream
+    from graspguide.study.stream_session import stream_command
 
     parser = args.command_parser
     if args.virtual_clock and args.port != SIM_PORT:
         parser.error("--virtual-clock is for --port sim (a board's clock is its own)")
     if not 0 <= args.trial_id <= 0xFFFF:
         parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
-    try:
-        scene = load_scene(args.scene)
-        problem = moment_unit_problem(scene.contacts, args.wrench)
-        if problem:
-            raise SceneError(f"--wrench with {args.scene}: {problem}")
-        source = open_source(args.source, tracker=args.tracker)
-        if isinstance(source, SyntheticSource):
-            source.aim(scene.contacts, args.wrench, scene.policy, scene.constraints, scene.y_axis)
-    except (SceneError, SourceError) as e:
-        print(f"graspguide stream: error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    kwargs = {"virtual_clock": True} if args.virtual_clock else {}
-    try:
-        transport = open_port(args.port, baudrate=args.baud, **kwargs)
-    except LinkError as e:
-        return fail("stream", e)
-    client = DeviceClient(transport, timeout=args.timeout)
-    log = view = None
-    code = EXIT_OK
-    summary = None
-    stop_acked = False
-    log_failed = False
-    try:
-        hello = client.hello()
-        config = {"scene": scene.to_dict(), "wrench": args.wrench}
-        config["config_hash"] = config_hash(config)
-        config.update(
-            source=source.describe(),
-            source_spec=args.source,
-            port=args.port,
-            trial_id=args.trial_id,
-            virtual_clock=args.virtual_clock,
-            scene_file=args.scene,
-        )
-        if args.log:
-            log = SessionLog(args.log)
-            log.scene(scene.to_dict())
-            log.device(hello)
-            log.config(config)
-        view = StatusView(scene.k)
-        summary = run_stream(
-            client, scene, args.wrench, source, args.trial_id, args.virtual_clock, log, view
-        )
-    except (LinkError, OSError) as e:  # OSError: the session log's disk (RecordWriteError)
-        code = EXIT_FAILURE
-        print(f"graspguide stream: error: {e}", file=sys.stderr)
-        log_failed = isinstance(e, OSError) and not isinstance(e, LinkError)
-    except KeyboardInterrupt:
-        code = EXIT_INTERRUPTED
-        print("graspguide stream: interrupted", file=sys.stderr)
-    finally:
-        if view is not None:
-            view.close()
-        try:
-            client.stop()
-            stop_acked = True
-        except LinkError as e:
-            print(f"graspguide stream: STOP failed: {e}", file=sys.stderr)
-            code = code or EXIT_FAILURE
-        except KeyboardInterrupt:
-            pass
-        transport.close()
-        if log is not None:
-            end = {"event": "end", "exit_code": code, "stop_acknowledged": stop_acked}
-            if summary is not None:
-                end.update({k: v for k, v in summary.items() if k != "trial_result"})
-            try:
-                log.result(end)
-                log.close()
-            except OSError as e:  # the records before stay whole (session_log)
-                if not log_failed:
-                    print(f"graspguide stream: error: {e}", file=sys.stderr)
-                code = code or EXIT_FAILURE
-    if summary is not None:
-        r = summary["trial_result"]
-        if r is None:
-            print(
-                f"no trial result: the source ended first ({summary['sent']} poses sent, "
-                f"last error {summary['last_error_deg']})"
-            )
-        else:
-            print(
-                f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
-                f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
-                f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
-                f"{summary['dropped']} dropped)"
-            )
-    return code
+    return call_with_options(stream_command, args)

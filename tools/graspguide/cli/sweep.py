@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from graspguide.cli.common import int_arg
+from graspguide.cli.common import call_with_options, int_arg
 
 HELP = (
     "the speed-accuracy trade, simulated: success rate and completion "
@@ -114,4 +114,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from graspguide.study import sweep
 
-    return sweep.run(args)
+    return call_with_options(sweep.run, args)

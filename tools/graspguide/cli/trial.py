@@ -4,13 +4,8 @@
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 
-from graspguide.cli.common import add_port_arguments, fail, signals_interrupt
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from graspguide.link.sim import SIM_PORT
-from graspguide.link.transport import LinkError
+from graspguide.cli.common import add_port_arguments, call_with_options, signals_interrupt
 
 HELP = "run a participant's trials of a study protocol (resumable; NASA-TLX after each session)"
 
@@ -88,95 +83,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def run(args: argparse.Namespace) -> int:
-    from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import open_port
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.progress import Progress
-    from graspguide.study.runner import StudyRunner, summary_lines
-    from graspguide.study.study_protocol import (
-        ProtocolFileError,
-        load_protocol,
-        participant_number,
-        session_order,
-    )
-    from graspguide.study.tlx import load_tlx_file
-    from graspguide.study.trial_sources import open_runner_source
+    from graspguide.study.runner import trial_command
 
-    def usage(message: str) -> int:
-        print(f"graspguide trial: error: {message}", file=sys.stderr)
-        return EXIT_USAGE
-
-    try:
-        protocol = load_protocol(args.protocol)
-        participant_number(args.participant)
-        source = open_runner_source(args.source, protocol, args.participant)
-        runner_tlx = None
-        if args.tlx is not None:
-            runner_tlx = load_tlx_file(
-                args.tlx, args.participant, session_order(protocol, args.participant)
-            )
-    except ProtocolFileError as e:
-        return usage(str(e))
-    except RunnerError as e:
-        return usage(str(e))
-    virtual_clock = args.port == SIM_PORT and source.simulated and not source.live
-    kwargs = {"virtual_clock": True} if virtual_clock else {}
-
-    transport = None
-    code = EXIT_OK
-    runner = None
-    try:
-        try:
-            transport = open_port(args.port, baudrate=args.baud, **kwargs)
-        except LinkError as e:
-            return fail("trial", e)
-        client = DeviceClient(transport, timeout=args.timeout)
-        try:
-            runner = StudyRunner(
-                protocol,
-                args.participant,
-                args.out,
-                source,
-                client,
-                virtual_clock,
-                tlx=runner_tlx,
-                progress=Progress(),
-                protocol_file=args.protocol,
-                port=args.port,
-            )
-            result = runner.run()
-            print(
-                f"{args.participant}: all {result['planned']} trials done ({result['ran']} "
-                f"run now, {result['skipped']} from earlier runs); "
-                f"{os.path.join(args.out, args.participant)}"
-            )
-            for line in summary_lines(args.out, args.participant):
-                print(line)
-        except ProtocolFileError as e:
-            code = usage(str(e))
-        except RunnerError as e:
-            print(f"graspguide trial: error: {e}", file=sys.stderr)
-            code = EXIT_USAGE if e.usage else EXIT_FAILURE
-        except LinkError as e:
-            print(f"graspguide trial: error: {e}", file=sys.stderr)
-            code = EXIT_FAILURE
-        except KeyboardInterrupt:
-            code = EXIT_INTERRUPTED
-            done = "" if runner is None else f" after {runner.ran} trials"
-            print(
-                f"\ngraspguide trial: interrupted{done}; completed trials are saved: run "
-                "the same command again to resume",
-                file=sys.stderr,
-            )
-        finally:
-            try:
-                client.stop()
-            except (LinkError, OSError) as e:
-                print(f"graspguide trial: STOP failed: {e}", file=sys.stderr)
-                code = code or EXIT_FAILURE
-            except KeyboardInterrupt:
-                pass
-    finally:
-        if transport is not None:
-            transport.close()
-    return code
+    return call_with_options(trial_command, args)

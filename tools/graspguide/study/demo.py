@@ -19,7 +19,6 @@ again. Everything here is labelled SIMULATED: no human took part.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -58,36 +57,47 @@ def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
     return len(done), planned, len(done) >= planned and sessions <= tlx
 
 
-def run(args: argparse.Namespace) -> int:
+def run(
+    *,
+    participants: int,
+    protocol: str | None = None,
+    out: str | None = None,
+    jobs: int | None = None,
+    source: str = "participant",
+) -> int:
+    """`graspguide demo`: ``participants`` virtual participants through ``protocol``
+    (default protocols/paper.toml) into the study folder ``out`` (default
+    logs/demo-study), ``jobs`` at a time (default the CPU count), then the analysis.
+    Returns the exit code."""
     from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import ProtocolFileError, load_protocol
     from graspguide.study.trial_sources import open_runner_source
 
     t0 = time.monotonic()
-    protocol_path = args.protocol or default_protocol()
-    out = args.out or default_out()
-    jobs = args.jobs or os.cpu_count() or 1
+    protocol_path = protocol or default_protocol()
+    out = out or default_out()
+    jobs = jobs or os.cpu_count() or 1
     try:
-        protocol = load_protocol(protocol_path)
-        if not args.source.startswith("participant"):
+        loaded = load_protocol(protocol_path)
+        if not source.startswith("participant"):
             raise RunnerError(
                 "--source must be the virtual participant: participant[:key=value,...]", usage=True
             )
-        open_runner_source(args.source, protocol, "U1")  # checks the spec
+        open_runner_source(source, loaded, "U1")  # checks the spec
     except (ProtocolFileError, RunnerError) as e:
         print(f"graspguide demo: error: {e}", file=sys.stderr)
         return EXIT_USAGE
-    pids = [f"U{i}" for i in range(1, args.participants + 1)]
+    pids = [f"U{i}" for i in range(1, participants + 1)]
     logs = os.path.join(out, "demo-logs")
     os.makedirs(logs, exist_ok=True)
     print(
         f"SIMULATED study (virtual participants, not human data): protocol {protocol_path}, "
-        f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {args.source}, "
+        f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {source}, "
         f"{min(jobs, len(pids))} at a time; study folder {out}",
         flush=True,
     )
 
-    status = {pid: _status(protocol, out, pid) for pid in pids}
+    status = {pid: _status(loaded, out, pid) for pid in pids}
     total = sum(s[1] for s in status.values())
     todo = [pid for pid in pids if not status[pid][2]]
     before = sum(s[0] for s in status.values())
@@ -99,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
 
-    code = _run_participants(args, protocol_path, out, logs, todo, jobs, total, status)
+    code = _run_participants(source, protocol_path, out, logs, todo, jobs, total, status)
     if code != EXIT_OK:
         return code
     run_s = time.monotonic() - t0
@@ -107,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_participants(
-    args,
+    source: str,
     protocol_path: str,
     out: str,
     logs: str,
@@ -119,8 +129,7 @@ def _run_participants(
     if not todo:
         return EXIT_OK
     tasks = [
-        TrialJob(protocol_path, out, pid, args.source, os.path.join(logs, f"{pid}.log"))
-        for pid in todo
+        TrialJob(protocol_path, out, pid, source, os.path.join(logs, f"{pid}.log")) for pid in todo
     ]
     next_report = [time.monotonic() + 5.0]
 

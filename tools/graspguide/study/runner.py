@@ -768,8 +768,97 @@ def summary_lines(out_dir: str, participant: str) -> list[str]:
     return out
 
 
+def trial_command(
+    *,
+    protocol: str,
+    participant: str,
+    source: str,
+    port: str,
+    baud: int,
+    timeout: float,
+    out: str,
+    tlx: str | None,
+) -> int:
+    """`graspguide trial`: ``participant``'s trials of the protocol file ``protocol`` on
+    the device at ``port`` into ``out``, poses from the source spec ``source``, the
+    NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
+    stopped; STOP on every way out. Returns the exit code."""
+    from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+    from graspguide.link.sim import SIM_PORT
+    from graspguide.link.transport import LinkError
+    from graspguide.study.device_session import DeviceSession, fail, report
+    from graspguide.study.study_protocol import (
+        ProtocolFileError,
+        load_protocol,
+        participant_number,
+    )
+    from graspguide.study.tlx import load_tlx_file
+    from graspguide.study.trial_sources import open_runner_source
+
+    protocol_file, source_spec, tlx_file = protocol, source, tlx
+    try:
+        loaded = load_protocol(protocol_file)
+        participant_number(participant)
+        poses = open_runner_source(source_spec, loaded, participant)
+        runner_tlx = None
+        if tlx_file is not None:
+            runner_tlx = load_tlx_file(tlx_file, participant, session_order(loaded, participant))
+    except (ProtocolFileError, RunnerError) as e:
+        report("trial", e)
+        return EXIT_USAGE
+    virtual_clock = port == SIM_PORT and poses.simulated and not poses.live
+    try:
+        device = DeviceSession("trial", port, baud, timeout, virtual_clock)
+    except LinkError as e:
+        return fail("trial", e)
+    code = EXIT_OK
+    runner = None
+    try:
+        runner = StudyRunner(
+            loaded,
+            participant,
+            out,
+            poses,
+            device.client,
+            virtual_clock,
+            tlx=runner_tlx,
+            progress=Progress(),
+            protocol_file=protocol_file,
+            port=port,
+        )
+        result = runner.run()
+        print(
+            f"{participant}: all {result['planned']} trials done ({result['ran']} "
+            f"run now, {result['skipped']} from earlier runs); "
+            f"{os.path.join(out, participant)}"
+        )
+        for line in summary_lines(out, participant):
+            print(line)
+    except ProtocolFileError as e:
+        report("trial", e)
+        code = EXIT_USAGE
+    except RunnerError as e:
+        report("trial", e)
+        code = EXIT_USAGE if e.usage else EXIT_FAILURE
+    except LinkError as e:
+        code = fail("trial", e)
+    except KeyboardInterrupt:
+        code = EXIT_INTERRUPTED
+        done = "" if runner is None else f" after {runner.ran} trials"
+        print(
+            f"\ngraspguide trial: interrupted{done}; completed trials are saved: run "
+            "the same command again to resume",
+            file=sys.stderr,
+        )
+    finally:
+        if not device.close():
+            code = code or EXIT_FAILURE
+    return code
+
+
 __all__ = [
     "StudyRunner",
+    "trial_command",
     "FRAME_COLUMNS",
     "TRIAL_FIELDS",
     "read_run_jsonl",

@@ -1,12 +1,17 @@
 """One `graspguide stream` trial: SET_SCENE, START_TRIAL, the source's poses through the
 pose loop (:mod:`graspguide.study.pose_loop`) into the session log and the live view,
-until the TRIAL_RESULT or the end of the source."""
+until the TRIAL_RESULT or the end of the source; :func:`stream_command` is the whole
+command (scene, source, device, log, STOP on every way out, the result line)."""
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import Any
 
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from graspguide.link.transport import LinkError
+from graspguide.study.device_session import DeviceSession, fail, report
 from graspguide.study.pose_loop import Frame, OpenLoopPoses, PoseLoop
 
 
@@ -80,4 +85,122 @@ def run_stream(
     }
 
 
-__all__ = ["run_stream"]
+def stream_command(
+    *,
+    scene: str,
+    wrench: list[float],
+    source: str,
+    tracker: str | None,
+    port: str,
+    baud: int,
+    timeout: float,
+    log: str | None,
+    trial_id: int,
+    virtual_clock: bool,
+) -> int:
+    """`graspguide stream`: one trial of the scene file ``scene`` with ``wrench`` on the
+    device at ``port``, poses from the source spec ``source``; the session folder ``log``
+    when given. STOP is sent and the log's end record written on every way out; returns
+    the exit code."""
+    from graspguide.core.units import moment_unit_problem
+    from graspguide.study.live_view import StatusView
+    from graspguide.study.records import SessionLog
+    from graspguide.study.scene_file import SceneError, config_hash, load_scene
+    from graspguide.study.sources import SourceError, SyntheticSource, open_source
+
+    scene_file, source_spec, log_dir = scene, source, log
+    try:
+        trial_scene = load_scene(scene_file)
+        problem = moment_unit_problem(trial_scene.contacts, wrench)
+        if problem:
+            raise SceneError(f"--wrench with {scene_file}: {problem}")
+        poses = open_source(source_spec, tracker=tracker)
+        if isinstance(poses, SyntheticSource):
+            poses.aim(
+                trial_scene.contacts,
+                wrench,
+                trial_scene.policy,
+                trial_scene.constraints,
+                trial_scene.y_axis,
+            )
+    except (SceneError, SourceError) as e:
+        report("stream", e)
+        return EXIT_USAGE
+    try:
+        device = DeviceSession("stream", port, baud, timeout, virtual_clock)
+    except LinkError as e:
+        return fail("stream", e)
+    client = device.client
+    session_log = view = None
+    code = EXIT_OK
+    summary = None
+    log_failed = False
+    try:
+        hello = client.hello()
+        config = {"scene": trial_scene.to_dict(), "wrench": wrench}
+        config["config_hash"] = config_hash(config)
+        config.update(
+            source=poses.describe(),
+            source_spec=source_spec,
+            port=port,
+            trial_id=trial_id,
+            virtual_clock=virtual_clock,
+            scene_file=scene_file,
+        )
+        if log_dir:
+            session_log = SessionLog(log_dir)
+            session_log.scene(trial_scene.to_dict())
+            session_log.device(hello)
+            session_log.config(config)
+        view = StatusView(trial_scene.k)
+        summary = run_stream(
+            client, trial_scene, wrench, poses, trial_id, virtual_clock, session_log, view
+        )
+    except (LinkError, OSError) as e:  # OSError: the session log's disk (RecordWriteError)
+        code = EXIT_FAILURE
+        report("stream", e)
+        log_failed = isinstance(e, OSError) and not isinstance(e, LinkError)
+    except KeyboardInterrupt:
+        code = EXIT_INTERRUPTED
+        print("graspguide stream: interrupted", file=sys.stderr)
+    finally:
+        if view is not None:
+            view.close()
+        if not device.close():
+            code = code or EXIT_FAILURE
+        if session_log is not None:
+            end = {
+                "event": "end",
+                "exit_code": code,
+                "stop_acknowledged": device.stop_acknowledged,
+            }
+            if summary is not None:
+                end.update({k: v for k, v in summary.items() if k != "trial_result"})
+            try:
+                session_log.result(end)
+                session_log.close()
+            except OSError as e:  # the records before stay whole (session_log)
+                if not log_failed:
+                    report("stream", e)
+                code = code or EXIT_FAILURE
+    if summary is not None:
+        print(summary_line(summary))
+    return code
+
+
+def summary_line(summary: dict[str, Any]) -> str:
+    r = summary["trial_result"]
+    if r is None:
+        return (
+            f"no trial result: the source ended first ({summary['sent']} poses sent, "
+            f"last error {summary['last_error_deg']})"
+        )
+    return (
+        f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
+        f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
+        f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
+        f"{summary['dropped']} dropped)"
+    )
+
+
+__all__ = ["run_stream", "stream_command"]

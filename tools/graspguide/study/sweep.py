@@ -33,7 +33,6 @@ per modality) and a table on stdout. Everything is labelled SIMULATED.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
@@ -515,7 +514,6 @@ def _shown_path(path: str) -> str:
 
 
 def run_sweep(
-    *,
     protocol_path: str,
     thresholds: Sequence[float],
     rates: Sequence[float],
@@ -524,6 +522,7 @@ def run_sweep(
     out: str,
     jobs: int,
     source: str,
+    *,
     modalities: Sequence[str] | None = None,
     contacts: Sequence[int] | None = None,
     grid: bool = False,
@@ -680,78 +679,107 @@ def run_sweep(
     return EXIT_OK, result
 
 
-def command_line(args: argparse.Namespace) -> str:
+def command_line(
+    protocol: str | None,
+    thresholds: str,
+    rates: str,
+    grid: bool,
+    modalities: str | None,
+    contacts: str | None,
+    participants: int,
+    wrenches: int,
+    source: str,
+    out: str | None,
+) -> str:
     """The command that gives this sweep (every option spelled out)."""
     parts = ["graspguide", "sweep"]
-    if args.protocol:
-        parts += ["--protocol", args.protocol]
-    parts += ["--thresholds", args.thresholds, "--rates", args.rates]
-    if args.grid:
+    if protocol:
+        parts += ["--protocol", protocol]
+    parts += ["--thresholds", thresholds, "--rates", rates]
+    if grid:
         parts.append("--grid")
-    if args.modalities:
-        parts += ["--modalities", args.modalities]
-    if args.contacts:
-        parts += ["--contacts", args.contacts]
-    parts += ["--participants", str(args.participants), "--wrenches", str(args.wrenches)]
-    if args.source != DEFAULT_SOURCE:
-        parts += ["--source", args.source]
-    if args.out:
-        parts += ["--out", args.out]
+    if modalities:
+        parts += ["--modalities", modalities]
+    if contacts:
+        parts += ["--contacts", contacts]
+    parts += ["--participants", str(participants), "--wrenches", str(wrenches)]
+    if source != DEFAULT_SOURCE:
+        parts += ["--source", source]
+    if out:
+        parts += ["--out", out]
     return " ".join(parts)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(
+    *,
+    thresholds: str,
+    rates: str,
+    protocol: str | None = None,
+    grid: bool = False,
+    modalities: str | None = None,
+    contacts: str | None = None,
+    participants: int = 2,
+    wrenches: int = 4,
+    source: str = DEFAULT_SOURCE,
+    out: str | None = None,
+    jobs: int | None = None,
+    quiet: bool = False,
+) -> int:
+    """`graspguide sweep` with its options as given on the command line (lists as
+    comma-separated text); writes OUT/sweep.json, OUT/sweep.png and prints the table.
+    Returns the exit code."""
     from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
 
+    command = command_line(
+        protocol, thresholds, rates, grid, modalities, contacts, participants, wrenches, source, out
+    )
     prog = "graspguide sweep"
     try:
-        thresholds = parse_values(args.thresholds, "thresholds", 0.0, 90.0)
-        rates = parse_values(args.rates, "rates", 0.0, POSE_RATE_HZ[1])
-        if any(r < POSE_RATE_HZ[0] for r in rates):
+        threshold_values = parse_values(thresholds, "thresholds", 0.0, 90.0)
+        rate_values = parse_values(rates, "rates", 0.0, POSE_RATE_HZ[1])
+        if any(r < POSE_RATE_HZ[0] for r in rate_values):
             raise SweepError(
                 f"--rates: each value must be at least {POSE_RATE_HZ[0]:g} poses "
                 "per second, the protocol file's minimum ([study] pose_rate_hz)"
             )
-        if any(t >= 90.0 for t in thresholds):
+        if any(t >= 90.0 for t in threshold_values):
             raise SweepError("--thresholds: each value must be below 90 degrees")
-        modalities = parse_modalities(args.modalities) if args.modalities else None
-        contacts = None
-        if args.contacts:
+        modality_values = parse_modalities(modalities) if modalities else None
+        contact_values = None
+        if contacts:
             try:
-                contacts = tuple(int(s) for s in args.contacts.split(","))
+                contact_values = tuple(int(s) for s in contacts.split(","))
             except ValueError:
-                raise SweepError(
-                    f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}"
-                ) from None
+                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {contacts!r}") from None
             if (
-                not contacts
-                or any(k not in (3, 4) for k in contacts)
-                or len(set(contacts)) != len(contacts)
+                not contact_values
+                or any(k not in (3, 4) for k in contact_values)
+                or len(set(contact_values)) != len(contact_values)
             ):
-                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {args.contacts!r}")
-        out = args.out or default_out()
-        jobs = args.jobs or os.cpu_count() or 1
+                raise SweepError(f"--contacts: expected 3, 4 or 3,4, got {contacts!r}")
+        out = out or default_out()
+        jobs = jobs or os.cpu_count() or 1
         code, result = run_sweep(
-            protocol_path=args.protocol or default_protocol(),
-            thresholds=thresholds,
-            rates=rates,
-            participants=args.participants,
-            wrenches=args.wrenches,
-            out=out,
-            jobs=jobs,
-            source=args.source,
-            modalities=modalities,
-            contacts=contacts,
-            grid=args.grid,
-            quiet=args.quiet,
+            protocol or default_protocol(),
+            threshold_values,
+            rate_values,
+            participants,
+            wrenches,
+            out,
+            jobs,
+            source,
+            modalities=modality_values,
+            contacts=contact_values,
+            grid=grid,
+            quiet=quiet,
         )
     except (SweepError, ProtocolFileError, RunnerError) as e:
         print(f"{prog}: error: {e}", file=sys.stderr)
         return EXIT_USAGE
     if code != EXIT_OK or result is None:
         return code
-    result["command"] = command_line(args)
+    result["command"] = command
     os.makedirs(out, exist_ok=True)
     json_path = os.path.join(out, "sweep.json")
     png_path = os.path.join(out, "sweep.png")
