@@ -561,6 +561,28 @@ def _long(wide, value: str = "y"):
     return long.sort_values(["participant", "modality"]).reset_index(drop=True)
 
 
+_PAIRWISE_COLUMNS = ["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
+# Mauchly's test where it cannot be computed (fewer participants than modalities).
+_NO_SPHERICITY = {
+    "W": math.nan,
+    "chi2": math.nan,
+    "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
+    "pval": math.nan,
+    "pval_second_order": math.nan,
+    "spher": None,
+}
+
+
+def _no_normality():
+    """Shapiro-Wilk where it cannot be computed (fewer than 4 participants)."""
+    import pandas as pd
+
+    return pd.DataFrame(
+        {"W": math.nan, "pval": math.nan, "normal": False},
+        index=pd.Index(list(MODALITIES), name="modality"),
+    )
+
+
 def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     """The paper's analysis of completion time on a wide participant x modality frame.
 
@@ -571,8 +593,6 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     """
     import numpy as np
     import pandas as pd
-    import pingouin as pg
-    from statsmodels.stats.anova import AnovaRM
 
     means = means.reindex(columns=list(MODALITIES)).astype(float)
     means.index = means.index.map(str).rename("participant")
@@ -591,7 +611,9 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     if (retained < 0).any().any():
         raise AnalysisError("negative completion times cannot be square-root transformed")
     transformed = np.sqrt(retained)
-    if len(retained) < 2:
+    if len(retained) >= 2:
+        tests = _repeated_measures_tests(retained, transformed, notes)
+    else:
         # A pilot (or outlier removal) leaves one participant: no within-subject variance,
         # so no test; the descriptive results stand on their own.
         if removed:
@@ -608,33 +630,33 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
                 f"({', '.join(map(str, means.index))}), e.g. a pilot: Tables I-III, the "
                 "participant means and Figure 4 are descriptive only"
             )
-        nan_frame = pd.DataFrame(
-            {"W": math.nan, "pval": math.nan, "normal": False},
-            index=pd.Index(list(MODALITIES), name="modality"),
-        )
-        return Statistics(
-            means=means,
-            outliers=outliers,
-            fences=fences,
-            removed=removed,
-            retained=retained,
-            transformed=transformed,
-            normality=nan_frame,
-            sphericity={
-                "W": math.nan,
-                "chi2": math.nan,
-                "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
-                "pval": math.nan,
-                "pval_second_order": math.nan,
-                "spher": None,
-            },
-            anova=None,
-            anova_statsmodels=None,
-            pairwise=pd.DataFrame(
-                columns=["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
-            ),
-            notes=[why],
-        )
+        notes = [why]
+        tests = {
+            "normality": _no_normality(),
+            "sphericity": dict(_NO_SPHERICITY),
+            "anova": None,
+            "anova_statsmodels": None,
+            "pairwise": pd.DataFrame(columns=_PAIRWISE_COLUMNS),
+        }
+    return Statistics(
+        means=means,
+        outliers=outliers,
+        fences=fences,
+        removed=removed,
+        retained=retained,
+        transformed=transformed,
+        notes=notes,
+        **tests,
+    )
+
+
+def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[str, Any]:
+    """Shapiro-Wilk, Mauchly, the RM ANOVA and the Bonferroni-corrected paired t-tests on
+    at least 2 participants; what could not be computed is said in ``notes``."""
+    import pandas as pd
+    import pingouin as pg
+    from statsmodels.stats.anova import AnovaRM
+
     long = _long(transformed)
     n = len(retained)
 
@@ -645,10 +667,7 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
             normality = pg.normality(long, dv="y", group="modality", method="shapiro")
         normality = normality.reindex(list(MODALITIES))
     else:
-        normality = pd.DataFrame(
-            {"W": math.nan, "pval": math.nan, "normal": False},
-            index=pd.Index(list(MODALITIES), name="modality"),
-        )
+        normality = _no_normality()
         notes.append(f"Shapiro-Wilk not computed: it needs at least 4 participants, {n} remain")
 
     # Mauchly: the covariance of the k-1 = 3 differences must be of full rank: n >= 4.
@@ -672,14 +691,7 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
             "spher": bool(p_chi2 > 0.05),
         }
     else:
-        sphericity = {
-            "W": math.nan,
-            "chi2": math.nan,
-            "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
-            "pval": math.nan,
-            "pval_second_order": math.nan,
-            "spher": None,
-        }
+        sphericity = dict(_NO_SPHERICITY)
         notes.append(
             f"Mauchly's test not computed: it needs at least {len(MODALITIES)} "
             f"participants, {n} remain"
@@ -746,23 +758,13 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
                 "diff_s": float(retained[a].mean() - retained[b].mean()),
             }
         )
-    pairwise = pd.DataFrame(
-        rows, columns=["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
-    )
-    return Statistics(
-        means=means,
-        outliers=outliers,
-        fences=fences,
-        removed=removed,
-        retained=retained,
-        transformed=transformed,
-        normality=normality,
-        sphericity=sphericity,
-        anova=anova,
-        anova_statsmodels=anova_sm,
-        pairwise=pairwise,
-        notes=notes,
-    )
+    return {
+        "normality": normality,
+        "sphericity": sphericity,
+        "anova": anova,
+        "anova_statsmodels": anova_sm,
+        "pairwise": pd.DataFrame(rows, columns=_PAIRWISE_COLUMNS),
+    }
 
 
 # ======================================================================================
