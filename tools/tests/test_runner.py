@@ -5,12 +5,12 @@ file, interactively and absent for simulated sources, and STOP on every way out.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -23,6 +23,7 @@ from graspguide.exit_codes import EXIT_USAGE
 from graspguide.study import runner as rn
 from graspguide.study import study_protocol as pf
 from graspguide.study.errors import RunnerError
+from graspguide.study.jobs import TrialJob
 from graspguide.study.progress import Progress
 from graspguide.study.sources import aligned_quaternion
 from graspguide.study.tlx import load_tlx_file
@@ -36,24 +37,17 @@ TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 # any motor runs it turns the hand towards the orientation that the core says aligns the
 # force with gravity, at a bounded angular speed.
 # --------------------------------------------------------------------------------------
+@dataclasses.dataclass(eq=False)
 class AligningHand:
     SIMULATED = True
 
-    def __init__(
-        self,
-        rate_hz: float = 100.0,
-        speed_deg_s: float = 120.0,
-        delay_s: float = 0.0,
-        fail_at: int = 0,
-        fail_with: str = "",
-    ):
-        self.rate_hz = rate_hz
-        self.speed = speed_deg_s
-        self.delay = delay_s
-        self.fail_at = fail_at  # raise at this many steps (over all trials)
-        self.fail_with = fail_with
-        self.steps = 0
-        self.trials = 0
+    rate_hz: float = 100.0
+    speed_deg_s: float = 120.0
+    delay_s: float = 0.0
+    fail_at: int = 0  # raise at this many steps (over all trials)
+    fail_with: str = ""
+    steps: int = dataclasses.field(default=0, init=False)
+    trials: int = dataclasses.field(default=0, init=False)
 
     @classmethod
     def from_spec(cls, spec: str, seed: int) -> AligningHand:
@@ -78,13 +72,13 @@ class AligningHand:
             if self.fail_with == "interrupt":
                 raise KeyboardInterrupt
             raise RuntimeError("source failed")
-        if self.delay:
-            time.sleep(self.delay)
+        if self.delay_s:
+            time.sleep(self.delay_s)
         dt, self.t = t_s - self.t, t_s
         if any(pwm):
             angle = quat_angle_deg(self.q, self.target)
             if angle > 1e-9:
-                self.q = slerp(self.q, self.target, min(1.0, self.speed * dt / angle))
+                self.q = slerp(self.q, self.target, min(1.0, self.speed_deg_s * dt / angle))
         return tuple(float(x) for x in self.q)
 
 
@@ -301,23 +295,8 @@ def test_open_loop_source_held_until_timeout(tmp_path, sim):
 # Resume: SIGTERM, SIGKILL, damaged last line
 # --------------------------------------------------------------------------------------
 def _trial_cmd(path, out, extra=(), delay=0.002):
-    return [
-        sys.executable,
-        "-m",
-        "graspguide",
-        "trial",
-        "--protocol",
-        path,
-        "--participant",
-        "U2",
-        "--port",
-        "sim",
-        "--source",
-        f"plugin:test_runner:AligningHand:delay={delay}",
-        "--out",
-        str(out),
-        *extra,
-    ]
+    source = f"plugin:test_runner:AligningHand:delay={delay}"
+    return [*TrialJob(str(path), str(out), "U2", source, log="").command(), *extra]
 
 
 def _env():

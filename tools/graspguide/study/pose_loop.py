@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 Pose = tuple[float, Sequence[float], Any]  # (t_s, quat w, x, y, z, contacts or None)
@@ -180,34 +180,23 @@ def pipeline_window(model: Any, pose_rate_hz: float) -> int:
 # --------------------------------------------------------------------------------------
 # The loop
 # --------------------------------------------------------------------------------------
+@dataclass(eq=False)
 class PoseLoop:
     """Runs one started trial on ``client`` (see the module's docstring)."""
 
-    def __init__(
-        self,
-        client: Any,
-        virtual_clock: bool,
-        base_us: int = 0,
-        skip_late: bool = False,
-        period_s: float = 0.0,
-        limit_s: float | None = None,
-        wall_limit_s: float | None = None,
-        on_send: Callable[[int, float, Sequence[float], Any], None] | None = None,
-        on_frame: Callable[[Frame], None] | None = None,
-    ):
-        self.client = client
-        self.virtual_clock = virtual_clock
-        self.base_us = base_us
-        self.skip_late = skip_late
-        self.period_s = period_s
-        self.limit_s = limit_s
-        self.wall_limit_s = wall_limit_s
-        self.on_send = on_send
-        self.on_frame = on_frame
-        self.sent = 0
-        self.frames = 0
-        self.late_skipped = 0
-        self.wall0 = time.monotonic()
+    client: Any
+    virtual_clock: bool
+    base_us: int = 0
+    skip_late: bool = False
+    period_s: float = 0.0
+    limit_s: float | None = None
+    wall_limit_s: float | None = None
+    on_send: Callable[[int, float, Sequence[float], Any], None] | None = None
+    on_frame: Callable[[Frame], None] | None = None
+    sent: int = field(default=0, init=False)
+    frames: int = field(default=0, init=False)
+    late_skipped: int = field(default=0, init=False)
+    wall0: float = field(default_factory=time.monotonic, init=False)
 
     def _stamp(self, t_s: float) -> int | None:
         """The POSE timestamp of trial time t_s, after waiting for it in real time; None

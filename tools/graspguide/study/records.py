@@ -38,15 +38,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 POSE_COLUMNS = ["send_time_s", "host_time_us", "t_s", "qw", "qx", "qy", "qz", "has_contacts"]
+# What a TELEMETRY says of the guidance, in the session log and the runner's frames.
+GUIDANCE_COLUMNS = ["error_deg", "alpha", "pwm0", "pwm1", "pwm2", "pwm3"]
 TELEMETRY_COLUMNS = [
     "recv_time_s",
     "host_time_us",
-    "error_deg",
-    "alpha",
-    "pwm0",
-    "pwm1",
-    "pwm2",
-    "pwm3",
+    *GUIDANCE_COLUMNS,
     "constraints_used",
     "solver_status",
     "iterations",
@@ -187,9 +184,7 @@ class JsonlDamaged(ValueError):
 
     def __init__(self, path: str, line: int, reason: str):
         super().__init__(f"{path}:{line}: {reason}")
-        self.path = path
         self.line = line
-        self.reason = reason
 
 
 @dataclass

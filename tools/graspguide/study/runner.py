@@ -49,6 +49,7 @@ lockstep.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import fcntl
 import json
@@ -72,6 +73,7 @@ from graspguide.study.pose_loop import (
 )
 from graspguide.study.progress import Progress
 from graspguide.study.records import (
+    GUIDANCE_COLUMNS,
     JsonlDamaged,
     RecordWriteError,
     append_json_line,
@@ -98,12 +100,7 @@ FRAME_COLUMNS = [
     "qx",
     "qy",
     "qz",
-    "error_deg",
-    "alpha",
-    "pwm0",
-    "pwm1",
-    "pwm2",
-    "pwm3",
+    *GUIDANCE_COLUMNS,
     "solver_status",
     "flags",
 ]
@@ -218,52 +215,46 @@ class _FramesFile:
                 pass
 
 
+@dataclasses.dataclass(eq=False)
 class StudyRunner:
     """One participant's run into ``out_dir``. :meth:`run` goes through the plan; the
-    caller owns the device client (HELLO is sent here, STOP in :meth:`run`'s finally)."""
+    caller owns the device client (HELLO is sent here, STOP in :meth:`run`'s finally).
+    ``tlx``: the NASA-TLX answers by session (else asked with ``ask``, default input);
+    ``pipeline``: POSEs sent ahead of their TELEMETRY (closed loop, virtual clock): None =
+    what the source allows (pipeline_window), 1 = lockstep. See _closed_loop_pipelined."""
 
-    def __init__(
-        self,
-        protocol: Protocol,
-        participant: str,
-        out_dir: str,
-        source: RunnerSource,
-        client: Any,
-        virtual_clock: bool,
-        tlx: dict[int, dict[str, int]] | None = None,
-        ask: Callable[[str], str] | None = None,
-        progress: Progress | None = None,
-        protocol_file: str | None = None,
-        err: TextIO | None = None,
-        port: str = "",
-        pipeline: int | None = None,
-    ):
-        self.protocol = protocol
-        # POSEs sent ahead of their TELEMETRY (closed loop, virtual clock): None = what
-        # the source allows (pipeline_window), 1 = lockstep. See _closed_loop_pipelined.
-        self.pipeline = pipeline
+    protocol: Protocol
+    participant: str
+    out_dir: str
+    source: RunnerSource
+    client: Any
+    virtual_clock: bool
+    tlx: dict[int, dict[str, int]] | None = None
+    ask: Callable[[str], str] = input
+    progress: Progress = dataclasses.field(default_factory=Progress)
+    protocol_file: str | None = None
+    err: TextIO | None = None
+    port: str = ""
+    pipeline: int | None = None
+
+    def __post_init__(self) -> None:
         self.pipeline_fallbacks = 0
-        self.participant = participant
-        self.out_dir = out_dir
-        self.source = source
-        self.client = client
-        self.virtual_clock = virtual_clock
-        self.tlx_given = tlx
-        self.ask = ask or input
-        self.progress = progress or Progress()
-        self.protocol_file = protocol_file
-        self.err = err or sys.stderr
-        self.port = port
-        self.pdir = os.path.join(out_dir, participant)
+        # None given for ask, progress or err (a caller passing its own default through)
+        # means the default.
+        if self.ask is None:
+            self.ask = input
+        self.progress = self.progress or Progress()
+        self.err = self.err or sys.stderr
+        self.pdir = os.path.join(self.out_dir, self.participant)
         self.trials_path = os.path.join(self.pdir, "trials.jsonl")
         self.tlx_path = os.path.join(self.pdir, "tlx.jsonl")
         self.frames_dir = os.path.join(self.pdir, "frames")
         self.runs_path = os.path.join(self.pdir, "runs.jsonl")
-        self.wrenches = draw_wrenches(protocol)
-        self.fam_wrenches = draw_familiarization_wrenches(protocol)
-        self.sessions = session_order(protocol, participant)
-        self.plan = plan(protocol, participant, self.wrenches, self.fam_wrenches)
-        self.config_hash = protocol.config_hash
+        self.wrenches = draw_wrenches(self.protocol)
+        self.fam_wrenches = draw_familiarization_wrenches(self.protocol)
+        self.sessions = session_order(self.protocol, self.participant)
+        self.plan = plan(self.protocol, self.participant, self.wrenches, self.fam_wrenches)
+        self.config_hash = self.protocol.config_hash
         self._vt_base_us = 0
         self._scene_key: tuple[int, str, str] | None = None
         self._lock_fd: int | None = None
@@ -465,16 +456,24 @@ class StudyRunner:
         self.client.unmatched.clear()
         self._vt_base_us += int(round((p.timeout_s + 2 * RESULT_MARGIN_S) * 1e6))
         self._scene_key = None
+        self._start_trial(trial, model, contacts)
+
+    def _start_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
+        """SET_SCENE when the condition changed, START_TRIAL, and the closed-loop model
+        (None for an open-loop source) told the trial."""
+        p = self.protocol
         self._scene(trial)
+        self.client.trial_results.clear()
         self.client.start_trial(trial.trial_index & 0xFFFF, list(trial.wrench))
-        model.begin_trial(
-            contacts=contacts,
-            y_axis=list(p.y_axis),
-            wrench=list(trial.wrench),
-            policy=trial.policy,
-            mode=trial.mode,
-            start_quat=list(p.start_quat),
-        )
+        if model is not None:
+            model.begin_trial(
+                contacts=contacts,
+                y_axis=list(p.y_axis),
+                wrench=list(trial.wrench),
+                policy=trial.policy,
+                mode=trial.mode,
+                start_quat=list(p.start_quat),
+            )
 
     def _no_result_error(self, trial: PlannedTrial, t_s: float) -> RunnerError:
         return RunnerError(
@@ -495,21 +494,9 @@ class StudyRunner:
 
     def run_trial(self, trial: PlannedTrial) -> dict[str, Any]:
         p = self.protocol
-        self._scene(trial)
-        self.client.trial_results.clear()
-        self.client.start_trial(trial.trial_index & 0xFFFF, list(trial.wrench))
         contacts = [list(c) for c in p.hands[trial.k]]
-        model = None
-        if self.source.closed_loop:
-            model = self.source.model  # type: ignore[attr-defined]
-            model.begin_trial(
-                contacts=contacts,
-                y_axis=list(p.y_axis),
-                wrench=list(trial.wrench),
-                policy=trial.policy,
-                mode=trial.mode,
-                start_quat=list(p.start_quat),
-            )
+        model = self.source.model if self.source.closed_loop else None  # type: ignore[attr-defined]
+        self._start_trial(trial, model, contacts)
         frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
         frames_path = frames_tmp[:-4]
         f = _FramesFile(frames_tmp)
@@ -600,10 +587,10 @@ class StudyRunner:
 
     # ---- TLX
     def _tlx(self, session: Session) -> None:
-        if self.tlx_given is not None and session.session in self.tlx_given:
-            scales: dict[str, int] | None = self.tlx_given[session.session]
+        if self.tlx is not None and session.session in self.tlx:
+            scales: dict[str, int] | None = self.tlx[session.session]
             origin = "file"
-        elif self.tlx_given is not None and not self.source.simulated:
+        elif self.tlx is not None and not self.source.simulated:
             raise RunnerError(
                 f"the --tlx file has no line for session {session.session} "
                 f"({session.modality}, k = {session.k}); add it and run again "

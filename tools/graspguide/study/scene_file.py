@@ -157,17 +157,12 @@ class Scene:
         return config_hash(self.to_dict())
 
     def set_scene_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :meth:`graspguide.link.client.DeviceClient.set_scene`."""
-        return {
-            "contacts": [list(c) for c in self.contacts],
-            "y_axis": list(self.y_axis),
-            "constraints": self.constraints,
-            "policy": self.policy,
-            "mode": self.mode,
-            "threshold_deg": self.threshold_deg,
-            "hold_s": self.hold_s,
-            "timeout_s": self.timeout_s,
-        }
+        """Keyword arguments of :meth:`graspguide.link.client.DeviceClient.set_scene`: the
+        normalised configuration without k, the contacts (metres) named as SET_SCENE's."""
+        kwargs = self.to_dict()
+        del kwargs["k"]
+        kwargs["contacts"] = kwargs.pop("contacts_m")
+        return kwargs
 
 
 def canonical_json(obj: Any) -> str:

@@ -34,7 +34,7 @@ import csv
 import importlib
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -113,12 +113,7 @@ class TrackerConvention:
         return tuple(matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))  # type: ignore
 
     def describe(self) -> dict[str, str]:
-        return {
-            "units": self.units,
-            "up_axis": self.up_axis,
-            "handedness": self.handedness,
-            "quat_order": self.quat_order,
-        }
+        return asdict(self)
 
     def convert(self, q, positions=None):
         """(quat_wxyz, positions in metres, world axes) from the tracker's values."""

@@ -32,7 +32,7 @@ import math
 import random
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from graspguide.core.units import UNITS, hand_span_problem, moment_unit_problem
@@ -695,21 +695,7 @@ class PlannedTrial:
     familiarization: bool
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "trial_index": self.trial_index,
-            "participant": self.participant,
-            "session": self.session,
-            "session_trial": self.session_trial,
-            "k": self.k,
-            "policy": self.policy,
-            "mode": self.mode,
-            "modality": self.modality,
-            "wrench_id": self.wrench_id,
-            "wrench": list(self.wrench),
-            "single_motor": self.single_motor,
-            "wrench_class": self.wrench_class,
-            "familiarization": self.familiarization,
-        }
+        return {**asdict(self), "wrench": list(self.wrench)}
 
 
 @dataclass(frozen=True)
