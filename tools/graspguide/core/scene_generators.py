@@ -463,30 +463,18 @@ def extreme_scenes() -> list[dict[str, Any]]:
     )
 
     # ---- guidance error / alpha -----------------------------------------------------------------
-    add(
-        _case(
-            _scene("aligned_with_gravity", hand3, [0, 0, -2.0, 0, 0, 0]),
-            "ok",
+    for name, force, why, error_deg in (
+        (
+            "aligned_with_gravity",
+            [0, 0, -2.0],
             "R f_hat = g: error 0, alpha 0 (mode V: every active motor at 70)",
-            expect={"error_deg": 0.0},
-        )
-    )
-    add(
-        _case(
-            _scene("opposite_to_gravity", hand3, [0, 0, 2.0, 0, 0, 0]),
-            "ok",
-            "R f_hat = -g: error 180, alpha 185",
-            expect={"error_deg": 180.0},
-        )
-    )
-    add(
-        _case(
-            _scene("perpendicular_to_gravity", hand3, [1.5, 0, 0, 0, 0, 0]),
-            "ok",
-            "R f_hat = +x: error 90",
-            expect={"error_deg": 90.0},
-        )
-    )
+            0.0,
+        ),
+        ("opposite_to_gravity", [0, 0, 2.0], "R f_hat = -g: error 180, alpha 185", 180.0),
+        ("perpendicular_to_gravity", [1.5, 0, 0], "R f_hat = +x: error 90", 90.0),
+    ):
+        scene = _scene(name, hand3, [*force, 0, 0, 0])
+        add(_case(scene, "ok", why, expect={"error_deg": error_deg}))
     add(
         _case(
             _scene(
