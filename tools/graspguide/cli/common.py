@@ -62,6 +62,30 @@ def positive_float(text: str) -> float:
     return value
 
 
+def add_protocol_argument(p: argparse.ArgumentParser, required: bool) -> None:
+    p.add_argument(
+        "--protocol",
+        required=required,
+        default=None,
+        metavar="FILE",
+        help="study protocol (protocols/paper.toml; format in docs/study.md)"
+        if required
+        else "study protocol (default: protocols/paper.toml of the repository)",
+    )
+
+
+def add_jobs_argument(p: argparse.ArgumentParser, what: str) -> None:
+    """--jobs of the simulated studies: ``what`` runs at a time, each its own simulator."""
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=int_arg(1, 256),
+        default=None,
+        metavar="N",
+        help=f"{what} at a time, each with its own simulated device (default: the CPU count)",
+    )
+
+
 def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument(
         "--port",

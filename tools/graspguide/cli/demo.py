@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from graspguide.cli.common import call_with_options, int_arg
+from graspguide.cli.common import (
+    add_jobs_argument,
+    add_protocol_argument,
+    call_with_options,
+    int_arg,
+)
 
 HELP = (
     "the paper's study end to end, simulated: 8 virtual "
@@ -40,12 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="virtual participants U1..UN (default 8, as in the paper)",
     )
-    p.add_argument(
-        "--protocol",
-        default=None,
-        metavar="FILE",
-        help="study protocol (default: protocols/paper.toml of the repository)",
-    )
+    add_protocol_argument(p, required=False)
     p.add_argument(
         "--out",
         default=None,
@@ -53,15 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="study folder (default: logs/demo-study in the repository); "
         "running again into it resumes or, when complete, re-analyses",
     )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=_count,
-        default=None,
-        metavar="N",
-        help="participants run at a time, each with its own simulated device "
-        "(default: the CPU count)",
-    )
+    add_jobs_argument(p, "participants run")
     p.add_argument(
         "--source",
         default=DEFAULT_SOURCE,

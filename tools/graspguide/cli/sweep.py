@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from graspguide.cli.common import call_with_options, int_arg
+from graspguide.cli.common import (
+    add_jobs_argument,
+    add_protocol_argument,
+    call_with_options,
+    int_arg,
+)
 
 HELP = (
     "the speed-accuracy trade, simulated: success rate and completion "
@@ -30,59 +35,45 @@ Exit status: 0 done, 1 a run failed (its log is named), 2 usage error, 130 inter
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from graspguide.study.sweep import DEFAULT_RATES, DEFAULT_SOURCE, DEFAULT_THRESHOLDS
 
-    p.add_argument(
-        "--protocol",
-        default=None,
-        metavar="FILE",
-        help="study protocol (default: protocols/paper.toml of the repository)",
-    )
-    p.add_argument(
-        "--thresholds",
-        default=",".join(f"{v:g}" for v in DEFAULT_THRESHOLDS),
-        metavar="LIST",
-        help="alignment thresholds in degrees, each in (0, 90), "
-        "run at the protocol's pose rate (default 1,2,3,5,7,10)",
-    )
-    p.add_argument(
-        "--rates",
-        default=",".join(f"{v:g}" for v in DEFAULT_RATES),
-        metavar="LIST",
-        help="pose rates in Hz, each in [5, 2000], run at the "
-        "protocol's threshold (default 30,60,100,240)",
-    )
+    add_protocol_argument(p, required=False)
+    for name, values, help in (
+        (
+            "--thresholds",
+            DEFAULT_THRESHOLDS,
+            "alignment thresholds in degrees, each in (0, 90), run at the protocol's pose rate",
+        ),
+        (
+            "--rates",
+            DEFAULT_RATES,
+            "pose rates in Hz, each in [5, 2000], run at the protocol's threshold",
+        ),
+    ):
+        default = ",".join(f"{v:g}" for v in values)
+        p.add_argument(name, default=default, metavar="LIST", help=f"{help} (default {default})")
     p.add_argument(
         "--grid",
         action="store_true",
         help="also run every threshold x rate pair (else one factor at a time)",
     )
-    p.add_argument(
-        "--modalities",
-        default=None,
-        metavar="LIST",
-        help="modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both "
-        "policies); default: the protocol's",
-    )
-    p.add_argument(
-        "--contacts",
-        default=None,
-        metavar="LIST",
-        help="contact counts, 3 and/or 4 (default: the protocol's)",
-    )
-    p.add_argument(
-        "--participants",
-        type=int_arg(1, 1000),
-        default=2,
-        metavar="N",
-        help="virtual participants U1..UN per point (default 2)",
-    )
-    p.add_argument(
-        "--wrenches",
-        type=int_arg(1, 1000),
-        default=4,
-        metavar="N",
-        help="target wrenches per session: the first N of the protocol's seeded "
-        "draw, its single/multi split scaled (default 4)",
-    )
+    for name, help in (
+        (
+            "--modalities",
+            "modalities (F+C, Fperp+C, F+V, Fperp+V) or modes (C, V = both policies); "
+            "default: the protocol's",
+        ),
+        ("--contacts", "contact counts, 3 and/or 4 (default: the protocol's)"),
+    ):
+        p.add_argument(name, default=None, metavar="LIST", help=help)
+    for name, default, help in (
+        ("--participants", 2, "virtual participants U1..UN per point (default 2)"),
+        (
+            "--wrenches",
+            4,
+            "target wrenches per session: the first N of the protocol's seeded draw, its "
+            "single/multi split scaled (default 4)",
+        ),
+    ):
+        p.add_argument(name, type=int_arg(1, 1000), default=default, metavar="N", help=help)
     p.add_argument(
         "--source",
         default=DEFAULT_SOURCE,
@@ -99,15 +90,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="sweep folder (default logs/guidance-sweep in the repository): "
         "points/, sweep.json, sweep.png; running again resumes",
     )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=int_arg(1, 256),
-        default=None,
-        metavar="N",
-        help="runner processes at a time, each with its own simulated device "
-        "(default: the CPU count)",
-    )
+    add_jobs_argument(p, "runner processes")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 

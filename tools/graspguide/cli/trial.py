@@ -5,7 +5,12 @@ from __future__ import annotations
 
 import argparse
 
-from graspguide.cli.common import add_port_arguments, call_with_options, signals_interrupt
+from graspguide.cli.common import (
+    add_port_arguments,
+    add_protocol_argument,
+    call_with_options,
+    signals_interrupt,
+)
 
 HELP = "run a participant's trials of a study protocol (resumable; NASA-TLX after each session)"
 
@@ -48,12 +53,7 @@ same command again to resume)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--protocol",
-        required=True,
-        metavar="FILE",
-        help="study protocol (protocols/paper.toml; format in docs/study.md)",
-    )
+    add_protocol_argument(p, required=True)
     p.add_argument(
         "--participant",
         required=True,
