@@ -6,12 +6,19 @@ from __future__ import annotations
 
 import itertools
 import os
+import tomllib
 
 import pytest
 from conftest import REPO_ROOT
 
 from graspguide.core import _core
 from graspguide.study import study_protocol as pf
+
+
+def loads_protocol(text, source="<string>"):
+    """A protocol from TOML text, through the loader's own checks (parse_protocol)."""
+    return pf.parse_protocol(tomllib.loads(text), source)
+
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 
@@ -61,7 +68,7 @@ def test_config_hash_is_stable_and_sensitive(paper):
     again = pf.load_protocol(PAPER)
     assert again.config_hash == paper.config_hash
     assert len(paper.config_hash) == 64
-    other = pf.loads_protocol(edited("seed = 2019", "seed = 2020"))
+    other = loads_protocol(edited("seed = 2019", "seed = 2020"))
     assert other.config_hash != paper.config_hash
 
 
@@ -101,7 +108,7 @@ def test_paper_split_5_single_7_multi(paper, paper_wrenches):
 
 def test_draw_is_deterministic_and_seeded(paper, paper_wrenches):
     assert pf.draw_wrenches(pf.load_protocol(PAPER)) == paper_wrenches
-    other = pf.draw_wrenches(pf.loads_protocol(edited("seed = 2019", "seed = 7")))
+    other = pf.draw_wrenches(loads_protocol(edited("seed = 2019", "seed = 7")))
     assert [w.wrench for w in other] != [w.wrench for w in paper_wrenches]
     assert sum(w.wrench_class == "single" for w in other) == 5
 
@@ -109,7 +116,7 @@ def test_draw_is_deterministic_and_seeded(paper, paper_wrenches):
 def test_split_with_policy_F_is_refused_with_the_reason():
     text = edited('split_policy = "Fperp"', 'split_policy = "F"')
     text = text.replace("max_draws = 100000", "max_draws = 300")
-    p = pf.loads_protocol(text, "x.toml")
+    p = loads_protocol(text, "x.toml")
     with pytest.raises(pf.ProtocolFileError) as e:
         pf.draw_wrenches(p)
     msg = str(e.value)
@@ -178,7 +185,7 @@ def test_split_with_policy_F_is_refused_with_the_reason():
 )
 def test_validation_errors_name_the_key(old, new, needles):
     with pytest.raises(pf.ProtocolFileError) as e:
-        pf.loads_protocol(edited(old, new), "my.toml")
+        loads_protocol(edited(old, new), "my.toml")
     msg = str(e.value)
     assert msg.startswith("my.toml: ")
     for n in needles:
@@ -255,7 +262,7 @@ def _range_params():
 @pytest.mark.parametrize("table,key,literal,accepted", list(_range_params()))
 def test_every_number_is_range_checked_and_named(table, key, literal, accepted):
     with pytest.raises(pf.ProtocolFileError) as e:
-        pf.loads_protocol(set_key(table, key, literal), "my.toml")
+        loads_protocol(set_key(table, key, literal), "my.toml")
     msg = str(e.value)
     assert msg.startswith(f"my.toml: [{table}] {key}: "), msg
     if key in INTEGER_KEYS and not literal.lstrip("-").isdigit():
@@ -279,7 +286,7 @@ def test_every_number_is_range_checked_and_named(table, key, literal, accepted):
     ],
 )
 def test_range_ends_are_accepted(table, key, value):
-    p = pf.loads_protocol(set_key(table, key, repr(value)))
+    p = loads_protocol(set_key(table, key, repr(value)))
     assert p.to_dict()[table][key] == value
 
 
@@ -290,7 +297,7 @@ def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
     """timeout_s = 9.3e12 and hold_s = 1e13 were accepted and overflowed the core's int64
     microseconds (an instant failure or an unearned success)."""
     with pytest.raises(pf.ProtocolFileError, match=rf"\[trial\] {key}: must be in"):
-        pf.loads_protocol(set_key("trial", key, value))
+        loads_protocol(set_key("trial", key, value))
 
 
 def test_trial_ranges_are_the_cores_not_a_copy(monkeypatch):
@@ -302,7 +309,7 @@ def test_trial_ranges_are_the_cores_not_a_copy(monkeypatch):
     narrow["timeout_s"]["max"] = 60.0
     monkeypatch.setattr(scene, "trial_limits", lambda: narrow)
     with pytest.raises(pf.ProtocolFileError, match=r"timeout_s: must be in \(0, 60\] seconds"):
-        pf.loads_protocol(paper_text())
+        loads_protocol(paper_text())
 
 
 @pytest.mark.parametrize(
@@ -332,7 +339,7 @@ def test_contacts_in_another_unit_than_stated_are_refused(units, scale, needles)
         values = [float(x) * scale for x in row.strip("[]").split(",")]
         text = text.replace(row, "[" + ", ".join(repr(v) for v in values) + "]")
     with pytest.raises(pf.ProtocolFileError) as e:
-        pf.loads_protocol(text, "my.toml")
+        loads_protocol(text, "my.toml")
     for n in needles:
         assert n in str(e.value), (n, str(e.value))
 
@@ -348,7 +355,7 @@ def test_the_same_hand_in_millimetres_loads_to_the_same_metres(paper):
         text = text.replace(
             row, "[" + ", ".join(f"{float(x) * 1000:.1f}" for x in row.strip("[]").split(",")) + "]"
         )
-    p = pf.loads_protocol(text)
+    p = loads_protocol(text)
     for k in (3, 4):
         assert [x for c in p.hands[k] for x in c] == pytest.approx(
             [x for c in paper.hands[k] for x in c], abs=1e-15
@@ -358,7 +365,7 @@ def test_the_same_hand_in_millimetres_loads_to_the_same_metres(paper):
 def test_a_moment_in_newton_millimetres_is_refused():
     """moment_max_Nm = 5 with force_N = 1 (5 N mm written as N m): a 5 m lever arm."""
     with pytest.raises(pf.ProtocolFileError) as e:
-        pf.loads_protocol(set_key("wrenches", "moment_max_Nm", "5.0"), "my.toml")
+        loads_protocol(set_key("wrenches", "moment_max_Nm", "5.0"), "my.toml")
     msg = str(e.value)
     assert msg.startswith("my.toml: [wrenches] moment_max_Nm: ")
     assert "looks like N mm" in msg and "divide by 1000" in msg
@@ -369,10 +376,10 @@ def test_missing_hand_for_a_used_contact_count():
     start = text.index("[hand.k4]")
     end = text.index("[conditions]")
     with pytest.raises(pf.ProtocolFileError, match=r"\[hand.k4\]: missing: contact_counts"):
-        pf.loads_protocol(text[:start] + text[end:])
+        loads_protocol(text[:start] + text[end:])
     # but fine when k = 4 is not used
     text2 = (text[:start] + text[end:]).replace("contact_counts = [3, 4]", "contact_counts = [3]")
-    assert pf.loads_protocol(text2).contact_counts == (3,)
+    assert loads_protocol(text2).contact_counts == (3,)
 
 
 def test_unreadable_and_invalid_files(tmp_path):
@@ -471,7 +478,7 @@ def test_counterbalancing_over_8_participants(paper):
 
 
 def test_fixed_and_random_orders():
-    fixed = pf.loads_protocol(
+    fixed = loads_protocol(
         edited('modality_order = "balanced_latin_square"', 'modality_order = "fixed"').replace(
             'contact_order = "alternate"', 'contact_order = "fixed"'
         )
@@ -479,7 +486,7 @@ def test_fixed_and_random_orders():
     for pid in ("U1", "U2"):
         o = pf.session_order(fixed, pid)
         assert [(s.k, s.modality) for s in o] == [(k, m) for k in (3, 4) for m in fixed.modalities]
-    rnd = pf.loads_protocol(
+    rnd = loads_protocol(
         edited('modality_order = "balanced_latin_square"', 'modality_order = "random"')
     )
     assert pf.session_order(rnd, "U1") == pf.session_order(rnd, "U1")

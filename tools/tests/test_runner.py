@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import time
+import tomllib
 
 import numpy as np
 import pytest
@@ -443,7 +444,8 @@ def test_other_protocol_or_mixed_data_refused(tmp_path, sim):
     out = tmp_path / "out"
     runner, _, _ = make_runner(protocol, out, AligningHand(), DeviceClient(sim), path=path)
     runner.run()
-    other = pf.loads_protocol(open(path).read().replace("seed = 11", "seed = 12"))
+    text = open(path).read().replace("seed = 11", "seed = 12")
+    other = pf.parse_protocol(tomllib.loads(text), "<string>")
     with pytest.raises(RunnerError, match="another protocol"):
         make_runner(other, out, AligningHand(), DeviceClient(sim))[0].run()
     with pytest.raises(RunnerError, match="simulated trials"):

@@ -4,11 +4,18 @@ stable hash."""
 from __future__ import annotations
 
 import os
+import tomllib
 
 import pytest
 
 from graspguide.core import _core, units
 from graspguide.study import scene_file as gs
+
+
+def loads_scene(text, source="<string>"):
+    """A scene from TOML text, through the loader's own checks (parse_scene)."""
+    return gs.parse_scene(tomllib.loads(text), source)
+
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
 MIN3 = """
@@ -34,7 +41,7 @@ def test_examples_load():
 
 
 def test_defaults_and_hash_is_normalised():
-    s = gs.loads_scene(MIN3)
+    s = loads_scene(MIN3)
     assert s.y_axis == (0.0, 1.0, 0.0)
     assert (s.constraints, s.policy, s.mode) == ("paper", "F", "C")
     assert (s.threshold_deg, s.hold_s, s.timeout_s) == (3.0, 0.5, 90.0)
@@ -55,21 +62,20 @@ thumb = [45.0, 45.0, 35.0]
 [scene]
 units = "mm"
 """
-    t = gs.loads_scene(full)
+    t = loads_scene(full)
     assert t.contacts == s.contacts  # mm / 1000 is correctly rounded: exactly equal
     assert t.config_hash() == s.config_hash()
-    assert len(s.config_hash()) == 64 and s.config_hash() == gs.loads_scene(MIN3).config_hash()
+    assert len(s.config_hash()) == 64 and s.config_hash() == loads_scene(MIN3).config_hash()
     assert (
-        gs.loads_scene(MIN3.replace('units = "m"', 'units = "m"\n')).config_hash()
-        == s.config_hash()
+        loads_scene(MIN3.replace('units = "m"', 'units = "m"\n')).config_hash() == s.config_hash()
     )
-    changed = gs.loads_scene(MIN3 + 'policy = "Fperp"\n')
+    changed = loads_scene(MIN3 + 'policy = "Fperp"\n')
     assert changed.config_hash() != s.config_hash()
 
 
 def test_hash_is_stable_known_value():
     # canonical JSON: sorted keys, no spaces -> a fixed digest for a fixed configuration
-    s = gs.loads_scene(MIN3)
+    s = loads_scene(MIN3)
     assert s.canonical_json().startswith('{"constraints":"paper","contacts_m":[[0.045,')
     assert s.config_hash() == gs.config_hash(s.to_dict())
 
@@ -148,12 +154,12 @@ def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
     """Accepted before and sent in SET_SCENE: the core's int64 microseconds overflowed
     (an instant failure with completion -9.2e12 s, or a success without the hold)."""
     with pytest.raises(gs.SceneError, match=rf"\[trial\] {key} must be in"):
-        gs.loads_scene(MIN3 + f"[trial]\n{key} = {value}\n")
+        loads_scene(MIN3 + f"[trial]\n{key} = {value}\n")
 
 
 def test_trial_range_ends_and_hold_up_to_the_timeout():
     lim = _core.TRIAL_LIMITS
-    s = gs.loads_scene(
+    s = loads_scene(
         MIN3 + f"[trial]\nthreshold_deg = {lim['threshold_deg']['min']!r}\n"
         f"hold_s = {lim['hold_s']['max']!r}\ntimeout_s = "
         f"{lim['timeout_s']['max']!r}\n"
@@ -163,9 +169,9 @@ def test_trial_range_ends_and_hold_up_to_the_timeout():
         lim["hold_s"]["max"],
         lim["timeout_s"]["max"],
     )
-    assert gs.loads_scene(MIN3 + "[trial]\nhold_s = 20\ntimeout_s = 20\n").hold_s == 20.0
+    assert loads_scene(MIN3 + "[trial]\nhold_s = 20\ntimeout_s = 20\n").hold_s == 20.0
     with pytest.raises(gs.SceneError, match=r"\[trial\] hold_s must not exceed timeout_s"):
-        gs.loads_scene(MIN3 + "[trial]\nhold_s = 20.5\ntimeout_s = 20\n")
+        loads_scene(MIN3 + "[trial]\nhold_s = 20.5\ntimeout_s = 20\n")
 
 
 # --------------------------------------------------------------------------------------
@@ -202,7 +208,7 @@ def _scaled(units: str, factor: float) -> str:
 )
 def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor, needles):
     with pytest.raises(gs.SceneError) as e:
-        gs.loads_scene(_scaled(units, factor), "hand.toml")
+        loads_scene(_scaled(units, factor), "hand.toml")
     msg = str(e.value)
     assert msg.startswith("hand.toml: "), msg
     for n in needles:
@@ -211,14 +217,14 @@ def test_contacts_in_another_unit_are_refused_with_the_likely_unit(units, factor
 
 @pytest.mark.parametrize("factor", [0.07, 1.0, 6.0])  # spans of 5.5 mm, 78 mm, 0.47 m
 def test_hands_from_5_mm_to_half_a_metre_load(factor):
-    s = gs.loads_scene(_scaled("m", factor))
+    s = loads_scene(_scaled("m", factor))
     assert units.HAND_SPAN_M[0] <= units.hand_span(s.contacts) <= units.HAND_SPAN_M[1]
-    mm = gs.loads_scene(_scaled("mm", 1000 * factor)).contacts
+    mm = loads_scene(_scaled("mm", 1000 * factor)).contacts
     assert [x for c in mm for x in c] == pytest.approx([x for c in s.contacts for x in c])
 
 
 def test_moment_unit_check_catches_newton_millimetres():
-    hand = gs.loads_scene(MIN3).contacts  # metres, span 78 mm
+    hand = loads_scene(MIN3).contacts  # metres, span 78 mm
     assert units.moment_unit_problem(hand, [1, 0, 0, 0.005, 0, 0]) is None  # 5 mm lever
     assert units.moment_unit_problem(hand, [1, 0, 0, 0.7, 0, 0]) is None  # 9 spans
     msg = units.moment_unit_problem(hand, [1, 0, 0, 5, 0, 0])  # 5 N mm as N m

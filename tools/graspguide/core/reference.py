@@ -93,19 +93,6 @@ TOLERANCES = {
     "kLpTol": kLpTol,
 }
 
-STATUSES = (
-    "ok",
-    "non_finite_input",
-    "bad_contact_count",
-    "coincident_contacts",
-    "imprecise_contacts",
-    "rank_deficient",
-    "zero_wrench",
-    "zero_force",
-    "bad_axis",
-    "bad_quaternion",
-    "nothing_to_display",
-)
 FALLBACK_CHAIN = {
     "paper": ("paper", "normal", "none"),
     "normal": ("normal", "none"),
@@ -587,7 +574,6 @@ __all__ = [
     "fallback_axis",
     "round_half_away",
     "TOLERANCES",
-    "STATUSES",
     "CONSTRAINT_MODELS",
     "POLICIES",
     "MODES",

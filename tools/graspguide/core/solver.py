@@ -27,9 +27,7 @@ STATUS_NAMES: tuple[str, ...] = tuple(_core.STATUS_NAMES)
 DECOMPOSITIONS: tuple[str, ...] = tuple(_core.DECOMPOSITIONS)
 SCALARS: tuple[str, ...] = tuple(_core.SCALARS)
 TOLERANCES: dict[str, dict[str, float]] = dict(_core.TOLERANCES)
-PWM_MIN: int = _core.kPwmMin
 PWM_SPAN: int = _core.kPwmSpan
-MIN_CONTACTS: int = _core.kMinContacts
 MAX_CONTACTS: int = _core.kMaxContacts
 DEFAULT_MAX_ITERATIONS: int = _core.kDefaultMaxIterations
 
@@ -355,9 +353,7 @@ __all__ = [
     "DECOMPOSITIONS",
     "SCALARS",
     "TOLERANCES",
-    "PWM_MIN",
     "PWM_SPAN",
-    "MIN_CONTACTS",
     "MAX_CONTACTS",
     "DEFAULT_MAX_ITERATIONS",
     "REQUEST_FIELDS",

@@ -42,7 +42,7 @@ from typing import Any
 
 from graspguide.core.units import UNITS, hand_span_problem
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, FINGERS, MODES, POLICIES
-from graspguide.study.toml_file import load_toml, loads_toml
+from graspguide.study.toml_file import load_toml
 
 TRIAL_DEFAULTS = {"threshold_deg": 3.0, "hold_s": 0.5, "timeout_s": 90.0}
 
@@ -273,15 +273,10 @@ def load_scene(path: str) -> Scene:
     return parse_scene(load_toml(path, SceneError, "scene file"), path)
 
 
-def loads_scene(text: str, source: str = "<string>") -> Scene:
-    return parse_scene(loads_toml(text, source, SceneError), source)
-
-
 __all__ = [
     "Scene",
     "SceneError",
     "load_scene",
-    "loads_scene",
     "parse_scene",
     "config_hash",
     "canonical_json",

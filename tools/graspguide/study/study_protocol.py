@@ -44,7 +44,7 @@ from graspguide.study.scene_file import (
     config_hash,
     file_unit_fix,
 )
-from graspguide.study.toml_file import load_toml, loads_toml
+from graspguide.study.toml_file import load_toml
 
 MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
 CONTACT_ORDERS = ("alternate", "fixed")
@@ -497,10 +497,6 @@ def load_protocol(path: str) -> Protocol:
     return parse_protocol(load_toml(path, ProtocolFileError, "protocol file"), path)
 
 
-def loads_protocol(text: str, source: str = "<string>") -> Protocol:
-    return parse_protocol(loads_toml(text, source, ProtocolFileError), source)
-
-
 # --------------------------------------------------------------------------------------
 # Wrenches
 # --------------------------------------------------------------------------------------
@@ -799,7 +795,6 @@ __all__ = [
     "PlannedTrial",
     "Session",
     "load_protocol",
-    "loads_protocol",
     "parse_protocol",
     "draw_wrenches",
     "draw_familiarization_wrenches",

@@ -17,10 +17,3 @@ def load_toml(path: str, error: type[Exception], what: str) -> dict[str, Any]:
         raise error(f"{path}: cannot read the {what}: {e.strerror}") from None
     except tomllib.TOMLDecodeError as e:
         raise error(f"{path}: not valid TOML: {e}") from None
-
-
-def loads_toml(text: str, source: str, error: type[Exception]) -> dict[str, Any]:
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise error(f"{source}: not valid TOML: {e}") from None
