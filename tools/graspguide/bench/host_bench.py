@@ -686,41 +686,59 @@ def _flatten(ns: list[list[float]]) -> list[float]:
     return [v for per in ns for v in per]
 
 
+CXX_WARMUP = 4  # untimed passes of each C++ loop before the timed ones
+
+
+def _cxx_loop_config(
+    name, group, k, scalar, settings, insts, timer, args, collect, **options
+) -> Config:
+    """A configuration timed by one of the binding's C++ loops (``_core.time_*``) over
+    ``settings``' reps and batches; ``collect(cfg, res)`` files what the loop returned."""
+
+    def run(cfg: Config) -> None:
+        res = timer(
+            *args,
+            scalar=scalar,
+            reps=settings["reps"],
+            batches=settings["batches"],
+            warmup=CXX_WARMUP,
+            **options,
+        )
+        collect(cfg, res)
+
+    return Config(name, group, "graspguide", k, scalar, settings, run, insts)
+
+
 def cxx_frame_config(
     name, insts, k, scalar, decomposition, warm, max_iterations, fixed, reps, batches
 ) -> Config:
-    def run(cfg: Config) -> None:
-        res = _core.time_frames(
-            *_frame_args(insts),
-            scalar=scalar,
-            decomposition=decomposition,
-            warm_start=warm,
-            max_iterations=max_iterations,
-            fixed_posture=fixed,
-            reps=reps,
-            batches=batches,
-            warmup=4,
-        )
+    def collect(cfg: Config, res: dict[str, Any]) -> None:
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
         cfg.outcomes = _outcomes_from_core(res)
         cfg.extra["recomputed_per_instance"] = sorted(set(res["recomputed"]))
         cfg.extra["frames_per_instance"] = res["frames_per_instance"]
 
-    return Config(
+    settings = {
+        "decomposition": decomposition,
+        "warm_start": warm,
+        "max_iterations": max_iterations,
+        "reps": reps,
+        "batches": batches,
+    }
+    return _cxx_loop_config(
         name,
         "fixed" if fixed else "frame",
-        "graspguide",
         k,
         scalar,
-        {
-            "decomposition": decomposition,
-            "warm_start": warm,
-            "max_iterations": max_iterations,
-            "reps": reps,
-            "batches": batches,
-        },
-        run,
+        settings,
         insts,
+        _core.time_frames,
+        _frame_args(insts),
+        collect,
+        decomposition=decomposition,
+        warm_start=warm,
+        max_iterations=max_iterations,
+        fixed_posture=fixed,
     )
 
 
@@ -731,28 +749,28 @@ def cxx_stages_config(name, insts, k, scalar, decomposition, reps, batches) -> C
     """Each stage of a frame in its own C++ loop: what dominates a frame."""
     ok = [i for i in insts if i.ok]
 
-    def run(cfg: Config) -> None:
-        res = _core.time_stages(
-            *_frame_args(ok),
-            scalar=scalar,
-            decomposition=decomposition,
-            reps=reps,
-            batches=batches,
-            warmup=4,
-        )
+    def collect(cfg: Config, res: list[dict[str, Any]]) -> None:
         for stage in STAGES:
             cfg.serie(stage, f"stage {stage}").add([v for d in res for v in d.get(stage, [])])
         cfg.extra["instances_timed"] = sum(1 for d in res if d)
 
-    return Config(
+    settings = {
+        "decomposition": decomposition,
+        "qp_warm_start": False,
+        "reps": reps,
+        "batches": batches,
+    }
+    return _cxx_loop_config(
         name,
         "stages",
-        "graspguide",
         k,
         scalar,
-        {"decomposition": decomposition, "qp_warm_start": False, "reps": reps, "batches": batches},
-        run,
+        settings,
         ok,
+        _core.time_stages,
+        _frame_args(ok),
+        collect,
+        decomposition=decomposition,
     )
 
 
@@ -766,49 +784,61 @@ def _qp_args(insts: list[Instance]):
 
 
 def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) -> Config:
-    args = _qp_args(insts)
-
-    def run(cfg: Config) -> None:
-        res = _core.time_qp(
-            *args,
-            scalar=scalar,
-            warm_start=warm,
-            violation_rel=violation_rel,
-            reps=reps,
-            batches=batches,
-            warmup=4,
-        )
+    def collect(cfg: Config, res: dict[str, Any]) -> None:
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
         cfg.outcomes = [
             Outcome(st, used, None if lam is None else np.asarray(lam))
             for st, used, lam in zip(res["status"], res["constraints_used"], res["lambda"])
         ]
 
-    return Config(
+    settings = {
+        "warm_start": warm,
+        "feas_rel": violation_rel or None,
+        "reps": reps,
+        "batches": batches,
+    }
+    return _cxx_loop_config(
         name,
         "qp",
-        "graspguide",
         k,
         scalar,
-        {"warm_start": warm, "feas_rel": violation_rel or None, "reps": reps, "batches": batches},
-        run,
+        settings,
         insts,
+        _core.time_qp,
+        _qp_args(insts),
+        collect,
+        warm_start=warm,
+        violation_rel=violation_rel,
     )
+
+
+def _py_call_config(name, insts, k, scalar, calls, binding, pass_timer) -> Config:
+    """A configuration of the existing binding timed one Python call at a time.
+    ``pass_timer()`` starts a pass and returns ``time(inst, samples)``, which adds the
+    instance's call times to ``samples`` and returns its Outcome."""
+
+    def run(cfg: Config) -> None:
+        samples: list[int] = []
+        time_instance = pass_timer()
+        cfg.outcomes = [time_instance(inst, samples) for inst in insts]
+        cfg.serie("py", "Python call").add(samples)
+
+    settings = {"decomposition": "qr", "warm_start": False, "calls": calls, "binding": binding}
+    return Config(name, "py-call", "graspguide", k, scalar, settings, run, insts)
 
 
 def py_guidance_config(name, insts, k, calls) -> Config:
     """The existing stateful binding, one Python call per frame (set_contacts + update)."""
 
-    def run(cfg: Config) -> None:
-        samples, outcomes = [], []
+    def pass_timer() -> Callable[[Instance, list[int]], Outcome]:
         g = _core.Guidance()
-        for inst in insts:
+
+        def time_instance(inst: Instance, samples: list[int]) -> Outcome:
             st = g.set_scene(inst.contacts, inst.policy, inst.mode, inst.constraints, inst.y_axis)
             if st == "ok":
                 st = g.set_wrench(inst.wrench)
             if st != "ok":
-                outcomes.append(Outcome(st))
-                continue
+                return Outcome(st)
             moved = np.nextafter(np.asarray(inst.contacts), np.inf).tolist()
             q = inst.orientation
             for r in range(calls):
@@ -820,61 +850,34 @@ def py_guidance_config(name, insts, k, calls) -> Config:
             g.set_contacts(moved)
             g.update(q)
             g.set_contacts(inst.contacts)
-            d = g.update(q)
-            outcomes.append(binding_outcome(d))
-        cfg.serie("py", "Python call").add(samples)
-        cfg.outcomes = outcomes
+            return binding_outcome(g.update(q))
 
-    return Config(
-        name,
-        "py-call",
-        "graspguide",
-        k,
-        "double",
-        {
-            "decomposition": "qr",
-            "warm_start": False,
-            "calls": calls,
-            "binding": "_core.Guidance set_contacts + update",
-        },
-        run,
-        insts,
-    )
+        return time_instance
+
+    binding = "_core.Guidance set_contacts + update"
+    return _py_call_config(name, insts, k, "double", calls, binding, pass_timer)
 
 
 def py_solve_config(name, insts, k, scalar, calls) -> Config:
     """The existing one-shot binding (_core.solve: scene, wrench and pose in one call)."""
 
-    def run(cfg: Config) -> None:
-        samples, outcomes = [], []
-        for inst in insts:
-            for _ in range(calls):
-                t0 = time.perf_counter_ns()
-                d = _core.solve(
-                    inst.contacts,
-                    inst.wrench,
-                    inst.policy,
-                    inst.mode,
-                    inst.constraints,
-                    inst.orientation,
-                    inst.y_axis,
-                    scalar,
-                )
-                samples.append(time.perf_counter_ns() - t0)
-            outcomes.append(binding_outcome(d))
-        cfg.serie("py", "Python call").add(samples)
-        cfg.outcomes = outcomes
+    def time_instance(inst: Instance, samples: list[int]) -> Outcome:
+        for _ in range(calls):
+            t0 = time.perf_counter_ns()
+            d = _core.solve(
+                inst.contacts,
+                inst.wrench,
+                inst.policy,
+                inst.mode,
+                inst.constraints,
+                inst.orientation,
+                inst.y_axis,
+                scalar,
+            )
+            samples.append(time.perf_counter_ns() - t0)
+        return binding_outcome(d)
 
-    return Config(
-        name,
-        "py-call",
-        "graspguide",
-        k,
-        scalar,
-        {"decomposition": "qr", "warm_start": False, "calls": calls, "binding": "_core.solve"},
-        run,
-        insts,
-    )
+    return _py_call_config(name, insts, k, scalar, calls, "_core.solve", lambda: time_instance)
 
 
 def peer_config(solver, insts, k, calls) -> Config:
