@@ -37,7 +37,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -650,6 +650,18 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     )
 
 
+# The design of every within-subject test: each participant under every modality.
+_WITHIN = {"within": "modality", "subject": "participant"}
+
+
+def _quietly(test: Callable[..., Any], long, **options) -> Any:
+    """A pingouin test of the square-rooted times ``y`` of the long frame, its warnings
+    (small samples, deprecations) silenced."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return test(long, dv="y", **options)
+
+
 def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[str, Any]:
     """Shapiro-Wilk, Mauchly, the RM ANOVA and the Bonferroni-corrected paired t-tests on
     at least 2 participants; what could not be computed is said in ``notes``."""
@@ -662,9 +674,7 @@ def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[st
 
     # Shapiro-Wilk per modality (pingouin needs >= 4 values per group).
     if n >= 4:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            normality = pg.normality(long, dv="y", group="modality", method="shapiro")
+        normality = _quietly(pg.normality, long, group="modality", method="shapiro")
         normality = normality.reindex(list(MODALITIES))
     else:
         normality = _no_normality()
@@ -672,11 +682,7 @@ def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[st
 
     # Mauchly: the covariance of the k-1 = 3 differences must be of full rank: n >= 4.
     if n >= len(MODALITIES):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sph = pg.sphericity(
-                long, dv="y", within="modality", subject="participant", method="mauchly"
-            )
+        sph = _quietly(pg.sphericity, long, **_WITHIN, method="mauchly")
         # p from the chi-square approximation (what SPSS reports, and the paper: chi2(5) =
         # 10.56, p = 0.061); pingouin's p adds R's second-order term (mauchly.test).
         from scipy.stats import chi2 as _chi2
@@ -697,16 +703,7 @@ def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[st
             f"participants, {n} remain"
         )
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        aov = pg.rm_anova(
-            data=long,
-            dv="y",
-            within="modality",
-            subject="participant",
-            detailed=True,
-            correction=True,
-        )
+    aov = _quietly(pg.rm_anova, long, **_WITHIN, detailed=True, correction=True)
     r0, r1 = aov.iloc[0], aov.iloc[1]
     anova = {
         "F": float(r0["F"]),
@@ -732,16 +729,7 @@ def _repeated_measures_tests(retained, transformed, notes: list[str]) -> dict[st
         "p": float(t["Pr > F"]),
     }
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        pw = pg.pairwise_tests(
-            data=long,
-            dv="y",
-            within="modality",
-            subject="participant",
-            padjust="bonf",
-            parametric=True,
-        )
+    pw = _quietly(pg.pairwise_tests, long, **_WITHIN, padjust="bonf", parametric=True)
     rows = []
     for _, r in pw.iterrows():
         a, b = str(r["A"]), str(r["B"])
