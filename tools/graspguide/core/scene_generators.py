@@ -132,6 +132,21 @@ def extreme_scenes() -> list[dict[str, Any]]:
     """Named edge cases; each notes its expected status where it is known a priori."""
     cases: list[dict[str, Any]] = []
     add = cases.append
+
+    def case(
+        name,
+        contacts,
+        wrench,
+        status,
+        note,
+        *,
+        orientation=IDENTITY_QUATERNION,
+        y_axis=DEFAULT_Y_AXIS,
+        **expected,
+    ):
+        """One named case: the scene, its expected status, why, and runs/expect/same_as."""
+        add(_case(_scene(name, contacts, wrench, y_axis, orientation), status, note, **expected))
+
     nan, inf = float("nan"), float("inf")
 
     hand3 = nominal_contacts(3)
@@ -148,167 +163,161 @@ def extreme_scenes() -> list[dict[str, Any]]:
     tetra = [P + d1, P + d2, P - d1 - d2]  # centroid exactly P
 
     # ---- coincident contacts --------------------------------------------------------------------
-    c = hand3.copy()
-    c[1] = c[0]
-    add(
-        _case(
-            _scene("coincident_thumb_equals_index_k3", c, pure_f),
-            "coincident_contacts",
-            "two equal contacts (pairwise check)",
-        )
-    )
-    c = hand4.copy()
-    c[1] = c[0]
-    add(
-        _case(
-            _scene("coincident_thumb_equals_index_k4", c, pure_f),
-            "coincident_contacts",
-            "two equal contacts among four; the other three span a plane",
-        )
-    )
+    for hand, why in (
+        (hand3, "two equal contacts (pairwise check)"),
+        (hand4, "two equal contacts among four; the other three span a plane"),
+    ):
+        c = hand.copy()
+        c[1] = c[0]
+        case(f"coincident_thumb_equals_index_k{len(c)}", c, pure_f, "coincident_contacts", why)
     c = hand4.copy()
     c[2] = c[1] + np.array([1e-6, 0.0, 0.0])
-    add(
-        _case(
-            _scene("coincident_index_middle_1um_k4", c, pure_f),
-            "coincident_contacts",
-            "index and middle 1 um apart (<= 1e-4 L)",
-        )
+    case(
+        "coincident_index_middle_1um_k4",
+        c,
+        pure_f,
+        "coincident_contacts",
+        "index and middle 1 um apart (<= 1e-4 L)",
     )
-    add(
-        _case(
-            _scene("coincident_all_equal_k3", [hand3[0]] * 3, pure_f),
-            "coincident_contacts",
-            "all contacts equal: L = 0",
-        )
+    case(
+        "coincident_all_equal_k3",
+        [hand3[0]] * 3,
+        pure_f,
+        "coincident_contacts",
+        "all contacts equal: L = 0",
     )
-    add(
-        _case(
-            _scene("coincident_palm_at_centroid_k4", tetra + [P], pure_f),
-            "coincident_contacts",
-            "palm exactly at the centroid of all four (r_4 = 0)",
-        )
+    case(
+        "coincident_palm_at_centroid_k4",
+        tetra + [P],
+        pure_f,
+        "coincident_contacts",
+        "palm exactly at the centroid of all four (r_4 = 0)",
     )
-    add(
-        _case(
-            _scene("coincident_contact_at_centroid_k3", [P + d1, P - d1, P], pure_f),
-            "coincident_contacts",
-            "third contact exactly at the midpoint = centroid (also collinear: "
-            "coincident is checked first)",
-        )
+    case(
+        "coincident_contact_at_centroid_k3",
+        [P + d1, P - d1, P],
+        pure_f,
+        "coincident_contacts",
+        "third contact exactly at the midpoint = centroid (also collinear: "
+        "coincident is checked first)",
     )
 
     # ---- rank -----------------------------------------------------------------------------------
     u = np.array([2 * d, d, 3 * d])
-    add(
-        _case(
-            _scene("collinear_k3", [P, P + u, P + 3 * u], pure_f),
-            "rank_deficient",
-            "three collinear contacts: rank 5",
-        )
+    case(
+        "collinear_k3",
+        [P, P + u, P + 3 * u],
+        pure_f,
+        "rank_deficient",
+        "three collinear contacts: rank 5",
     )
-    add(
-        _case(
-            _scene("collinear_k4", [P, P + u, P + 3 * u, P + 4 * u], pure_f),
-            "rank_deficient",
-            "four collinear contacts: rank 5",
-        )
+    case(
+        "collinear_k4",
+        [P, P + u, P + 3 * u, P + 4 * u],
+        pure_f,
+        "rank_deficient",
+        "four collinear contacts: rank 5",
     )
     c = np.array([P, P + u, P + 3 * u])
     c[1] += np.array([1e-9, -2e-9, 0.0])
-    add(
-        _case(
-            _scene("nearly_collinear_k3", c, pure_f),
-            "rank_deficient",
-            "middle contact 2 nm off the line: sigma_6/sigma_1 ~ 1e-7",
-        )
+    case(
+        "nearly_collinear_k3",
+        c,
+        pure_f,
+        "rank_deficient",
+        "middle contact 2 nm off the line: sigma_6/sigma_1 ~ 1e-7",
     )
 
     # ---- contacts on / near the y_O axis (fallback axis) ----------------------------------------
     on_axis = [[0.0, 8 * d, 0.0], [4 * d, -4 * d, d], [-4 * d, -4 * d, -d]]  # O = 0
-    add(
-        _case(
-            _scene("contact_on_y_axis_k3", on_axis, pure_f, orientation=q_tilt),
-            "ok",
-            "r_1 = (0, a, 0) exactly parallel to y_O: fallback axis for contact 0",
-            expect={"fallback_mask": 1},
-        )
+    case(
+        "contact_on_y_axis_k3",
+        on_axis,
+        pure_f,
+        "ok",
+        "r_1 = (0, a, 0) exactly parallel to y_O: fallback axis for contact 0",
+        orientation=q_tilt,
+        expect={"fallback_mask": 1},
     )
     neg = [[0.0, -8 * d, 0.0], [4 * d, 4 * d, d], [-4 * d, 4 * d, -d]]
-    add(
-        _case(
-            _scene("contact_on_neg_y_axis_k3", neg, pure_f, orientation=q_tilt),
-            "ok",
-            "r_1 anti-parallel to y_O: fallback axis",
-            expect={"fallback_mask": 1},
-        )
+    case(
+        "contact_on_neg_y_axis_k3",
+        neg,
+        pure_f,
+        "ok",
+        "r_1 anti-parallel to y_O: fallback axis",
+        orientation=q_tilt,
+        expect={"fallback_mask": 1},
     )
     on4 = [[0.0, 8 * d, 0.0], [4 * d, -2 * d, d], [-4 * d, -2 * d, -d], [0.0, -4 * d, 0.0]]
-    add(
-        _case(
-            _scene(
-                "contacts_on_y_axis_k4", on4, [0.4, 0.2, -1.1, 0.0, 0.0, 0.0], orientation=q_tilt
-            ),
-            "ok",
-            "thumb and palm both on the y_O axis (opposite sides)",
-            expect={"fallback_mask": 9},
-        )
+    case(
+        "contacts_on_y_axis_k4",
+        on4,
+        [0.4, 0.2, -1.1, 0.0, 0.0, 0.0],
+        "ok",
+        "thumb and palm both on the y_O axis (opposite sides)",
+        orientation=q_tilt,
+        expect={"fallback_mask": 9},
     )
     for label, sin_t, mask in (("inside", 5e-4, 1), ("outside", 2e-3, 0)):
         # Centroid exactly 0, r_1 = (a sin_t, a, 0): ||y_1 x y_O|| = sin_t / sqrt(1 + sin_t^2).
         a = 8 * d
         h = a * sin_t / 2
         cc = [[2 * h, a, 0.0], [4 * d - h, -a / 2, d], [-4 * d - h, -a / 2, -d]]
-        add(
-            _case(
-                _scene(f"contact_near_y_axis_{label}_tol_k3", cc, pure_f, orientation=q_tilt),
-                "ok",
-                f"||y_1 x y_O|| ~ {sin_t:g} ({label} kAxisParallelTol = 1e-3)",
-                expect={"fallback_mask": mask},
-            )
+        case(
+            f"contact_near_y_axis_{label}_tol_k3",
+            cc,
+            pure_f,
+            "ok",
+            f"||y_1 x y_O|| ~ {sin_t:g} ({label} kAxisParallelTol = 1e-3)",
+            orientation=q_tilt,
+            expect={"fallback_mask": mask},
         )
     onz = [[0.0, 0.0, 8 * d], [4 * d, d, -4 * d], [-4 * d, -d, -4 * d]]
-    add(
-        _case(
-            _scene(
-                "custom_y_axis_z_contact_on_axis",
-                onz,
-                pure_f,
-                y_axis=(0.0, 0.0, 1.0),
-                orientation=q_tilt,
-            ),
-            "ok",
-            "y_O = +z, contact 0 on it: fallback e = +x (tie with +y, first index)",
-            expect={"fallback_mask": 1},
-        )
-    )
     diag = [[4 * d, 4 * d, 4 * d], [-4 * d, 2 * d, -2 * d], [0.0, -6 * d, -2 * d]]  # O = 0
-    add(
-        _case(
-            _scene(
-                "custom_y_axis_diagonal", diag, pure_f, y_axis=(1.0, 1.0, 1.0), orientation=q_tilt
-            ),
-            "ok",
+    for name, contacts, y_axis, why in (
+        (
+            "z_contact_on_axis",
+            onz,
+            (0.0, 0.0, 1.0),
+            "y_O = +z, contact 0 on it: fallback e = +x (tie with +y, first index)",
+        ),
+        (
+            "diagonal",
+            diag,
+            (1.0, 1.0, 1.0),
             "y_O = (1,1,1) unnormalised, contact 0 on it: three-way tie, e = +x",
+        ),
+    ):
+        case(
+            f"custom_y_axis_{name}",
+            contacts,
+            pure_f,
+            "ok",
+            why,
+            y_axis=y_axis,
+            orientation=q_tilt,
             expect={"fallback_mask": 1},
         )
+    case(
+        "y_axis_default_reference_k3",
+        hand3,
+        pure_f,
+        "ok",
+        "reference for y_axis_scaled",
+        orientation=q_tilt,
     )
-    add(
-        _case(
-            _scene("y_axis_default_reference_k3", hand3, pure_f, orientation=q_tilt),
-            "ok",
-            "reference for y_axis_scaled",
-        )
+    case(
+        "y_axis_scaled",
+        hand3,
+        pure_f,
+        "ok",
+        "y_O = (0, 2.5, 0) is normalised",
+        y_axis=(0.0, 2.5, 0.0),
+        orientation=q_tilt,
+        same_as="y_axis_default_reference_k3",
     )
-    add(
-        _case(
-            _scene("y_axis_scaled", hand3, pure_f, y_axis=(0.0, 2.5, 0.0), orientation=q_tilt),
-            "ok",
-            "y_O = (0, 2.5, 0) is normalised",
-            same_as="y_axis_default_reference_k3",
-        )
-    )
-    add(_case(_scene("y_axis_zero", hand3, pure_f, y_axis=(0.0, 0.0, 0.0)), "bad_axis", "y_O = 0"))
+    case("y_axis_zero", hand3, pure_f, "bad_axis", "y_O = 0", y_axis=(0.0, 0.0, 0.0))
 
     # ---- units and scale ------------------------------------------------------------------------
     for k in (3, 4):
@@ -336,20 +345,16 @@ def extreme_scenes() -> list[dict[str, Any]]:
             )
 
     # ---- wrench ---------------------------------------------------------------------------------
-    add(_case(_scene("zero_wrench", hand3, [0.0] * 6), "zero_wrench", "w = 0"))
-    add(
-        _case(
-            _scene("zero_force_with_moment", hand3, [0, 0, 0, 0.01, -0.02, 0.0]),
-            "zero_force",
-            "f = 0, m != 0",
-        )
+    case("zero_wrench", hand3, [0.0] * 6, "zero_wrench", "w = 0")
+    case(
+        "zero_force_with_moment", hand3, [0, 0, 0, 0.01, -0.02, 0.0], "zero_force", "f = 0, m != 0"
     )
-    add(
-        _case(
-            _scene("tiny_force_with_moment", hand4, [1e-9, 0, 0, 0.02, 0.0, 0.01]),
-            "zero_force",
-            "||f|| / ||w_L|| ~ 2e-9 < 1e-6",
-        )
+    case(
+        "tiny_force_with_moment",
+        hand4,
+        [1e-9, 0, 0, 0.02, 0.0, 0.01],
+        "zero_force",
+        "||f|| / ||w_L|| ~ 2e-9 < 1e-6",
     )
 
     # ---- relevance boundary ---------------------------------------------------------------------
@@ -365,47 +370,45 @@ def extreme_scenes() -> list[dict[str, Any]]:
         add(_case(scene, "ok", why, expect={"relevant0": relevant}))
 
     # ---- constraint models ----------------------------------------------------------------------
-    add(
-        _case(
-            _scene("paper_infeasible_k3", hand3, [0, 0, -1.0, 0, 0, 0]),
-            "ok",
+    for name, hand, wrench, used, why in (
+        (
+            "paper_infeasible_k3",
+            hand3,
+            [0, 0, -1.0, 0, 0, 0],
+            "normal",
             "nominal 3-contact hand pushed along -z: paper infeasible, falls back to normal",
-            expect={"constraints_used": "normal"},
-        )
-    )
-    add(
-        _case(
-            _scene("paper_infeasible_k4", hand4, [0, 1.0, 0, 0, -0.05, 0]),
-            "ok",
+        ),
+        (
+            "paper_infeasible_k4",
+            hand4,
+            [0, 1.0, 0, 0, -0.05, 0],
+            "normal",
             "4-contact hand, moment about y_O of the wrong sign for lambda_ix >= 0: "
             "paper infeasible, falls back to normal",
-            expect={"constraints_used": "normal"},
-        )
-    )
-    add(
-        _case(
-            _scene("paper_feasible_interior_k4", hand4, [0, 1.0, 0, 0, 0.05, 0]),
-            "ok",
+        ),
+        (
+            "paper_feasible_interior_k4",
+            hand4,
+            [0, 1.0, 0, 0, 0.05, 0],
+            "paper",
             "the same with the opposite moment: paper strictly feasible (margin > 0)",
-            expect={"constraints_used": "paper"},
-        )
-    )
-    add(
-        _case(
-            _scene("paper_feasible_degenerate_k3", hand3, [0, -2.0, 0.5, 0, 0, 0]),
-            "ok",
+        ),
+        (
+            "paper_feasible_degenerate_k3",
+            hand3,
+            [0, -2.0, 0.5, 0, 0, 0],
+            "paper",
             "pure force: every lambda_ix = 0 at the (degenerate) paper optimum",
-            expect={"constraints_used": "paper"},
-        )
-    )
-    add(
-        _case(
-            _scene("paper_feasible_degenerate_k4", hand4, [0, 0, -1.0, 0, 0, 0]),
-            "ok",
+        ),
+        (
+            "paper_feasible_degenerate_k4",
+            hand4,
+            [0, 0, -1.0, 0, 0, 0],
+            "paper",
             "pure force, 4 contacts: paper feasible on a degenerate vertex",
-            expect={"constraints_used": "paper"},
-        )
-    )
+        ),
+    ):
+        case(name, hand, wrench, "ok", why, expect={"constraints_used": used})
 
     # ---- non-finite inputs ----------------------------------------------------------------------
     def with_value(name, field, index, value, k=3):
@@ -434,32 +437,30 @@ def extreme_scenes() -> list[dict[str, Any]]:
     q_ref = _scene("quaternion_unit", hand4, [0.7, -0.4, -1.5, 0.0, 0.0, 0.0], orientation=q_tilt)
     add(_case(q_ref, "ok", "reference for the scaled quaternions"))
     for label, s in (("scaled_3p7", 3.7), ("scaled_2e-6", 2e-6 / 1.0), ("negated", -1.0)):
-        add(
-            _case(
-                _scene(
-                    f"quaternion_{label}",
-                    hand4,
-                    q_ref["wrench"],
-                    orientation=[s * v for v in q_tilt],
-                ),
-                "ok",
-                f"orientation scaled by {s:g}: same result as the unit quaternion",
-                same_as="quaternion_unit",
-            )
+        case(
+            f"quaternion_{label}",
+            hand4,
+            q_ref["wrench"],
+            "ok",
+            f"orientation scaled by {s:g}: same result as the unit quaternion",
+            orientation=[s * v for v in q_tilt],
+            same_as="quaternion_unit",
         )
-    add(
-        _case(
-            _scene("quaternion_zero", hand4, pure_f, orientation=(0.0, 0.0, 0.0, 0.0)),
-            "bad_quaternion",
-            "q = 0",
-        )
+    case(
+        "quaternion_zero",
+        hand4,
+        pure_f,
+        "bad_quaternion",
+        "q = 0",
+        orientation=(0.0, 0.0, 0.0, 0.0),
     )
-    add(
-        _case(
-            _scene("quaternion_tiny", hand4, pure_f, orientation=(1e-7, 0.0, 0.0, 0.0)),
-            "bad_quaternion",
-            "||q|| = 1e-7 < kMinQuaternionNorm",
-        )
+    case(
+        "quaternion_tiny",
+        hand4,
+        pure_f,
+        "bad_quaternion",
+        "||q|| = 1e-7 < kMinQuaternionNorm",
+        orientation=(1e-7, 0.0, 0.0, 0.0),
     )
 
     # ---- guidance error / alpha -----------------------------------------------------------------
@@ -475,83 +476,66 @@ def extreme_scenes() -> list[dict[str, Any]]:
     ):
         scene = _scene(name, hand3, [*force, 0, 0, 0])
         add(_case(scene, "ok", why, expect={"error_deg": error_deg}))
-    add(
-        _case(
-            _scene(
-                "rotated_into_gravity",
-                hand3,
-                [1.0, 0, 0, 0, 0, 0],
-                orientation=quat_from_axis_angle([0, 1, 0], math.pi / 2).tolist(),
-            ),
-            "ok",
-            "hand rotated +90 deg about y takes +x to -z: error ~0",
-        )
+    case(
+        "rotated_into_gravity",
+        hand3,
+        [1.0, 0, 0, 0, 0, 0],
+        "ok",
+        "hand rotated +90 deg about y takes +x to -z: error ~0",
+        orientation=quat_from_axis_angle([0, 1, 0], math.pi / 2).tolist(),
     )
 
     # ---- contact count and check order ----------------------------------------------------------
-    add(
-        _case(
-            _scene("bad_contact_count_k2", hand3[:2], pure_f), "bad_contact_count", "two contacts"
-        )
-    )
-    add(
-        _case(_scene("bad_contact_count_k1", hand3[:1], pure_f), "bad_contact_count", "one contact")
-    )
+    case("bad_contact_count_k2", hand3[:2], pure_f, "bad_contact_count", "two contacts")
+    case("bad_contact_count_k1", hand3[:1], pure_f, "bad_contact_count", "one contact")
     sc = _scene("order_nan_before_count", hand3[:2], pure_f)
     sc["wrench"][2] = nan
     add(_case(sc, "non_finite_input", "NaN and k = 2: non_finite_input first"))
-    add(
-        _case(
-            _scene("order_count_before_axis", hand3[:2], pure_f, y_axis=(0, 0, 0)),
-            "bad_contact_count",
-            "k = 2 and y_O = 0: bad_contact_count first",
-        )
+    case(
+        "order_count_before_axis",
+        hand3[:2],
+        pure_f,
+        "bad_contact_count",
+        "k = 2 and y_O = 0: bad_contact_count first",
+        y_axis=(0, 0, 0),
     )
-    add(
-        _case(
-            _scene(
-                "order_axis_before_quaternion",
-                hand3,
-                pure_f,
-                y_axis=(0, 0, 0),
-                orientation=(0, 0, 0, 0),
-            ),
-            "bad_axis",
-            "y_O = 0 and q = 0: bad_axis first",
-        )
+    case(
+        "order_axis_before_quaternion",
+        hand3,
+        pure_f,
+        "bad_axis",
+        "y_O = 0 and q = 0: bad_axis first",
+        y_axis=(0, 0, 0),
+        orientation=(0, 0, 0, 0),
     )
-    add(
-        _case(
-            _scene(
-                "order_quaternion_before_coincident",
-                [hand3[0]] * 3,
-                pure_f,
-                orientation=(0, 0, 0, 0),
-            ),
-            "bad_quaternion",
-            "q = 0 and coincident contacts: bad_quaternion first",
-        )
+    case(
+        "order_quaternion_before_coincident",
+        [hand3[0]] * 3,
+        pure_f,
+        "bad_quaternion",
+        "q = 0 and coincident contacts: bad_quaternion first",
+        orientation=(0, 0, 0, 0),
     )
-    add(
-        _case(
-            _scene("order_coincident_before_zero_wrench", [hand3[0]] * 3, [0.0] * 6),
-            "coincident_contacts",
-            "coincident and w = 0: coincident first",
-        )
+    case(
+        "order_coincident_before_zero_wrench",
+        [hand3[0]] * 3,
+        [0.0] * 6,
+        "coincident_contacts",
+        "coincident and w = 0: coincident first",
     )
-    add(
-        _case(
-            _scene("order_zero_wrench_before_rank", [P, P + u, P + 3 * u], [0.0] * 6),
-            "zero_wrench",
-            "collinear and w = 0: zero_wrench first",
-        )
+    case(
+        "order_zero_wrench_before_rank",
+        [P, P + u, P + 3 * u],
+        [0.0] * 6,
+        "zero_wrench",
+        "collinear and w = 0: zero_wrench first",
     )
-    add(
-        _case(
-            _scene("order_zero_force_before_rank", [P, P + u, P + 3 * u], [0, 0, 0, 0.01, 0, 0]),
-            "zero_force",
-            "collinear and f = 0: zero_force first",
-        )
+    case(
+        "order_zero_force_before_rank",
+        [P, P + u, P + 3 * u],
+        [0, 0, 0, 0.01, 0, 0],
+        "zero_force",
+        "collinear and f = 0: zero_force first",
     )
     return cases
 
