@@ -190,6 +190,12 @@ def _choice(x: Any, field: str, accepted: Sequence[str]) -> str:
     return x
 
 
+def _option(x: Any, what: str, accepted: Sequence[str]) -> None:
+    """A ValueError (not a RequestError: a caller's mistake) for an unknown option."""
+    if x not in accepted:
+        raise ValueError(f"unknown {what} {_show(x)}; accepted: {', '.join(accepted)}")
+
+
 def _max_iterations(x: Any) -> int:
     if isinstance(x, bool) or not isinstance(x, numbers.Integral):
         raise TypeError(f"max_iterations must be an int, {_got(x)}")
@@ -245,12 +251,8 @@ def solve(
     ValueError for an unknown scalar or decomposition.
     """
     kw = _check_kwargs(contacts, wrench, policy, mode, constraints, orientation, y_axis)
-    if scalar not in SCALARS:
-        raise ValueError(f"unknown scalar {_show(scalar)}; accepted: {', '.join(SCALARS)}")
-    if decomposition not in DECOMPOSITIONS:
-        raise ValueError(
-            f"unknown decomposition {_show(decomposition)}; accepted: {', '.join(DECOMPOSITIONS)}"
-        )
+    _option(scalar, "scalar", SCALARS)
+    _option(decomposition, "decomposition", DECOMPOSITIONS)
     return _core.solve(
         scalar=scalar,
         decomposition=decomposition,
@@ -285,11 +287,7 @@ class Guidance:
         decomposition: str = "qr",
         max_iterations: int = DEFAULT_MAX_ITERATIONS,
     ) -> str:
-        if decomposition not in DECOMPOSITIONS:
-            raise ValueError(
-                f"unknown decomposition {_show(decomposition)}; accepted: "
-                f"{', '.join(DECOMPOSITIONS)}"
-            )
+        _option(decomposition, "decomposition", DECOMPOSITIONS)
         return self._g.set_scene(
             _contacts(contacts),
             _choice(policy, "policy", POLICIES),
