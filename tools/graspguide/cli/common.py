@@ -118,7 +118,7 @@ def signals_interrupt() -> Iterator[None]:
     raise KeyboardInterrupt in the main thread, as Ctrl-C does, so every command leaves
     through the same path: STOP sent, logs closed, exit status 130. Only the first one
     interrupts: a second signal must not cut the STOP on the way out short."""
-    fired = []
+    fired: list[int] = []
 
     def interrupt(signum, frame):
         if not fired:

@@ -64,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         ("--contacts", "contact counts, 3 and/or 4 (default: the protocol's)"),
     ):
         p.add_argument(name, default=None, metavar="LIST", help=help)
-    for name, default, help in (
+    for name, count, help in (
         ("--participants", 2, "virtual participants U1..UN per point (default 2)"),
         (
             "--wrenches",
@@ -73,7 +73,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "single/multi split scaled (default 4)",
         ),
     ):
-        p.add_argument(name, type=int_arg(1, 1000), default=default, metavar="N", help=help)
+        p.add_argument(name, type=int_arg(1, 1000), default=count, metavar="N", help=help)
     p.add_argument(
         "--source",
         default=DEFAULT_SOURCE,

@@ -265,7 +265,7 @@ def _tlx_row(where: str, rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def participant_dirs(paths: Iterable[os.PathLike]) -> list[Path]:
+def participant_dirs(paths: Iterable[str | os.PathLike]) -> list[Path]:
     """The participant folders under the given study or participant folders, in order.
 
     A folder holding ``trials.jsonl`` or ``tlx.jsonl`` is a participant folder; otherwise
@@ -305,7 +305,7 @@ def participant_dirs(paths: Iterable[os.PathLike]) -> list[Path]:
     return found
 
 
-def load(paths: Iterable[os.PathLike]):
+def load(paths: Iterable[str | os.PathLike]):
     """Read study or participant folders into ``(trials, tlx)`` pandas DataFrames.
 
     ``trials`` has one row per logged trial, familiarization trials included (flagged in
@@ -563,7 +563,7 @@ def _long(wide, value: str = "y"):
 
 _PAIRWISE_COLUMNS = ["A", "B", "T", "dof", "p_unc", "p_bonf", "mean_A_s", "mean_B_s", "diff_s"]
 # Mauchly's test where it cannot be computed (fewer participants than modalities).
-_NO_SPHERICITY = {
+_NO_SPHERICITY: dict[str, Any] = {
     "W": math.nan,
     "chi2": math.nan,
     "dof": len(MODALITIES) * (len(MODALITIES) - 1) // 2 - 1,
@@ -769,7 +769,7 @@ def _p(p: float) -> str:
 
 
 def figure4(
-    stats: Statistics, out_dir: os.PathLike, simulated: bool = False, stem: str = "figure4"
+    stats: Statistics, out_dir: str | os.PathLike, simulated: bool = False, stem: str = "figure4"
 ) -> list[Path]:
     """Mean +- SD per modality (retained participants' means, s) with the Bonferroni p
     of every pair above the bars; writes ``stem.png`` and ``stem.svg`` (Agg)."""
@@ -1133,7 +1133,7 @@ def summary_text(res: Result) -> str:
     return "\n".join(lines)
 
 
-def analyze(paths: Iterable[os.PathLike], remove_outliers: bool = True) -> Result:
+def analyze(paths: Iterable[str | os.PathLike], remove_outliers: bool = True) -> Result:
     """Load, then Tables I-III and the statistics (no files written)."""
     paths = list(paths)
     trials, tlx = load(paths)
@@ -1157,7 +1157,7 @@ def analyze(paths: Iterable[os.PathLike], remove_outliers: bool = True) -> Resul
     )
 
 
-def default_out_dir(paths: Sequence[os.PathLike]) -> Path:
+def default_out_dir(paths: Sequence[str | os.PathLike]) -> Path:
     """``analysis/`` in the first study folder (the parent of a participant folder)."""
     first = Path(paths[0])
     if (first / TRIALS_FILE).exists() or (first / TLX_FILE).exists():
@@ -1165,7 +1165,7 @@ def default_out_dir(paths: Sequence[os.PathLike]) -> Path:
     return first / "analysis"
 
 
-def write_outputs(res: Result, out_dir: os.PathLike) -> list[Path]:
+def write_outputs(res: Result, out_dir: str | os.PathLike) -> list[Path]:
     """report.md, figure4.png/.svg and the tables as CSV in ``out_dir``."""
     out = Path(out_dir)
     try:

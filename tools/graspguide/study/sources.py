@@ -105,12 +105,13 @@ class TrackerConvention:
         return list(self.matrix @ (np.asarray(p, dtype=float) / scale))
 
     def quaternion(self, q: Sequence[float]) -> tuple[float, float, float, float]:
-        q = np.asarray(q, dtype=float)
-        if q.shape != (4,):
-            raise SourceError(f"a quaternion has 4 components, got {list(q)}")
-        wxyz = q if self.quat_order == "wxyz" else np.array([q[3], q[0], q[1], q[2]])
+        a = np.asarray(q, dtype=float)
+        if a.shape != (4,):
+            raise SourceError(f"a quaternion has 4 components, got {list(a)}")
+        wxyz = a if self.quat_order == "wxyz" else np.array([a[3], a[0], a[1], a[2]])
         m = self.matrix
-        return tuple(matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))  # type: ignore
+        w, x, y, z = (float(v) for v in matrix_to_quat(m @ quat_to_matrix(wxyz) @ m.T))
+        return w, x, y, z
 
     def describe(self) -> dict[str, str]:
         return asdict(self)

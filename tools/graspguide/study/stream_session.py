@@ -137,7 +137,7 @@ def stream_command(
     log_failed = False
     try:
         hello = client.hello()
-        config = {"scene": trial_scene.to_dict(), "wrench": wrench}
+        config: dict[str, Any] = {"scene": trial_scene.to_dict(), "wrench": wrench}
         config["config_hash"] = config_hash(config)
         config.update(
             source=poses.describe(),

@@ -471,7 +471,7 @@ def parse_protocol(data: dict[str, Any], source: str = "<protocol>") -> Protocol
         constraints=constraints,
         start_quat=start_quat,
         y_axis=y_axis,
-        hands=hands,  # type: ignore[arg-type]
+        hands=hands,
         modalities=tuple(cond_modalities),
         contact_counts=tuple(counts),
         modality_order=modality_order,
@@ -730,7 +730,7 @@ def session_order(protocol: Protocol, participant: str) -> list[Session]:
         # so that every (row, contact order) pair occurs once in 2 * rows participants
         if ((n - 1) + (n - 1) // n_rows) % 2:
             counts.reverse()
-    sessions = []
+    sessions: list[Session] = []
     for k in counts:
         for m in order:
             sessions.append(Session(len(sessions) + 1, k, m))
