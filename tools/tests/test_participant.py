@@ -34,6 +34,17 @@ IDENTITY = (1.0, 0.0, 0.0, 0.0)
 THRESHOLD_DEG, HOLD_S, TIMEOUT_S = 3.0, 0.5, 90.0
 
 
+def motor_speeds(vp):
+    """The model's ERM speeds in PWM units (its first-order lag of the PWM)."""
+    return [float(v) for v in vp._motor]
+
+
+def felt_direction(vp, speeds, noise=None):
+    """The weight direction the model infers from ``speeds`` (unit, hand frame) or None."""
+    d = vp._direction(speeds, noise)
+    return None if d is None else np.array(d)
+
+
 def _wrenches(n: int, seed: int):
     """Seeded unit forces (N), some with a moment (N m) about the centroid."""
     rng = np.random.default_rng(seed)
@@ -191,18 +202,18 @@ def test_erm_lag_reaches_63_percent_after_tau(tau):
     for i in range(100):
         t = i * dt
         vp.step(t, [int(target), 0, 0, 0])
-        speed = vp.motor_speeds()[0]
-        assert vp.motor_speeds()[1:] == [0.0, 0.0, 0.0]
+        speed = motor_speeds(vp)[0]
+        assert motor_speeds(vp)[1:] == [0.0, 0.0, 0.0]
         if crossed is None and speed >= (1 - math.exp(-1)) * target - 1e-9:
             crossed = t + dt  # the first sample's PWM acts over the preceding dt
     assert crossed == pytest.approx(tau, abs=dt)
-    assert vp.motor_speeds()[0] == pytest.approx(target, rel=1e-3)
+    assert motor_speeds(vp)[0] == pytest.approx(target, rel=1e-3)
     # And back down (stop) with the same lag.
     t0 = 100 * dt
     vp.step(t0, [0, 0, 0, 0])
     for i in range(1, 200):
         vp.step(t0 + i * dt, [0, 0, 0, 0])
-        if vp.motor_speeds()[0] <= math.exp(-1) * target:
+        if motor_speeds(vp)[0] <= math.exp(-1) * target:
             assert (i + 1) * dt == pytest.approx(tau, abs=dt)
             break
     else:
@@ -261,7 +272,7 @@ def test_speed_bound_follows_the_parameter():
 
 def _steady(vp, pwm):
     open_loop(vp, pwm, 1.5)  # 25 tau: the ERM state equals the PWM to ~1e-11
-    return vp.motor_speeds()
+    return motor_speeds(vp)
 
 
 def _scaled(pwm, c):
@@ -277,8 +288,8 @@ def test_mode_c_ignores_magnitude_mode_v_uses_it():
         s_base = _steady(new_participant(mode=mode), base)
         s_half = _steady(new_participant(mode=mode), half)
         vp = new_participant(mode=mode)
-        d_base = vp.felt_direction(s_base, noise)
-        d_half = vp.felt_direction(s_half, noise)
+        d_base = felt_direction(vp, s_base, noise)
+        d_half = felt_direction(vp, s_half, noise)
         assert np.allclose(d_base, d_half, atol=1e-9)  # direction: relative strengths only
         if mode == "C":
             assert vp.felt_distance_deg(s_base) is None  # no magnitude at all in C
@@ -290,13 +301,13 @@ def test_mode_c_ignores_magnitude_mode_v_uses_it():
             assert near < 0.6 * far  # V: weaker means closer
     # Which motors vibrate matters in both modes.
     vp = new_participant(mode="C")
-    other = vp.felt_direction(_steady(new_participant(mode="C"), [0, 170, 130, 90]))
+    other = felt_direction(vp, _steady(new_participant(mode="C"), [0, 170, 130, 90]))
     assert (
         math.degrees(
             math.acos(
                 float(
                     np.clip(
-                        other @ vp.felt_direction(_steady(new_participant(mode="C"), base)), -1, 1
+                        other @ felt_direction(vp, _steady(new_participant(mode="C"), base)), -1, 1
                     )
                 )
             )
@@ -434,7 +445,7 @@ def test_mode_c_converges_with_the_core_when_the_estimate_is_near(report_figure)
                 y_axis=Y_AXIS,
             )
             vp = new_participant(mode="C", policy=policy)
-            d = vp.felt_direction([float(v) for v in res["pwm"]])
+            d = felt_direction(vp, [float(v) for v in res["pwm"]])
             f = np.array(w[:3]) / np.linalg.norm(w[:3])
             err = math.degrees(math.acos(float(np.clip(d @ f, -1, 1))))
             ok, t = closed_loop(w, mode="C", policy=policy, seed=300 + i)[:2]

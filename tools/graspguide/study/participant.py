@@ -363,21 +363,6 @@ class VirtualParticipant:
         self._trial = True
 
     # ------------------------------------------------------------------ perception
-    def motor_speeds(self) -> list[float]:
-        """Current ERM speeds in PWM units (the first-order lag of the PWM)."""
-        self._need_trial()
-        return [float(v) for v in self._motor]
-
-    def felt_direction(
-        self, speeds: Sequence[float] | None = None, noise: Sequence[float] | None = None
-    ) -> np.ndarray | None:
-        """Weight direction the participant infers in its hand frame (unit), or None
-        when no motor is felt. ``speeds``: motor speeds (default: the current ones);
-        ``noise``: k standard normal draws for the Weber noise (default: none)."""
-        self._need_trial()
-        d = self._direction(self._motor if speeds is None else speeds, noise)
-        return None if d is None else np.array(d)
-
     def _direction(self, speeds: Sequence[float], noise: Sequence[float] | None) -> Vec3 | None:
         s = [float(v) for v in speeds]
         felt = [v >= 0.5 * PWM_FLOOR for v in s]
