@@ -181,13 +181,13 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
 def test_run_stream_then_stop_leaves_device_idle():
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import transport as gt
+    from graspguide.link import sim as link_sim
     from graspguide.study import sources
     from graspguide.study.stream_session import run_stream
 
     scene = gs.load_scene(SCENE3)
     src = sources.open_source("synthetic:rate=100,duration=0.5")
-    with gt.SimulatedDevice(virtual_clock=True) as sim:
+    with link_sim.SimulatedDevice(virtual_clock=True) as sim:
         client = gd.DeviceClient(sim, timeout=2.0)
         client.hello()
         summary = run_stream(client, scene, [0.3, -1.2, -0.8, 0, 0, 0], src, virtual_clock=True)
@@ -408,10 +408,10 @@ def test_sigterm_stop_reaches_the_device(tmp_path):
 
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import transport as gt
+    from graspguide.link import sim as link_sim
 
     trace = tmp_path / "motors.csv"
-    with gt.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:
+    with link_sim.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:
         p = _start_streaming(dev.pty_path, tmp_path / "log")
         _, err = _signal_and_wait(p, signal.SIGTERM)
         assert p.returncode == 130, (p.returncode, err)

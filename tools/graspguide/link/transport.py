@@ -23,7 +23,6 @@ import errno
 import os
 import select
 import time
-from typing import Any
 
 DEFAULT_BAUDRATE = 115200
 DEFAULT_WRITE_TIMEOUT = 2.0
@@ -283,24 +282,3 @@ __all__ = [
     "LinkTimeout",
     "DEFAULT_BAUDRATE",
 ]
-
-# Names that moved to graspguide.link.sim and are still imported from here by the CLI,
-# the study jobs and tests; resolved lazily because sim imports this module.
-_MOVED_TO_SIM = frozenset(
-    {
-        "SIM_PORT",
-        "SimulatedDevice",
-        "die_with_parent",
-        "find_repo_root",
-        "find_sim_binary",
-        "sim_build_command",
-    }
-)
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MOVED_TO_SIM:
-        from graspguide.link import sim
-
-        return getattr(sim, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
