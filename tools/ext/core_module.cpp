@@ -11,6 +11,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/stl/array.h>
 #include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
@@ -329,15 +330,19 @@ void check_count(const V& v, std::size_t n, const char* what) {
                               .c_str());
 }
 
+// graspguide bench's instances, one entry per instance in every list: contacts, wrenches,
+// orientations, y axes, policies, modes and constraint models. One tuple, so that every
+// timing function takes (and checks) them the same way.
+using InstanceLists = std::tuple<std::vector<ContactList>, std::vector<Wrench>, std::vector<Quat4>,
+                                 std::vector<Axis3>, std::vector<std::string>,
+                                 std::vector<std::string>, std::vector<std::string>>;
+
 // The options of each instance of time_frames / time_stages, once every per-instance list
 // is checked to have one entry per instance.
-std::vector<SceneOptions> instance_options(std::size_t n, const std::vector<Wrench>& wrenches,
-                                           const std::vector<Quat4>& orientations,
-                                           const std::vector<Axis3>& y_axes,
-                                           const std::vector<std::string>& policies,
-                                           const std::vector<std::string>& modes,
-                                           const std::vector<std::string>& constraints,
+std::vector<SceneOptions> instance_options(const InstanceLists& instances,
                                            const std::string& decomposition, int max_iterations) {
+  const auto& [contacts, wrenches, orientations, y_axes, policies, modes, constraints] = instances;
+  const std::size_t n = contacts.size();
   check_count(wrenches, n, "wrenches");
   check_count(orientations, n, "orientations");
   check_count(y_axes, n, "y_axes");
@@ -455,16 +460,12 @@ nb::dict time_frames_t(const std::vector<ContactList>& contacts,
   return d;
 }
 
-nb::dict time_frames(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
-                     const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
-                     const std::vector<std::string>& policies,
-                     const std::vector<std::string>& modes,
-                     const std::vector<std::string>& constraints, const std::string& scalar,
+nb::dict time_frames(const InstanceLists& instances, const std::string& scalar,
                      const std::string& decomposition, bool warm_start, int max_iterations,
                      bool fixed_posture, int reps, int batches, int warmup) {
   const std::vector<SceneOptions> options =
-      instance_options(contacts.size(), wrenches, orientations, y_axes, policies, modes,
-                       constraints, decomposition, max_iterations);
+      instance_options(instances, decomposition, max_iterations);
+  const auto& [contacts, wrenches, orientations, y_axes, policies, modes, constraints] = instances;
   check_timing_args(reps, batches, warmup);
   if (is_float_scalar(scalar))
     return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, warm_start,
@@ -658,15 +659,11 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   return d;
 }
 
-nb::list time_stages(const std::vector<ContactList>& contacts, const std::vector<Wrench>& wrenches,
-                     const std::vector<Quat4>& orientations, const std::vector<Axis3>& y_axes,
-                     const std::vector<std::string>& policies,
-                     const std::vector<std::string>& modes,
-                     const std::vector<std::string>& constraints, const std::string& scalar,
+nb::list time_stages(const InstanceLists& instances, const std::string& scalar,
                      const std::string& decomposition, int reps, int batches, int warmup) {
   const std::vector<SceneOptions> options =
-      instance_options(contacts.size(), wrenches, orientations, y_axes, policies, modes,
-                       constraints, decomposition, gg::kDefaultMaxIterations);
+      instance_options(instances, decomposition, gg::kDefaultMaxIterations);
+  const auto& [contacts, wrenches, orientations, y_axes, policies, modes, constraints] = instances;
   check_timing_args(reps, batches, warmup);
   const bool is_float = is_float_scalar(scalar);
   nb::list out;
@@ -780,12 +777,12 @@ NB_MODULE(_core, m) {
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
 
-  m.def("time_frames", &time_frames, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
-        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double", "decomposition"_a = "qr",
+  m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double", "decomposition"_a = "qr",
         "warm_start"_a = true, "max_iterations"_a = gg::kDefaultMaxIterations,
         "fixed_posture"_a = false, "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
-        "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. One list "
-        "entry per instance for every argument. Moving posture (default): each frame sets "
+        "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. instances: "
+        "(contacts, wrenches, orientations, y_axes, policies, modes, constraints), one list "
+        "entry per instance in each. Moving posture (default): each frame sets "
         "new contacts (the instance's own and a copy moved by one ulp, alternately) and "
         "runs update(), so the whole grasp part runs every frame; fixed_posture=True: only "
         "the orientation changes. Returns a dict: ns (per instance, `batches` samples, each "
@@ -793,8 +790,7 @@ NB_MODULE(_core, m) {
         "iterations (of the instance's own contacts after a timed-like previous frame), "
         "recomputed (grasp recomputations among the timed and warm-up frames), "
         "frames_per_instance.");
-  m.def("time_stages", &time_stages, "contacts"_a, "wrenches"_a, "orientations"_a, "y_axes"_a,
-        "policies"_a, "modes"_a, "constraints"_a, "scalar"_a = "double", "decomposition"_a = "qr",
+  m.def("time_stages", &time_stages, "instances"_a, "scalar"_a = "double", "decomposition"_a = "qr",
         "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
         "Benchmark (graspguide bench): time each stage of a frame (contact_frames, "
         "grasp_matrix, decomposition, relevance (with desired forces), qp (solve_forces, "

@@ -273,10 +273,10 @@ def test_bad_options_are_clear_errors(core):
     with pytest.raises(ValueError, match="expected 9 \\(k=3\\) or 12"):
         core.time_qp([[0.0] * 5], [[0.0] * 5], [[0.0] * 5], ["paper"])
     with pytest.raises(ValueError, match="one per instance"):
-        core.time_frames([[[0, 0, 0]] * 3], [], [], [], [], [], [])
+        core.time_frames(([[[0, 0, 0]] * 3], [], [], [], [], [], []))
     for timer, lists in (
-        (core.time_frames, [[]] * 7),
-        (core.time_stages, [[]] * 7),
+        (core.time_frames, [([],) * 7]),
+        (core.time_stages, [([],) * 7]),
         (core.time_qp, [[]] * 4),
     ):
         with pytest.raises(ValueError, match="unknown scalar 'half'; accepted"):

@@ -662,7 +662,9 @@ class Config:
 
 
 def _frame_args(insts: list[Instance]):
-    return (
+    """The positional arguments of ``_core.time_frames`` and ``time_stages``: the one
+    ``instances`` tuple of per-instance lists."""
+    instances = (
         [i.contacts for i in insts],
         [i.wrench for i in insts],
         [i.orientation for i in insts],
@@ -671,6 +673,7 @@ def _frame_args(insts: list[Instance]):
         [i.mode for i in insts],
         [i.constraints for i in insts],
     )
+    return (instances,)
 
 
 def _outcomes_from_core(res: dict[str, Any]) -> list[Outcome]:
