@@ -330,6 +330,18 @@ void check_count(const V& v, std::size_t n, const char* what) {
                               .c_str());
 }
 
+// What every timing loop returns: the samples and, per instance, the answer it timed.
+nb::dict timing_result(const nb::list& ns, const nb::list& status, const nb::list& lambda,
+                       const nb::list& used, const nb::list& iterations) {
+  nb::dict d;
+  d["ns"] = ns;
+  d["status"] = status;
+  d["lambda"] = lambda;
+  d["constraints_used"] = used;
+  d["iterations"] = iterations;
+  return d;
+}
+
 // graspguide bench's instances, one entry per instance in every list: contacts, wrenches,
 // orientations, y axes, policies, modes and constraint models. One tuple, so that every
 // timing function takes (and checks) them the same way.
@@ -448,13 +460,8 @@ nb::dict time_frames_t(const std::vector<ContactList>& contacts,
     frame_outputs<T>(s, k, fr, g->grasp(), status, pwm, lambda, used, iterations);
     recomputed.append(recomputations);
   }
-  nb::dict d;
-  d["ns"] = ns;
-  d["status"] = status;
+  nb::dict d = timing_result(ns, status, lambda, used, iterations);
   d["pwm"] = pwm;
-  d["lambda"] = lambda;
-  d["constraints_used"] = used;
-  d["iterations"] = iterations;
   d["recomputed"] = recomputed;
   d["frames_per_instance"] = (reps * batches) + warmup;
   return d;
@@ -568,13 +575,7 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
                            warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
                            used, iterations);
   }
-  nb::dict d;
-  d["ns"] = ns;
-  d["status"] = status;
-  d["lambda"] = lambda;
-  d["constraints_used"] = used;
-  d["iterations"] = iterations;
-  return d;
+  return timing_result(ns, status, lambda, used, iterations);
 }
 
 // The stages of one frame, each in its own loop on the previous stage's output, so the
