@@ -65,6 +65,7 @@ import numpy as np
 
 from graspguide.core import _core, reference
 from graspguide.core import scene_generators as scenes
+from graspguide.exit_codes import EXIT_USAGE, fail
 
 SCHEMA = "graspguide-bench/1"
 
@@ -1378,8 +1379,7 @@ def main_args(args) -> int:
         opts = options_from_args(args)
         report = run_bench(opts, progress)
     except BenchError as e:
-        print(f"graspguide bench: error: {e}", file=sys.stderr)
-        return 2
+        return fail("bench", e, EXIT_USAGE)
     print(format_table(report), flush=True)
     if args.json:
         write_json(report, args.json)

@@ -4,10 +4,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK
+from graspguide.exit_codes import EXIT_OK, fail
 
 HELP = "the paper's Tables I-III, statistics and Figure 4 from study logs"
 
@@ -65,8 +64,7 @@ def run(args: argparse.Namespace) -> int:
         out = Path(args.out) if args.out else default_out_dir(args.dirs)
         written = write_outputs(res, out)
     except AnalysisError as e:
-        print(f"graspguide analyze: error: {e}", file=sys.stderr)
-        return EXIT_FAILURE
+        return fail("analyze", e)
     print(summary_text(res))
     print()
     print(f"Wrote {', '.join(p.name for p in written)} to {out}")

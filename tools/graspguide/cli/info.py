@@ -6,9 +6,8 @@ import argparse
 import json
 
 from graspguide.cli.common import add_port_arguments, connect
-from graspguide.exit_codes import EXIT_OK
+from graspguide.exit_codes import EXIT_OK, fail
 from graspguide.link.transport import LinkError
-from graspguide.study.device_session import fail
 
 HELP = "identify a device: HELLO_REPLY and STATUS"
 DESCRIPTION = (

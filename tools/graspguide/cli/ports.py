@@ -6,10 +6,9 @@ import argparse
 import json
 import sys
 
-from graspguide.exit_codes import EXIT_OK
+from graspguide.exit_codes import EXIT_OK, fail
 from graspguide.link.sim import SIM_PORT
 from graspguide.link.transport import LinkError
-from graspguide.study.device_session import fail
 
 HELP = "list serial ports (and the simulated device 'sim')"
 DESCRIPTION = (

@@ -14,9 +14,8 @@ from graspguide.cli.common import (
     positive_int,
     signals_interrupt,
 )
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, fail
 from graspguide.link.transport import LinkError
-from graspguide.study.device_session import fail
 
 HELP = "answer JSON Lines requests (contacts, wrench -> PWM) with the C++ core"
 

@@ -23,7 +23,7 @@ import os
 import sys
 import time
 
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail
 from graspguide.study.jobs import (
     TrialJob,
     count_lines,
@@ -85,8 +85,7 @@ def run(
             )
         open_runner_source(source, loaded, "U1")  # checks the spec
     except (ProtocolFileError, RunnerError) as e:
-        print(f"graspguide demo: error: {e}", file=sys.stderr)
-        return EXIT_USAGE
+        return fail("demo", e, EXIT_USAGE)
     pids = [f"U{i}" for i in range(1, participants + 1)]
     logs = os.path.join(out, "demo-logs")
     os.makedirs(logs, exist_ok=True)

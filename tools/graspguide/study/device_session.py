@@ -1,24 +1,13 @@
 """A command's device session: the port opened (the simulator on its virtual clock when
 asked), its DeviceClient, and STOP then the port closed on every way out, with the
-commands' one-line error report."""
+commands' STOP report."""
 
 from __future__ import annotations
 
 import sys
 
-from graspguide.exit_codes import EXIT_FAILURE
 from graspguide.link.client import DeviceClient
 from graspguide.link.transport import LinkError, open_port
-
-
-def report(command: str, message: object) -> None:
-    """The one-line error report of ``graspguide COMMAND`` on stderr."""
-    print(f"graspguide {command}: error: {message}", file=sys.stderr)
-
-
-def fail(command: str, e: BaseException) -> int:
-    report(command, e)
-    return EXIT_FAILURE
 
 
 class DeviceSession:
@@ -50,4 +39,4 @@ class DeviceSession:
         return True
 
 
-__all__ = ["DeviceSession", "fail", "report"]
+__all__ = ["DeviceSession"]

@@ -26,6 +26,10 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+# Imported once here, not per pose: run() and _send() are the per-frame path.
+from graspguide.link.client import DeviceError, LinkTimeout, host_time_us
+from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
+
 Pose = tuple[float, Sequence[float], Any]  # (t_s, quat w, x, y, z, contacts or None)
 
 
@@ -203,8 +207,6 @@ class PoseLoop:
         for a pose too late to send."""
         if self.virtual_clock:
             return (self.base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
-        from graspguide.link.client import host_time_us
-
         wait = self.wall0 + t_s - time.monotonic()
         if wait > 0:
             time.sleep(wait)
@@ -215,9 +217,6 @@ class PoseLoop:
     def _send(self, stamped: list[tuple[float, int, Sequence[float], Any]]) -> list[Any] | None:
         """The answers to the stamped poses, or None when the device refused the only one
         because the trial had already ended (its TRIAL_RESULT is queued)."""
-        from graspguide.link.client import DeviceError
-        from graspguide.link.messages import ErrorCode
-
         client = self.client
         if len(stamped) > 1:
             answers = client.pose_batch([(t_us, q) for _, t_us, q, _ in stamped])
@@ -237,9 +236,6 @@ class PoseLoop:
 
     def run(self, poses: Any) -> LoopResult:
         """The trial until it ends or ``poses`` run out; raises PoseLoopError, LinkError."""
-        from graspguide.link.client import LinkTimeout
-        from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
-
         client = self.client
         lockstep = poses.window <= 1
         on_frame = self.on_frame

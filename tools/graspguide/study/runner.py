@@ -770,10 +770,17 @@ def trial_command(
     the device at ``port`` into ``out``, poses from the source spec ``source``, the
     NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
     stopped; STOP on every way out. Returns the exit code."""
-    from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+    from graspguide.exit_codes import (
+        EXIT_FAILURE,
+        EXIT_INTERRUPTED,
+        EXIT_OK,
+        EXIT_USAGE,
+        fail,
+        report,
+    )
     from graspguide.link.sim import SIM_PORT
     from graspguide.link.transport import LinkError
-    from graspguide.study.device_session import DeviceSession, fail, report
+    from graspguide.study.device_session import DeviceSession
     from graspguide.study.study_protocol import (
         ProtocolFileError,
         load_protocol,

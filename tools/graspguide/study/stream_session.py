@@ -9,9 +9,9 @@ import sys
 import time
 from typing import Any
 
-from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail, report
 from graspguide.link.transport import LinkError
-from graspguide.study.device_session import DeviceSession, fail, report
+from graspguide.study.device_session import DeviceSession
 from graspguide.study.pose_loop import Frame, OpenLoopPoses, PoseLoop
 
 
