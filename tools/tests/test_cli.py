@@ -841,3 +841,22 @@ def test_known_answers_float_pwm(known_answers):
         f"float PWM within 1 count on {within}/{n_ok} = "
         f"{100 * share:.2f} % < 99.9 %; off: " + "; ".join(off)
     )
+
+
+# --------------------------------------------------------------------------------------
+# Absurd magnitudes: an answer line, never a traceback
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("big", [1e300, -1e300, 1.7e308])
+def test_absurd_magnitudes_are_answered(big):
+    """Squaring such a number overflows; the unit checks once raised OverflowError on it."""
+    lines = [
+        json.dumps({**GOOD, "wrench": [0.3, -1.2, big, 0, 0, 0]}),
+        json.dumps({**GOOD, "wrench": [0.3, -1.2, -0.8, big, 0, 0]}),
+        json.dumps({**GOOD, "wrench": [big, big, big, big, big, big]}),
+        GOOD_LINE,
+    ]
+    answers = solve_lines(lines)
+    assert len(answers) == len(lines)
+    for ans in answers[:-1]:
+        assert ans["ok"] or ans["error"] in solver.STATUS_NAMES + ("bad_request",), ans
+    assert answers[-1]["ok"] is True

@@ -60,8 +60,9 @@ def moment_unit_problem(
     (contacts in metres): a lever arm |m| / |f| over :data:`MAX_LEVER_SPANS` hand spans,
     which is what a moment in N mm given as N m looks like. A zero force is left to the
     core (zero_force)."""
-    f = math.sqrt(sum(float(x) ** 2 for x in wrench[:3]))
-    m = math.sqrt(sum(float(x) ** 2 for x in wrench[3:6]))
+    # x * x, not x ** 2: a float power raises OverflowError where a product is infinite.
+    f = math.sqrt(sum(float(x) * float(x) for x in wrench[:3]))
+    m = math.sqrt(sum(float(x) * float(x) for x in wrench[3:6]))
     span = hand_span(contacts_m)
     if not (f > 0 and span > 0 and math.isfinite(f) and math.isfinite(m)):
         return None
