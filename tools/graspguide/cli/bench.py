@@ -1,20 +1,50 @@
-"""`graspguide bench`: the host benchmark (graspguide.bench.host_bench)."""
+"""`graspguide bench`: the host benchmark (graspguide.bench.host_bench), or with
+--target the instruction counts on a microcontroller (graspguide.bench.targets)."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+from pathlib import Path
+
+from graspguide.cli.common import positive_float
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, report
 
 HELP = (
     "host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
-    "scipy, with accuracy against the float64 reference"
+    "scipy, with accuracy against the float64 reference; --target: "
+    "instruction counts on Cortex-M4F/M7 under QEMU"
 )
 DESCRIPTION = (
     "Time this project's full frame (in C++ and per Python call) and its QP "
     "alone next to DAQP, quadprog, OSQP and scipy on the same instances, "
     "judge every answer against the float64 reference, print a table. "
-    "Columns: tools/README.md, 'graspguide bench'."
+    "Columns: tools/README.md, 'graspguide bench'. "
+    "With --target m4f or m7: build the stage-count image, run it under QEMU "
+    "(-icount), print the instructions of every stage over the scene set and "
+    "compare them with the regression baseline; exit 1 when a median or "
+    "maximum grew more than 10 % or a status differs from the float64 reference."
 )
 RAW_DESCRIPTION = False
+
+TARGET_CHOICES = ("m4f", "m7")
+# Options of one mode only: their dest, and the flag a message names.
+HOST_ONLY = {
+    "instances": "--instances",
+    "seed": "--seed",
+    "k": "--k",
+    "quick": "--quick",
+    "solvers": "--solvers",
+    "max_passes": "--max-passes",
+}
+TARGET_ONLY = {
+    "no_build": "--no-build",
+    "update_baseline": "--update-baseline",
+    "baseline": "--baseline",
+    "raw": "--raw",
+    "qemu_timeout": "--qemu-timeout",
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,11 +88,113 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)",
     )
+    t = p.add_argument_group("microcontroller targets (--target)")
+    t.add_argument(
+        "--target",
+        dest="targets",
+        action="append",
+        choices=TARGET_CHOICES,
+        default=None,
+        help="instead of the host benchmark, count instructions on this target under "
+        "QEMU: m4f (Cortex-M4F, mps2-an386), m7 (Cortex-M7, mps2-an500); repeatable. "
+        '--json then writes {"cortex-m4f": {"k3": {STAGE: {"median", "max"}}, '
+        '..., "pwm_vs_float64", "stack_bytes"}}',
+    )
+    t.add_argument(
+        "--no-build",
+        action="store_true",
+        help="run the images as they are (default: `pio run -e m4f_stages` etc. first, "
+        "which rebuilds only what changed)",
+    )
+    t.add_argument(
+        "--update-baseline",
+        action="store_true",
+        help="write the figures as the new regression baseline instead of comparing",
+    )
+    t.add_argument(
+        "--baseline",
+        metavar="FILE",
+        default=None,
+        help="the regression baseline (default: tools/perf/stage_baseline.json of the repository)",
+    )
+    t.add_argument(
+        "--raw", metavar="DIR", default=None, help="keep each target's raw output lines in DIR"
+    )
+    t.add_argument(
+        "--qemu-timeout",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="seconds QEMU may run one image before it is killed (default 300)",
+    )
+
+
+def _misplaced(args: argparse.Namespace, options: dict[str, str]) -> list[str]:
+    parser = args.command_parser
+    return [
+        flag for dest, flag in options.items() if getattr(args, dest) != parser.get_default(dest)
+    ]
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.targets:
+        wrong = _misplaced(args, HOST_ONLY)
+        if wrong:
+            report("bench", f"{', '.join(wrong)}: host benchmark options, not for --target")
+            return EXIT_USAGE
+        return run_targets(args)
+    wrong = _misplaced(args, TARGET_ONLY)
+    if wrong:
+        report("bench", f"{', '.join(wrong)}: only with --target")
+        return EXIT_USAGE
     # graspguide.bench (numpy, the peer solvers) is imported when the command runs, so
     # the other commands do not pay for it at start-up.
     from graspguide.bench import host_bench
 
     return host_bench.main_args(args)
+
+
+def run_targets(args: argparse.Namespace) -> int:
+    """`graspguide bench --target ...`: 0 when every figure is within the baseline (or
+    the baseline was written), 1 on a regression, a status that differs from the float64
+    reference, a missing baseline or a run that failed."""
+    from graspguide.bench import targets
+    from graspguide.link.sim import find_repo_root
+
+    def progress(msg: str) -> None:
+        print(f"bench: {msg}", file=sys.stderr, flush=True)
+
+    root_dir = find_repo_root()
+    if root_dir is None:
+        report(
+            "bench",
+            "--target needs the GraspGuide repository (platformio.ini, lib/): run from it",
+        )
+        return EXIT_FAILURE
+    root = Path(root_dir)
+    chosen = [targets.TARGETS[name] for name in dict.fromkeys(args.targets)]
+    try:
+        results = targets.measure(
+            root,
+            chosen,
+            build_first=not args.no_build,
+            qemu_timeout_s=args.qemu_timeout or targets.QEMU_TIMEOUT_S,
+            raw_dir=Path(args.raw) if args.raw else None,
+            progress=progress,
+        )
+    except targets.TargetError as e:
+        return fail("bench", e)
+    print(targets.format_table(results), flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2) + "\n")
+        progress(f"wrote {args.json}")
+    baseline = Path(args.baseline) if args.baseline else root / targets.BASELINE
+    try:
+        if args.update_baseline:
+            targets.write_baseline(baseline, results)
+            print(f"baseline written: {baseline}")
+        result = targets.check(results, targets.load_baseline(baseline))
+    except targets.TargetError as e:
+        return fail("bench", e)
+    print("\n".join(result.lines()), flush=True)
+    return EXIT_FAILURE if result.failed else EXIT_OK
