@@ -226,10 +226,13 @@ if [[ -z $qemu_why ]] && ! command -v qemu-system-arm >/dev/null 2>&1; then
     qemu_why="qemu-system-arm not on PATH after tools/install-arm.sh"
 fi
 if [[ -z $qemu_why ]]; then
+    # It runs `pio run` on the two images first (seconds when they are up to date): an
+    # image left over from before a failed build is never the one counted.
     run_case "QEMU stage counts within baseline" qemu_stages \
-        "$PY" tools/scripts/qemu_stages.py --json "$REPORT_DIR/qemu_stages.json"
+        "$ROOT/.venv/bin/graspguide" bench --target m4f --target m7 \
+        --json "$REPORT_DIR/qemu_stages.json"
 else
-    firmware_unavailable "QEMU stage counts (tools/scripts/qemu_stages.py)" "$qemu_why"
+    firmware_unavailable "QEMU stage counts (graspguide bench --target m4f --target m7)" "$qemu_why"
 fi
 
 # --- 5. pytest -----------------------------------------------------------------

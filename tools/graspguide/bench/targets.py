@@ -129,10 +129,16 @@ def stage_columns(columns: Sequence[str]) -> list[str]:
 
 
 def _motor_columns(columns: Sequence[str], word: str) -> list[str]:
-    found = [c for c in columns if (m := _PER_MOTOR.fullmatch(c)) and m.group(1) == word]
-    if not found:
-        raise BadOutput(f"COLUMNS has no {word}0..{word}3 columns: {' '.join(columns)}")
-    return found
+    """``word``0, ``word``1, ...: one column a motor, in motor order."""
+    found = sorted(
+        (int(m.group(2)), c)
+        for c in columns
+        if (m := _PER_MOTOR.fullmatch(c)) and m.group(1) == word
+    )
+    if not found or [i for i, _ in found] != list(range(len(found))):
+        have = " ".join(c for _, c in found) or "none"
+        raise BadOutput(f"COLUMNS needs {word}0, {word}1, ... one a motor; it has: {have}")
+    return [c for _, c in found]
 
 
 def _int(text: str, what: str, lineno: int) -> int:
@@ -154,6 +160,11 @@ def _check_calibration(fields: list[str], lineno: int) -> int:
             f"{INSTRUCTIONS_PER_TICK} (is QEMU run with -icount shift=0?)"
         )
     return empty
+
+
+def _halted(reason_code: str, last_scene: str | None) -> TargetHalted:
+    after = f" after scene {last_scene}" if last_scene else ""
+    return TargetHalted(f"the image trapped{after}: HALT {reason_code} (reason, code)")
 
 
 def _scene_row(
@@ -186,8 +197,7 @@ def parse(lines: Iterable[str]) -> StageRun:
         tag, _, rest = line.strip().partition(" ")
         fields = rest.split()
         if tag == "HALT":
-            last = f" after scene {run.rows[-1].name}" if run and run.rows else ""
-            raise TargetHalted(f"the image trapped{last}: HALT {rest} (reason, code)")
+            raise _halted(rest, run.rows[-1].name if run and run.rows else None)
         if tag == "CAL":
             empty = _check_calibration(fields, lineno)
         elif tag == "COLUMNS":
@@ -197,6 +207,8 @@ def parse(lines: Iterable[str]) -> StageRun:
                 raise BadOutput(f"line {lineno}: COLUMNS lacks {', '.join(missing)}")
             run = StageRun(stages=stage_columns(columns))
             cols = (_motor_columns(columns, "pwm"), _motor_columns(columns, "ref"))
+            if len(cols[0]) != len(cols[1]):
+                raise BadOutput(f"line {lineno}: {len(cols[0])} pwm but {len(cols[1])} ref columns")
         elif tag == "S":
             if columns is None or run is None:
                 raise BadOutput(f"line {lineno}: a scene line before the COLUMNS line")
@@ -305,11 +317,13 @@ class Finding:
     def __str__(self) -> str:
         if self.kind == "grown":
             assert self.value is not None and self.baseline is not None
-            growth = f"+{100 * (self.value / self.baseline - 1):.1f} %" if self.baseline else ""
+            growth = (
+                f"+{100 * (self.value / self.baseline - 1):.1f} %" if self.baseline else "from 0"
+            )
             return (
                 f"REGRESSION {self.where}: {self.value} instructions, "
-                f"baseline {self.baseline} {growth}"
-            ).rstrip()
+                f"baseline {self.baseline} ({growth})"
+            )
         if self.kind == "new":
             value = "" if self.value is None else f": {self.value} instructions"
             return f"new {self.where}{value}, no baseline yet (--update-baseline)"
@@ -507,7 +521,10 @@ def run_image(root: Path, target: Target, timeout_s: float = QEMU_TIMEOUT_S) -> 
     # QEMU writes semihosting output (SYS_WRITE0) to its stderr.
     lines = p.stderr.splitlines()
     if p.returncode != 0:
-        parse(lines)  # a HALT line says why; otherwise QEMU's own message does
+        halt = [ln.split(" ", 1)[1] for ln in lines if ln.startswith("HALT ")]
+        if halt:
+            scenes = [ln.split()[1] for ln in lines if ln.startswith("S ") and len(ln.split()) > 1]
+            raise _halted(halt[0], scenes[-1] if scenes else None)
         tail = "\n".join((lines + p.stdout.splitlines())[-5:])
         raise TargetError(f"{target.key}: QEMU exited {p.returncode} running {elf}:\n{tail}")
     return lines
