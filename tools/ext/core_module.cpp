@@ -22,6 +22,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "graspguide.h"
@@ -224,6 +225,139 @@ nb::dict solve(const ContactList& contacts, const Wrench& wrench, const std::str
   const SceneOptions o = parse_options(policy, mode, constraints, decomposition, max_iterations);
   return is_float_scalar(scalar) ? solve_t<float>(contacts, wrench, o, orientation, y_axis)
                                  : solve_t<double>(contacts, wrench, o, orientation, y_axis);
+}
+
+// The fast path of the public solve() (graspguide.core.solver): its arguments read only
+// when each has exactly a plain type (a list or tuple of float and int, a str name, an int
+// cap). Anything else, a subclass included (bool is one of int), is "not plain": the
+// function returns None and the Python wrapper runs its thorough checks, so those stay
+// the only source of error messages. A plain request gets the same dict as solve().
+namespace plain {
+
+// Rows beyond this are never read by the core; the wrapper forwards at most as many.
+constexpr Py_ssize_t kMaxForwardedContacts = 64;
+
+bool number(PyObject* o, double& out) {
+  if (PyFloat_CheckExact(o)) {
+    out = PyFloat_AS_DOUBLE(o);
+    return true;
+  }
+  if (!PyLong_CheckExact(o)) return false;
+  out = PyLong_AsDouble(o);  // what float(int) computes
+  if (out == -1.0 && PyErr_Occurred()) {
+    PyErr_Clear();  // beyond the double range: the wrapper makes it infinite
+    return false;
+  }
+  return true;
+}
+
+bool sequence(PyObject* o, Py_ssize_t n) {
+  return (PyList_CheckExact(o) || PyTuple_CheckExact(o)) && PySequence_Fast_GET_SIZE(o) == n;
+}
+
+template <std::size_t N>
+bool numbers(nb::handle h, std::array<double, N>& out) {
+  PyObject* o = h.ptr();
+  if (!sequence(o, Py_ssize_t(N))) return false;
+  PyObject** items = PySequence_Fast_ITEMS(o);
+  for (std::size_t i = 0; i < N; ++i)
+    if (!number(items[i], out[i])) return false;
+  return true;
+}
+
+bool contacts(nb::handle h, ContactList& out) {
+  PyObject* o = h.ptr();
+  if (!PyList_CheckExact(o) && !PyTuple_CheckExact(o)) return false;
+  const Py_ssize_t n = PySequence_Fast_GET_SIZE(o);
+  if (n > kMaxForwardedContacts) return false;
+  out.resize(static_cast<std::size_t>(n));
+  PyObject** rows = PySequence_Fast_ITEMS(o);
+  for (Py_ssize_t i = 0; i < n; ++i)
+    if (!numbers<3>(rows[i], out[static_cast<std::size_t>(i)])) return false;
+  return true;
+}
+
+// The index of an exact str among the names, or -1.
+template <typename E, std::size_t N>
+int name_index(nb::handle h, const E (&values)[N], const char* (*name)(E)) {
+  PyObject* o = h.ptr();
+  if (!PyUnicode_CheckExact(o)) return -1;
+  Py_ssize_t size = 0;
+  const char* text = PyUnicode_AsUTF8AndSize(o, &size);
+  if (text == nullptr) {
+    PyErr_Clear();  // not encodable (a lone surrogate): no name matches it
+    return -1;
+  }
+  for (std::size_t i = 0; i < N; ++i)
+    if (std::string_view(text, static_cast<std::size_t>(size)) == name(values[i])) return int(i);
+  return -1;
+}
+
+bool max_iterations(nb::handle h, int& out) {
+  PyObject* o = h.ptr();
+  if (!PyLong_CheckExact(o)) return false;
+  int overflow = 0;
+  const long long v = PyLong_AsLongLongAndOverflow(o, &overflow);
+  if (v == -1 && PyErr_Occurred()) {
+    PyErr_Clear();
+    return false;
+  }
+  // As the wrapper clamps: below 1 is the core's bad_config, the binding takes a C int.
+  constexpr long long kMax = std::numeric_limits<int>::max();
+  out = overflow > 0 ? int(kMax) : overflow < 0 ? -1 : int(std::max(-1LL, std::min(v, kMax)));
+  return true;
+}
+
+const char* scalar_name(bool is_float) { return is_float ? "float" : "double"; }
+
+}  // namespace plain
+
+template <std::size_t N>
+nb::list float_list(const std::array<double, N>& v) {
+  nb::list out;
+  for (double x : v) out.append(x);
+  return out;
+}
+
+// The numbers of a request read as solve_plain reads them, as new lists of floats:
+// (contacts, wrench, orientation, y_axis), or None when any is not plain.
+nb::object plain_numbers(nb::handle contacts, nb::handle wrench, nb::handle orientation,
+                         nb::handle y_axis) {
+  ContactList c;
+  Wrench w;
+  Quat4 q;
+  Axis3 y;
+  if (!plain::contacts(contacts, c) || !plain::numbers(wrench, w) ||
+      !plain::numbers(orientation, q) || !plain::numbers(y_axis, y))
+    return nb::none();
+  nb::list rows;
+  for (const auto& row : c) rows.append(float_list(row));
+  return nb::make_tuple(rows, float_list(w), float_list(q), float_list(y));
+}
+
+nb::object solve_plain(nb::handle contacts, nb::handle wrench, nb::handle policy, nb::handle mode,
+                       nb::handle constraints, nb::handle orientation, nb::handle y_axis,
+                       nb::handle scalar, nb::handle decomposition, nb::handle max_iterations) {
+  ContactList c;
+  Wrench w;
+  Quat4 q;
+  Axis3 y;
+  SceneOptions o;
+  constexpr bool kScalars[] = {false, true};
+  const int ip = plain::name_index(policy, kPolicies, policy_name_fn);
+  const int im = plain::name_index(mode, kModes, mode_name_fn);
+  const int ic = plain::name_index(constraints, kModels, model_name_fn);
+  const int id = plain::name_index(decomposition, kDecompositions, decomposition_name_fn);
+  const int is = plain::name_index(scalar, kScalars, plain::scalar_name);
+  if (ip < 0 || im < 0 || ic < 0 || id < 0 || is < 0 ||
+      !plain::max_iterations(max_iterations, o.max_iterations) || !plain::contacts(contacts, c) ||
+      !plain::numbers(wrench, w) || !plain::numbers(orientation, q) || !plain::numbers(y_axis, y))
+    return nb::none();
+  o.policy = kPolicies[ip];
+  o.mode = kModes[im];
+  o.constraints = kModels[ic];
+  o.decomposition = kDecompositions[id];
+  return kScalars[is] ? solve_t<float>(c, w, o, q, y) : solve_t<double>(c, w, o, q, y);
 }
 
 // Stateful guidance in double, as the firmware runs it frame by frame.
@@ -755,6 +889,21 @@ NB_MODULE(_core, m) {
                      "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
          kResultDoc)
             .c_str());
+
+  // .none(): None is an argument like any other here (not plain), not a binding error.
+  m.def("solve_plain", &solve_plain, "contacts"_a.none(), "wrench"_a.none(), "policy"_a.none(),
+        "mode"_a.none(), "constraints"_a.none(), "orientation"_a.none(), "y_axis"_a.none(),
+        "scalar"_a.none(), "decomposition"_a.none(), "max_iterations"_a.none(),
+        "solve() for arguments of exactly the plain types (lists or tuples of float and int, "
+        "str names, an int max_iterations; every argument given): the same dict, or None when "
+        "any argument is of another type or value, for graspguide.core.solver to check "
+        "thoroughly. max_iterations is clamped to [-1, INT_MAX] as the wrapper does.");
+
+  m.def("plain_numbers", &plain_numbers, "contacts"_a.none(), "wrench"_a.none(),
+        "orientation"_a.none(), "y_axis"_a.none(),
+        "The numbers of a request as solve_plain reads them, as new lists of floats: "
+        "(contacts, wrench, orientation, y_axis), or None when any is not a list or tuple of "
+        "exactly float and int of the right length (at most 64 contacts).");
 
   nb::class_<PyGuidance>(m, "Guidance",
                          "Stateful Algorithm 1 in double (graspguide::Guidance<double>): the "

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import collections
+import decimal
+import fractions
 import itertools
 import json
 import math
 import os
+import types
 
 import numpy as np
 import pytest
@@ -473,3 +477,243 @@ def test_contacts_in_a_plane_containing_y_axis_match_the_reference():
         [[0.045, 0.045, 0.0], [0.015, 0.095, 0.0], [-0.01, 0.1, 0.0]], [0, 0, 1.0, 0, 0, 0]
     )
     assert r["constraints_used"] == "normal" and r["pwm"] == [177, 177, 177]
+
+
+# --------------------------------------------------------------------------------------
+# Fast paths: they only accept, and nothing the thorough checks refuse
+# --------------------------------------------------------------------------------------
+class _NoPlainCore:
+    """The binding with its plain-type fast path answering "not plain" to everything."""
+
+    def __getattr__(self, name):
+        return getattr(_core, name)
+
+    @staticmethod
+    def solve_plain(*args):
+        return None
+
+    @staticmethod
+    def plain_numbers(*args):
+        return None
+
+
+class _Float(float):
+    def __float__(self):  # float() disagrees with the stored value
+        return 2.0
+
+
+class _Int(int):
+    pass
+
+
+class _Str(str):
+    pass
+
+
+class _List(list):
+    pass
+
+
+def _outcome(fn, *args, **kw):
+    """What a call gives: its result, or its exception's type, code and message."""
+    try:
+        return ("result", json.dumps(fn(*args, **kw), allow_nan=True, sort_keys=True))
+    except Exception as e:  # noqa: BLE001 - the exception is the outcome compared
+        return ("raised", type(e).__name__, getattr(e, "code", None), str(e))
+
+
+@pytest.fixture
+def thorough(monkeypatch):
+    """``thorough(fn, ...)``: the outcome of fn with every fast path of solver off."""
+
+    def run(fn, *args, **kw):
+        with monkeypatch.context() as m:
+            m.setattr(solver, "_core", _NoPlainCore())
+            m.setattr(solver, "_plain_numbers", lambda x, n: None)
+            m.setattr(solver, "_float64_array", lambda x: False)
+            m.setattr(solver, "_plain_fields", lambda obj: None)
+            return _outcome(fn, *args, **kw)
+
+    return run
+
+
+def _numbers(good):
+    """A field's value in every form a caller might pass, plain or not, good or bad.
+    Built afresh per call: the generator is used up by one."""
+    good = list(good)
+    ints = [int(round(v)) for v in good]
+    rest = good[1:]
+    return {
+        "list": list(good),
+        "tuple": tuple(good),
+        "ints": ints,
+        "mixed": [good[0], *ints[1:]],
+        "nan": [math.nan, *rest],
+        "inf": [-math.inf, *rest],
+        "2**53+1": [2**53 + 1, *rest],
+        "huge int": [10**400, *rest],
+        "-huge int": [-(10**400), *rest],
+        "float64 array": np.array(good),
+        "big-endian array": np.array(good, dtype=">f8"),
+        "float32 array": np.array(good, np.float32),
+        "int64 array": np.array(ints),
+        "bool array": np.array(good) > 0,
+        "2-D array": np.array([good]),
+        "0-D array": np.array(good[0]),
+        "masked array": np.ma.masked_array(good),
+        "short": good[:-1],
+        "long": [*good, 0.0],
+        "empty": [],
+        "bool": [True, *rest],
+        "numpy bool": [np.bool_(False), *rest],
+        "None inside": [None, *rest],
+        "str inside": ["1", *rest],
+        "nested": [[good[0]], *rest],
+        "numpy float64s": [np.float64(v) for v in good],
+        "numpy int64": [np.int64(1), *rest],
+        "float subclass": [_Float(1.0), *rest],
+        "int subclass": [_Int(1), *rest],
+        "Fraction": [fractions.Fraction(1, 3), *rest],
+        "Decimal": [decimal.Decimal("0.1"), *rest],
+        "list subclass": _List(good),
+        "range": range(len(good)),
+        "generator": (v for v in good),
+        "string": "1" * len(good),
+        "bytes": b"1" * len(good),
+        "dict": dict(enumerate(good)),
+        "None": None,
+        "number": 1.0,
+    }
+
+
+def _contact_forms():
+    rows = [list(c) for c in HAND3]
+    forms = {
+        "tuples": tuple(tuple(r) for r in rows),
+        "array": np.array(rows),
+        "float32 array": np.array(rows, np.float32),
+        "(3, 2) array": np.array(rows)[:, :2],
+        "(3, 3, 1) array": np.array(rows)[:, :, None],
+        "flat array": np.array(rows).ravel(),
+        "array rows": [np.array(r) for r in rows],
+        "no rows": [],
+        "2 rows": rows[:2],
+        "5 rows": rows + HAND4[3:] + [[0.0, 0.0, 0.1]],
+        "64 rows": rows * 21 + rows[:1],
+        "65 rows": rows * 21 + rows[:2],
+        "70 rows, the last bad": rows * 23 + [[0.0, 0.0]],
+        "(70, 3) array": np.array(rows * 23 + rows[:1]),
+        "flat list": [v for r in rows for v in r],
+    }
+    for name, row in _numbers(HAND3[1]).items():
+        forms[f"row {name}"] = [rows[0], row, rows[2]]
+    return forms
+
+
+_NAMES = {
+    "policy": ["F", "Fperp", "f", "F\0perp", _Str("F"), None, 1, b"F", "\ud800", ""],
+    "mode": ["C", "V", "v", _Str("V"), None, 0],
+    "constraints": ["paper", "normal", "none", "Paper", _Str("none"), None, ["paper"]],
+}
+_OPTIONS = {
+    "scalar": ["double", "float", "half", None, _Str("float"), 1],
+    "decomposition": [*solver.DECOMPOSITIONS, "lu", None, _Str(solver.DEFAULT_DECOMPOSITION)],
+    "max_iterations": [64, 1, 0, -5, 2**31, 2**40, -(2**40), 10**30, True, 2.5, None, "64"]
+    + [np.int64(5), _Int(3)],
+}
+_FIELDS = {"wrench": PURE_F, "orientation": Q_TILT, "y_axis": [0.0, 1.0, 0.0]}
+
+
+def _solve_cases():
+    base = {"contacts": HAND3, "wrench": PURE_F, "orientation": Q_TILT}
+    cases = [(f"contacts {n}", {**base, "contacts": v}) for n, v in _contact_forms().items()]
+    for field, good in _FIELDS.items():
+        cases += [(f"{field} {n}", {**base, field: v}) for n, v in _numbers(good).items()]
+    for field, values in {**_NAMES, **_OPTIONS}.items():
+        cases += [(f"{field} {v!r}", {**base, field: v}) for v in values]
+    return cases
+
+
+def test_fast_paths_accept_and_refuse_as_the_thorough_checks(thorough):
+    """Every form of every argument: solve() gives the same result, or raises the same
+    exception with the same message, with and without its fast paths."""
+    cases = list(zip(_solve_cases(), _solve_cases()))  # two sets: a generator is used up
+    assert len(cases) > 150
+    for (name, fast_kw), (_, slow_kw) in cases:
+        assert _outcome(solver.solve, **fast_kw) == thorough(solver.solve, **slow_kw), name
+    # The checks whose fast path is one line of their own: a bool is no int, a str
+    # subclass is a str.
+    with pytest.raises(TypeError, match="^max_iterations must be an int, got boolean true$"):
+        solver.solve(HAND3, PURE_F, max_iterations=True)
+    assert solver.solve(HAND3, PURE_F, _Str("Fperp"), _Str("V")) == solver.solve(
+        HAND3, PURE_F, "Fperp", "V"
+    )
+
+
+def _requests():
+    good = {"contacts": HAND3, "wrench": PURE_F}
+    requests = [
+        good,
+        {**good, "units": "mm"},
+        {**good, "policy": "Fperp", "mode": "V", "constraints": "none", "y_axis": [0, 1, 0]},
+        {"contacts": HAND3},
+        {},
+        types.MappingProxyType(good),
+        collections.OrderedDict(good),
+        [good],
+        None,
+        {1: 2, **good},
+    ]
+    requests += [{**good, "contacts": v} for v in _contact_forms().values()]
+    for field, value in _FIELDS.items():
+        requests += [{**good, field: v} for v in _numbers(value).values()]
+    return requests
+
+
+def _guidance_calls():
+    """One call on a Guidance with a scene and a wrench, per form of each argument."""
+    calls = [lambda g, v=v: g.update(v) for v in _numbers(Q_TILT).values()]
+    calls += [lambda g, v=v: g.set_wrench(v) for v in _numbers(PURE_F).values()]
+    calls += [lambda g, v=v: g.set_contacts(v) for v in _contact_forms().values()]
+    calls += [lambda g, v=v: g.set_scene(v) for v in _contact_forms().values()]
+    calls += [
+        lambda g, k=k, v=v: g.set_scene(HAND3, **{k: v}) for k, vs in _NAMES.items() for v in vs
+    ]
+    return calls
+
+
+def _on_guidance(call):
+    g = solver.Guidance()
+    assert g.set_scene(HAND3) == "ok" and g.set_wrench(PURE_F) == "ok"
+    return call(g)
+
+
+def test_fast_paths_of_parse_request_and_guidance(thorough):
+    for fast, slow in zip(_requests(), _requests()):
+        assert _outcome(solver.parse_request, fast) == thorough(solver.parse_request, slow), fast
+    for i, (fast, slow) in enumerate(zip(_guidance_calls(), _guidance_calls())):
+        assert _outcome(_on_guidance, fast) == thorough(_on_guidance, slow), i
+
+
+def test_plain_arguments_take_the_bindings_fast_path():
+    """The plain forms are answered by _core.solve_plain itself (no Python check), with
+    the binding's own result; any other form is left to the thorough checks."""
+    plain = ["list", "tuple", "ints", "mixed", "nan", "inf", "2**53+1"]
+    for name, value in _numbers(PURE_F).items():
+        args = (HAND3, value, "F", "C", "paper", Q_TILT, [0.0, 1.0, 0.0])
+        res = _core.solve_plain(*args, "double", solver.DEFAULT_DECOMPOSITION, 64)
+        if name in plain:
+            assert res == _core.solve(*args, "double", solver.DEFAULT_DECOMPOSITION, 64), name
+        else:
+            assert res is None, name
+    numbers = _core.plain_numbers(
+        tuple(map(tuple, HAND4)), [1, 2, 3, 4, 5, 10**20], Q_TILT, [0, 1, 0]
+    )
+    assert numbers == (
+        [list(c) for c in HAND4],
+        [1.0, 2.0, 3.0, 4.0, 5.0, 1e20],
+        Q_TILT,
+        [0.0, 1.0, 0.0],
+    )
+    assert all(type(v) is float for v in numbers[1] + numbers[3])
+    assert _core.plain_numbers(HAND3, PURE_F, Q_TILT, [0, 1, True]) is None

@@ -9,6 +9,12 @@ policy/mode/constraint names are exact); values are not: NaN, infinities and
 out-of-range numbers go to the core, which answers with a status such as
 ``non_finite_input``. :func:`parse_request` does the same for one JSON request of the
 command line and raises :class:`RequestError` with a machine-readable code.
+
+Every check has a fast path for the plain types nearly every caller passes (a list or
+tuple of float and int, a numpy float64 array, a str name): it only accepts, and sends
+anything else to the thorough checks, which alone refuse and write the messages. So a
+fast path never changes what is accepted or what an error says. :func:`solve` takes its
+fast path in the binding (``_core.solve_plain``).
 """
 
 from __future__ import annotations
@@ -30,6 +36,8 @@ TOLERANCES: dict[str, dict[str, float]] = dict(_core.TOLERANCES)
 PWM_SPAN: int = _core.kPwmSpan
 MAX_CONTACTS: int = _core.kMaxContacts
 DEFAULT_MAX_ITERATIONS: int = _core.kDefaultMaxIterations
+# The binding lists its default route first.
+DEFAULT_DECOMPOSITION: str = DECOMPOSITIONS[0]
 
 DEFAULT_ORIENTATION = (1.0, 0.0, 0.0, 0.0)
 DEFAULT_Y_AXIS = (0.0, 1.0, 0.0)
@@ -44,6 +52,9 @@ REQUEST_FIELDS: dict[str, Any] = {
     "orientation": list(DEFAULT_ORIENTATION),
     "y_axis": list(DEFAULT_Y_AXIS),
 }
+
+_FIELDS_KEYS = REQUEST_FIELDS.keys()
+_REQUIRED = tuple(key for key, default in REQUEST_FIELDS.items() if default is None)
 
 # Cap on the contact count handed to the core (anything but 3 or 4 is
 # bad_contact_count there); keeps a huge list from costing more than its parsing.
@@ -122,7 +133,38 @@ def _is_sequence(x: Any) -> bool:
     return isinstance(x, Sequence) or hasattr(x, "__array__")
 
 
+_PLAIN_NUMBERS = frozenset((float, int))
+_INT_MAX = 2**31 - 1
+
+
+def _plain_numbers(x: Any, n: int) -> list[float] | None:
+    """``x`` as n floats if it is a list or tuple of exactly n floats and ints (what JSON
+    and most callers give), else None. Exact types: bool, a subclass of int, is not
+    plain. The thorough path gives the same floats for such an ``x``."""
+    if (type(x) is list or type(x) is tuple) and len(x) == n:
+        types = set(map(type, x))
+        if types <= _PLAIN_NUMBERS:
+            if int not in types:
+                return list(x)
+            try:
+                return list(map(float, x))
+            except OverflowError:  # beyond the double range: the thorough path's inf
+                return None
+    return None
+
+
+def _float64_array(x: Any) -> bool:
+    """Is ``x`` a numpy float64 array (not a subclass)? numpy is not imported for it."""
+    t = type(x)
+    return t.__name__ == "ndarray" and t.__module__ == "numpy" and x.dtype.char == "d"
+
+
 def _number_list(x: Any, n: int, field: str, what: str) -> list[float]:
+    fast = _plain_numbers(x, n)
+    if fast is not None:
+        return fast
+    if _float64_array(x) and x.shape == (n,):
+        return x.tolist()
     if not _is_sequence(x):
         raise RequestError(
             "bad_request", f"{field} must be an array of {n} numbers ({what}), {_got(x)}"
@@ -153,6 +195,13 @@ def _number_list(x: Any, n: int, field: str, what: str) -> list[float]:
 def _contacts(x: Any, field: str = "contacts") -> list[list[float]]:
     """A list of [x, y, z] triples. The count is not checked here: anything but 3 or 4
     goes to the core, which answers bad_contact_count."""
+    if (type(x) is list or type(x) is tuple) and len(x) <= _MAX_FORWARDED_CONTACTS:
+        rows = [_plain_numbers(row, 3) for row in x]
+        if None not in rows:
+            return rows  # type: ignore[return-value]
+    elif _float64_array(x) and x.ndim == 2 and x.shape[1] == 3:
+        if x.shape[0] <= _MAX_FORWARDED_CONTACTS:
+            return x.tolist()
     if not _is_sequence(x):
         raise RequestError(
             "bad_request",
@@ -178,6 +227,8 @@ def _contacts(x: Any, field: str = "contacts") -> list[list[float]]:
 
 
 def _choice(x: Any, field: str, accepted: Sequence[str]) -> str:
+    if type(x) is str and x in accepted:
+        return x
     listed = ", ".join(f'"{a}"' for a in accepted)
     if not isinstance(x, str):
         raise RequestError("bad_request", f"{field} must be a string, one of {listed}; {_got(x)}")
@@ -197,15 +248,35 @@ def _option(x: Any, what: str, accepted: Sequence[str]) -> None:
 
 
 def _max_iterations(x: Any) -> int:
-    if isinstance(x, bool) or not isinstance(x, numbers.Integral):
+    if type(x) is not int and (isinstance(x, bool) or not isinstance(x, numbers.Integral)):
         raise TypeError(f"max_iterations must be an int, {_got(x)}")
     # The core answers bad_config below 1; the binding takes a C int.
-    return int(max(-1, min(int(x), 2**31 - 1)))
+    return int(max(-1, min(int(x), _INT_MAX)))
 
 
 def _check_kwargs(
     contacts, wrench, policy, mode, constraints, orientation, y_axis
 ) -> dict[str, Any]:
+    plain = _core.plain_numbers(contacts, wrench, orientation, y_axis)
+    if (
+        plain is not None
+        and type(policy) is str
+        and policy in POLICIES
+        and type(mode) is str
+        and mode in MODES
+        and type(constraints) is str
+        and constraints in CONSTRAINT_MODELS
+    ):
+        c, w, q, y = plain
+        return dict(
+            contacts=c,
+            wrench=w,
+            policy=policy,
+            mode=mode,
+            constraints=constraints,
+            orientation=q,
+            y_axis=y,
+        )
     return dict(
         contacts=_contacts(contacts),
         wrench=_number_list(wrench, 6, "wrench", "fx, fy, fz, mx, my, mz"),
@@ -229,7 +300,7 @@ def solve(
     orientation=DEFAULT_ORIENTATION,
     y_axis=DEFAULT_Y_AXIS,
     scalar: str = "double",
-    decomposition: str = "qr",
+    decomposition: str = DEFAULT_DECOMPOSITION,
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
 ) -> dict[str, Any]:
     """Run Algorithm 1 on one scene with ``graspguide::Guidance<double|float>``.
@@ -238,8 +309,8 @@ def solve(
     ``bad_contact_count``); wrench: ``[fx, fy, fz, mx, my, mz]`` in the object frame;
     policy ``"F"``/``"Fperp"``; mode ``"C"``/``"V"``; constraints
     ``"paper"``/``"normal"``/``"none"``; orientation ``[w, x, y, z]`` hand -> world;
-    y_axis: y_O in the hand frame; scalar ``"double"``/``"float"``; decomposition
-    ``"qr"``/``"svd"``.
+    y_axis: y_O in the hand frame; scalar ``"double"``/``"float"``; decomposition one of
+    :data:`DECOMPOSITIONS` (default :data:`DEFAULT_DECOMPOSITION`).
 
     Returns a dict: ``status`` (``"ok"`` or a name from :data:`STATUS_NAMES`), ``pwm``
     (k ints, all 0 unless ok), ``levels`` (k), ``lambda`` (3k), ``constraints_used``,
@@ -250,14 +321,49 @@ def solve(
     Raises :class:`RequestError` (a ValueError) for a wrong type, length or name, and
     ValueError for an unknown scalar or decomposition.
     """
+    res = _core.solve_plain(
+        contacts,
+        wrench,
+        policy,
+        mode,
+        constraints,
+        orientation,
+        y_axis,
+        scalar,
+        decomposition,
+        max_iterations,
+    )
+    if res is not None:
+        return res
     kw = _check_kwargs(contacts, wrench, policy, mode, constraints, orientation, y_axis)
+    return solve_checked(kw, *check_options(scalar, decomposition, max_iterations))
+
+
+def check_options(scalar: Any, decomposition: Any, max_iterations: Any) -> tuple[str, str, int]:
+    """The options of :func:`solve` checked as it checks them, for :func:`solve_checked`:
+    (scalar, decomposition, max_iterations clamped to what the binding takes)."""
     _option(scalar, "scalar", SCALARS)
     _option(decomposition, "decomposition", DECOMPOSITIONS)
+    return scalar, decomposition, _max_iterations(max_iterations)
+
+
+def solve_checked(
+    kw: dict[str, Any], scalar: str, decomposition: str, max_iterations: int
+) -> dict[str, Any]:
+    """:func:`solve` on arguments already checked: ``kw`` from :func:`parse_request` (or
+    changed only in its numbers), the options from :func:`check_options`. Nothing is
+    checked again."""
     return _core.solve(
-        scalar=scalar,
-        decomposition=decomposition,
-        max_iterations=_max_iterations(max_iterations),
-        **kw,
+        kw["contacts"],
+        kw["wrench"],
+        kw["policy"],
+        kw["mode"],
+        kw["constraints"],
+        kw["orientation"],
+        kw["y_axis"],
+        scalar,
+        decomposition,
+        max_iterations,
     )
 
 
@@ -284,7 +390,7 @@ class Guidance:
         mode: str = "C",
         constraints: str = "paper",
         y_axis=DEFAULT_Y_AXIS,
-        decomposition: str = "qr",
+        decomposition: str = DEFAULT_DECOMPOSITION,
         max_iterations: int = DEFAULT_MAX_ITERATIONS,
     ) -> str:
         _option(decomposition, "decomposition", DECOMPOSITIONS)
@@ -308,9 +414,20 @@ class Guidance:
         return self._g.update(_number_list(orientation, 4, "orientation", "quaternion w, x, y, z"))
 
 
+def _plain_fields(obj: Any) -> dict[str, Any] | None:
+    """A request's fields, defaults filled in, if it is a dict with the required fields
+    and no unknown one (the fast path of :func:`parse_request`); else None."""
+    if type(obj) is dict and _FIELDS_KEYS >= obj.keys() and all(k in obj for k in _REQUIRED):
+        return {**REQUEST_FIELDS, **obj}
+    return None
+
+
 def parse_request(obj: Any) -> dict[str, Any]:
     """Check one decoded JSON request and return the keyword arguments of :func:`solve`
     (defaults filled in). Raises :class:`RequestError`."""
+    merged = _plain_fields(obj)
+    if merged is not None:
+        return _check_kwargs(**merged)
     if not isinstance(obj, Mapping):
         raise RequestError(
             "bad_json", f"a request must be a JSON object {{...}}, got {_type_name(obj)}"
@@ -354,5 +471,8 @@ __all__ = [
     "PWM_SPAN",
     "MAX_CONTACTS",
     "DEFAULT_MAX_ITERATIONS",
+    "DEFAULT_DECOMPOSITION",
     "REQUEST_FIELDS",
+    "check_options",
+    "solve_checked",
 ]
