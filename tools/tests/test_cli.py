@@ -860,3 +860,24 @@ def test_absurd_magnitudes_are_answered(big):
     for ans in answers[:-1]:
         assert ans["ok"] or ans["error"] in solver.STATUS_NAMES + ("bad_request",), ans
     assert answers[-1]["ok"] is True
+
+
+def test_duplicate_fields_and_a_late_byte_order_mark():
+    """The first field given again is the one named; a BOM after line 1 is not skipped
+    (the message is json.loads' own)."""
+    answers = solve_lines(
+        [
+            b'{"wrench": 1, "contacts": 1, "contacts": 2, "wrench": 3}',
+            b'{"policy": "F", "mode": "C", "mode": "V", "policy": "F"}',
+            b"\xef\xbb\xbf" + GOOD_LINE.encode(),
+            GOOD_LINE,
+        ]
+    )
+    assert [a.get("error") for a in answers] == ["bad_request", "bad_request", "bad_json", None]
+    assert '"contacts" is given more than once' in answers[0]["message"]
+    assert '"mode" is given more than once' in answers[1]["message"]
+    try:
+        json.loads("\ufeff" + GOOD_LINE)
+    except json.JSONDecodeError as e:
+        expected = f"line 3 is not valid JSON: {e.msg} at column {e.colno}"
+    assert answers[2]["message"] == expected

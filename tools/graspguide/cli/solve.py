@@ -14,6 +14,7 @@ from graspguide.cli.common import (
     positive_int,
     signals_interrupt,
 )
+from graspguide.core.solver import DECOMPOSITIONS, DEFAULT_DECOMPOSITION
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, fail
 from graspguide.link.transport import LinkError
 
@@ -98,10 +99,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--decomposition",
-        choices=("qr", "svd"),
-        default="qr",
-        help="equilibrium route: column-pivoting QR (default, the firmware's) "
-        "or Jacobi SVD (reference route)",
+        choices=DECOMPOSITIONS,
+        default=DEFAULT_DECOMPOSITION,
+        help=f"equilibrium route (docs/algorithm.md, step 3): {DEFAULT_DECOMPOSITION} "
+        "(default, the firmware's) or "
+        + " or ".join(d for d in DECOMPOSITIONS if d != DEFAULT_DECOMPOSITION)
+        + " (a reference route)",
     )
     p.add_argument(
         "--max-iterations",
@@ -172,8 +175,11 @@ def _check_engine_options(args) -> None:
             "--engine device computes in the firmware's float; drop --scalar "
             "double (compare with --engine core --scalar float)"
         )
-    if args.decomposition != "qr":
-        parser.error("--engine device uses the firmware's QR route; drop --decomposition")
+    if args.decomposition != DEFAULT_DECOMPOSITION:
+        parser.error(
+            f"--engine device uses the firmware's {DEFAULT_DECOMPOSITION} route; drop "
+            "--decomposition"
+        )
     if args.max_iterations is not None:
         parser.error("--engine device uses the firmware's QP iteration cap; drop --max-iterations")
 

@@ -11,7 +11,12 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
+from itertools import chain
 from typing import Any, BinaryIO, Protocol, TextIO
+
+from graspguide.core import solver
+from graspguide.core.solver import RequestError
+from graspguide.core.units import hand_span, hand_span_problem, moment_unit_problem
 
 # A request is a few hundred bytes; a longer line is answered with bad_json without
 # being parsed (the rest of it is read and dropped, so the stream goes on).
@@ -66,18 +71,23 @@ class _DuplicateField(ValueError):
 
 
 def _no_duplicates(pairs):
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
+    out = dict(pairs)
+    if len(out) == len(pairs):
+        return out
+    seen: set[str] = set()
+    for key, _ in pairs:  # the first key given again, as a reader scanning the line meets it
+        if key in seen:
             raise _DuplicateField(key)
-        out[key] = value
-    return out
+        seen.add(key)
+    raise AssertionError("unreachable: a shorter dict has a repeated key")
+
+
+# One decoder for every line (json.loads would build one per call).
+_DECODER = json.JSONDecoder(parse_int=_parse_int, object_pairs_hook=_no_duplicates)
 
 
 def _decode(line: bytes, number: int):
     """The JSON value of one line, or raise RequestError."""
-    from graspguide.core.solver import RequestError
-
     try:
         text = line.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -87,7 +97,9 @@ def _decode(line: bytes, number: int):
             f"byte offset {e.start}); send UTF-8 encoded JSON",
         ) from None
     try:
-        return json.loads(text, parse_int=_parse_int, object_pairs_hook=_no_duplicates)
+        if text.startswith("\ufeff"):  # json.loads refuses it so; the decoder alone would not
+            raise json.JSONDecodeError("Unexpected UTF-8 BOM (decode using utf-8-sig)", text, 0)
+        return _DECODER.decode(text)
     except _DuplicateField as e:
         raise RequestError(
             "bad_request",
@@ -118,12 +130,18 @@ def finite_or_none(x: Any) -> Any:
     return x
 
 
+def _finite_list(xs: list[Any]) -> list[Any]:
+    if all(map(math.isfinite, xs)):  # always, for an ok answer: a copy is all it takes
+        return list(xs)
+    return [finite_or_none(v) for v in xs]
+
+
 def success_answer(res: dict[str, Any]) -> dict[str, Any]:
     return {
         "ok": True,
         "pwm": list(res["pwm"]),
-        "levels": [finite_or_none(v) for v in res["levels"]],
-        "lambda": [finite_or_none(v) for v in res["lambda"]],
+        "levels": _finite_list(res["levels"]),
+        "lambda": _finite_list(res["lambda"]),
         "constraints_used": res["constraints_used"],
         "relevant": list(res["relevant"]),
         "error_deg": finite_or_none(res["error_deg"]),
@@ -137,56 +155,66 @@ def error_answer(code: str, message: str) -> dict[str, Any]:
     return {"ok": False, "error": code, "message": message}
 
 
-def answer(
-    line: bytes | _LineTooLong,
-    number: int,
-    scalar: str = "double",
-    decomposition: str = "qr",
-    max_iterations: int | None = None,
-    engine: Engine | None = None,
-) -> dict[str, Any] | None:
-    """The response to one input line, or None for a blank line. With ``engine`` (a
-    device) it answers instead of the core."""
-    from graspguide.core import solver
+class Answerer:
+    """The response to each input line, with the solve options checked once for all of
+    them. With ``engine`` (a device) the engine answers instead of the core."""
 
-    if isinstance(line, _LineTooLong):
-        return error_answer(
-            "bad_json",
-            f"line {number} is {line.size} bytes long, over the limit of "
-            f"{MAX_LINE_BYTES}; a request is one short JSON object per line",
-        )
-    if number == 1 and line.startswith(_BOM):
-        line = line[len(_BOM) :]
-    if not line.strip():
-        return None
-    try:
-        obj = _decode(line, number)
-        obj, units = pop_units(obj)
-        kwargs = in_metres(solver.parse_request(obj), units)
-    except solver.RequestError as e:
-        message = e.message
-        if not message.startswith("line "):
-            message = f"line {number}: {message}"
-        return error_answer(e.code, message)
-    if engine is not None:
-        return engine.answer(kwargs)
-    try:
-        res = solver.solve(
-            scalar=scalar,
-            decomposition=decomposition,
-            max_iterations=(
-                solver.DEFAULT_MAX_ITERATIONS if max_iterations is None else max_iterations
-            ),
-            **kwargs,
-        )
-    except Exception as e:  # never expected: the request was checked above
-        return error_answer(
-            "internal_error",
-            f"line {number}: unexpected {type(e).__name__}: {e}; please report this request",
-        )
-    if res["status"] != "ok":
-        return error_answer(res["status"], solver.status_message(res["status"]))
-    return success_answer(res)
+    def __init__(
+        self,
+        scalar: str = "double",
+        decomposition: str | None = None,
+        max_iterations: int | None = None,
+        engine: Engine | None = None,
+    ):
+        self.engine = engine
+        self.options: tuple[str, str, int] | None = None
+        self.options_error: Exception | None = None
+        try:
+            self.options = solver.check_options(
+                scalar,
+                solver.DEFAULT_DECOMPOSITION if decomposition is None else decomposition,
+                solver.DEFAULT_MAX_ITERATIONS if max_iterations is None else max_iterations,
+            )
+        except (TypeError, ValueError) as e:
+            # A caller's bad option (the command's parser never lets one through): every
+            # request that reaches the core is answered internal_error with it.
+            self.options_error = e
+
+    def __call__(self, line: bytes | _LineTooLong, number: int) -> dict[str, Any] | None:
+        """The response to one input line, or None for a blank line."""
+        if isinstance(line, _LineTooLong):
+            return error_answer(
+                "bad_json",
+                f"line {number} is {line.size} bytes long, over the limit of "
+                f"{MAX_LINE_BYTES}; a request is one short JSON object per line",
+            )
+        if number == 1 and line.startswith(_BOM):
+            line = line[len(_BOM) :]
+        if not line.strip():
+            return None
+        try:
+            obj = _decode(line, number)
+            obj, units = pop_units(obj)
+            kwargs = in_metres(solver.parse_request(obj), units)
+        except RequestError as e:
+            message = e.message
+            if not message.startswith("line "):
+                message = f"line {number}: {message}"
+            return error_answer(e.code, message)
+        if self.engine is not None:
+            return self.engine.answer(kwargs)
+        try:
+            if self.options is None:
+                raise self.options_error  # type: ignore[misc]
+            res = solver.solve_checked(kwargs, *self.options)
+        except Exception as e:  # never expected: the request was checked above
+            return error_answer(
+                "internal_error",
+                f"line {number}: unexpected {type(e).__name__}: {e}; please report this request",
+            )
+        if res["status"] != "ok":
+            return error_answer(res["status"], solver.status_message(res["status"]))
+        return success_answer(res)
 
 
 REQUEST_UNITS = ("m", "mm", "any")
@@ -194,8 +222,6 @@ REQUEST_UNITS = ("m", "mm", "any")
 
 def pop_units(obj: Any) -> tuple[Any, str]:
     """The request without its "units" field, and that field ("m" by default)."""
-    from graspguide.core.solver import RequestError
-
     if not isinstance(obj, dict) or "units" not in obj:
         return obj, "m"
     obj = dict(obj)
@@ -225,49 +251,54 @@ def in_metres(kw: dict[str, Any], units: str) -> dict[str, Any]:
     refuse anyway (a contact count other than 3 or 4, a non-finite number, all contacts
     at one point) go on to the core's own answer; "units": "any" skips the checks (the
     core uses only ratios: synthetic geometry such as its scale tests)."""
-    from graspguide.core.solver import RequestError
-    from graspguide.core.units import hand_span, hand_span_problem, moment_unit_problem
-
     contacts, wrench = kw["contacts"], kw["wrench"]
     if (
         units == "any"
         or len(contacts) not in (3, 4)
-        or not all(math.isfinite(x) for x in [*(v for c in contacts for v in c), *wrench])
+        or not all(map(math.isfinite, chain(*contacts, wrench)))
     ):
         return kw
-    if hand_span(contacts) > 0.0:
-        problem = hand_span_problem(contacts, units, _solve_unit_fix)
+    span = hand_span(contacts)
+    if span > 0.0:
+        problem = hand_span_problem(contacts, units, _solve_unit_fix, span)
         if problem:
             raise RequestError("bad_request", problem)
     if units == "mm":
         contacts = [[v / 1000.0 for v in c] for c in contacts]
         wrench = list(wrench[:3]) + [v / 1000.0 for v in wrench[3:]]
         kw = {**kw, "contacts": contacts, "wrench": wrench}
-    problem = moment_unit_problem(contacts, wrench)
+        span = hand_span(contacts)  # of the metres, as rounded
+    problem = moment_unit_problem(contacts, wrench, span)
     if problem:
         raise RequestError("bad_request", problem)
     return kw
 
 
+# ASCII only, and strict JSON (no NaN): any consumer can read it. One encoder for every
+# answer (json.dumps would build one per call).
+_ENCODER = json.JSONEncoder(ensure_ascii=True, allow_nan=False, separators=(", ", ": "))
+
+
 def dumps(obj: dict[str, Any]) -> str:
-    # ASCII only, and strict JSON (no NaN): any consumer can read it.
-    return json.dumps(obj, ensure_ascii=True, allow_nan=False, separators=(", ", ": "))
+    return _ENCODER.encode(obj)
 
 
 def run_solve(
     inp: BinaryIO,
     out: TextIO,
     scalar: str = "double",
-    decomposition: str = "qr",
+    decomposition: str | None = None,
     max_iterations: int | None = None,
     engine: Engine | None = None,
 ) -> int:
-    """Answer every line of ``inp`` on ``out``; returns the number of answers."""
+    """Answer every line of ``inp`` on ``out``; returns the number of answers.
+    ``decomposition`` and ``max_iterations`` default to the core's."""
     count = 0
+    answer = Answerer(scalar, decomposition, max_iterations, engine)
     engine_errors = engine.errors if engine is not None else ()
     for number, line in enumerate(read_lines(inp), start=1):
         try:
-            response = answer(line, number, scalar, decomposition, max_iterations, engine)
+            response = answer(line, number)
         except engine_errors as e:
             # The engine failed (a device's link): this request gets its error line,
             # every earlier answer is already out, and the command stops.

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from itertools import combinations, starmap
 
 UNITS = {"m": 1.0, "mm": 1000.0}  # divisor to metres (x / 1000 is correctly rounded)
 
@@ -23,18 +24,20 @@ MAX_LEVER_SPANS = 10.0
 
 def hand_span(contacts: Sequence[Sequence[float]]) -> float:
     """The largest distance between two contacts."""
-    return max(
-        (math.dist(a, b) for i, a in enumerate(contacts) for b in contacts[i + 1 :]), default=0.0
-    )
+    return max(starmap(math.dist, combinations(contacts, 2)), default=0.0)
 
 
 def hand_span_problem(
-    contacts: Sequence[Sequence[float]], unit: str, fix: Callable[[str | None], str]
+    contacts: Sequence[Sequence[float]],
+    unit: str,
+    fix: Callable[[str | None], str],
+    span: float | None = None,
 ) -> str | None:
     """None when ``contacts`` (in ``unit``, "m" or "mm") span like a hand
     (:data:`HAND_SPAN_M`); else what is wrong, the likely unit and ``fix(symbol)`` (the
-    likely unit's symbol, "mm", "cm" or "m", or None when no unit makes it a hand)."""
-    raw = hand_span(contacts)
+    likely unit's symbol, "mm", "cm" or "m", or None when no unit makes it a hand).
+    ``span``: their :func:`hand_span`, if the caller has it already."""
+    raw = hand_span(contacts) if span is None else span
     lo, hi = HAND_SPAN_M
     if lo <= raw / UNITS[unit] <= hi:
         return None
@@ -54,16 +57,17 @@ def hand_span_problem(
 
 
 def moment_unit_problem(
-    contacts_m: Sequence[Sequence[float]], wrench: Sequence[float]
+    contacts_m: Sequence[Sequence[float]], wrench: Sequence[float], span: float | None = None
 ) -> str | None:
     """None unless the wrench's moment is implausibly large for its force and the hand
     (contacts in metres): a lever arm |m| / |f| over :data:`MAX_LEVER_SPANS` hand spans,
     which is what a moment in N mm given as N m looks like. A zero force is left to the
-    core (zero_force)."""
+    core (zero_force). ``span``: the contacts' :func:`hand_span`, if the caller has it."""
     # x * x, not x ** 2: a float power raises OverflowError where a product is infinite.
-    f = math.sqrt(sum(float(x) * float(x) for x in wrench[:3]))
-    m = math.sqrt(sum(float(x) * float(x) for x in wrench[3:6]))
-    span = hand_span(contacts_m)
+    f = math.sqrt(sum([x * x for x in map(float, wrench[:3])]))
+    m = math.sqrt(sum([x * x for x in map(float, wrench[3:6])]))
+    if span is None:
+        span = hand_span(contacts_m)
     if not (f > 0 and span > 0 and math.isfinite(f) and math.isfinite(m)):
         return None
     lever = m / f
