@@ -30,7 +30,9 @@ What is timed (see tools/README.md for the columns):
   (``_core.time_frames``): float/double, QR/SVD, warm/cold start, and an iteration-limit
   variant. ``fixed``: frames with a fixed posture (orientation only). ``stages``: each
   stage of a frame in its own C++ loop (``_core.time_stages``), to say what dominates.
-* ``py-call``: the same through the existing binding, one Python call per frame.
+* ``py-call``: the same through the existing binding, one Python call per frame, and
+  through the public API (``graspguide.core.solver``: ``solve``, ``Guidance``), which
+  checks the Python types on top of the binding.
 * ``qp``: the QP alone: the core's ``solve_forces`` in a C++ loop (``_core.time_qp``),
   DAQP (its own ``solve_time`` from ``info``, and the Python call), quadprog and OSQP
   (one problem object per shape, reused through ``update()``, warm-started; its own
@@ -63,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from graspguide.core import _core, reference
+from graspguide.core import _core, reference, solver
 from graspguide.core import scene_generators as scenes
 from graspguide.exit_codes import EXIT_USAGE, fail
 
@@ -816,41 +818,68 @@ def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) ->
     )
 
 
+# The series of a py-call configuration: the binding itself, and the same call through the
+# public API (graspguide.core.solver: its type checks on top of the binding).
+PY_CALL_SERIES = {"py": "Python call", "api": "public API call"}
+
+
 def _py_call_config(name, insts, k, scalar, calls, binding, pass_timer) -> Config:
-    """A configuration of the existing binding timed one Python call at a time.
-    ``pass_timer()`` starts a pass and returns ``time(inst, samples)``, which adds the
-    instance's call times to ``samples`` and returns its Outcome."""
+    """A configuration of the existing binding timed one Python call at a time, through
+    the binding and through the public API. ``pass_timer()`` starts a pass and returns
+    ``time(inst, samples)``, which adds the instance's call times to ``samples[key]``
+    (keys: :data:`PY_CALL_SERIES`) and returns its Outcome."""
 
     def run(cfg: Config) -> None:
-        samples: list[int] = []
+        samples: dict[str, list[int]] = {key: [] for key in PY_CALL_SERIES}
         time_instance = pass_timer()
         cfg.outcomes = [time_instance(inst, samples) for inst in insts]
-        cfg.serie("py", "Python call").add(samples)
+        for key, label in PY_CALL_SERIES.items():
+            cfg.serie(key, label).add(samples[key])
 
     settings = {"decomposition": "qr", "warm_start": False, "calls": calls, "binding": binding}
     return Config(name, "py-call", "graspguide", k, scalar, settings, run, insts)
 
 
+def _timed_pair(r: int, binding: Callable[[], Any], api: Callable[[], Any], samples) -> Any:
+    """Call ``binding`` and ``api`` (which must answer alike), the first alternately, so
+    that neither always finds the caches warmed by the other; their times go to
+    ``samples``. Returns the binding's answer."""
+    answers = {}
+    for key in ("py", "api") if r % 2 == 0 else ("api", "py"):
+        call = binding if key == "py" else api
+        t0 = time.perf_counter_ns()
+        answers[key] = call()
+        samples[key].append(time.perf_counter_ns() - t0)
+    if answers["py"] != answers["api"]:
+        raise BenchError(f"the public API and the binding disagree: {answers}")
+    return answers["py"]
+
+
 def py_guidance_config(name, insts, k, calls) -> Config:
     """The existing stateful binding, one Python call per frame (set_contacts + update)."""
 
-    def pass_timer() -> Callable[[Instance, list[int]], Outcome]:
+    def pass_timer() -> Callable[[Instance, dict[str, list[int]]], Outcome]:
         g = _core.Guidance()
+        api = solver.Guidance()
 
-        def time_instance(inst: Instance, samples: list[int]) -> Outcome:
+        def time_instance(inst: Instance, samples: dict[str, list[int]]) -> Outcome:
             st = g.set_scene(inst.contacts, inst.policy, inst.mode, inst.constraints, inst.y_axis)
             if st == "ok":
                 st = g.set_wrench(inst.wrench)
+            api.set_scene(inst.contacts, inst.policy, inst.mode, inst.constraints, inst.y_axis)
+            api.set_wrench(inst.wrench)
             if st != "ok":
                 return Outcome(st)
             moved = np.nextafter(np.asarray(inst.contacts), np.inf).tolist()
             q = inst.orientation
             for r in range(calls):
                 c = moved if r % 2 == 0 else inst.contacts
-                t0 = time.perf_counter_ns()
-                g.set_contacts(c)
-                g.update(q)
-                samples.append(time.perf_counter_ns() - t0)
+                _timed_pair(
+                    r,
+                    lambda c=c: (g.set_contacts(c), g.update(q)),
+                    lambda c=c: (api.set_contacts(c), api.update(q)),
+                    samples,
+                )
             g.set_contacts(moved)
             g.update(q)
             g.set_contacts(inst.contacts)
@@ -865,20 +894,19 @@ def py_guidance_config(name, insts, k, calls) -> Config:
 def py_solve_config(name, insts, k, scalar, calls) -> Config:
     """The existing one-shot binding (_core.solve: scene, wrench and pose in one call)."""
 
-    def time_instance(inst: Instance, samples: list[int]) -> Outcome:
-        for _ in range(calls):
-            t0 = time.perf_counter_ns()
-            d = _core.solve(
-                inst.contacts,
-                inst.wrench,
-                inst.policy,
-                inst.mode,
-                inst.constraints,
-                inst.orientation,
-                inst.y_axis,
-                scalar,
-            )
-            samples.append(time.perf_counter_ns() - t0)
+    def time_instance(inst: Instance, samples: dict[str, list[int]]) -> Outcome:
+        args = (
+            inst.contacts,
+            inst.wrench,
+            inst.policy,
+            inst.mode,
+            inst.constraints,
+            inst.orientation,
+            inst.y_axis,
+            scalar,
+        )
+        for r in range(calls):
+            d = _timed_pair(r, lambda: _core.solve(*args), lambda: solver.solve(*args), samples)
         return binding_outcome(d)
 
     return _py_call_config(name, insts, k, scalar, calls, "_core.solve", lambda: time_instance)
