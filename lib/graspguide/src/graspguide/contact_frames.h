@@ -17,7 +17,11 @@ struct ContactFrames {
   T length_scale = T(0);             // L = max |C_i - O|
   Contacts<T, K> offset_scaled;      // (C_i - O) / L, one column per contact
   Mat3<T> rotation[K];               // R_i = [x_i y_i z_i], contact i -> object frame
-  uint8_t fallback_mask = 0;         // bit i: contact i used the fallback x axis
+  Vec3<T> axis = Vec3<T>::UnitY();   // y_O, unit
+  // c_i = |s_i x y_O| (s_i = (C_i - O) / L): the moment about y_O is -sum_i c_i lambda_ix
+  // when no contact uses the fallback (force_qp.h, the paper model's x rows).
+  T x_moment[K] = {};
+  uint8_t fallback_mask = 0;  // bit i: contact i used the fallback x axis
 };
 
 // A unit vector perpendicular to y_O, used when y_i is (anti)parallel to y_O. Built from
@@ -64,11 +68,14 @@ Status contact_frames(const Contacts<T, K>& contacts, const Vec3<T>& y_axis,
   out.length_scale = scale;
   out.offset_scaled = r / scale;
 
+  out.axis = y_o;
   out.fallback_mask = 0;
   for (int i = 0; i < K; ++i) {
-    const Vec3<T> y = r.col(i).normalized();
+    const T r_norm = r.col(i).norm();
+    const Vec3<T> y = r.col(i) / r_norm;
     Vec3<T> x = y.cross(y_o);
     const T s = x.norm();
+    out.x_moment[i] = s * r_norm / scale;
     if (s < T(kAxisParallelTol)) {
       x = y.cross(fallback_axis<T>(y_o)).normalized();
       out.fallback_mask = static_cast<uint8_t>(out.fallback_mask | (1u << i));

@@ -5,6 +5,7 @@
 #include "graspguide/force_qp.h"
 #include "graspguide/motor_levels.h"
 #include "graspguide/relevance.h"
+#include "graspguide/svd_route.h"
 
 namespace graspguide {
 
@@ -23,15 +24,44 @@ struct GraspSolution {
   T rank_ratio = T(0);
 };
 
-struct WarmStart {
-  ConstraintModel model = ConstraintModel::kNone;
-  uint16_t active = 0;
-};
+// Steps 2-5 for the chosen route: the rank, lambda0 (for the relevance) and the QP optimum.
+template <typename T, int K>
+Status grasp_forces(const ContactFrames<T, K>& frames, const Vec6<T>& w, const Vec3<T>& force,
+                    ConstraintModel model, const SolverSettings& settings, T& rank_ratio,
+                    uint8_t& relevant, ForceSolution<T, K>& forces) {
+  if (settings.decomposition == Decomposition::kSVD) {
+#if GRASPGUIDE_WITH_SVD_ROUTE
+    GraspMat<T, K> g;
+    grasp_matrix<T, K>(frames, g);
+    Equilibrium<T, K> eq;
+    const Status s = equilibrium_svd<T, K>(g, w, eq);
+    rank_ratio = eq.rank_ratio;
+    if (s != Status::kOk) return s;
+    relevant = relevance<T, K>(frames, force);
+    forces.active = 0;
+    return solve_forces_svd<T, K>(eq, desired_forces<T, K>(eq.lambda0, relevant), model,
+                                  settings.max_iterations, forces.lambda, forces.used,
+                                  forces.iterations);
+#else
+    return Status::kBadConfig;
+#endif
+  }
+  GraspStructure<T, K> st;
+  const Status s = grasp_structure<T, K>(frames, st);
+  rank_ratio = st.rank_ratio;
+  if (s != Status::kOk) return s;
+  const Vec6<T> w_hat = whitened_wrench<T, K>(st, w);
+  const ForceVec<T, K> lambda0 = min_norm_forces<T, K>(st, w_hat);
+  relevant = relevance<T, K>(frames, force);
+  const ForceVec<T, K> start =
+      project_onto_equilibrium<T, K>(st, w_hat, desired_forces<T, K>(lambda0, relevant));
+  return solve_forces<T, K>(frames, st, w, lambda0, start, model, settings.max_iterations, forces);
+}
 
 template <typename T, int K>
 Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const Vec3<T>& y_axis,
                    ConstraintModel model, Policy policy, const SolverSettings& settings,
-                   const WarmStart& warm, GraspSolution<T>& out) {
+                   GraspSolution<T>& out) {
   if (!wrench.allFinite()) return Status::kNonFiniteInput;
   ContactFrames<T, K> frames;
   Status s = contact_frames<T, K>(contacts, y_axis, frames);
@@ -43,16 +73,9 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   const T f_norm = force.stableNorm();
   if (!(f_norm > T(kZeroForceRelTol) * w_norm)) return Status::kZeroForce;
 
-  Equilibrium<T, K> eq;
-  s = equilibrium<T, K>(frames, w, settings.decomposition, eq);
-  out.rank_ratio = eq.rank_ratio;
-  if (s != Status::kOk) return s;
-
-  const uint8_t relevant = relevance<T, K>(frames, force);
-  const ForceVec<T, K> des = desired_forces<T, K>(eq.lambda0, relevant);
+  uint8_t relevant = 0;
   ForceSolution<T, K> forces;
-  s = solve_forces<T, K>(eq, des, model, settings.max_iterations, warm.model,
-                         settings.warm_start ? warm.active : uint16_t(0), forces);
+  s = grasp_forces<T, K>(frames, w, force, model, settings, out.rank_ratio, relevant, forces);
   out.iterations = forces.iterations;
   if (s != Status::kOk) return s;
 
@@ -77,10 +100,10 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
 #define GRASPGUIDE_GRASP_SOLUTION(EXTERN, T, K)                                                   \
   EXTERN template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&, const Vec3<T>&, \
                                            ConstraintModel, Policy, const SolverSettings&,        \
-                                           const WarmStart&, GraspSolution<T>&);                  \
-  EXTERN template Status solve_forces<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&,      \
-                                            ConstraintModel, int, ConstraintModel, uint16_t,      \
-                                            ForceSolution<T, K>&, T);
+                                           GraspSolution<T>&);                                    \
+  EXTERN template Status solve_forces<T, K>(                                                      \
+      const ContactFrames<T, K>&, const GraspStructure<T, K>&, const Vec6<T>&,                    \
+      const ForceVec<T, K>&, const ForceVec<T, K>&, ConstraintModel, int, ForceSolution<T, K>&, T);
 #define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN)    \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \

@@ -25,8 +25,8 @@ Status geometry_status_k(const Scene<T>& scene) {
   const Status s =
       contact_frames<T, K>(scene.contacts.template leftCols<K>(), scene.y_axis, frames);
   if (s != Status::kOk) return s;
-  Equilibrium<T, K> eq;
-  return equilibrium<T, K>(frames, Vec6<T>::Unit(2), scene.solver.decomposition, eq);
+  GraspStructure<T, K> st;
+  return grasp_structure<T, K>(frames, st);
 }
 
 template <typename T>
@@ -53,7 +53,6 @@ class Guidance {
     if (scene.solver.max_iterations < 1) return Status::kBadConfig;
     scene_ = scene;
     dirty_ = true;
-    warm_ = WarmStart{};
     return Status::kOk;
   }
 
@@ -124,9 +123,8 @@ class Guidance {
     GraspSolution<T> next;
     const Contacts<T, K> c = scene_.contacts.template leftCols<K>();
     const Status s = solve_grasp<T, K>(c, wrench_, scene_.y_axis, scene_.constraints, scene_.policy,
-                                       scene_.solver, warm_, next);
+                                       scene_.solver, next);
     grasp_ = next;
-    if (s == Status::kOk) warm_ = WarmStart{next.used, next.active};
     return s;
   }
 
@@ -136,7 +134,6 @@ class Guidance {
   bool dirty_ = true;
   Status grasp_status_ = Status::kOk;
   GraspSolution<T> grasp_;
-  WarmStart warm_;
 };
 
 }  // namespace graspguide

@@ -11,6 +11,7 @@
 #include <limits>
 
 #include "graspguide/eigen_decompositions.h"
+#include "graspguide/qp_info.h"
 #include "graspguide/status.h"
 #include "graspguide/types.h"
 
@@ -27,10 +28,6 @@ struct ProjectionQp {
                            // norm: the row depends on the active rows
 };
 
-struct QpInfo {
-  int iterations = 0;   // active-set changes (additions and removals)
-  uint16_t active = 0;  // bit j: constraint j active at the solution
-};
 
 namespace detail {
 

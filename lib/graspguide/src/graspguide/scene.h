@@ -12,7 +12,9 @@ namespace graspguide {
 enum class ConstraintModel : uint8_t { kPaper = 0, kNormal = 1, kNone = 2 };
 enum class Policy : uint8_t { kF = 0, kFperp = 1 };
 enum class Mode : uint8_t { kC = 0, kV = 1 };
-enum class Decomposition : uint8_t { kQR = 0, kSVD = 1 };
+// The structured route (grasp_structure.h, force_qp.h) or the SVD reference route
+// (svd_route.h), which the accuracy table compares (docs/performance.md).
+enum class Decomposition : uint8_t { kStructured = 0, kSVD = 1 };
 
 constexpr const char* constraint_model_name(ConstraintModel m) {
   return m == ConstraintModel::kPaper ? "paper" : m == ConstraintModel::kNormal ? "normal" : "none";
@@ -43,11 +45,7 @@ inline bool parse_mode(const char* s, Mode* out) { return parse_name<Mode, 2>(s,
 
 struct SolverSettings {
   int max_iterations = kDefaultMaxIterations;
-  Decomposition decomposition = Decomposition::kQR;
-  // Off by default: on the M4F a warm-started frame costs no less than a cold one (full
-  // frame k=4 median 12,560 vs 12,200 instructions, docs/performance.md): building the
-  // previous active set back up outweighs the iterations it saves.
-  bool warm_start = false;
+  Decomposition decomposition = Decomposition::kStructured;
 };
 
 // Defaults are the paper's experiment: 3 degrees held for 0.5 s, 90 s timeout.

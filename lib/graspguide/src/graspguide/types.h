@@ -5,6 +5,7 @@
 #include "graspguide/eigen.h"
 
 #include "graspguide/config.h"
+#include "graspguide_frame/pwm.h"  // Pwm
 
 namespace graspguide {
 
@@ -25,9 +26,6 @@ template <typename T, int K>
 using GraspMat = Eigen::Matrix<T, 6, 3 * K>;
 template <typename T, int K>
 using GraspMatT = Eigen::Matrix<T, 3 * K, 6>;
-// The reduced grasp matrix M^T of the QR route, 3(k-1) x 3 (grasp_matrix.h).
-template <typename T, int K>
-using ReducedGraspT = Eigen::Matrix<T, 3 * (K - 1), 3>;
 // Contact forces, [x y z] of each contact in its own frame.
 template <typename T, int K>
 using ForceVec = Eigen::Matrix<T, 3 * K, 1>;
@@ -38,10 +36,5 @@ template <typename T, int K>
 using NullVec = Eigen::Matrix<T, 3 * K - 6, 1>;
 template <typename T, int K>
 using LevelVec = Eigen::Matrix<T, K, 1>;
-
-// 8-bit PWM per motor; unused motors (k = 3) stay 0.
-struct Pwm {
-  uint8_t duty[kMaxContacts] = {0, 0, 0, 0};
-};
 
 }  // namespace graspguide
