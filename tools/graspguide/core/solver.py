@@ -54,7 +54,7 @@ REQUEST_FIELDS: dict[str, Any] = {
 }
 
 _FIELDS_KEYS = REQUEST_FIELDS.keys()
-_REQUIRED = tuple(key for key, default in REQUEST_FIELDS.items() if default is None)
+_REQUIRED = frozenset(key for key, default in REQUEST_FIELDS.items() if default is None)
 
 # Cap on the contact count handed to the core (anything but 3 or 4 is
 # bad_contact_count there); keeps a huge list from costing more than its parsing.
@@ -417,7 +417,7 @@ class Guidance:
 def _plain_fields(obj: Any) -> dict[str, Any] | None:
     """A request's fields, defaults filled in, if it is a dict with the required fields
     and no unknown one (the fast path of :func:`parse_request`); else None."""
-    if type(obj) is dict and _FIELDS_KEYS >= obj.keys() and all(k in obj for k in _REQUIRED):
+    if type(obj) is dict and _FIELDS_KEYS >= obj.keys() >= _REQUIRED:
         return {**REQUEST_FIELDS, **obj}
     return None
 
