@@ -20,7 +20,10 @@ say() { printf 'bootstrap: %s\n' "$*"; }
 die() { printf 'bootstrap: ERROR: %s\n' "$*" >&2; exit 1; }
 
 # --- 1. Debian packages ------------------------------------------------------
-APT_PACKAGES=(libeigen3-dev libgtest-dev cmake ninja-build g++ python3-venv)
+# gcc-avr, avr-libc, simavr and libsimavr-dev: the per-frame layer built for the ATmega328P
+# and its cycle counts (src/harness/avr_frame/).
+APT_PACKAGES=(libeigen3-dev libgtest-dev cmake ninja-build g++ python3-venv
+    gcc-avr avr-libc simavr libsimavr-dev)
 # shellcheck source=tools/apt-ensure.sh
 . "$ROOT/tools/apt-ensure.sh"
 apt_ensure "${APT_PACKAGES[@]}"
@@ -68,6 +71,7 @@ if [[ -f $ROOT/tools/pyproject.toml ]]; then
     # Everything that can change what `pip install ./tools` builds.
     src_dirs=(tools)
     [[ -d lib/graspguide ]] && src_dirs+=(lib/graspguide)
+    [[ -d lib/graspguide_frame ]] && src_dirs+=(lib/graspguide_frame)
     src_hash="$(
         {
             find "${src_dirs[@]}" -type f \

@@ -5,6 +5,7 @@
 
 #include "graspguide/grasp_solution.h"
 #include "graspguide/orientation.h"
+#include "graspguide_frame/pwm.h"
 
 namespace graspguide {
 
@@ -100,8 +101,8 @@ class Guidance {
 
  private:
   Status run(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
-    Quat<T> q;
-    Status s = unit_quaternion<T>(orientation_wxyz, q);
+    T gravity[3];
+    Status s = gravity_in_hand<T>(orientation_wxyz.data(), gravity);
     if (s != Status::kOk) return s;
     if (!has_wrench_) return Status::kZeroWrench;
     if (dirty_) {
@@ -110,11 +111,12 @@ class Guidance {
       out.recomputed = true;
     }
     if (grasp_status_ != Status::kOk) return grasp_status_;
-    const Alignment<T> a = alignment<T>(q, grasp_.force_unit);
+    // The rest is the per-frame layer's: what a frame costs while the posture holds.
+    const Alignment<T> a = alignment_to_gravity<T>(grasp_.force_unit.data(), gravity);
     out.error_deg = a.error_deg;
     out.alpha = a.alpha;
-    const T gain = scene_.mode == Mode::kC ? T(kPwmSpan) : a.alpha;
-    out.pwm = pwm_from_levels<T, kMaxContacts>(grasp_.levels, gain);
+    out.pwm =
+        pwm_from_levels<T>(grasp_.levels.data(), kMaxContacts, pwm_gain(scene_.mode, a.alpha));
     return Status::kOk;
   }
 

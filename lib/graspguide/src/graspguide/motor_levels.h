@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "graspguide/scene.h"
+#include "graspguide_frame/pwm.h"
 
 namespace graspguide {
 
@@ -22,19 +23,10 @@ Status motor_levels(const ForceVec<T, K>& lambda, Policy policy, LevelVec<T, K>&
   return Status::kOk;
 }
 
-// gain = kPwmSpan in mode C, alpha in mode V. A level at or below kMotorOffLevel is off, so
-// float noise never switches a motor on at kPwmMin.
+// The per-frame layer's PWM (graspguide_frame/pwm.h) on an Eigen level vector.
 template <typename T, int K>
 Pwm pwm_from_levels(const LevelVec<T, K>& m, T gain) {
-  Pwm out;
-  for (int i = 0; i < K; ++i) {
-    const T level = std::abs(m(i));
-    if (!(level > T(kMotorOffLevel))) continue;
-    T duty = std::floor(T(kPwmMin) + gain * level + T(0.5));
-    duty = duty < T(0) ? T(0) : (duty > T(255) ? T(255) : duty);
-    out.duty[i] = static_cast<uint8_t>(duty);
-  }
-  return out;
+  return pwm_from_levels<T>(m.data(), K, gain);
 }
 
 }  // namespace graspguide

@@ -3,6 +3,9 @@
 // precision because a float QR of a hand grasp carries relative errors near 1e-6.
 #pragma once
 
+// kMotorOffLevel and kMinQuaternionNorm: the per-frame layer's.
+#include "graspguide_frame/tolerances.h"
+
 namespace graspguide {
 
 template <typename T>
@@ -28,8 +31,6 @@ inline constexpr double kRankRelTol = 1e-4;
 inline constexpr double kZeroForceRelTol = 1e-6;
 inline constexpr double kRelevanceCosTol = 1e-5;
 inline constexpr double kTinyRel = 1e-12;
-inline constexpr double kMotorOffLevel = 1e-3;
-inline constexpr double kMinQuaternionNorm = 1e-6;
 
 inline constexpr int kDefaultMaxIterations = 64;
 

@@ -5,6 +5,7 @@
 #include "graspguide/eigen.h"
 
 #include "graspguide/config.h"
+#include "graspguide_frame/pwm.h"  // Pwm
 
 namespace graspguide {
 
@@ -35,10 +36,5 @@ template <typename T, int K>
 using NullVec = Eigen::Matrix<T, 3 * K - 6, 1>;
 template <typename T, int K>
 using LevelVec = Eigen::Matrix<T, K, 1>;
-
-// 8-bit PWM per motor; unused motors (k = 3) stay 0.
-struct Pwm {
-  uint8_t duty[kMaxContacts] = {0, 0, 0, 0};
-};
 
 }  // namespace graspguide

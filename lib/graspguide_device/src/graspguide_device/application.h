@@ -5,6 +5,8 @@
 
 #include "graspguide.h"
 #include "graspguide_device/hal.h"
+#include "graspguide_frame/trial_clock.h"
+#include "graspguide_frame/watchdog.h"
 
 #ifndef GRASPGUIDE_STALE_TIMEOUT_MS
 #define GRASPGUIDE_STALE_TIMEOUT_MS 200  // no POSE for this long: motors off
@@ -69,7 +71,7 @@ class Application {
  public:
   Application(MotorOutputs& motors, Clock& clock,
               uint32_t stale_timeout_us = kDefaultStaleTimeoutUs)
-      : motors_(motors), clock_(clock), stale_timeout_us_(stale_timeout_us) {
+      : motors_(motors), clock_(clock), watchdog_(stale_timeout_us) {
     motors_off();  // whatever the pins did before boot
   }
 
@@ -111,7 +113,7 @@ class Application {
     out.host_time_us = in.host_time_us;
     if (state_ == DeviceState::kIdle) return refuse(Refusal::kNoScene);
     ++counters_.poses;
-    last_pose_us_ = clock_.now_us();
+    watchdog_.feed(clock_.now_us());
     stale_ = false;
     if (state_ != DeviceState::kTrialRunning) {
       motors_off();
@@ -119,15 +121,12 @@ class Application {
     }
     // The trial's clocks start with its first POSE, even one that fails below: a trial must
     // end on the device's clock whatever its POSEs carry.
-    const int64_t t_us = unwrap(in.host_time_us);
+    const int64_t t_us =
+        trial_started_ ? timeline_.advance(in.host_time_us) : timeline_.restart(in.host_time_us);
     if (!trial_started_) {
       trial_.start(guidance_.scene().trial, t_us);
       trial_started_ = true;
-      trial_device_us_ = 0;
-      last_tick_us_ = clock_.now_us();
-      // Once per trial: tick() runs every poll, and double arithmetic is soft-float on the MCU.
-      trial_device_limit_us_ =
-          static_cast<int64_t>(guidance_.scene().trial.timeout_s * 1e6) + kTrialClockSlackUs;
+      deadline_.start(clock_.now_us(), guidance_.scene().trial.timeout_s, kTrialClockSlackUs);
     } else if (t_us < trial_last_us_) {
       // A step back, or one forward of 2^31 us or more (the same thing on a 32-bit
       // timestamp): the host's timeline can no longer be trusted to end the trial, so it
@@ -195,7 +194,7 @@ class Application {
     if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
     motors_.write(pwm);
     motors_on_ = !all_zero(pwm);
-    last_pose_us_ = clock_.now_us();
+    watchdog_.feed(clock_.now_us());
     return Reply{};
   }
 
@@ -204,19 +203,13 @@ class Application {
   // froze would otherwise keep it running forever). Returns true, with *report filled,
   // when a trial ended here: a failure at timeout_s, as every timed-out trial.
   bool tick(TrialReport* report = nullptr) {
-    if (motors_on_ && clock_.now_us() - last_pose_us_ >= stale_timeout_us_) {
+    if (motors_on_ && watchdog_.expired(clock_.now_us())) {
       motors_off();
       if (!stale_) ++counters_.stale_events;
       stale_ = true;
     }
     if (state_ != DeviceState::kTrialRunning || !trial_started_) return false;
-    // Summed step by step into 64 bits, so a long gap between calls (a process stopped
-    // for minutes) cannot wrap it; each step signed, as a virtual clock may step back a
-    // little when a late POSE resets it.
-    const uint32_t now = clock_.now_us();
-    trial_device_us_ += static_cast<int32_t>(now - last_tick_us_);
-    last_tick_us_ = now;
-    if (trial_device_us_ < trial_device_limit_us_) return false;
+    if (!deadline_.passed(clock_.now_us())) return false;
     trial_.expire();
     motors_off();
     state_ = DeviceState::kSceneSet;
@@ -269,24 +262,9 @@ class Application {
     return reply;
   }
 
-  // Host timestamps are 32-bit microseconds that wrap every 71.6 min; the trial needs a
-  // monotonic 64-bit time. The step from the previous POSE is read as a signed 32-bit
-  // difference: a wrap is a small step forward, and any step of 2^31 us or more forward
-  // reads as a step back (trial timeouts are at most 1800 s < 2^31 us, so no trial needs one).
-  int64_t unwrap(uint32_t host_us) {
-    if (!trial_started_) {
-      last_host_us_ = host_us;
-      host_time_us_ = host_us;
-      return host_time_us_;
-    }
-    host_time_us_ += static_cast<int32_t>(host_us - last_host_us_);
-    last_host_us_ = host_us;
-    return host_time_us_;
-  }
-
   MotorOutputs& motors_;
   Clock& clock_;
-  uint32_t stale_timeout_us_;
+  PoseWatchdog watchdog_;
   Guidance<Real> guidance_;
   Trial trial_;
   DeviceState state_ = DeviceState::kIdle;
@@ -298,13 +276,9 @@ class Application {
   bool trial_started_ = false;
   bool motors_on_ = false;
   bool stale_ = false;
-  uint32_t last_pose_us_ = 0;
-  uint32_t last_tick_us_ = 0;
-  int64_t trial_device_us_ = 0;  // device time since the trial's first POSE
-  int64_t trial_device_limit_us_ = 0;
+  HostTimeline timeline_;
+  TrialDeadline deadline_;  // the device's clock since the trial's first POSE
   int64_t trial_last_us_ = 0;
-  uint32_t last_host_us_ = 0;
-  int64_t host_time_us_ = 0;
 };
 
 }  // namespace graspguide::device

@@ -1,11 +1,12 @@
-// Step 7b: the trial as a pure state machine on injected timestamps (no clock inside):
-// success once the error has stayed within the threshold for the hold time, failure at
-// the timeout (reported as exactly the timeout, as in the paper).
+// The trial as a pure state machine on injected timestamps (no clock inside): success once
+// the error has stayed within the threshold for the hold time, failure at the timeout
+// (reported as exactly the timeout, as in the paper).
 #pragma once
 
-#include <cstdint>
+#include <stdint.h>
 
-#include "graspguide/scene.h"
+#include "graspguide_frame/status.h"
+#include "graspguide_frame/trial_config.h"
 
 namespace graspguide {
 
