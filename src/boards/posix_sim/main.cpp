@@ -148,8 +148,10 @@ int main(int argc, char** argv) {
     stream.wait_readable(1);  // 1 ms: the watchdog's resolution in real time
     if (opt.virtual_clock) virtual_time.follow_silence();
     device.poll();
+    stream.flush();  // the answers to everything poll() read, in one write
   }
   app.stop();  // motors off on the way out, and in the trace
+  stream.flush();
   if (trace) std::fclose(trace);
   return 0;
 }

@@ -7,10 +7,12 @@
 
 #include <cerrno>
 #include <cstdlib>
+#include <cstring>
 
 namespace graspguide::sim {
 
 PtyStream::~PtyStream() {
+  flush();
   if (slave_keepalive_fd_ >= 0) ::close(slave_keepalive_fd_);
   if (master_fd_ >= 0) ::close(master_fd_);
 }
@@ -31,19 +33,63 @@ bool PtyStream::open() {
 }
 
 bool PtyStream::wait_readable(int timeout_ms) const {
+  if (in_begin_ < in_end_) return true;
   pollfd p{master_fd_, POLLIN, 0};
   return ::poll(&p, 1, timeout_ms) > 0 && (p.revents & POLLIN);
 }
 
 size_t PtyStream::read(uint8_t* buffer, size_t capacity) {
-  const ssize_t n = ::read(master_fd_, buffer, capacity);
-  return n > 0 ? static_cast<size_t>(n) : 0;
+  if (in_begin_ == in_end_) {
+    const ssize_t n = ::read(master_fd_, in_, sizeof in_);
+    if (n <= 0) return 0;
+    in_begin_ = 0;
+    in_end_ = static_cast<size_t>(n);
+  }
+  const size_t n = in_end_ - in_begin_ < capacity ? in_end_ - in_begin_ : capacity;
+  std::memcpy(buffer, in_ + in_begin_, n);
+  in_begin_ += n;
+  return n;
 }
 
 size_t PtyStream::write(const uint8_t* data, size_t length) {
-  // LinkDevice writes one whole frame per call. A host that stops reading for
-  // kWriteTimeoutMs loses this frame; if part of it went out, a delimiter ends it there, so
-  // the host's parser drops only this frame instead of merging it with the next.
+  if (length > sizeof out_) {  // never for a frame of this protocol; sent on its own
+    flush();
+    write_frame(data, length, 0);
+    return length;
+  }
+  if (out_size_ + length > sizeof out_ || frames_ == kMaxQueuedFrames) flush();
+  std::memcpy(out_ + out_size_, data, length);
+  out_size_ += length;
+  frame_ends_[frames_++] = out_size_;
+  return length;
+}
+
+void PtyStream::flush() {
+  // One write for all the queued frames when the pty takes them (it does unless the host
+  // stopped reading); else frame by frame, each with write_frame's timeout.
+  size_t done = 0;
+  if (out_size_ > 0) {
+    const ssize_t n = ::write(master_fd_, out_, out_size_);
+    if (n > 0) done = static_cast<size_t>(n);
+  }
+  size_t start = 0;
+  for (size_t i = 0; i < frames_ && done < out_size_; ++i) {
+    const size_t end = frame_ends_[i];
+    if (end > done) {
+      const size_t sent = done > start ? done - start : 0;
+      write_frame(out_ + start + sent, end - start - sent, sent);
+      done = end;
+    }
+    start = end;
+  }
+  out_size_ = 0;
+  frames_ = 0;
+}
+
+void PtyStream::write_frame(const uint8_t* data, size_t length, size_t sent) {
+  // A host that stops reading for kWriteTimeoutMs loses this frame; if part of it went out
+  // (``sent`` bytes before this call, or some now), a delimiter ends it there, so the
+  // host's parser drops only this frame instead of merging it with the next.
   constexpr int kWriteTimeoutMs = 200;
   size_t done = 0;
   while (done < length) {
@@ -55,12 +101,11 @@ size_t PtyStream::write(const uint8_t* data, size_t length) {
     pollfd p{master_fd_, POLLOUT, 0};
     if (!(n < 0 && errno == EAGAIN) || ::poll(&p, 1, kWriteTimeoutMs) <= 0) break;
   }
-  if (done > 0 && done < length) {
+  if (sent + done > 0 && done < length) {
     const uint8_t delimiter = 0;
     pollfd p{master_fd_, POLLOUT, 0};
     if (::poll(&p, 1, kWriteTimeoutMs) > 0) (void)::write(master_fd_, &delimiter, 1);
   }
-  return done;
 }
 
 }  // namespace graspguide::sim
