@@ -33,14 +33,17 @@ from __future__ import annotations
 import math
 import struct
 import time
+from binascii import crc_hqx as _crc_hqx
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
 from graspguide.link.codec import (
+    COBS_MAX_BLOCK_DATA,
+    COBS_MAX_CODE,
     CRC,
+    CRC16_INIT,
     FRAME_OVERHEAD,
     HEADER,
     MAX_RAW_FRAME_SIZE,
@@ -51,7 +54,6 @@ from graspguide.link.codec import (
     check_frame,
     cobs_decode,
     cobs_encode,
-    crc16,
     encode_message,
     message_of,
 )
@@ -112,9 +114,12 @@ assert tuple(s.name for s in Pose.FIELDS) == (
 _POSE_HEAD = struct.Struct(HEADER.format + Pose.FIELDS[0].format + Pose.FIELDS[1].format)
 _POSE_TAIL_COBS = b"\x01" * (HEADER.size + Pose.STRUCT.size - _POSE_HEAD.size - 1)
 _POSE_ZEROS = bytes(len(_POSE_TAIL_COBS) + 1)
+_COBS_CODE = [bytes((n + 1,)) for n in range(COBS_MAX_BLOCK_DATA)]
 _TELEMETRY_ID = int(MsgId.TELEMETRY)
-_TELEMETRY_SIZE = Telemetry.STRUCT.size
-# _telemetry_fast assigns the flattened values by position: a schema change must show here.
+# A whole decoded TELEMETRY frame (header, payload, CRC) in one unpack.
+_TELEMETRY_FRAME = struct.Struct(HEADER.format + Telemetry.STRUCT.format[1:] + CRC.format[1:])
+_TELEMETRY_BODY = _TELEMETRY_FRAME.size - CRC.size
+# _telemetry_frame assigns the flattened values by position: a schema change must show here.
 assert [spec.name for spec in Telemetry.FIELDS] == [
     "host_time_us",
     "error_deg",
@@ -129,6 +134,7 @@ assert [spec.name for spec in Telemetry.FIELDS] == [
 _CONSTRAINT_BY_VALUE = {int(e): e for e in ConstraintModel}
 _ERRORCODE_BY_VALUE = {int(e): e for e in ErrorCode}
 _set = object.__setattr__
+_new = object.__new__
 # DeviceClient.counters(): the totals by attribute name, and each queue's count by the name
 # it is reported under.
 _TOTALS = ("bytes_received", "frames_received", "host_bad_frames", "device_frames_lost")
@@ -137,6 +143,16 @@ _QUEUES = {
     "unmatched": "unmatched",
     "telemetry_backlog": "telemetry_backlog",
 }
+
+
+def _cobs_crc(crc: int) -> bytes:
+    """The COBS blocks of a CRC's two bytes (little-endian), which end a POSE's frame."""
+    lo, hi = crc & 0xFF, crc >> 8
+    if lo and hi:
+        return bytes((3, lo, hi))
+    if hi:
+        return bytes((1, 2, hi))
+    return bytes((2, lo, 1)) if lo else b"\x01\x01\x01"
 
 
 def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None:
@@ -151,31 +167,82 @@ def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None
         head = _POSE_HEAD.pack(PROTOCOL_VERSION, _POSE_ID, seq, int(t_us) & 0xFFFFFFFF, w, x, y, z)
     except (OverflowError, struct.error, TypeError, ValueError):
         return None
-    crc = CRC.pack(crc16(head + _POSE_ZEROS))
-    return cobs_encode(head) + _POSE_TAIL_COBS + cobs_encode(crc) + b"\0"
+    # The CRC continued over the zeros: the same as crc16(head + zeros), without the copy.
+    crc = _crc_hqx(_POSE_ZEROS, _crc_hqx(head, CRC16_INIT))
+    if len(head) < COBS_MAX_BLOCK_DATA:  # always: one COBS block per zero, split in C
+        blocks = b"".join([_COBS_CODE[len(part)] + part for part in head.split(b"\0")])
+    else:  # pragma: no cover - a schema with a head this long
+        blocks = cobs_encode(head)
+    return blocks + _POSE_TAIL_COBS + _cobs_crc(crc) + b"\0"
 
 
-def _telemetry_fast(payload_view: bytes, offset: int) -> Telemetry | None:
-    """TELEMETRY from its payload without the generic field walk; None if an enum value
-    is not in its set (the generic path then counts it as undecodable)."""
-    (t_us, err, alpha, p0, p1, p2, p3, used, status, iters, flags, compute) = (
-        Telemetry.STRUCT.unpack_from(payload_view, offset)
-    )
+def _cobs_decode_short(enc: bytes) -> bytearray | None:
+    """cobs_decode of a frame shorter than one full COBS block (every frame the device
+    sends): the data with each code byte but the first turned into the zero it stands
+    for; None where cobs_decode raises (a 0x00 inside, a block past the end)."""
+    n = len(enc)
+    if not n or n >= COBS_MAX_CODE or 0 in enc:
+        return None
+    buf = bytearray(enc)
+    j = buf[0]
+    while j < n:
+        code = buf[j]
+        buf[j] = 0
+        j += code
+    if j != n:
+        return None
+    del buf[0]
+    return buf
+
+
+def _telemetry_frame(raw: bytearray) -> tuple[int, Telemetry] | None:
+    """(seq, TELEMETRY) of a decoded frame without the generic field walk; None for
+    anything else: another message or version, a bad CRC, an enum value not in its set
+    (the generic path then counts it)."""
+    if len(raw) != _TELEMETRY_FRAME.size or raw[1] != _TELEMETRY_ID:
+        return None
+    (
+        version,
+        _,
+        seq,
+        t_us,
+        err,
+        alpha,
+        p0,
+        p1,
+        p2,
+        p3,
+        used,
+        status,
+        iters,
+        flags,
+        compute,
+        crc,
+    ) = _TELEMETRY_FRAME.unpack(raw)
+    if version != PROTOCOL_VERSION or _crc_hqx(raw[:_TELEMETRY_BODY], CRC16_INIT) != crc:
+        return None
     used_e = _CONSTRAINT_BY_VALUE.get(used)
     status_e = _ERRORCODE_BY_VALUE.get(status)
     if used_e is None or status_e is None:
         return None
-    tel = object.__new__(Telemetry)
-    _set(tel, "host_time_us", t_us)
-    _set(tel, "error_deg", err)
-    _set(tel, "alpha", alpha)
-    _set(tel, "pwm", (p0, p1, p2, p3))
-    _set(tel, "constraints_used", used_e)
-    _set(tel, "solver_status", status_e)
-    _set(tel, "iterations", iters)
-    _set(tel, "flags", flags)
-    _set(tel, "compute_time_us", compute)
-    return tel
+    tel = _new(Telemetry)
+    # The frozen dataclass's fields set at once, as its __init__ would.
+    _set(
+        tel,
+        "__dict__",
+        {
+            "host_time_us": t_us,
+            "error_deg": err,
+            "alpha": alpha,
+            "pwm": (p0, p1, p2, p3),
+            "constraints_used": used_e,
+            "solver_status": status_e,
+            "iterations": iters,
+            "flags": flags,
+            "compute_time_us": compute,
+        },
+    )
+    return seq, tel
 
 
 # What each ErrorCode means: the schema's text (tools/codegen/link_messages.toml), checked
@@ -388,11 +455,15 @@ def host_time_us() -> int:
     return (time.monotonic_ns() // 1000) & 0xFFFFFFFF
 
 
-@dataclass
-class _Received:
+class _Received(NamedTuple):
     seq: int
     message: Any
     t_rx: float
+
+
+# _Received without its Python-level __new__ (one per frame received).
+def _received(seq: int, message: Any, t_rx: float, _make=tuple.__new__) -> _Received:
+    return _make(_Received, (seq, message, t_rx))
 
 
 def _pose_answer(seq: int, t_us: int) -> Callable[[_Received], bool]:
@@ -509,35 +580,48 @@ class DeviceClient:
     def _fast_frame(self, enc: bytes, now: float) -> bool:
         """A complete, well-formed frame handled without the byte-wise parser; False when
         the parser must see it (anything unusual), with nothing changed."""
-        try:
-            raw = cobs_decode(enc)
-        except BadCobsError:
-            return False
+        if len(enc) < COBS_MAX_CODE:
+            raw = _cobs_decode_short(enc)
+            if raw is None:
+                return False
+        else:
+            try:
+                raw = bytearray(cobs_decode(enc))
+            except BadCobsError:
+                return False
+        fast = _telemetry_frame(raw)
+        if fast is not None:
+            # The common case (a study's ~10^6 TELEMETRY), _accept inlined.
+            seq, msg = fast
+            self._parser.counts[ParseEvent.FRAME] += 1
+            self.frames_received += 1
+            last = self._last_device_seq
+            if last is not None:
+                gap = (seq - last - 1) & 0xFFFF
+                if gap < 0x8000:
+                    self.device_frames_lost += gap
+            self._last_device_seq = seq
+            self._inbox.append(_received(seq, msg, now))
+            return True
         if not FRAME_OVERHEAD <= len(raw) <= MAX_RAW_FRAME_SIZE:
             return False
         body_len = len(raw) - CRC.size
-        if crc16(raw[:body_len]) != CRC.unpack_from(raw, body_len)[0]:
+        if _crc_hqx(raw[:body_len], CRC16_INIT) != CRC.unpack_from(raw, body_len)[0]:
             return False
         version, msg_id, seq = HEADER.unpack_from(raw)
         if version != PROTOCOL_VERSION:
             return False
-        if msg_id == _TELEMETRY_ID and body_len - HEADER.size == _TELEMETRY_SIZE:
-            msg = _telemetry_fast(raw, HEADER.size)
-            if msg is None:
-                return False
-            self._parser.counts[ParseEvent.FRAME] += 1
-        else:
-            event, frame = check_frame(raw, self._parser.accept)
-            if event is not ParseEvent.FRAME:
-                return False
-            self._parser.counts[ParseEvent.FRAME] += 1
-            self._parser.frame = frame
-            assert frame is not None  # check_frame's FRAME verdict carries it
-            try:
-                msg = message_of(frame)
-            except (BadEnumValueError, ProtocolError):
-                self.undecodable_frames += 1
-                return True
+        event, frame = check_frame(bytes(raw), self._parser.accept)
+        if event is not ParseEvent.FRAME:
+            return False
+        self._parser.counts[ParseEvent.FRAME] += 1
+        self._parser.frame = frame
+        assert frame is not None  # check_frame's FRAME verdict carries it
+        try:
+            msg = message_of(frame)
+        except (BadEnumValueError, ProtocolError):
+            self.undecodable_frames += 1
+            return True
         self._accept(seq, msg, now)
         return True
 
@@ -548,7 +632,7 @@ class DeviceClient:
             if gap < 0x8000:
                 self.device_frames_lost += gap
         self._last_device_seq = seq
-        self._inbox.append(_Received(seq, msg, now))
+        self._inbox.append(_received(seq, msg, now))
 
     def _push_bytes(self, data: bytes, now: float) -> None:
         """The reference path: every byte through the FrameParser."""
@@ -830,9 +914,10 @@ class DeviceClient:
         wires: list[bytes] = []
         seqs: list[int] = []
         times: list[int] = []
+        seq0 = self._seq._next
         for t_us, quat in poses:
             t_us = int(t_us) & 0xFFFFFFFF
-            seq = (self._seq._next + len(seqs)) & 0xFFFF
+            seq = (seq0 + len(seqs)) & 0xFFFF
             wire = encode_pose_fast(seq, t_us, quat) if len(quat) == 4 else None
             if wire is None:
                 wire = encode_message(self._pose_message(t_us, quat, None), seq)
@@ -843,11 +928,24 @@ class DeviceClient:
         for _ in seqs:
             self._seq.next()
         self._write(b"".join(wires))
-        # Each answer's wait starts when it is needed, as if its POSE had just been sent.
-        out = [
-            self._wait(_pose_answer(seq, t_us), f"POSE (seq {seq})", timeout).message
-            for seq, t_us in zip(seqs, times)
-        ]
+        out: list[Any] = []
+        inbox = self._inbox
+        for seq, t_us in zip(seqs, times):
+            # What _wait does first, inlined: the answer may already be in the inbox
+            # (one read brings many); else wait for it, as if its POSE had just been
+            # sent (``timeout`` applies to each answer).
+            while inbox:
+                item = inbox.popleft()
+                m = item.message
+                if type(m) is Telemetry:
+                    if m.host_time_us == t_us:
+                        break
+                elif isinstance(m, Error) and m.request_seq == seq:
+                    break
+                self._park(item)
+            else:
+                m = self._wait(_pose_answer(seq, t_us), f"POSE (seq {seq})", timeout).message
+            out.append(m)
         self._settle()
         return out
 
