@@ -12,7 +12,7 @@ What varies is given, not re-implemented:
   ``base_us``, so a simulated device runs as fast as the link allows) or real time (each
   pose waits for its time; ``skip_late`` drops a pose more than two periods late);
 * what is done with each pose and its TELEMETRY (``on_send``, ``on_frame``: the logs,
-  the frame CSV, the live view);
+  the live view; ``on_frames``: the same for a whole batch at once, the frame CSV);
 * when to give up without a TRIAL_RESULT (``limit_s`` of trial time on the virtual
   clock, ``wall_limit_s`` in real time): :class:`TrialOverrun`.
 
@@ -31,6 +31,7 @@ from graspguide.link.client import DeviceError, LinkTimeout, host_time_us
 from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING, Error, ErrorCode
 
 Pose = tuple[float, Sequence[float], Any]  # (t_s, quat w, x, y, z, contacts or None)
+Stamped = tuple[float, int, Sequence[float], Any]  # (t_s, POSE timestamp, quat, contacts)
 
 
 class PoseLoopError(Exception):
@@ -152,7 +153,7 @@ class PipelinedPoses:
 
     def feel(self, index: int, t_s: float, pwm: Sequence[int]) -> None:
         try:
-            self._feel(t_s, list(pwm[: self.k]))
+            self._feel(t_s, pwm[: self.k])
         except ValueError as e:
             raise PoseLoopError(
                 f"pose {index}: the model refused the TELEMETRY's PWM: {e}"
@@ -197,6 +198,11 @@ class PoseLoop:
     wall_limit_s: float | None = None
     on_send: Callable[[int, float, Sequence[float], Any], None] | None = None
     on_frame: Callable[[Frame], None] | None = None
+    # Once per batch: (index of its first pose, the poses sent, their TELEMETRY), for
+    # the frames received (the batch's up to the one that ended the trial, or up to
+    # the one the loop failed on). Called after their on_frame and before the next
+    # batch is sent, so a caller batching its writes has everything written in order.
+    on_frames: Callable[[int, list[Stamped], list[Any]], None] | None = None
     sent: int = field(default=0, init=False)
     frames: int = field(default=0, init=False)
     late_skipped: int = field(default=0, init=False)
@@ -214,7 +220,7 @@ class PoseLoop:
             return None  # too late for this sample: skip it, keep the pace
         return host_time_us()
 
-    def _send(self, stamped: list[tuple[float, int, Sequence[float], Any]]) -> list[Any] | None:
+    def _send(self, stamped: list[Stamped]) -> list[Any] | None:
         """The answers to the stamped poses, or None when the device refused the only one
         because the trial had already ended (its TRIAL_RESULT is queued)."""
         client = self.client
@@ -239,6 +245,7 @@ class PoseLoop:
         client = self.client
         lockstep = poses.window <= 1
         on_frame = self.on_frame
+        on_frames = self.on_frames
         feel = poses.feel
         # trial time beyond which to give up, on the virtual clock (real time: the wall)
         limit_s = self.limit_s if self.virtual_clock and self.limit_s is not None else None
@@ -250,47 +257,65 @@ class PoseLoop:
             batch = poses.next_batch(index)
             if not batch:
                 break
-            stamped = []
-            for t, quat, contacts in batch:
-                t_us = self._stamp(t)
-                if t_us is None:
-                    self.late_skipped += 1
-                    continue
+            if self.virtual_clock:  # _stamp's arithmetic for the whole batch
+                base_us = self.base_us
+                stamped = [
+                    (t, (base_us + int(round(t * 1e6))) & 0xFFFFFFFF, quat, contacts)
+                    for t, quat, contacts in batch
+                ]
                 if self.on_send is not None:
-                    self.on_send(t_us, t, quat, contacts)
-                stamped.append((t, t_us, quat, contacts))
+                    for t, t_us, quat, contacts in stamped:
+                        self.on_send(t_us, t, quat, contacts)
+            else:
+                stamped = []
+                for t, quat, contacts in batch:
+                    t_us = self._stamp(t)
+                    if t_us is None:
+                        self.late_skipped += 1
+                        continue
+                    if self.on_send is not None:
+                        self.on_send(t_us, t, quat, contacts)
+                    stamped.append((t, t_us, quat, contacts))
             if not stamped:
                 continue
             answers = self._send(stamped)
             if answers is None:
                 ended = True
                 break
-            for j, ((t_s, t_us, quat, contacts), tel) in enumerate(zip(stamped, answers)):
-                if isinstance(tel, Error):
-                    raise PoseLoopError(
-                        f"the device refused pose {index + j} "
-                        f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
-                    )
-                self.frames += 1
-                last_tel = tel
-                if on_frame is not None:
-                    on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
-                running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
-                if not running or (lockstep and client.trial_results):
-                    # The trial ended with this pose; the rest of the batch was refused.
-                    for rest in answers[j + 1 :]:
-                        if not isinstance(rest, Error):
-                            raise PoseLoopError("the device answered a POSE after the trial ended")
-                    ended = True
-                    break
-                if limit_s is not None:
-                    if t_s > limit_s:
-                        raise TrialOverrun(t_s, time.monotonic() - self.wall0, False)
-                elif self.wall_limit_s is not None and not self.virtual_clock:
-                    wall = time.monotonic() - self.wall0
-                    if wall > self.wall_limit_s:
-                        raise TrialOverrun(t_s, wall, True)
-                feel(index + j, t_s, tel.pwm)
+            received = 0
+            try:
+                for j, ((t_s, t_us, quat, contacts), tel) in enumerate(zip(stamped, answers)):
+                    if isinstance(tel, Error):
+                        raise PoseLoopError(
+                            f"the device refused pose {index + j} "
+                            f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
+                        )
+                    self.frames += 1
+                    received = j + 1
+                    last_tel = tel
+                    if on_frame is not None:
+                        on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
+                    running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
+                    if not running or (lockstep and client.trial_results):
+                        # The trial ended with this pose; the rest of the batch was refused.
+                        for rest in answers[j + 1 :]:
+                            if not isinstance(rest, Error):
+                                raise PoseLoopError(
+                                    "the device answered a POSE after the trial ended"
+                                )
+                        ended = True
+                        break
+                    if limit_s is not None:
+                        if t_s > limit_s:
+                            raise TrialOverrun(t_s, time.monotonic() - self.wall0, False)
+                    elif self.wall_limit_s is not None and not self.virtual_clock:
+                        wall = time.monotonic() - self.wall0
+                        if wall > self.wall_limit_s:
+                            raise TrialOverrun(t_s, wall, True)
+                    feel(index + j, t_s, tel.pwm)
+            finally:
+                if on_frames is not None and received:
+                    on_frames(index, stamped[:received], answers[:received])
             index += len(batch)
         if ended and not client.trial_results:
             # the pose that ended the trial: its TRIAL_RESULT follows the TELEMETRY
@@ -310,6 +335,7 @@ __all__ = [
     "TrialOverrun",
     "Diverged",
     "Frame",
+    "Stamped",
     "LoopResult",
     "OpenLoopPoses",
     "LockstepPoses",

@@ -62,12 +62,12 @@ from typing import Any, TextIO
 from graspguide.study.errors import RunnerError
 from graspguide.study.pose_loop import (
     Diverged,
-    Frame,
     LockstepPoses,
     OpenLoopPoses,
     PipelinedPoses,
     PoseLoop,
     PoseLoopError,
+    Stamped,
     TrialOverrun,
     pipeline_window,
 )
@@ -505,10 +505,12 @@ class StudyRunner:
         real_time = not self.virtual_clock
         progress_frame = self.progress.frame
 
-        def on_frame(fr: Frame) -> None:
-            tel = fr.tel
-            f.write(_frame_row(fr.t_s, fr.t_us, fr.quat, tel))
-            progress_frame(fr.t_s, float(tel.error_deg), tel.pwm[:k], real_time)
+        def on_frames(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
+            # One write per batch; the live line shows the batch's last frame (a batch
+            # is one frame in real time, and a few ms of wall time on the virtual clock).
+            f.write(_frame_rows(stamped, tels))
+            tel = tels[-1]
+            progress_frame(stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time)
 
         wall0 = time.monotonic()
         window = self._window(model is not None)
@@ -520,7 +522,7 @@ class StudyRunner:
                     base_us=self._vt_base_us,
                     limit_s=p.timeout_s + RESULT_MARGIN_S,
                     wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
-                    on_frame=on_frame,
+                    on_frames=on_frames,
                 )
                 try:
                     done = loop.run(self._trial_poses(trial, model, window))
@@ -721,14 +723,25 @@ _FRAME_ROW = "%r,%d,%r,%r,%r,%r,%r,%r,%d,%d,%d,%d,%d,%d\n"
 _FRAME_HEADER = ",".join(FRAME_COLUMNS) + "\n"
 
 
-def _frame_row(t_s: float, t_us: int, quat: Sequence[float], tel: Any) -> str:
-    """One FRAME_COLUMNS row: the POSE sent and its TELEMETRY."""
-    return _FRAME_ROW % (
-        (round(t_s, 6), t_us)
-        + tuple(quat)
-        + (float(tel.error_deg), float(tel.alpha))
-        + tuple(tel.pwm)
-        + (int(tel.solver_status), int(tel.flags))
+def _frame_rows(stamped: Sequence[Stamped], tels: Sequence[Any]) -> str:
+    """The FRAME_COLUMNS rows of poses sent (t_s, t_us, quat, contacts) and their
+    TELEMETRY, as csv.writer writes them (floats by repr; %d takes the enums' values)."""
+    row = _FRAME_ROW
+    return "".join(
+        [
+            row
+            % (
+                round(t_s, 6),
+                t_us,
+                *quat,
+                float(tel.error_deg),
+                float(tel.alpha),
+                *tel.pwm,
+                tel.solver_status,
+                tel.flags,
+            )
+            for (t_s, t_us, quat, _), tel in zip(stamped, tels)
+        ]
     )
 
 
