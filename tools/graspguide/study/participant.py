@@ -72,6 +72,7 @@ own contact geometry and its own orientation.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from collections import deque
@@ -214,6 +215,8 @@ class FeelLagError(RuntimeError):
 
 
 def _check_time(t_s: Any) -> float:
+    if type(t_s) is float and t_s - t_s == 0.0:  # the common case: finite (inf - inf is NaN)
+        return t_s
     if (
         isinstance(t_s, bool)
         or not isinstance(t_s, (int, float, np.floating, np.integer))
@@ -561,8 +564,12 @@ class VirtualParticipant:
                 self._next_decision = t + 3.0 * self.params.erm_tau_s + self.params.reaction_time_s
 
     def _check_pwm(self, pwm: Any) -> list[float]:
-        # Fast path: a list or tuple of k ints/floats in 0..255 (NaN fails the range test).
+        # Fast paths: a list or tuple of k ints (TELEMETRY's) in 0..255, or of k
+        # ints/floats in 0..255 (NaN fails the range test).
         if type(pwm) in (list, tuple) and len(pwm) == self._k:
+            u = [float(v) for v in pwm if type(v) is int]
+            if len(u) == self._k and min(pwm) >= 0 and max(pwm) <= 255:
+                return u
             try:
                 u = [float(v) for v in pwm if type(v) is int or type(v) is float]
             except OverflowError:
@@ -787,15 +794,32 @@ def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
     ``centre`` (mapped onto the sphere by the exponential map), sorted by their angle to
     the centre (the centre first), out to 180 degrees; as three arrays (x, y, z).
 
-    Built with ``math`` on plain floats (see the top of the module): numpy's sin/cos
-    depend on the CPU. The arrays are only ever combined elementwise (+, *, compare),
-    which is IEEE-exact per element, so the search gives the same bits on every CPU."""
+    The lattice and its sines and cosines (:func:`_hex_lattice`) are built with ``math``
+    on plain floats: numpy's sin/cos depend on the CPU. Here they are only combined
+    elementwise (+, *, /, sqrt), which is IEEE-exact per element, as are the search's own
+    uses of the arrays (+, *, compare), so the search gives the same bits on every CPU."""
     n0 = norm3(centre)
     c = (centre[0] / n0, centre[1] / n0, centre[2] / n0)
     e1 = cross3(c, (1.0, 0.0, 0.0) if abs(c[0]) < 0.9 else (0.0, 1.0, 0.0))
     m = norm3(e1)
     e1 = (e1[0] / m, e1[1] / m, e1[2] / m)
     e2 = cross3(c, e1)
+    a, b, cr, sr = _hex_lattice(spacing_deg)
+    # Point p at the angle r from the centre: d = cos(r) c + sin(r) (a e1 + b e2), then
+    # normalised; the centre itself (r = 0, the first point) is c.
+    d = [cr * c[i] + sr * (a * e1[i] + b * e2[i]) for i in range(3)]
+    for i in range(3):
+        d[i][0] = c[i]
+    m = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    return tuple(v / m for v in d)
+
+
+@functools.lru_cache(maxsize=4)
+def _hex_lattice(spacing_deg: float) -> tuple[np.ndarray, ...]:
+    """The centre-independent part of :func:`_hex_directions` (every mode C trial uses the
+    same spacing): the lattice points within 180 degrees in their order, as the unit
+    tangent direction (a, b) of each and cos(r), sin(r) of its angle r (the centre first,
+    with a = b = 0). Read-only arrays: they are shared."""
     s = math.radians(spacing_deg)
     n = int(math.ceil(math.pi / s / 0.8)) + 1
     h = math.sqrt(3.0) / 2.0
@@ -808,18 +832,14 @@ def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
         for k, x, y in ((i * i + i * j + j * j, (i + 0.5 * j) * s, j * h * s),)
         if math.sqrt(k) * s <= math.pi + 1e-12
     )
-    out = []
-    for _, _, x, y, r in points:
-        if r > 0:
-            a, b = x / r, y / r
-            t = (a * e1[0] + b * e2[0], a * e1[1] + b * e2[1], a * e1[2] + b * e2[2])
-            cr, sr = math.cos(r), math.sin(r)
-            d = (cr * c[0] + sr * t[0], cr * c[1] + sr * t[1], cr * c[2] + sr * t[2])
-        else:
-            d = c
-        m = norm3(d)
-        out.append((d[0] / m, d[1] / m, d[2] / m))
-    return tuple(np.array(v, dtype=np.float64) for v in zip(*out))
+    rows = [
+        (x / r, y / r, math.cos(r), math.sin(r)) if r > 0 else (0.0, 0.0, 1.0, 0.0)
+        for _, _, x, y, r in points
+    ]
+    out = tuple(np.array(v, dtype=np.float64) for v in zip(*rows))
+    for v in out:
+        v.flags.writeable = False
+    return out
 
 
 # --------------------------------------------------------------------------------------
