@@ -1,5 +1,6 @@
 """`graspguide bench`: the host benchmark (graspguide.bench.host_bench), or with
---target the instruction counts on a microcontroller (graspguide.bench.targets)."""
+--target the instruction counts on a microcontroller (graspguide.bench.targets) or the
+cycles of the per-frame layer on the ATmega328P (graspguide.bench.avr_target)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, repor
 HELP = (
     "host benchmark: full frame and QP alone vs DAQP, quadprog, OSQP, "
     "scipy, with accuracy against the float64 reference; --target: "
-    "instruction counts on Cortex-M4F/M7 under QEMU"
+    "instruction counts on Cortex-M4F/M7 under QEMU, per-frame cycles on the "
+    "ATmega328P under simavr"
 )
 DESCRIPTION = (
     "Time this project's full frame (in C++ and per Python call) and its QP "
@@ -24,11 +26,14 @@ DESCRIPTION = (
     "With --target m4f or m7: build the stage-count image, run it under QEMU "
     "(-icount), print the instructions of every stage over the scene set and "
     "compare them with the regression baseline; exit 1 when a median or "
-    "maximum grew more than 10 % or a status differs from the float64 reference."
+    "maximum grew more than 10 % or a status differs from the float64 reference. "
+    "With --target avr: the per-frame layer's cycles on the ATmega328P at 8 MHz "
+    "under simavr (frame, trial, watchdog), its flash and RAM, against "
+    "tools/perf/avr_baseline.json."
 )
 RAW_DESCRIPTION = False
 
-TARGET_CHOICES = ("m4f", "m7")
+TARGET_CHOICES = ("m4f", "m7", "avr")
 # Options of one mode only: their dest, and the flag a message names.
 HOST_ONLY = {
     "instances": "--instances",
@@ -96,9 +101,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=TARGET_CHOICES,
         default=None,
         help="instead of the host benchmark, count instructions on this target under "
-        "QEMU: m4f (Cortex-M4F, mps2-an386), m7 (Cortex-M7, mps2-an500); repeatable. "
+        "QEMU: m4f (Cortex-M4F, mps2-an386), m7 (Cortex-M7, mps2-an500), or the per-frame "
+        "layer's cycles on avr (ATmega328P at 8 MHz, simavr); repeatable. "
         '--json then writes {"cortex-m4f": {"k3": {STAGE: {"median", "max"}}, '
-        '..., "pwm_vs_float64", "stack_bytes"}}',
+        '..., "pwm_vs_float64", "stack_bytes"}, "atmega328p": {"cycles": {PART: '
+        '{"median", "max"}}, "flash_bytes", "ram_static_bytes", "stack_bytes", ...}}',
     )
     t.add_argument(
         "--no-build",
@@ -115,7 +122,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--baseline",
         metavar="FILE",
         default=None,
-        help="the regression baseline (default: tools/perf/stage_baseline.json of the repository)",
+        help="the regression baseline (default: tools/perf/stage_baseline.json of the "
+        "repository; --target avr's is tools/perf/avr_baseline.json)",
     )
     t.add_argument(
         "--raw", metavar="DIR", default=None, help="keep each target's raw output lines in DIR"
@@ -172,29 +180,60 @@ def run_targets(args: argparse.Namespace) -> int:
         )
         return EXIT_FAILURE
     root = Path(root_dir)
-    chosen = [targets.TARGETS[name] for name in dict.fromkeys(args.targets)]
+    chosen = [targets.TARGETS[n] for n in dict.fromkeys(args.targets) if n in targets.TARGETS]
+    avr_results: dict = {}
     try:
-        results = targets.measure(
-            root,
-            chosen,
-            build_first=not args.no_build,
-            qemu_timeout_s=args.qemu_timeout or targets.QEMU_TIMEOUT_S,
-            raw_dir=Path(args.raw) if args.raw else None,
-            progress=progress,
+        results = (
+            targets.measure(
+                root,
+                chosen,
+                build_first=not args.no_build,
+                qemu_timeout_s=args.qemu_timeout or targets.QEMU_TIMEOUT_S,
+                raw_dir=Path(args.raw) if args.raw else None,
+                progress=progress,
+            )
+            if chosen
+            else {}
         )
+        if "avr" in args.targets:
+            from graspguide.bench import avr_target
+
+            avr_results = avr_target.measure(
+                root,
+                build_first=not args.no_build,
+                raw_dir=Path(args.raw) if args.raw else None,
+                progress=progress,
+            )
     except targets.TargetError as e:
         return fail("bench", e)
-    print(targets.format_table(results), flush=True)
+    if results:
+        print(targets.format_table(results), flush=True)
+    if avr_results:
+        print(avr_target.format_table(avr_results), flush=True)
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=2) + "\n")
+        Path(args.json).write_text(json.dumps({**results, **avr_results}, indent=2) + "\n")
         progress(f"wrote {args.json}")
-    baseline = Path(args.baseline) if args.baseline else root / targets.BASELINE
+    failed = False
     try:
-        if args.update_baseline:
-            targets.write_baseline(baseline, results)
-            print(f"baseline written: {baseline}")
-        result = targets.check(results, targets.load_baseline(baseline))
+        if results:
+            baseline = Path(args.baseline) if args.baseline else root / targets.BASELINE
+            if args.update_baseline:
+                targets.write_baseline(baseline, results)
+                print(f"baseline written: {baseline}")
+            result = targets.check(results, targets.load_baseline(baseline))
+            print("\n".join(result.lines()), flush=True)
+            failed = result.failed
+        if avr_results:
+            avr_baseline = Path(args.baseline) if args.baseline and not chosen else None
+            avr_baseline = avr_baseline or root / avr_target.BASELINE
+            if args.update_baseline:
+                avr_target.write_baseline(avr_baseline, avr_results)
+                print(f"baseline written: {avr_baseline}")
+            avr_failed, lines = avr_target.check(
+                avr_results, avr_target.load_baseline(avr_baseline)
+            )
+            print("\n".join(lines), flush=True)
+            failed = failed or avr_failed
     except targets.TargetError as e:
         return fail("bench", e)
-    print("\n".join(result.lines()), flush=True)
-    return EXIT_FAILURE if result.failed else EXIT_OK
+    return EXIT_FAILURE if failed else EXIT_OK
