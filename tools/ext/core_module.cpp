@@ -42,7 +42,7 @@ using Axis3 = std::array<double, 3>;
 inline gg::Status status_at(int i) { return static_cast<gg::Status>(i); }
 
 constexpr const char* decomposition_name(gg::Decomposition d) {
-  return d == gg::Decomposition::kQR ? "qr" : "svd";
+  return d == gg::Decomposition::kStructured ? "structured" : "svd";
 }
 
 // A name for an error message: printable ASCII, at most 40 characters (the message
@@ -86,7 +86,8 @@ constexpr gg::Policy kPolicies[] = {gg::Policy::kF, gg::Policy::kFperp};
 constexpr gg::Mode kModes[] = {gg::Mode::kC, gg::Mode::kV};
 constexpr gg::ConstraintModel kModels[] = {
     gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal, gg::ConstraintModel::kNone};
-constexpr gg::Decomposition kDecompositions[] = {gg::Decomposition::kQR, gg::Decomposition::kSVD};
+constexpr gg::Decomposition kDecompositions[] = {gg::Decomposition::kStructured,
+                                                  gg::Decomposition::kSVD};
 
 const char* policy_name_fn(gg::Policy p) { return gg::policy_name(p); }
 const char* mode_name_fn(gg::Mode m) { return gg::mode_name(m); }
@@ -97,7 +98,7 @@ struct SceneOptions {
   gg::Policy policy = gg::Policy::kF;
   gg::Mode mode = gg::Mode::kC;
   gg::ConstraintModel constraints = gg::ConstraintModel::kPaper;
-  gg::Decomposition decomposition = gg::Decomposition::kQR;
+  gg::Decomposition decomposition = gg::Decomposition::kStructured;
   int max_iterations = gg::kDefaultMaxIterations;
 };
 
@@ -532,19 +533,17 @@ void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr, const gg::
 
 // One Guidance<T> per instance. Moving posture: every frame sets new contacts (alternately
 // the instance's own and their nudged copy) and runs update(), i.e. contact frames, grasp
-// matrix, decomposition, QP, levels and PWM; the warm start, when enabled, comes from the
-// previous frame as on the device. Fixed posture: only the orientation changes, so a frame
+// structure (or the SVD route's decomposition), QP, levels and PWM. Fixed posture: only the orientation changes, so a frame
 // is the orientation error, alpha and the PWM mapping.
 template <typename T>
 nb::dict time_frames_t(const std::vector<ContactList>& contacts,
                        const std::vector<Wrench>& wrenches, const std::vector<Quat4>& orientations,
                        const std::vector<Axis3>& y_axes, const std::vector<SceneOptions>& options,
-                       bool warm_start, bool fixed_posture, int reps, int batches, int warmup) {
+                       bool fixed_posture, int reps, int batches, int warmup) {
   nb::list ns, status, pwm, lambda, used, iterations, recomputed;
   auto g = std::make_unique<gg::Guidance<T>>();
   for (std::size_t n = 0; n < contacts.size(); ++n) {
     gg::Scene<T> scene = make_scene<T>(contacts[n], y_axes[n], options[n]);
-    scene.solver.warm_start = warm_start;
     const int k = contact_count(contacts[n]);
     gg::FrameResult<T> fr;
     gg::Status s = g->set_scene(scene);
@@ -581,10 +580,6 @@ nb::dict time_frames_t(const std::vector<ContactList>& contacts,
             return std::uint32_t(fr.pwm.duty[0]);
           },
           reps, batches, warmup);
-      // The reported answer is the instance's own contacts, after a previous frame (the
-      // nudged ones): the warm start is in the state the timed frames had.
-      g->set_contacts(moved);
-      g->update(q0, fr);
       g->set_contacts(base);
     }
     s = g->update(q0, fr);
@@ -602,29 +597,28 @@ nb::dict time_frames_t(const std::vector<ContactList>& contacts,
 }
 
 nb::dict time_frames(const InstanceLists& instances, const std::string& scalar,
-                     const std::string& decomposition, bool warm_start, int max_iterations,
-                     bool fixed_posture, int reps, int batches, int warmup) {
+                     const std::string& decomposition, int max_iterations, bool fixed_posture,
+                     int reps, int batches, int warmup) {
   const std::vector<SceneOptions> options =
       instance_options(instances, decomposition, max_iterations);
   const auto& [contacts, wrenches, orientations, y_axes, policies, modes, constraints] = instances;
   check_timing_args(reps, batches, warmup);
   if (is_float_scalar(scalar))
-    return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, warm_start,
-                                fixed_posture, reps, batches, warmup);
-  return time_frames_t<double>(contacts, wrenches, orientations, y_axes, options, warm_start,
-                               fixed_posture, reps, batches, warmup);
+    return time_frames_t<float>(contacts, wrenches, orientations, y_axes, options, fixed_posture,
+                                reps, batches, warmup);
+  return time_frames_t<double>(contacts, wrenches, orientations, y_axes, options, fixed_posture,
+                               reps, batches, warmup);
 }
 
-// The QP alone (step 5 with its fallback chain), on data computed elsewhere (the bench
-// hands every solver the same float64 lambda0, null basis and lambda_des). Cold: no warm
-// start. Warm: the active set of this instance's own previous solution, the best case a
-// tracker frame can give it.
+// The QP alone (step 5 with its fallback chain) on the data every solver of the bench is
+// handed (float64 lambda0, null basis and lambda_des, computed by the reference): the
+// null-space QP of the SVD reference route (projection_qp.h), DAQP's exact problem. The
+// structured route's QP needs the grasp structure instead; time_stages times it.
 template <typename T, int K>
 void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& null_basis,
                const std::vector<double>& lambda_des, gg::ConstraintModel model, int max_iterations,
-               bool warm_start, double violation_rel, int reps, int batches, int warmup,
-               nb::list& ns, nb::list& status, nb::list& lambda, nb::list& used,
-               nb::list& iterations) {
+               double violation_rel, int reps, int batches, int warmup, nb::list& ns,
+               nb::list& status, nb::list& lambda, nb::list& used, nb::list& iterations) {
   constexpr int kVars = 3 * K - 6;
   auto eq = std::make_unique<gg::Equilibrium<T, K>>();
   gg::ForceVec<T, K> des;
@@ -635,38 +629,34 @@ void time_qp_k(const std::vector<double>& lambda0, const std::vector<double>& nu
       eq->null_basis(i, j) = static_cast<T>(null_basis[std::size_t(i) * kVars + j]);
   }
   const T tol = violation_rel > 0 ? static_cast<T>(violation_rel) : gg::Tolerances<T>::kFeasRelTol;
-  auto solve = [&](gg::ConstraintModel wm, std::uint16_t wa, gg::ForceSolution<T, K>& out) {
-    return gg::solve_forces<T, K>(*eq, des, model, max_iterations, wm, wa, out, tol);
+  gg::ForceVec<T, K> out;
+  gg::ConstraintModel model_used = gg::ConstraintModel::kNone;
+  int its = 0;
+  auto solve = [&]() {
+    return gg::solve_forces_svd<T, K>(*eq, des, model, max_iterations, out, model_used, its, tol);
   };
-  gg::ForceSolution<T, K> first;
-  const gg::Status s0 = solve(gg::ConstraintModel::kNone, 0, first);
-  const gg::ConstraintModel warm_model =
-      warm_start && s0 == gg::Status::kOk ? first.used : gg::ConstraintModel::kNone;
-  const std::uint16_t warm_active = warm_start && s0 == gg::Status::kOk ? first.active : 0;
-  gg::ForceSolution<T, K> out;
   const std::vector<double> samples = time_batches(
       [&](int) {
-        const gg::Status s = solve(warm_model, warm_active, out);
-        return std::uint32_t(s) + std::uint32_t(out.iterations);
+        const gg::Status s = solve();
+        return std::uint32_t(s) + std::uint32_t(its);
       },
       reps, batches, warmup);
-  const gg::Status s = solve(warm_model, warm_active, out);
+  const gg::Status s = solve();
   nb::list sample_list, l;
   for (double v : samples) sample_list.append(v);
   ns.append(sample_list);
   status.append(gg::status_name(s));
-  for (int i = 0; i < 3 * K; ++i) l.append(double(out.lambda(i)));
+  for (int i = 0; i < 3 * K; ++i) l.append(double(out(i)));
   lambda.append(s == gg::Status::kOk ? nb::object(l) : nb::none());
-  used.append(s == gg::Status::kOk ? gg::constraint_model_name(out.used) : "");
-  iterations.append(out.iterations);
+  used.append(s == gg::Status::kOk ? gg::constraint_model_name(model_used) : "");
+  iterations.append(its);
 }
 
 nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
                  const std::vector<std::vector<double>>& null_basis,
                  const std::vector<std::vector<double>>& lambda_des,
                  const std::vector<std::string>& models, const std::string& scalar,
-                 int max_iterations, bool warm_start, double violation_rel, int reps, int batches,
-                 int warmup) {
+                 int max_iterations, double violation_rel, int reps, int batches, int warmup) {
   const std::size_t n = lambda0.size();
   check_count(null_basis, n, "null_basis");
   check_count(lambda_des, n, "lambda_des");
@@ -694,19 +684,19 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
     const bool k4 = m == 12;
     if (is_float && k4)
       time_qp_k<float, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                          warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                          violation_rel, reps, batches, warmup, ns, status, lambda,
                           used, iterations);
     else if (is_float)
       time_qp_k<float, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                          warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                          violation_rel, reps, batches, warmup, ns, status, lambda,
                           used, iterations);
     else if (k4)
       time_qp_k<double, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                           warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                           violation_rel, reps, batches, warmup, ns, status, lambda,
                            used, iterations);
     else
       time_qp_k<double, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                           warm_start, violation_rel, reps, batches, warmup, ns, status, lambda,
+                           violation_rel, reps, batches, warmup, ns, status, lambda,
                            used, iterations);
   }
   return timing_result(ns, status, lambda, used, iterations);
@@ -723,71 +713,92 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
   const gg::Contacts<T, K> c = scene.contacts.template leftCols<K>();
   const gg::Vec6<T> wrench = make_wrench<T>(wrench_in);
   auto frames = std::make_unique<gg::ContactFrames<T, K>>();
-  auto eq = std::make_unique<gg::Equilibrium<T, K>>();
-  gg::GraspMat<T, K> g;
   nb::dict d;
   if (gg::contact_frames<T, K>(c, scene.y_axis, *frames) != gg::Status::kOk) return d;
-  const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames->length_scale);
+  gg::ContactFrames<T, K>& fr = *frames;
+  const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, fr.length_scale);
   const gg::Vec3<T> force = wrench.template head<3>();
-  gg::ReducedGraspT<T, K> mt;
-  if (gg::equilibrium<T, K>(*frames, w, o.decomposition, *eq) != gg::Status::kOk) return d;
-  const std::uint8_t relevant = gg::relevance<T, K>(*frames, force);
-  const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq->lambda0, relevant);
-  gg::ForceSolution<T, K> forces;
-  if (gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations, gg::ConstraintModel::kNone,
-                             0, forces) != gg::Status::kOk)
-    return d;
   gg::Quat<T> q;
   gg::unit_quaternion<T>(make_quat<T>(orientation), q);
   const gg::Vec3<T> f_unit = force / force.stableNorm();
-
   auto to_list = [](const std::vector<double>& v) {
     nb::list l;
     for (double x : v) l.append(x);
     return l;
   };
-  gg::ContactFrames<T, K>& fr = *frames;
   d["contact_frames"] = to_list(time_batches(
       [&](int) { return std::uint32_t(gg::contact_frames<T, K>(c, scene.y_axis, fr)); }, reps,
       batches, warmup));
-  // Each route builds only the matrix it decomposes: the reduced M^T (QR) or G (SVD).
-  const bool svd = o.decomposition == gg::Decomposition::kSVD;
-  d["grasp_matrix"] = to_list(time_batches(
-      [&](int) {
-        if (svd) {
+  gg::ForceVec<T, K> lambda;
+  if (o.decomposition == gg::Decomposition::kSVD) {
+    auto eq = std::make_unique<gg::Equilibrium<T, K>>();
+    gg::GraspMat<T, K> g;
+    gg::grasp_matrix<T, K>(fr, g);
+    if (gg::equilibrium_svd<T, K>(g, w, *eq) != gg::Status::kOk) return d;
+    const gg::ForceVec<T, K> des =
+        gg::desired_forces<T, K>(eq->lambda0, gg::relevance<T, K>(fr, force));
+    gg::ConstraintModel used = gg::ConstraintModel::kNone;
+    int its = 0;
+    if (gg::solve_forces_svd<T, K>(*eq, des, o.constraints, o.max_iterations, lambda, used, its) !=
+        gg::Status::kOk)
+      return d;
+    d["structure"] = to_list(time_batches(
+        [&](int) {
           gg::grasp_matrix<T, K>(fr, g);
-          return std::uint32_t(g(0, 0) > T(0));
-        }
-        gg::reduced_grasp_matrix<T, K>(fr, mt);
-        return std::uint32_t(mt(0, 1) > T(0));
-      },
-      reps, batches, warmup));
-  d["decomposition"] = to_list(time_batches(
-      [&](int) {
-        return std::uint32_t(svd ? gg::equilibrium_svd<T, K>(g, w, *eq)
-                                 : gg::equilibrium_qr<T, K>(fr, mt, w, *eq));
-      },
-      reps, batches, warmup));
-  d["relevance"] = to_list(time_batches(
-      [&](int) {
-        const std::uint8_t m = gg::relevance<T, K>(fr, force);
-        const gg::ForceVec<T, K> x = gg::desired_forces<T, K>(eq->lambda0, m);
-        return std::uint32_t(m) + std::uint32_t(x(0) > T(0));
-      },
-      reps, batches, warmup));
-  d["qp"] = to_list(time_batches(
-      [&](int) {
-        return std::uint32_t(gg::solve_forces<T, K>(*eq, des, o.constraints, o.max_iterations,
-                                                    gg::ConstraintModel::kNone, 0, forces));
-      },
-      reps, batches, warmup));
+          return std::uint32_t(gg::equilibrium_svd<T, K>(g, w, *eq));
+        },
+        reps, batches, warmup));
+    d["forces"] = to_list(time_batches(
+        [&](int) {
+          const std::uint8_t m = gg::relevance<T, K>(fr, force);
+          const gg::ForceVec<T, K> x = gg::desired_forces<T, K>(eq->lambda0, m);
+          return std::uint32_t(m) + std::uint32_t(x(0) > T(0));
+        },
+        reps, batches, warmup));
+    d["qp"] = to_list(time_batches(
+        [&](int) {
+          return std::uint32_t(
+              gg::solve_forces_svd<T, K>(*eq, des, o.constraints, o.max_iterations, lambda, used, its));
+        },
+        reps, batches, warmup));
+  } else {
+    auto st = std::make_unique<gg::GraspStructure<T, K>>();
+    if (gg::grasp_structure<T, K>(fr, *st) != gg::Status::kOk) return d;
+    gg::Vec6<T> w_hat = gg::whitened_wrench<T, K>(*st, w);
+    gg::ForceVec<T, K> lambda0 = gg::min_norm_forces<T, K>(*st, w_hat);
+    gg::ForceVec<T, K> start = gg::project_onto_equilibrium<T, K>(
+        *st, w_hat, gg::desired_forces<T, K>(lambda0, gg::relevance<T, K>(fr, force)));
+    gg::ForceSolution<T, K> sol;
+    if (gg::solve_forces<T, K>(fr, *st, w, lambda0, start, o.constraints, o.max_iterations, sol) !=
+        gg::Status::kOk)
+      return d;
+    lambda = sol.lambda;
+    d["structure"] = to_list(time_batches(
+        [&](int) { return std::uint32_t(gg::grasp_structure<T, K>(fr, *st)); }, reps, batches,
+        warmup));
+    d["forces"] = to_list(time_batches(
+        [&](int) {
+          w_hat = gg::whitened_wrench<T, K>(*st, w);
+          lambda0 = gg::min_norm_forces<T, K>(*st, w_hat);
+          const std::uint8_t m = gg::relevance<T, K>(fr, force);
+          start = gg::project_onto_equilibrium<T, K>(*st, w_hat,
+                                                     gg::desired_forces<T, K>(lambda0, m));
+          return std::uint32_t(m) + std::uint32_t(start(0) > T(0));
+        },
+        reps, batches, warmup));
+    d["qp"] = to_list(time_batches(
+        [&](int) {
+          return std::uint32_t(gg::solve_forces<T, K>(fr, *st, w, lambda0, start, o.constraints,
+                                                      o.max_iterations, sol));
+        },
+        reps, batches, warmup));
+  }
   d["levels_pwm"] = to_list(time_batches(
       [&](int) {
         gg::LevelVec<T, K> m;
-        gg::motor_levels<T, K>(forces.lambda, o.policy, m);
+        gg::motor_levels<T, K>(lambda, o.policy, m);
         const gg::Alignment<T> a = gg::alignment<T>(q, f_unit);
-        const gg::Pwm p =
-            gg::pwm_from_levels<T, K>(m, o.mode == gg::Mode::kC ? T(gg::kPwmSpan) : a.alpha);
+        const gg::Pwm p = gg::pwm_from_levels<T, K>(m, gg::pwm_gain(o.mode, a.alpha));
         return std::uint32_t(p.duty[0]);
       },
       reps, batches, warmup));
@@ -842,7 +853,7 @@ NB_MODULE(_core, m) {
   m.attr("POLICIES") = nb::make_tuple("F", "Fperp");
   m.attr("MODES") = nb::make_tuple("C", "V");
   m.attr("CONSTRAINT_MODELS") = nb::make_tuple("paper", "normal", "none");
-  m.attr("DECOMPOSITIONS") = nb::make_tuple("qr", "svd");
+  m.attr("DECOMPOSITIONS") = nb::make_tuple("structured", "svd");
   m.attr("SCALARS") = nb::make_tuple("double", "float");
   m.attr("kPwmMin") = gg::kPwmMin;
   m.attr("kPwmSpan") = gg::kPwmSpan;
@@ -877,7 +888,7 @@ NB_MODULE(_core, m) {
 
   m.def("solve", &solve, "contacts"_a, "wrench"_a, "policy"_a = "F", "mode"_a = "C",
         "constraints"_a = "paper", "orientation"_a = Quat4{1.0, 0.0, 0.0, 0.0},
-        "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "qr",
+        "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "structured",
         "max_iterations"_a = gg::kDefaultMaxIterations,
         (std::string("Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
                      "orientation in one call).\n\n"
@@ -885,7 +896,7 @@ NB_MODULE(_core, m) {
                      "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
                      "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "
                      "'normal' | 'none'; orientation: [w, x, y, z] hand -> world; y_axis: y_O in "
-                     "the hand frame; scalar 'double' | 'float'; decomposition 'qr' | 'svd'; "
+                     "the hand frame; scalar 'double' | 'float'; decomposition 'structured' | 'svd'; "
                      "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
          kResultDoc)
             .c_str());
@@ -912,7 +923,7 @@ NB_MODULE(_core, m) {
                          "return a status name ('ok' or the error; on error nothing changes).")
       .def(nb::init<>())
       .def("set_scene", &PyGuidance::set_scene, "contacts"_a, "policy"_a = "F", "mode"_a = "C",
-           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "decomposition"_a = "qr",
+           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "decomposition"_a = "structured",
            "max_iterations"_a = gg::kDefaultMaxIterations,
            "Set the contacts (3 or 4 triples) and the scene's parameters; forces a "
            "recomputation. Returns a status name.")
@@ -927,8 +938,8 @@ NB_MODULE(_core, m) {
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
 
-  m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double", "decomposition"_a = "qr",
-        "warm_start"_a = true, "max_iterations"_a = gg::kDefaultMaxIterations,
+  m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double", "decomposition"_a = "structured",
+        "max_iterations"_a = gg::kDefaultMaxIterations,
         "fixed_posture"_a = false, "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
         "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. instances: "
         "(contacts, wrenches, orientations, y_axes, policies, modes, constraints), one list "
@@ -940,22 +951,23 @@ NB_MODULE(_core, m) {
         "iterations (of the instance's own contacts after a timed-like previous frame), "
         "recomputed (grasp recomputations among the timed and warm-up frames), "
         "frames_per_instance.");
-  m.def("time_stages", &time_stages, "instances"_a, "scalar"_a = "double", "decomposition"_a = "qr",
+  m.def("time_stages", &time_stages, "instances"_a, "scalar"_a = "double", "decomposition"_a = "structured",
         "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
         "Benchmark (graspguide bench): time each stage of a frame (contact_frames, "
-        "grasp_matrix, decomposition, relevance (with desired forces), qp (solve_forces, "
-        "cold), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns one "
+        "structure (the whitened grasp matrix; on the SVD route G and its SVD), forces "
+        "(lambda0, relevance, desired forces and the unconstrained optimum), qp (with the "
+        "fallback chain), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns one "
         "dict per instance, stage -> `batches` samples of mean ns per call; empty for an "
         "instance whose grasp is not ok.");
   m.def("time_qp", &time_qp, "lambda0"_a, "null_basis"_a, "lambda_des"_a, "models"_a,
         "scalar"_a = "double", "max_iterations"_a = gg::kDefaultMaxIterations,
-        "warm_start"_a = false, "violation_rel"_a = 0.0, "reps"_a = 64, "batches"_a = 5,
+        "violation_rel"_a = 0.0, "reps"_a = 64, "batches"_a = 5,
         "warmup"_a = 4,
-        "Benchmark (graspguide bench): time the core's QP alone (solve_forces: step 5 with "
-        "the fallback paper -> normal -> none) in a C++ loop, on given float64 data: per "
-        "instance lambda0 (3k), null_basis (3k x (3k-6), row-major, orthonormal columns), "
-        "lambda_des (3k) and the requested model. warm_start: start from this instance's "
-        "own previous active set. violation_rel > 0 replaces kFeasRelTol (feasibility "
+        "Benchmark (graspguide bench): time the SVD reference route's null-space QP alone "
+        "(solve_forces_svd: step 5 with the fallback paper -> normal -> none) in a C++ loop, "
+        "on the float64 data every solver of the bench gets: per instance lambda0 (3k), "
+        "null_basis (3k x (3k-6), row-major, orthonormal columns), lambda_des (3k) and the "
+        "requested model. violation_rel > 0 replaces kFeasRelTol (feasibility "
         "tolerance relative to |lambda0|). Returns a dict: ns, status, lambda, "
         "constraints_used, iterations.");
 }

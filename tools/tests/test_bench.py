@@ -309,7 +309,7 @@ def test_cli_writes_json_and_prints_the_table(tmp_path):
         timeout=120,
     )
     assert p.returncode == 0, p.stderr
-    assert "frame double qr cold" in p.stdout and "daqp" in p.stdout
+    assert "frame double structured" in p.stdout and "daqp" in p.stdout
     data = json.loads(path.read_text())
     assert data["settings"]["k"] == [3] and data["goal"] is None  # the goal needs k=4
     assert all(t["passes"] == 1 for r in data["results"] for t in r["timing"].values())

@@ -2,11 +2,13 @@
 // -icount shift=0 (one instruction per virtual nanosecond). The SysTick counter runs on
 // mps2's 25 MHz reference clock, so one tick is 40 instructions; a calibration loop of a
 // known length checks that ratio at start-up. For every scene of the generated set
-// (stage_scenes.h: random hands and the extremes) it times, in float:
-//   contact frames | grasp matrix | decomposition (QR) | QP | motor mapping
-// then whole frames through Guidance<float>: cold (fresh solver), warm (contacts moved
-// slightly, previous active set), the SVD route, and a fixed-posture frame. One line per
-// scene goes out through semihosting; tools/scripts/qemu_stages.py reads them.
+// (stage_scenes.h: random hands and the extremes) it times, in float, the stages of the
+// structured route:
+//   contact frames | grasp structure (whitened G, rank) | minimum-norm forces, relevance
+//   and the unconstrained optimum | QP | motor mapping
+// then whole frames through Guidance<float>: cold (fresh solver), the SVD reference
+// route, and a fixed-posture frame. One line per scene goes out through semihosting;
+// `graspguide bench --target m4f` (tools/graspguide/bench/targets.py) reads them.
 #include <cstdint>
 
 #include "graspguide.h"
@@ -74,31 +76,34 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   int32_t stage[5] = {-1, -1, -1, -1, -1};
   {
     gg::ContactFrames<T, K> frames;
-    gg::ReducedGraspT<T, K> mt;
-    gg::Equilibrium<T, K> eq;
+    gg::GraspStructure<T, K> st;
     gg::ForceSolution<T, K> forces;
     gg::LevelVec<T, K> levels;
+    gg::Vec6<T> w, w_hat;
+    gg::ForceVec<T, K> lambda0, start;
     uint32_t t0 = ticks();
     gg::Status s = gg::contact_frames<T, K>(contacts, y_axis, frames);
     uint32_t t1 = ticks();
     stage[0] = elapsed(t0, t1);
     if (s == gg::Status::kOk) {
       t0 = ticks();
-      const gg::Vec6<T> w = gg::scaled_wrench<T>(wrench, frames.length_scale);
-      gg::reduced_grasp_matrix<T, K>(frames, mt);
+      s = gg::grasp_structure<T, K>(frames, st);
       t1 = ticks();
       stage[1] = elapsed(t0, t1);
-      t0 = ticks();
-      s = gg::equilibrium_qr<T, K>(frames, mt, w, eq);
-      t1 = ticks();
-      stage[2] = elapsed(t0, t1);
     }
     if (s == gg::Status::kOk) {
       t0 = ticks();
+      w = gg::scaled_wrench<T>(wrench, frames.length_scale);
+      w_hat = gg::whitened_wrench<T, K>(st, w);
+      lambda0 = gg::min_norm_forces<T, K>(st, w_hat);
       const uint8_t relevant = gg::relevance<T, K>(frames, wrench.template head<3>());
-      const gg::ForceVec<T, K> des = gg::desired_forces<T, K>(eq.lambda0, relevant);
-      s = gg::solve_forces<T, K>(eq, des, c.constraints, gg::kDefaultMaxIterations,
-                                 gg::ConstraintModel::kNone, 0, forces);
+      start = gg::project_onto_equilibrium<T, K>(st, w_hat,
+                                                 gg::desired_forces<T, K>(lambda0, relevant));
+      t1 = ticks();
+      stage[2] = elapsed(t0, t1);
+      t0 = ticks();
+      s = gg::solve_forces<T, K>(frames, st, w, lambda0, start, c.constraints,
+                                 gg::kDefaultMaxIterations, forces);
       t1 = ticks();
       stage[3] = elapsed(t0, t1);
     }
@@ -126,9 +131,8 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   scene.constraints = c.constraints;
   scene.policy = c.policy;
   scene.mode = c.mode;
-  scene.solver.warm_start = true;  // only the "warm" frame has a previous active set
-  gg::FrameResult<T> cold, warm, fixed, svd;
-  int32_t t_cold = -1, t_warm = -1, t_fixed = -1, t_svd = -1;
+  gg::FrameResult<T> cold, fixed, svd;
+  int32_t t_cold = -1, t_fixed = -1, t_svd = -1;
   {
     gg::Guidance<T> guide;
     // A scene or wrench the solver refuses is that frame's status (motors off).
@@ -144,13 +148,6 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
       t0 = ticks();
       guide.update(turned, fixed);
       t_fixed = elapsed(t0, ticks());
-      // Contacts moved by 0.1 mm: the grasp part runs again, warm-started.
-      Eigen::Matrix<T, 3, gg::kMaxContacts> moved = scene.contacts;
-      moved.template leftCols<K>().array() += T(1e-4);
-      t0 = ticks();
-      guide.set_contacts(moved);
-      guide.update(q, warm);
-      t_warm = elapsed(t0, ticks());
     }
   }
   {
@@ -167,7 +164,7 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(cold.pwm.duty[i]);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(c.pwm[i]);
   for (int32_t v : stage) line.sp().num(v);
-  line.sp().num(t_cold).sp().num(t_warm).sp().num(t_svd).sp().num(t_fixed);
+  line.sp().num(t_cold).sp().num(t_svd).sp().num(t_fixed);
   line.sp().str(gg::status_name(svd.status));
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(svd.pwm.duty[i]);
   stages::write0(line.end());
@@ -189,8 +186,8 @@ int main() {
   const int32_t loop_b = elapsed(t0, ticks());
   stages::write0(line.str("CAL ").num(empty).sp().num(loop_a).sp().num(loop_b).end());
   stages::write0(line.str("COLUMNS name k status ref_status pwm0 pwm1 pwm2 pwm3 ref0 ref1 ref2 "
-                          "ref3 frames grasp decomposition qp mapping full_cold full_warm "
-                          "full_svd fixed svd_status svd0 svd1 svd2 svd3")
+                          "ref3 frames structure forces qp mapping full_cold full_svd fixed "
+                          "svd_status svd0 svd1 svd2 svd3")
                      .end());
   for (int i = 0; i < stages::kStageSceneCount; ++i) {
     const stages::StageScene& c = stages::kStageScenes[i];

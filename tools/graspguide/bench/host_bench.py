@@ -27,13 +27,14 @@ What is timed (see tools/README.md for the columns):
 
 * ``frame``: Guidance<T> frames with new contacts every frame (the whole grasp part:
   contact frames, grasp matrix, decomposition, QP, levels, PWM), timed in a C++ loop
-  (``_core.time_frames``): float/double, QR/SVD, warm/cold start, and an iteration-limit
+  (``_core.time_frames``): float/double, the structured and the SVD route, and an iteration-limit
   variant. ``fixed``: frames with a fixed posture (orientation only). ``stages``: each
   stage of a frame in its own C++ loop (``_core.time_stages``), to say what dominates.
 * ``py-call``: the same through the existing binding, one Python call per frame, and
   through the public API (``graspguide.core.solver``: ``solve``, ``Guidance``), which
   checks the Python types on top of the binding.
-* ``qp``: the QP alone: the core's ``solve_forces`` in a C++ loop (``_core.time_qp``),
+* ``qp``: the QP alone: the SVD reference route's null-space QP, the very problem the other
+  solvers get, in a C++ loop (``_core.time_qp``; the structured QP is a stage of ``stages``),
   DAQP (its own ``solve_time`` from ``info``, and the Python call), quadprog and OSQP
   (one problem object per shape, reused through ``update()``, warm-started; its own
   ``update + solve + polish`` time) per Python call, and ``scipy.optimize.minimize``
@@ -70,6 +71,9 @@ from graspguide.core import scene_generators as scenes
 from graspguide.exit_codes import EXIT_USAGE, fail
 
 SCHEMA = "graspguide-bench/1"
+
+# Issue 12: a whole k=4 double frame within 0.6 of DAQP's QP alone on the same instances.
+GOAL_RATIO = 0.6
 
 # Noise rule (module docstring): a series is repeated while its pass medians differ by
 # more than 10 % or its pass p99s by more than 25 % (the tail is noisier by nature).
@@ -716,7 +720,7 @@ def _cxx_loop_config(
 
 
 def cxx_frame_config(
-    name, insts, k, scalar, decomposition, warm, max_iterations, fixed, reps, batches
+    name, insts, k, scalar, decomposition, max_iterations, fixed, reps, batches
 ) -> Config:
     def collect(cfg: Config, res: dict[str, Any]) -> None:
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
@@ -726,7 +730,6 @@ def cxx_frame_config(
 
     settings = {
         "decomposition": decomposition,
-        "warm_start": warm,
         "max_iterations": max_iterations,
         "reps": reps,
         "batches": batches,
@@ -742,13 +745,12 @@ def cxx_frame_config(
         _frame_args(insts),
         collect,
         decomposition=decomposition,
-        warm_start=warm,
         max_iterations=max_iterations,
         fixed_posture=fixed,
     )
 
 
-STAGES = ("contact_frames", "grasp_matrix", "decomposition", "relevance", "qp", "levels_pwm")
+STAGES = ("contact_frames", "structure", "forces", "qp", "levels_pwm")
 
 
 def cxx_stages_config(name, insts, k, scalar, decomposition, reps, batches) -> Config:
@@ -762,7 +764,6 @@ def cxx_stages_config(name, insts, k, scalar, decomposition, reps, batches) -> C
 
     settings = {
         "decomposition": decomposition,
-        "qp_warm_start": False,
         "reps": reps,
         "batches": batches,
     }
@@ -789,7 +790,7 @@ def _qp_args(insts: list[Instance]):
     )
 
 
-def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) -> Config:
+def cxx_qp_config(name, insts, k, scalar, violation_rel, reps, batches) -> Config:
     def collect(cfg: Config, res: dict[str, Any]) -> None:
         cfg.serie("cxx", "C++ loop").add(_flatten(res["ns"]))
         cfg.outcomes = [
@@ -798,7 +799,6 @@ def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) ->
         ]
 
     settings = {
-        "warm_start": warm,
         "feas_rel": violation_rel or None,
         "reps": reps,
         "batches": batches,
@@ -813,7 +813,6 @@ def cxx_qp_config(name, insts, k, scalar, warm, violation_rel, reps, batches) ->
         _core.time_qp,
         _qp_args(insts),
         collect,
-        warm_start=warm,
         violation_rel=violation_rel,
     )
 
@@ -836,7 +835,7 @@ def _py_call_config(name, insts, k, scalar, calls, binding, pass_timer) -> Confi
         for key, label in PY_CALL_SERIES.items():
             cfg.serie(key, label).add(samples[key])
 
-    settings = {"decomposition": "qr", "warm_start": False, "calls": calls, "binding": binding}
+    settings = {"decomposition": "structured", "calls": calls, "binding": binding}
     return Config(name, "py-call", "graspguide", k, scalar, settings, run, insts)
 
 
@@ -994,30 +993,27 @@ def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
         frames = [i for i in insts if i.k == k]
         qps = [i for i in frames if i.ok]
         for scalar in ("double", "float"):
-            for dec in ("qr", "svd"):
-                for warm in (True, False):
-                    configs.append(
-                        cxx_frame_config(
-                            f"frame {scalar} {dec} {'warm' if warm else 'cold'}",
-                            frames,
-                            k,
-                            scalar,
-                            dec,
-                            warm,
-                            _core.kDefaultMaxIterations,
-                            False,
-                            reps,
-                            batches,
-                        )
+            for dec in ("structured", "svd"):
+                configs.append(
+                    cxx_frame_config(
+                        f"frame {scalar} {dec}",
+                        frames,
+                        k,
+                        scalar,
+                        dec,
+                        _core.kDefaultMaxIterations,
+                        False,
+                        reps,
+                        batches,
                     )
+                )
         configs.append(
             cxx_frame_config(
-                f"frame double qr cold max_it={LIMITED_ITERATIONS}",
+                f"frame double structured max_it={LIMITED_ITERATIONS}",
                 frames,
                 k,
                 "double",
-                "qr",
-                False,
+                "structured",
                 LIMITED_ITERATIONS,
                 False,
                 reps,
@@ -1031,8 +1027,7 @@ def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
                     frames,
                     k,
                     scalar,
-                    "qr",
-                    True,
+                    "structured",
                     _core.kDefaultMaxIterations,
                     True,
                     reps * 8,
@@ -1040,7 +1035,7 @@ def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
                 )
             )
         for scalar in ("double", "float"):
-            for dec in ("qr", "svd"):
+            for dec in ("structured", "svd"):
                 configs.append(
                     cxx_stages_config(
                         f"stages {scalar} {dec}", frames, k, scalar, dec, reps, batches
@@ -1049,22 +1044,14 @@ def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
         configs.append(py_guidance_config("py Guidance double", frames, k, calls))
         for scalar in ("double", "float"):
             configs.append(py_solve_config(f"py solve {scalar}", frames, k, scalar, calls))
-        configs.append(
-            cxx_qp_config("QP double cold", qps, k, "double", False, 0.0, qp_reps, batches)
-        )
-        configs.append(
-            cxx_qp_config("QP double warm", qps, k, "double", True, 0.0, qp_reps, batches)
-        )
-        configs.append(
-            cxx_qp_config("QP float cold", qps, k, "float", False, 0.0, qp_reps, batches)
-        )
+        configs.append(cxx_qp_config("QP double", qps, k, "double", 0.0, qp_reps, batches))
+        configs.append(cxx_qp_config("QP float", qps, k, "float", 0.0, qp_reps, batches))
         configs.append(
             cxx_qp_config(
-                f"QP double cold feas={LOOSE_FEAS_REL:g}",
+                f"QP double feas={LOOSE_FEAS_REL:g}",
                 qps,
                 k,
                 "double",
-                False,
                 LOOSE_FEAS_REL,
                 qp_reps,
                 batches,
@@ -1169,11 +1156,11 @@ def machine_info(peers: dict[str, Any]) -> dict[str, Any]:
 
 
 def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """Host, k=4, double: this project's median full frame (the shipped settings: QR,
-    cold start, default iteration cap) vs DAQP's median internal solve_time for the QP
-    alone on the same instances (ratio <= 1: the goal is met). Also: the fastest double
+    """Host, k=4, double: this project's median full frame (the shipped settings: the
+    structured route, default iteration cap) vs DAQP's median internal solve_time for the
+    QP alone on the same instances (issue 12's goal: ratio <= GOAL_RATIO). Also: the fastest double
     frame variant, and DAQP's setup + solve."""
-    frame = next((r for r in results if r["k"] == 4 and r["name"] == "frame double qr cold"), None)
+    frame = next((r for r in results if r["k"] == 4 and r["name"] == "frame double structured"), None)
     daqp = next((r for r in results if r["k"] == 4 and r["solver"] == "daqp"), None)
     if frame is None or daqp is None:
         return None
@@ -1191,14 +1178,14 @@ def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
     ds = daqp["timing"]["internal_setup"]["median_ns"]
     b = best["timing"]["cxx"]["median_ns"]
     return {
-        "description": "k=4, double: median full frame (frame double qr cold, C++ "
+        "description": "k=4, double: median full frame (frame double structured, C++ "
         "loop) / DAQP median internal solve_time for the QP alone",
         "frame_median_ns": f,
         "daqp_solve_median_ns": d,
         "daqp_setup_solve_median_ns": ds,
         "ratio": f / d,
         "ratio_vs_setup_solve": f / ds,
-        "met": f <= d,
+        "met": f <= GOAL_RATIO * d,
         "fastest_frame": best["name"],
         "fastest_frame_median_ns": b,
         "fastest_ratio": b / d,
