@@ -14,7 +14,6 @@ from graspguide.cli.common import (
     positive_int,
     signals_interrupt,
 )
-from graspguide.core.solver import DECOMPOSITIONS, DEFAULT_DECOMPOSITION
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, fail
 from graspguide.link.transport import LinkError
 
@@ -88,6 +87,24 @@ examples:
 """
 
 
+class _Routes:
+    """The binding's equilibrium routes (graspguide.core.solver.DECOMPOSITIONS, the default
+    first), looked up only when argparse checks or lists them: every command's parser is
+    built at start-up, and the others do not need the core loaded."""
+
+    def __contains__(self, name: object) -> bool:
+        return name in _routes()
+
+    def __iter__(self):
+        return iter(_routes())
+
+
+def _routes() -> tuple[str, ...]:
+    from graspguide.core.solver import DECOMPOSITIONS
+
+    return DECOMPOSITIONS
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--scalar",
@@ -99,12 +116,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--decomposition",
-        choices=DECOMPOSITIONS,
-        default=DEFAULT_DECOMPOSITION,
-        help=f"equilibrium route (docs/algorithm.md, step 3): {DEFAULT_DECOMPOSITION} "
-        "(default, the firmware's) or "
-        + " or ".join(d for d in DECOMPOSITIONS if d != DEFAULT_DECOMPOSITION)
-        + " (a reference route)",
+        choices=_Routes(),
+        default=None,
+        metavar="ROUTE",  # argparse would list the choices when the parser is built
+        help="equilibrium route (docs/algorithm.md, step 3): %(choices)s; the first is the "
+        "default, the firmware's, the others are reference routes",
     )
     p.add_argument(
         "--max-iterations",
@@ -175,10 +191,9 @@ def _check_engine_options(args) -> None:
             "--engine device computes in the firmware's float; drop --scalar "
             "double (compare with --engine core --scalar float)"
         )
-    if args.decomposition != DEFAULT_DECOMPOSITION:
+    if args.decomposition not in (None, _routes()[0]):
         parser.error(
-            f"--engine device uses the firmware's {DEFAULT_DECOMPOSITION} route; drop "
-            "--decomposition"
+            f"--engine device uses the firmware's {_routes()[0]} route; drop --decomposition"
         )
     if args.max_iterations is not None:
         parser.error("--engine device uses the firmware's QP iteration cap; drop --max-iterations")
