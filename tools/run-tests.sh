@@ -7,7 +7,8 @@
 #      Arduino board compiled on the host against a stub of the Arduino API (1 case)
 #   4. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
 #      pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages and the QEMU
-#      stage counts vs tools/perf/stage_baseline.json (each is 1 case)
+#      stage counts vs tools/perf/stage_baseline.json (each is 1 case), and the
+#      per-frame layer's cycles on the ATmega328P under simavr (1 case)
 #   5. pytest tools/tests        (if that directory exists; its QEMU firmware test
 #      runs the m4f_firmware image of step 4)
 # Output of every stage goes to the console. Test cases are counted from
@@ -233,6 +234,25 @@ if [[ -z $qemu_why ]]; then
         --json "$REPORT_DIR/qemu_stages.json"
 else
     firmware_unavailable "QEMU stage counts (graspguide bench --target m4f --target m7)" "$qemu_why"
+fi
+
+# The per-frame layer on the paper's ATmega328P, built with Debian's gcc-avr (installed by
+# bootstrap.sh with avr-libc and simavr) and run cycle-exact under simavr: cycles against
+# tools/perf/avr_baseline.json, PWM against the float64 reference (1 case).
+avr_why=""
+for tool in avr-g++ avr-size avr-nm; do
+    if [[ -z $avr_why ]] && ! command -v "$tool" >/dev/null 2>&1; then
+        avr_why="$tool not on PATH after tools/bootstrap.sh (Debian's gcc-avr)"
+    fi
+done
+if [[ -z $avr_why && ! -f /usr/include/simavr/sim_avr.h ]]; then
+    avr_why="simavr's headers missing after tools/bootstrap.sh (Debian's libsimavr-dev)"
+fi
+if [[ -z $avr_why ]]; then
+    run_case "AVR per-frame layer within baseline" avr_frame \
+        "$ROOT/.venv/bin/graspguide" bench --target avr --json "$REPORT_DIR/avr_frame.json"
+else
+    firmware_unavailable "AVR per-frame layer (graspguide bench --target avr)" "$avr_why"
 fi
 
 # --- 5. pytest -----------------------------------------------------------------
