@@ -312,7 +312,7 @@ TYPED_TEST(Extremes, NoHeapAllocationAtRunTime) {
   const long before = g_allocations.load();
   for (int n = 0; n < 200; ++n) {
     const auto rs = graspguide_test::random_scene(rng, 3 + n % 2);
-    for (auto d : {gg::Decomposition::kQR, gg::Decomposition::kSVD}) {
+    for (auto d : {gg::Decomposition::kStructured, gg::Decomposition::kSVD}) {
       auto s = graspguide_test::make_scene<T>(rs, gg::ConstraintModel(n % 3), gg::Policy(n % 2),
                                               gg::Mode((n / 2) % 2));
       s.solver.decomposition = d;

@@ -1,9 +1,13 @@
-// The active-set solver on problems with known answers, degenerate vertices, infeasible
-// sets, its iteration cap and warm starts; then KKT checks on random degenerate problems.
+// The SVD route's active-set solver (projection_qp.h) on problems with known answers,
+// degenerate vertices, infeasible sets, its iteration cap and warm starts, then KKT checks
+// on random degenerate problems; the structured route's solver (force_qp.h) on hand scenes:
+// infeasible sets, its iteration cap and rows that depend on the active ones.
 #include <gtest/gtest.h>
 
 #include <random>
 
+#include "common/hand_scenes.h"
+#include "graspguide.h"
 #include "graspguide/projection_qp.h"
 
 namespace gg = graspguide;
@@ -210,3 +214,139 @@ void kkt_on_random_problems(unsigned seed) {
 
 TEST(ProjectionQp, KktHoldsOnRandomDegenerateProblems3x9) { kkt_on_random_problems<3, 9>(1); }
 TEST(ProjectionQp, KktHoldsOnRandomDegenerateProblems6x12) { kkt_on_random_problems<6, 12>(2); }
+
+// ---------------------------------------------------------------- force_qp.h
+
+// A random hand scene ready for project_forces: frames, structure, wrench, the
+// unconstrained optimum and the violation tolerance solve_forces would use.
+template <int K>
+struct ForceProblem {
+  gg::ContactFrames<double, K> f;
+  gg::GraspStructure<double, K> st;
+  gg::Vec6<double> w;
+  gg::ForceVec<double, K> lambda0, start;
+  double violation_tol = 0;
+};
+
+template <int K>
+ForceProblem<K> force_problem(const graspguide_test::RandomScene& s) {
+  ForceProblem<K> p;
+  EXPECT_EQ(
+      (gg::contact_frames<double, K>(s.contacts.leftCols<K>(), gg::Vec3<double>::UnitY(), p.f)),
+      gg::Status::kOk);
+  EXPECT_EQ((gg::grasp_structure<double, K>(p.f, p.st)), gg::Status::kOk);
+  p.w = gg::scaled_wrench<double>(s.wrench, p.f.length_scale);
+  const gg::Vec6<double> w_hat = gg::whitened_wrench<double, K>(p.st, p.w);
+  p.lambda0 = gg::min_norm_forces<double, K>(p.st, w_hat);
+  const auto des =
+      gg::desired_forces<double, K>(p.lambda0, gg::relevance<double, K>(p.f, s.wrench.head<3>()));
+  p.start = gg::project_onto_equilibrium<double, K>(p.st, w_hat, des);
+  p.violation_tol = gg::Tolerances<double>::kFeasRelTol * p.lambda0.norm();
+  return p;
+}
+
+template <int K>
+gg::Status project(const ForceProblem<K>& p, uint16_t constrained, uint16_t fixed, int max_it,
+                   gg::ForceVec<double, K>& lambda, gg::QpInfo& info) {
+  return gg::project_forces<double, K>(
+      p.st, p.start, constrained, fixed, p.violation_tol, gg::Tolerances<double>::kFeasRelTol,
+      gg::Tolerances<double>::kDependentRelTol, max_it, lambda, info);
+}
+
+// Where the SVD route's solver finds no point for a model, project_forces must say
+// kQpInfeasible too rather than return a point.
+TEST(ForceQp, InfeasibleModelsAreReportedLikeTheSvdRoute) {
+  std::mt19937_64 rng(31);
+  int infeasible = 0;
+  for (int n = 0; n < 400; ++n) {
+    const auto s = graspguide_test::random_scene(rng, 3);
+    const auto p = force_problem<3>(s);
+    gg::GraspMat<double, 3> g;
+    gg::grasp_matrix<double, 3>(p.f, g);
+    gg::Equilibrium<double, 3> eq;
+    ASSERT_EQ((gg::equilibrium_svd<double, 3>(g, p.w, eq)), gg::Status::kOk);
+    gg::ForceVec<double, 3> reference, lambda;
+    gg::ConstraintModel used = gg::ConstraintModel::kNone;
+    int iterations = 0;
+    ASSERT_EQ((gg::solve_forces_svd<double, 3>(eq, p.start, gg::ConstraintModel::kPaper, 64,
+                                               reference, used, iterations)),
+              gg::Status::kOk);
+    if (used == gg::ConstraintModel::kPaper) continue;
+    ++infeasible;
+    gg::QpInfo info;
+    EXPECT_EQ(
+        project<3>(p, gg::constrained_bits<3>(gg::ConstraintModel::kPaper), 0, 64, lambda, info),
+        gg::Status::kQpInfeasible)
+        << n;
+  }
+  EXPECT_GT(infeasible, 5);
+}
+
+TEST(ForceQp, IterationCapIsAStatus) {
+  std::mt19937_64 rng(32);
+  int capped = 0;
+  for (int n = 0; n < 200; ++n) {
+    const auto p = force_problem<4>(graspguide_test::random_scene(rng, 4));
+    const uint16_t normal = gg::constrained_bits<4>(gg::ConstraintModel::kNormal);
+    gg::ForceVec<double, 4> lambda, again;
+    gg::QpInfo info, info2;
+    if (project<4>(p, normal, 0, 64, lambda, info) != gg::Status::kOk || info.iterations < 2)
+      continue;
+    ++capped;
+    EXPECT_EQ(project<4>(p, normal, 0, info.iterations - 1, again, info2),
+              gg::Status::kQpIterationLimit);
+    ASSERT_EQ(project<4>(p, normal, 0, info.iterations, again, info2), gg::Status::kOk);
+    EXPECT_EQ(info2.iterations, info.iterations);
+    EXPECT_EQ((again - lambda).norm(), 0.0);
+  }
+  EXPECT_GT(capped, 10);
+}
+
+// With no moment about y_O every x component of the paper model is 0, and the x rows
+// depend on each other (and on equilibrium). Holding them all as equalities meets the last
+// one as a dependent row; leaving them as plain inequalities meets them through degenerate
+// steps. Both must reach the optimum paper_x_rows' split reaches.
+TEST(ForceQp, DependentRowsGiveTheSameOptimum) {
+  std::mt19937_64 rng(33);
+  int checked = 0;
+  for (int n = 0; n < 400; ++n) {
+    auto s = graspguide_test::random_scene(rng, 3 + n % 2);
+    s.wrench.tail<3>().setZero();
+    const auto check = [&](auto k_tag) {
+      constexpr int K = decltype(k_tag)::value;
+      const auto p = force_problem<K>(s);
+      uint16_t fixed = 0, implied = 0;
+      ASSERT_EQ((gg::paper_x_rows<double, K>(p.f, p.w, p.violation_tol, fixed, implied)),
+                gg::Status::kOk);
+      ASSERT_NE(implied, 0);
+      const uint16_t paper = gg::constrained_bits<K>(gg::ConstraintModel::kPaper);
+      gg::ForceVec<double, K> split, all_fixed, plain;
+      gg::QpInfo i1, i2, i3;
+      const gg::Status s1 =
+          project<K>(p, static_cast<uint16_t>(paper & ~implied), fixed, 64, split, i1);
+      const gg::Status s2 =
+          project<K>(p, paper, static_cast<uint16_t>(fixed | implied), 64, all_fixed, i2);
+      const gg::Status s3 = project<K>(p, paper, 0, 64, plain, i3);
+      EXPECT_EQ(s2, s1) << n;
+      EXPECT_EQ(s3, s1) << n;
+      if (s1 != gg::Status::kOk) return;
+      ++checked;
+      // Of the k x rows held as equalities, the last one met depends on those before it
+      // and is never added.
+      EXPECT_EQ(__builtin_popcount(i2.active & gg::axis_bits<K>(0)), K - 1) << n;
+      const double scale = 1 + split.norm();
+      if (s2 == gg::Status::kOk) {
+        EXPECT_LT((all_fixed - split).norm(), 1e-8 * scale) << n;
+      }
+      if (s3 == gg::Status::kOk) {
+        EXPECT_LT((plain - split).norm(), 1e-8 * scale) << n;
+      }
+      for (int i = 0; i < K; ++i) EXPECT_NEAR(split(3 * i), 0.0, 1e-9 * scale) << n;
+    };
+    if (s.k == 3)
+      check(std::integral_constant<int, 3>());
+    else
+      check(std::integral_constant<int, 4>());
+  }
+  EXPECT_GT(checked, 50);
+}
