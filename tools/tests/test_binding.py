@@ -169,7 +169,7 @@ def test_defaults_match_explicit_arguments():
         orientation=[1, 0, 0, 0],
         y_axis=[0, 1, 0],
         scalar="double",
-        decomposition="qr",
+        decomposition="structured",
         max_iterations=64,
     )
     assert a == b
@@ -228,7 +228,7 @@ def test_max_iterations_and_decomposition():
     # [0, 0, -1] on this hand: paper is infeasible, the solver needs several changes.
     r = _core.solve(HAND3, [0, 0, -1.0, 0, 0, 0], max_iterations=1)
     assert r["status"] == "qp_iteration_limit"
-    qr = _core.solve(HAND4, PURE_F, orientation=Q_TILT, decomposition="qr")
+    qr = _core.solve(HAND4, PURE_F, orientation=Q_TILT, decomposition="structured")
     svd = _core.solve(HAND4, PURE_F, orientation=Q_TILT, decomposition="svd")
     assert qr["status"] == svd["status"] == "ok"
     assert np.allclose(qr["lambda"], svd["lambda"], rtol=0, atol=1e-9)
@@ -318,7 +318,7 @@ def test_weird_values_never_crash():
 
         contacts = [pick(3) for _ in range(k)]
         for scalar in ("double", "float"):
-            for decomposition in ("qr", "svd"):
+            for decomposition in ("structured", "svd"):
                 r = _core.solve(
                     contacts,
                     pick(6),

@@ -170,8 +170,8 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
     detail::projector_column<T, K>(st, j, v);
     const T z_norm = rows.split(v, d, z, coeff);
-    // Implied by the rows already held (the last x of a no-moment paper scene is): its
-    // value is already zero up to rounding, and a step along noise would be wrong.
+    // Fixed by equilibrium and the rows already held: a step along noise would be wrong.
+    // The row stays a constraint, so a value other than zero is still caught below.
     if (!(z_norm > dependent_tol)) continue;
     lambda.noalias() -= (lambda(j) / (z_norm * z_norm)) * z;
     lambda(j) = T(0);
@@ -249,13 +249,12 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
 // What the paper model can decide before iterating, from the moment about y_O (the
 // budget b = tau . y_O = sum_i c_i lambda_ix): kQpInfeasible when b is negative beyond the
 // tolerance; otherwise, when b is zero within it, `fixed` gets the x rows it forces to
-// zero, all but the one of the contact with the largest c_i, and `implied` that one:
-// equilibrium then holds it at b / c_i >= -violation_tol by itself, so it is not a
-// constraint to check (in float, its rounding could only pass for a violation).
+// zero, all but the one of the contact with the largest c_i, which equilibrium then holds
+// at b / c_i by itself (it stays an ordinary constraint, checked like any other).
 template <typename T, int K>
 Status paper_x_rows(const ContactFrames<T, K>& frames, const Vec6<T>& w, T violation_tol,
-                    uint16_t& fixed, uint16_t& implied) {
-  fixed = implied = 0;
+                    uint16_t& fixed) {
+  fixed = 0;
   if (frames.fallback_mask != 0) return Status::kOk;  // a fallback x is not in the identity
   int largest = 0;
   for (int i = 1; i < K; ++i)
@@ -263,9 +262,7 @@ Status paper_x_rows(const ContactFrames<T, K>& frames, const Vec6<T>& w, T viola
   const T budget = w.template tail<3>().dot(frames.axis);
   const T slack = violation_tol * frames.x_moment[largest];
   if (budget < -slack) return Status::kQpInfeasible;
-  if (budget > slack) return Status::kOk;
-  fixed = static_cast<uint16_t>(axis_bits<K>(0) & ~(1u << (3 * largest)));
-  implied = static_cast<uint16_t>(1u << (3 * largest));
+  if (budget <= slack) fixed = static_cast<uint16_t>(axis_bits<K>(0) & ~(1u << (3 * largest)));
   return Status::kOk;
 }
 
@@ -282,14 +279,14 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
   for (int model = static_cast<int>(requested); model <= static_cast<int>(ConstraintModel::kNone);
        ++model) {
     const auto m = static_cast<ConstraintModel>(model);
-    uint16_t fixed = 0, implied = 0;
+    uint16_t fixed = 0;
     if (m == ConstraintModel::kPaper &&
-        paper_x_rows<T, K>(frames, w, violation_tol, fixed, implied) == Status::kQpInfeasible)
+        paper_x_rows<T, K>(frames, w, violation_tol, fixed) == Status::kQpInfeasible)
       continue;
     QpInfo info;
-    const Status s = project_forces<T, K>(
-        st, start, static_cast<uint16_t>(constrained_bits<K>(m) & ~implied), fixed, violation_tol,
-        feasibility_rel, T(Tolerances<T>::kDependentRelTol), max_iterations, out.lambda, info);
+    const Status s = project_forces<T, K>(st, start, constrained_bits<K>(m), fixed, violation_tol,
+                                          feasibility_rel, T(Tolerances<T>::kDependentRelTol),
+                                          max_iterations, out.lambda, info);
     out.iterations += info.iterations;
     if (s == Status::kQpInfeasible) continue;
     if (s != Status::kOk) return s;
