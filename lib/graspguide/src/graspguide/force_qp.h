@@ -249,12 +249,13 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
 // What the paper model can decide before iterating, from the moment about y_O (the
 // budget b = tau . y_O = sum_i c_i lambda_ix): kQpInfeasible when b is negative beyond the
 // tolerance; otherwise, when b is zero within it, `fixed` gets the x rows it forces to
-// zero, all but the one of the contact with the largest c_i, which equilibrium then holds
-// at b / c_i by itself (it stays an ordinary constraint, checked like any other).
+// zero, all but the one of the contact with the largest c_i, `implied`, which equilibrium
+// then holds at b / c_i by itself (it stays an ordinary constraint, checked like any other:
+// in a hand whose plane contains y_O equilibrium fixes every x, and not always at zero).
 template <typename T, int K>
 Status paper_x_rows(const ContactFrames<T, K>& frames, const Vec6<T>& w, T violation_tol,
-                    uint16_t& fixed) {
-  fixed = 0;
+                    uint16_t& fixed, uint16_t& implied) {
+  fixed = implied = 0;
   if (frames.fallback_mask != 0) return Status::kOk;  // a fallback x is not in the identity
   int largest = 0;
   for (int i = 1; i < K; ++i)
@@ -262,7 +263,10 @@ Status paper_x_rows(const ContactFrames<T, K>& frames, const Vec6<T>& w, T viola
   const T budget = w.template tail<3>().dot(frames.axis);
   const T slack = violation_tol * frames.x_moment[largest];
   if (budget < -slack) return Status::kQpInfeasible;
-  if (budget <= slack) fixed = static_cast<uint16_t>(axis_bits<K>(0) & ~(1u << (3 * largest)));
+  if (budget <= slack) {
+    implied = static_cast<uint16_t>(1u << (3 * largest));
+    fixed = static_cast<uint16_t>(axis_bits<K>(0) & ~implied);
+  }
   return Status::kOk;
 }
 
@@ -279,9 +283,9 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
   for (int model = static_cast<int>(requested); model <= static_cast<int>(ConstraintModel::kNone);
        ++model) {
     const auto m = static_cast<ConstraintModel>(model);
-    uint16_t fixed = 0;
+    uint16_t fixed = 0, implied = 0;
     if (m == ConstraintModel::kPaper &&
-        paper_x_rows<T, K>(frames, w, violation_tol, fixed) == Status::kQpInfeasible)
+        paper_x_rows<T, K>(frames, w, violation_tol, fixed, implied) == Status::kQpInfeasible)
       continue;
     QpInfo info;
     const Status s = project_forces<T, K>(st, start, constrained_bits<K>(m), fixed, violation_tol,
