@@ -44,9 +44,7 @@ from graspguide.link.codec import (
     COBS_MAX_CODE,
     CRC,
     CRC16_INIT,
-    FRAME_OVERHEAD,
     HEADER,
-    MAX_RAW_FRAME_SIZE,
     Accept,
     FrameParser,
     ParseEvent,
@@ -119,6 +117,8 @@ _TELEMETRY_ID = int(MsgId.TELEMETRY)
 # A whole decoded TELEMETRY frame (header, payload, CRC) in one unpack.
 _TELEMETRY_FRAME = struct.Struct(HEADER.format + Telemetry.STRUCT.format[1:] + CRC.format[1:])
 _TELEMETRY_BODY = _TELEMETRY_FRAME.size - CRC.size
+_TELEMETRY_WIRE = _TELEMETRY_FRAME.size + 1
+assert _TELEMETRY_WIRE < COBS_MAX_CODE  # one COBS block: _telemetry_frame relies on it
 # _telemetry_frame assigns the flattened values by position: a schema change must show here.
 assert [spec.name for spec in Telemetry.FIELDS] == [
     "host_time_us",
@@ -176,31 +176,25 @@ def encode_pose_fast(seq: int, t_us: int, quat: Sequence[float]) -> bytes | None
     return blocks + _POSE_TAIL_COBS + _cobs_crc(crc) + b"\0"
 
 
-def _cobs_decode_short(enc: bytes) -> bytearray | None:
-    """cobs_decode of a frame shorter than one full COBS block (every frame the device
-    sends): the data with each code byte but the first turned into the zero it stands
-    for; None where cobs_decode raises (a 0x00 inside, a block past the end)."""
+def _telemetry_frame(enc: bytes) -> tuple[int, Telemetry] | None:
+    """(seq, TELEMETRY) of one frame off the wire (COBS, no delimiter) without the generic
+    decoders; None for anything else: another message or version, a broken COBS block, a
+    bad CRC, an enum value not in its set (the generic path then counts it)."""
     n = len(enc)
-    if not n or n >= COBS_MAX_CODE or 0 in enc:
+    # COBS adds one byte to a frame this short; version and id are its first block's.
+    if n != _TELEMETRY_WIRE or enc[0] < 3 or enc[2] != _TELEMETRY_ID or 0 in enc:
         return None
-    buf = bytearray(enc)
-    j = buf[0]
+    # COBS decoding of a frame shorter than one full block: each code byte but the first
+    # becomes the zero it stands for.
+    raw = bytearray(enc)
+    j = raw[0]
     while j < n:
-        code = buf[j]
-        buf[j] = 0
+        code = raw[j]
+        raw[j] = 0
         j += code
     if j != n:
         return None
-    del buf[0]
-    return buf
-
-
-def _telemetry_frame(raw: bytearray) -> tuple[int, Telemetry] | None:
-    """(seq, TELEMETRY) of a decoded frame without the generic field walk; None for
-    anything else: another message or version, a bad CRC, an enum value not in its set
-    (the generic path then counts it)."""
-    if len(raw) != _TELEMETRY_FRAME.size or raw[1] != _TELEMETRY_ID:
-        return None
+    del raw[0]
     (
         version,
         _,
@@ -461,9 +455,9 @@ class _Received(NamedTuple):
     t_rx: float
 
 
-# _Received without its Python-level __new__ (one per frame received).
-def _received(seq: int, message: Any, t_rx: float, _make=tuple.__new__) -> _Received:
-    return _make(_Received, (seq, message, t_rx))
+# _Received(seq, message, t_rx) without its Python-level __new__ (one per frame received):
+# _new_received(_Received, (seq, message, t_rx)).
+_new_received = tuple.__new__
 
 
 def _pose_answer(seq: int, t_us: int) -> Callable[[_Received], bool]:
@@ -512,6 +506,10 @@ class DeviceClient:
         self.bytes_received = 0
         self.frames_received = 0
         self.undecodable_frames = 0  # CRC passed but a field value is not in its set
+        # Good TELEMETRY frames of the fast path: counted here, not in the parser's
+        # counts (a dict keyed by an enum costs a Python-level hash per frame), and
+        # added to them in parse_counts.
+        self._fast_telemetry_frames = 0
         self.device_frames_lost = 0
         self._last_device_seq: int | None = None
         if send_idle_delimiter:
@@ -537,6 +535,7 @@ class DeviceClient:
     @property
     def parse_counts(self) -> dict[str, int]:
         counts = {e.value: n for e, n in self._parser.counts.items()}
+        counts[ParseEvent.FRAME.value] += self._fast_telemetry_frames
         counts["undecodable"] = self.undecodable_frames
         return counts
 
@@ -567,33 +566,24 @@ class DeviceClient:
                 return n
             self._push_bytes(data[: end + 1], now)
             pos = end + 1
-        while pos < n:
-            end = data.find(0, pos)
-            if end < 0:
-                self._push_bytes(data[pos:], now)  # a partial frame: parser state
-                break
-            if end > pos and not self._fast_frame(data[pos:end], now):
-                self._push_bytes(data[pos : end + 1], now)
-            pos = end + 1
+        pieces = (data[pos:] if pos else data).split(b"\0")
+        partial = pieces.pop()  # after the last delimiter: a frame still coming, or b""
+        fast_frame = self._fast_frame
+        for enc in pieces:
+            if enc and not fast_frame(enc, now):
+                self._push_bytes(enc + b"\0", now)
+        if partial:
+            self._push_bytes(partial, now)  # parser state
         return n
 
     def _fast_frame(self, enc: bytes, now: float) -> bool:
         """A complete, well-formed frame handled without the byte-wise parser; False when
         the parser must see it (anything unusual), with nothing changed."""
-        if len(enc) < COBS_MAX_CODE:
-            raw = _cobs_decode_short(enc)
-            if raw is None:
-                return False
-        else:
-            try:
-                raw = bytearray(cobs_decode(enc))
-            except BadCobsError:
-                return False
-        fast = _telemetry_frame(raw)
+        fast = _telemetry_frame(enc)
         if fast is not None:
             # The common case (a study's ~10^6 TELEMETRY), _accept inlined.
             seq, msg = fast
-            self._parser.counts[ParseEvent.FRAME] += 1
+            self._fast_telemetry_frames += 1
             self.frames_received += 1
             last = self._last_device_seq
             if last is not None:
@@ -601,17 +591,14 @@ class DeviceClient:
                 if gap < 0x8000:
                     self.device_frames_lost += gap
             self._last_device_seq = seq
-            self._inbox.append(_received(seq, msg, now))
+            self._inbox.append(_new_received(_Received, (seq, msg, now)))
             return True
-        if not FRAME_OVERHEAD <= len(raw) <= MAX_RAW_FRAME_SIZE:
+        try:
+            raw = cobs_decode(enc)
+        except BadCobsError:
             return False
-        body_len = len(raw) - CRC.size
-        if _crc_hqx(raw[:body_len], CRC16_INIT) != CRC.unpack_from(raw, body_len)[0]:
-            return False
-        version, msg_id, seq = HEADER.unpack_from(raw)
-        if version != PROTOCOL_VERSION:
-            return False
-        event, frame = check_frame(bytes(raw), self._parser.accept)
+        # Anything but a good frame (size, CRC, version, id, length) is the parser's.
+        event, frame = check_frame(raw, self._parser.accept)
         if event is not ParseEvent.FRAME:
             return False
         self._parser.counts[ParseEvent.FRAME] += 1
@@ -622,7 +609,7 @@ class DeviceClient:
         except (BadEnumValueError, ProtocolError):
             self.undecodable_frames += 1
             return True
-        self._accept(seq, msg, now)
+        self._accept(frame.seq, msg, now)
         return True
 
     def _accept(self, seq: int, msg: Any, now: float) -> None:
@@ -632,7 +619,7 @@ class DeviceClient:
             if gap < 0x8000:
                 self.device_frames_lost += gap
         self._last_device_seq = seq
-        self._inbox.append(_received(seq, msg, now))
+        self._inbox.append(_Received(seq, msg, now))
 
     def _push_bytes(self, data: bytes, now: float) -> None:
         """The reference path: every byte through the FrameParser."""
