@@ -449,8 +449,9 @@ class VirtualParticipant:
         ``step`` does with the PWM it is given). Validated here, once per telemetry
         (``pwm`` must be k numbers 0..255: NaN, a wrong length or a non-number raise
         ValueError)."""
-        self._need_trial()
-        t = _check_time(t_s)
+        if not self._trial:
+            self._need_trial()
+        t = t_s if type(t_s) is float and t_s - t_s == 0.0 else _check_time(t_s)
         u = self._check_pwm(pwm)
         if not self._unfelt or t != self._unfelt[0]:
             expected = self._unfelt[0] if self._unfelt else None
@@ -475,8 +476,9 @@ class VirtualParticipant:
         :meth:`max_lead` poses ahead of the last felt pose. The result is then bit for
         bit what lockstep ``step`` gives. This is checked, not assumed: an act() whose
         result could depend on a PWM not yet felt raises :class:`FeelLagError`."""
-        self._need_trial()
-        t = _check_time(t_s)
+        if not self._trial:
+            self._need_trial()
+        t = t_s if type(t_s) is float and t_s - t_s == 0.0 else _check_time(t_s)
         if self._t_last is not None and t < self._t_last:
             raise ValueError(f"time went backwards: {t} after {self._t_last}")
         return self._act(t)
@@ -567,8 +569,8 @@ class VirtualParticipant:
         # Fast paths: a list or tuple of k ints (TELEMETRY's) in 0..255, or of k
         # ints/floats in 0..255 (NaN fails the range test).
         if type(pwm) in (list, tuple) and len(pwm) == self._k:
-            u = [float(v) for v in pwm if type(v) is int]
-            if len(u) == self._k and min(pwm) >= 0 and max(pwm) <= 255:
+            u = [float(v) for v in pwm if type(v) is int and 0 <= v <= 255]
+            if len(u) == self._k:
                 return u
             try:
                 u = [float(v) for v in pwm if type(v) is int or type(v) is float]
