@@ -69,6 +69,29 @@ TYPED_TEST(PwmTest, ModesOffLevelAndClamp) {
   EXPECT_EQ(gg::pwm_from_levels(nan_level, 1, T(100)).duty[0], 0);
 }
 
+// A posture's plan: gains on both sides of the limit below which no motor is compared with
+// 255, for levels of every size, give the reference's numbers.
+TYPED_TEST(PwmTest, APlanGivesTheReferenceNumbersOnBothSidesOfItsGainLimit) {
+  using T = TypeParam;
+  const T sets[][4] = {
+      {T(1), T(0.5), T(0.25), T(0)}, {T(0.3), T(0.3), T(0.002), T(0.9)}, {T(3), T(0), T(0), T(0)}};
+  for (const auto& levels : sets) {
+    const gg::PwmPlan<T> plan = gg::plan_pwm(levels, 4);
+    ASSERT_GT(plan.gain_limit, T(0));
+    for (int step = -2000; step <= 2000; ++step) {
+      const T gain = plan.gain_limit * (T(1) + T(step) * T(1e-5));
+      const gg::Pwm p = gg::pwm_from_plan(plan, gain);
+      for (int m = 0; m < 4; ++m) ASSERT_EQ(p.duty[m], as_written(levels[m], gain)) << gain;
+    }
+  }
+  const T none[4] = {T(0), T(0), T(0), T(0)};
+  const gg::PwmPlan<T> off = gg::plan_pwm(none, 4);
+  EXPECT_EQ(off.on, 0);
+  for (int m = 0; m < 4; ++m) EXPECT_EQ(gg::pwm_from_plan(off, T(100)).duty[m], 0);
+  const T inf_level[1] = {std::numeric_limits<T>::infinity()};
+  EXPECT_EQ(gg::pwm_from_levels(inf_level, 1, T(1)).duty[0], 255);
+}
+
 TYPED_TEST(PwmTest, OnlyTheFirstKMotorsAreDriven) {
   using T = TypeParam;
   const T m[4] = {T(0.6), T(0.6), T(0.6), T(0.6)};

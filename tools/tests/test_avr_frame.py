@@ -54,7 +54,7 @@ def test_cycle_counts_are_produced_for_every_part(measured):
                     len(a) for a in avr_target.SPECIAL_ANGLES.values()
                 )
                 assert 0 < s["median"] <= s["max"]
-    for part in ("trial_start", "trial_update", "watchdog"):
+    for part in ("pwm_plan", "trial_start", "trial_update", "watchdog"):
         assert 0 < parts[part]["median"] <= parts[part]["max"]
     # The frame is float arithmetic in software: far more than the bookkeeping around it.
     assert parts["frame k4 V"]["median"] > 10 * parts["watchdog"]["median"]
@@ -84,7 +84,7 @@ def fake_lines(records, cycles=5000, pwm="70 70 70 0", stack=90):
     out = []
     for r in records:
         if r.tag == "S":
-            out.append("S")
+            out.append("S 300")
         elif r.tag == "O":
             out.append("O 1")
         elif r.tag in "QG":

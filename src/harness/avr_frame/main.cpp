@@ -2,7 +2,7 @@
 // fixed-posture frame (error, alpha, PWM), the trial update and the watchdog decision, each
 // on the inputs the host streams in, with the results printed for the host to check.
 // Run by tools/graspguide/bench/avr_target.py through simavr_runner; the stream:
-//   'S' mode:u8 k:u8 f_hat:f32[3] levels:f32[4]  the posture         -> "S"
+//   'S' mode:u8 k:u8 f_hat:f32[3] levels:f32[4]  a posture's PWM plan -> "S cycles"
 //   'Q' wxyz:f32[4]           a frame from a quaternion -> "Q cycles status err alpha pwm0..3"
 //   'G' gravity:f32[3]        a frame from gravity      -> the same, tagged "G"
 //   'C' threshold hold timeout:f32 host_us now_us:u32  trial start -> "C cycles status"
@@ -28,6 +28,7 @@ struct Posture {
   uint8_t k = 4;
   float f_hat[3] = {0, 0, -1};
   float levels[gg::kMaxContacts] = {0, 0, 0, 0};
+  gg::PwmPlan<float> plan;
 } g_posture;
 
 struct FrameIn {
@@ -54,20 +55,25 @@ gg::HostTimeline g_timeline;
 gg::TrialDeadline g_deadline;
 gg::PoseWatchdog g_watchdog(kStaleTimeoutUs);
 
+// Once per posture: which motors are on and their doubled levels.
+__attribute__((noinline)) void plan_posture() {
+  g_posture.plan = gg::plan_pwm(g_posture.levels, g_posture.k);
+}
+
 __attribute__((noinline)) void frame_from_quaternion() {
   g_out.status = gg::alignment_from_quaternion(g_in.wxyz, g_posture.f_hat, g_out.alignment);
-  g_out.pwm = g_out.status == gg::Status::kOk
-                  ? gg::pwm_from_levels(g_posture.levels, g_posture.k,
-                                        gg::pwm_gain(g_posture.mode, g_out.alignment.alpha))
-                  : gg::Pwm{};
+  g_out.pwm =
+      g_out.status == gg::Status::kOk
+          ? gg::pwm_from_plan(g_posture.plan, gg::pwm_gain(g_posture.mode, g_out.alignment.alpha))
+          : gg::Pwm{};
 }
 
 __attribute__((noinline)) void frame_from_gravity() {
   g_out.status = gg::alignment_from_gravity(g_in.gravity, g_posture.f_hat, g_out.alignment);
-  g_out.pwm = g_out.status == gg::Status::kOk
-                  ? gg::pwm_from_levels(g_posture.levels, g_posture.k,
-                                        gg::pwm_gain(g_posture.mode, g_out.alignment.alpha))
-                  : gg::Pwm{};
+  g_out.pwm =
+      g_out.status == gg::Status::kOk
+          ? gg::pwm_from_plan(g_posture.plan, gg::pwm_gain(g_posture.mode, g_out.alignment.alpha))
+          : gg::Pwm{};
 }
 
 __attribute__((noinline)) void trial_start() {
@@ -119,7 +125,8 @@ int main() {
         g_posture.k = channel::read<uint8_t>();
         channel::read_bytes(g_posture.f_hat, sizeof g_posture.f_hat);
         channel::read_bytes(g_posture.levels, sizeof g_posture.levels);
-        channel::put("S");
+        channel::put("S ");
+        counted(plan_posture);
         break;
       case 'Q':
         channel::read_bytes(g_in.wxyz, sizeof g_in.wxyz);

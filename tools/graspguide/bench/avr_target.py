@@ -10,6 +10,7 @@ marks around each measured call. Measured, each on its own:
 
 * ``frame``: a fixed-posture frame from a quaternion: gravity's row of R(q), the error
   angle, alpha and the PWM of k motors (k = 3 and 4, modes C and V);
+* ``pwm_plan``: once per posture, which motors are on and their doubled levels;
 * ``frame_from_gravity``: the same from a gravity vector measured in the hand (an IMU);
 * ``trial_start``, ``trial_update`` (the host timeline and the trial state machine) and
   ``watchdog`` (the pose watchdog and the trial's device-clock deadline).
@@ -422,10 +423,12 @@ def parse(lines: Sequence[str], records: Sequence[Record]) -> Measured:
         fields = line.split()
         if not fields or fields[0] != rec.tag:
             raise AvrBadOutput(f"line {lineno}: {line!r} answers a {rec.tag!r} record")
+        cycles = _int(fields[1], lineno) if len(fields) > 1 else -1
+        if cycles < 0:
+            raise AvrBadOutput(f"line {lineno}: {line!r} has no cycle count")
         if rec.tag == "S":
-            continue
-        cycles = _int(fields[1], lineno)
-        if rec.tag == "O":
+            m.add("pwm_plan", cycles)
+        elif rec.tag == "O":
             m.overhead = cycles
         elif rec.tag in "QG":
             if len(fields) != 9:

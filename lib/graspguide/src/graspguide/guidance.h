@@ -107,6 +107,7 @@ class Guidance {
     if (!has_wrench_) return Status::kZeroWrench;
     if (dirty_) {
       grasp_status_ = scene_.k == 3 ? solve_k<3>() : solve_k<4>();
+      pwm_plan_ = plan_pwm<T>(grasp_.levels.data(), kMaxContacts);
       dirty_ = false;
       out.recomputed = true;
     }
@@ -115,8 +116,7 @@ class Guidance {
     const Alignment<T> a = alignment_to_gravity<T>(grasp_.force_unit.data(), gravity);
     out.error_deg = a.error_deg;
     out.alpha = a.alpha;
-    out.pwm =
-        pwm_from_levels<T>(grasp_.levels.data(), kMaxContacts, pwm_gain(scene_.mode, a.alpha));
+    out.pwm = pwm_from_plan(pwm_plan_, pwm_gain(scene_.mode, a.alpha));
     return Status::kOk;
   }
 
@@ -136,6 +136,7 @@ class Guidance {
   bool dirty_ = true;
   Status grasp_status_ = Status::kOk;
   GraspSolution<T> grasp_;
+  PwmPlan<T> pwm_plan_;  // the posture's part of the PWM
 };
 
 }  // namespace graspguide
