@@ -890,14 +890,18 @@ class DeviceClient:
         return m
 
     def pose_batch(
-        self, poses: Sequence[tuple[int, Sequence[float]]], timeout: float | None = None
+        self,
+        poses: Sequence[tuple[int, Sequence[float]]],
+        timeout: float | None = None,
+        on_written: Callable[[], None] | None = None,
     ) -> list[Any]:
         """Several POSEs (``(t_us, quat)``, no contacts) written at once, then their
         answers in order: the TELEMETRY of each, or the ERROR that refused it (e.g.
         not_allowed_in_state for the POSEs that followed the one ending a trial). The
         device handles them one after the other exactly as if each had been sent after
         the previous answer; a TRIAL_RESULT lands in :attr:`trial_results`. ``timeout``
-        applies to each answer."""
+        applies to each answer. ``on_written()`` is called once the POSEs are written,
+        before their answers are read: work done there overlaps the device's."""
         wires: list[bytes] = []
         seqs: list[int] = []
         times: list[int] = []
@@ -915,6 +919,8 @@ class DeviceClient:
         for _ in seqs:
             self._seq.next()
         self._write(b"".join(wires))
+        if on_written is not None:
+            on_written()
         out: list[Any] = []
         inbox = self._inbox
         for seq, t_us in zip(seqs, times):

@@ -200,8 +200,9 @@ class PoseLoop:
     on_frame: Callable[[Frame], None] | None = None
     # Once per batch: (index of its first pose, the poses sent, their TELEMETRY), for
     # the frames received (the batch's up to the one that ended the trial, or up to
-    # the one the loop failed on). Called after their on_frame and before the next
-    # batch is sent, so a caller batching its writes has everything written in order.
+    # the one the loop failed on); in order, after their on_frame, all before run()
+    # returns or raises. A batch's call comes once the next batch's POSEs are written
+    # (pipelined), so what it does (the frame CSV) overlaps the device's work.
     on_frames: Callable[[int, list[Stamped], list[Any]], None] | None = None
     sent: int = field(default=0, init=False)
     frames: int = field(default=0, init=False)
@@ -220,14 +221,18 @@ class PoseLoop:
             return None  # too late for this sample: skip it, keep the pace
         return host_time_us()
 
-    def _send(self, stamped: list[Stamped]) -> list[Any] | None:
+    def _send(self, stamped: list[Stamped], on_written: Callable[[], None]) -> list[Any] | None:
         """The answers to the stamped poses, or None when the device refused the only one
-        because the trial had already ended (its TRIAL_RESULT is queued)."""
+        because the trial had already ended (its TRIAL_RESULT is queued). ``on_written``
+        is called once the poses are written (pipelined) or before (one pose)."""
         client = self.client
         if len(stamped) > 1:
-            answers = client.pose_batch([(t_us, q) for _, t_us, q, _ in stamped])
+            answers = client.pose_batch(
+                [(t_us, q) for _, t_us, q, _ in stamped], on_written=on_written
+            )
             self.sent += len(stamped)
             return answers
+        on_written()
         _, t_us, quat, contacts = stamped[0]
         try:
             tel = client.pose(t_us, quat, contacts)
@@ -253,70 +258,81 @@ class PoseLoop:
         t_s = 0.0
         last_tel = None
         ended = False
-        while not ended:
-            batch = poses.next_batch(index)
-            if not batch:
-                break
-            if self.virtual_clock:  # _stamp's arithmetic for the whole batch
-                base_us = self.base_us
-                stamped = [
-                    (t, (base_us + int(round(t * 1e6))) & 0xFFFFFFFF, quat, contacts)
-                    for t, quat, contacts in batch
-                ]
-                if self.on_send is not None:
-                    for t, t_us, quat, contacts in stamped:
-                        self.on_send(t_us, t, quat, contacts)
-            else:
-                stamped = []
-                for t, quat, contacts in batch:
-                    t_us = self._stamp(t)
-                    if t_us is None:
-                        self.late_skipped += 1
-                        continue
+        # The frames of the batch before, for on_frames once the next batch is written.
+        pending: list[tuple[int, list[Stamped], list[Any]]] = []
+
+        def write_pending() -> None:
+            while pending:
+                assert on_frames is not None  # only then is anything pending
+                on_frames(*pending.pop(0))
+
+        try:
+            while not ended:
+                batch = poses.next_batch(index)
+                if not batch:
+                    break
+                if self.virtual_clock:  # _stamp's arithmetic for the whole batch
+                    base_us = self.base_us
+                    stamped = [
+                        (t, (base_us + int(round(t * 1e6))) & 0xFFFFFFFF, quat, contacts)
+                        for t, quat, contacts in batch
+                    ]
                     if self.on_send is not None:
-                        self.on_send(t_us, t, quat, contacts)
-                    stamped.append((t, t_us, quat, contacts))
-            if not stamped:
-                continue
-            answers = self._send(stamped)
-            if answers is None:
-                ended = True
-                break
-            received = 0
-            try:
-                for j, ((t_s, t_us, quat, contacts), tel) in enumerate(zip(stamped, answers)):
-                    if isinstance(tel, Error):
-                        raise PoseLoopError(
-                            f"the device refused pose {index + j} "
-                            f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
-                        )
-                    self.frames += 1
-                    received = j + 1
-                    last_tel = tel
-                    if on_frame is not None:
-                        on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
-                    running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
-                    if not running or (lockstep and client.trial_results):
-                        # The trial ended with this pose; the rest of the batch was refused.
-                        for rest in answers[j + 1 :]:
-                            if not isinstance(rest, Error):
-                                raise PoseLoopError(
-                                    "the device answered a POSE after the trial ended"
-                                )
-                        ended = True
-                        break
-                    if limit_s is not None:
-                        if t_s > limit_s:
-                            raise TrialOverrun(t_s, time.monotonic() - self.wall0, False)
-                    elif self.wall_limit_s is not None and not self.virtual_clock:
-                        wall = time.monotonic() - self.wall0
-                        if wall > self.wall_limit_s:
-                            raise TrialOverrun(t_s, wall, True)
-                    feel(index + j, t_s, tel.pwm)
-            finally:
-                if on_frames is not None and received:
-                    on_frames(index, stamped[:received], answers[:received])
-            index += len(batch)
+                        for t, t_us, quat, contacts in stamped:
+                            self.on_send(t_us, t, quat, contacts)
+                else:
+                    stamped = []
+                    for t, quat, contacts in batch:
+                        t_us = self._stamp(t)
+                        if t_us is None:
+                            self.late_skipped += 1
+                            continue
+                        if self.on_send is not None:
+                            self.on_send(t_us, t, quat, contacts)
+                        stamped.append((t, t_us, quat, contacts))
+                if not stamped:
+                    continue
+                answers = self._send(stamped, write_pending)
+                if answers is None:
+                    ended = True
+                    break
+                received = 0
+                try:
+                    for j, ((t_s, t_us, quat, contacts), tel) in enumerate(zip(stamped, answers)):
+                        if isinstance(tel, Error):
+                            raise PoseLoopError(
+                                f"the device refused pose {index + j} "
+                                f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
+                            )
+                        self.frames += 1
+                        received = j + 1
+                        last_tel = tel
+                        if on_frame is not None:
+                            on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
+                        running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
+                        if not running or (lockstep and client.trial_results):
+                            # The trial ended with this pose; the rest of the batch was refused.
+                            for rest in answers[j + 1 :]:
+                                if not isinstance(rest, Error):
+                                    raise PoseLoopError(
+                                        "the device answered a POSE after the trial ended"
+                                    )
+                            ended = True
+                            break
+                        if limit_s is not None:
+                            if t_s > limit_s:
+                                raise TrialOverrun(t_s, time.monotonic() - self.wall0, False)
+                        elif self.wall_limit_s is not None and not self.virtual_clock:
+                            wall = time.monotonic() - self.wall0
+                            if wall > self.wall_limit_s:
+                                raise TrialOverrun(t_s, wall, True)
+                        feel(index + j, t_s, tel.pwm)
+                finally:
+                    if on_frames is not None and received:
+                        pending.append((index, stamped[:received], answers[:received]))
+                index += len(batch)
+        finally:
+            write_pending()
         if ended and not client.trial_results:
             # the pose that ended the trial: its TRIAL_RESULT follows the TELEMETRY
             try:
