@@ -10,7 +10,8 @@ mix of requests made with the project's scene generators.
 ``time`` writes them to a temporary file and runs the `graspguide solve` command of the
 active environment on it ``--repeat`` times (file in, file out, so the terminal is not
 timed), and once on an empty input to take the interpreter's start-up out; it prints
-lines/s with and without the start-up.
+lines/s with and without the start-up, and lines per CPU second of the command (less
+disturbed by other load on a shared machine than the wall time).
 
 The mix: hand-like scenes (``random_scenes``, k = 3 and 4) over every policy, mode and
 constraint model, some with optional fields left out, integer zeros or millimetres; the
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -139,10 +141,16 @@ def _command() -> list[str]:
     return [exe, "solve"]
 
 
-def _run(path_in: str, path_out: str) -> float:
-    t0 = time.perf_counter()
+def _children_cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _run(path_in: str, path_out: str) -> tuple[float, float]:
+    """Wall and CPU seconds of one run (the CPU time is less disturbed by other load)."""
+    t0, c0 = time.perf_counter(), _children_cpu_s()
     subprocess.run([*_command(), "--input", path_in, "--output", path_out], check=True)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, _children_cpu_s() - c0
 
 
 def time_command(lines: list[str], repeat: int) -> dict[str, float]:
@@ -151,13 +159,14 @@ def time_command(lines: list[str], repeat: int) -> dict[str, float]:
         with open(src, "w", encoding="ascii") as f:
             f.write("\n".join(lines) + "\n")
         open(empty, "w").close()
-        walls, starts = [], []
+        runs, starts = [], []
         for _ in range(repeat):  # alternated, so a noisy moment hits both alike
             starts.append(_run(empty, out))
-            walls.append(_run(src, out))
+            runs.append(_run(src, out))
         with open(out, encoding="ascii") as f:
             answers = sum(1 for _ in f)
-    wall, start = statistics.median(walls), statistics.median(starts)
+    wall, start = (statistics.median(r[0] for r in rs) for rs in (runs, starts))
+    cpu, start_cpu = (statistics.median(r[1] for r in rs) for rs in (runs, starts))
     return {
         "lines": len(lines),
         "answers": answers,
@@ -165,6 +174,8 @@ def time_command(lines: list[str], repeat: int) -> dict[str, float]:
         "startup_s": start,
         "lines_per_s": len(lines) / wall,
         "lines_per_s_after_startup": len(lines) / (wall - start),
+        "cpu_s": cpu,
+        "lines_per_cpu_s_after_startup": len(lines) / (cpu - start_cpu),
     }
 
 
@@ -190,7 +201,8 @@ def main() -> int:
     print(
         f"graspguide solve: {r['lines']} lines ({r['answers']} answers) in {r['wall_s']:.3f} s "
         f"(median of {a.repeat}): {r['lines_per_s']:,.0f} lines/s; start-up "
-        f"{r['startup_s']:.3f} s, {r['lines_per_s_after_startup']:,.0f} lines/s after it"
+        f"{r['startup_s']:.3f} s, {r['lines_per_s_after_startup']:,.0f} lines/s after it; "
+        f"{r['lines_per_cpu_s_after_startup']:,.0f} lines per CPU second after it"
     )
     return 0
 
