@@ -395,6 +395,7 @@ class Measured:
     overhead: int = 0
     stack_bytes: int = 0
     cycles: dict[str, list[int]] = field(default_factory=dict)  # part -> counts
+    by_kind: dict[str, list[int]] = field(default_factory=dict)  # k=4 V frames by angle kind
     frames: list[tuple[Record, list[str]]] = field(default_factory=list)  # Q and G answers
     mismatches: list[str] = field(default_factory=list)
 
@@ -437,6 +438,8 @@ def parse(lines: Sequence[str], records: Sequence[Record]) -> Measured:
             part = "frame" if rec.tag == "Q" else "frame_from_gravity"
             m.add(f"{part} k{rec.posture.k} {rec.posture.mode}", cycles)
             m.frames.append((rec, fields))
+            if rec.tag == "Q" and (rec.posture.k, rec.posture.mode) == (4, "V"):
+                m.by_kind.setdefault(rec.kind, []).append(cycles - m.overhead)
         elif rec.tag == "C":
             m.add("trial_start", cycles)
             if fields[2:] != ["0"]:
@@ -500,6 +503,9 @@ def summarize(m: Measured, mem: dict[str, int]) -> dict[str, Any]:
         "mcu": KEY,
         "clock_hz": CLOCK_HZ,
         "cycles": parts,
+        # Where the error formula's branches fall: near_0 and at_3 below 60 degrees, other
+        # across all three, near_180 in the third (docs/per-frame-layer.md).
+        "frame_k4_V_by_angle": {kind: _stats(v) for kind, v in m.by_kind.items()},
         "count_overhead_cycles": m.overhead,
         "stack_bytes": m.stack_bytes,
         **mem,
@@ -616,6 +622,12 @@ def format_table(results: dict[str, Any]) -> str:
         for part, s in r["cycles"].items():
             ms = 1000 * s["median"] / r["clock_hz"]
             out.append(f"{part:<26}{s['median']:>8,}{s['max']:>8,}   ({ms:.2f} ms, n={s['n']})")
+        out.append(
+            "frame k4 V by angle (median / max): "
+            + ", ".join(
+                f"{k} {s['median']:,}/{s['max']:,}" for k, s in r["frame_k4_V_by_angle"].items()
+            )
+        )
         p, e = r["pwm_vs_float64"], r["error_vs_float64_deg"]
         out.append(
             f"PWM vs float64 reference: {p['within_1']}/{p['compared']} within 1 count "
