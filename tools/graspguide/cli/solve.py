@@ -66,7 +66,7 @@ Error:
         "coincident_contacts", "rank_deficient", "zero_force", "bad_quaternion"
 
 With --engine device --port PORT|sim a device answers instead (the firmware's float
-and QR route): per request SET_SCENE, START_TRIAL, one POSE, its TELEMETRY, STOP.
+and default route): per request SET_SCENE, START_TRIAL, one POSE, its TELEMETRY, STOP.
 Its answers have the keys the wire carries: ok, pwm, constraints_used, error_deg,
 iterations, alpha (levels, lambda, relevant and fallback_mask are not on the wire).
 Bad requests get the same codes and messages; compare with --scalar float.
