@@ -916,8 +916,7 @@ class DeviceClient:
             seqs.append(seq)
             times.append(t_us)
         self._settle()
-        for _ in seqs:
-            self._seq.next()
+        self._seq._next = (seq0 + len(seqs)) & 0xFFFF  # every seq numbered above used
         self._write(b"".join(wires))
         if on_written is not None:
             on_written()

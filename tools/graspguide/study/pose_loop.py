@@ -252,6 +252,7 @@ class PoseLoop:
         on_frame = self.on_frame
         on_frames = self.on_frames
         feel = poses.feel
+        running_flag = TELEMETRY_FLAG_TRIAL_RUNNING
         # trial time beyond which to give up, on the virtual clock (real time: the wall)
         limit_s = self.limit_s if self.virtual_clock and self.limit_s is not None else None
         index = 0
@@ -304,12 +305,11 @@ class PoseLoop:
                                 f"the device refused pose {index + j} "
                                 f"({ErrorCode(tel.code).name.lower()}) while the trial was running"
                             )
-                        self.frames += 1
                         received = j + 1
                         last_tel = tel
                         if on_frame is not None:
                             on_frame(Frame(index + j, t_s, t_us, quat, contacts, tel))
-                        running = int(tel.flags) & TELEMETRY_FLAG_TRIAL_RUNNING
+                        running = int(tel.flags) & running_flag
                         if not running or (lockstep and client.trial_results):
                             # The trial ended with this pose; the rest of the batch was refused.
                             for rest in answers[j + 1 :]:
@@ -328,6 +328,7 @@ class PoseLoop:
                                 raise TrialOverrun(t_s, wall, True)
                         feel(index + j, t_s, tel.pwm)
                 finally:
+                    self.frames += received
                     if on_frames is not None and received:
                         pending.append((index, stamped[:received], answers[:received]))
                 index += len(batch)

@@ -725,7 +725,8 @@ _FRAME_HEADER = ",".join(FRAME_COLUMNS) + "\n"
 
 def _frame_rows(stamped: Sequence[Stamped], tels: Sequence[Any]) -> str:
     """The FRAME_COLUMNS rows of poses sent (t_s, t_us, quat, contacts) and their
-    TELEMETRY, as csv.writer writes them (floats by repr; %d takes the enums' values)."""
+    TELEMETRY, as csv.writer writes them: floats by repr (a Telemetry holds its f32
+    fields as floats), %d takes the enums' values."""
     row = _FRAME_ROW
     return "".join(
         [
@@ -734,8 +735,8 @@ def _frame_rows(stamped: Sequence[Stamped], tels: Sequence[Any]) -> str:
                 round(t_s, 6),
                 t_us,
                 *quat,
-                float(tel.error_deg),
-                float(tel.alpha),
+                tel.error_deg,
+                tel.alpha,
                 *tel.pwm,
                 tel.solver_status,
                 tel.flags,
