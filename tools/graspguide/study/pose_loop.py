@@ -221,6 +221,28 @@ class PoseLoop:
             return None  # too late for this sample: skip it, keep the pace
         return host_time_us()
 
+    def _stamp_batch(self, batch: list[Pose]) -> list[Stamped]:
+        """The batch's poses with their POSE timestamps (a late one left out, counted),
+        each given to on_send."""
+        if self.virtual_clock:  # _stamp's arithmetic, for the whole batch at once
+            base_us = self.base_us
+            stamped = [
+                (t, (base_us + int(round(t * 1e6))) & 0xFFFFFFFF, quat, contacts)
+                for t, quat, contacts in batch
+            ]
+        else:
+            stamped = []
+            for t, quat, contacts in batch:
+                t_us = self._stamp(t)
+                if t_us is None:
+                    self.late_skipped += 1
+                    continue
+                stamped.append((t, t_us, quat, contacts))
+        if self.on_send is not None:
+            for t, t_us, quat, contacts in stamped:
+                self.on_send(t_us, t, quat, contacts)
+        return stamped
+
     def _send(self, stamped: list[Stamped], on_written: Callable[[], None]) -> list[Any] | None:
         """The answers to the stamped poses, or None when the device refused the only one
         because the trial had already ended (its TRIAL_RESULT is queued). ``on_written``
@@ -272,25 +294,7 @@ class PoseLoop:
                 batch = poses.next_batch(index)
                 if not batch:
                     break
-                if self.virtual_clock:  # _stamp's arithmetic for the whole batch
-                    base_us = self.base_us
-                    stamped = [
-                        (t, (base_us + int(round(t * 1e6))) & 0xFFFFFFFF, quat, contacts)
-                        for t, quat, contacts in batch
-                    ]
-                    if self.on_send is not None:
-                        for t, t_us, quat, contacts in stamped:
-                            self.on_send(t_us, t, quat, contacts)
-                else:
-                    stamped = []
-                    for t, quat, contacts in batch:
-                        t_us = self._stamp(t)
-                        if t_us is None:
-                            self.late_skipped += 1
-                            continue
-                        if self.on_send is not None:
-                            self.on_send(t_us, t, quat, contacts)
-                        stamped.append((t, t_us, quat, contacts))
+                stamped = self._stamp_batch(batch)
                 if not stamped:
                     continue
                 answers = self._send(stamped, write_pending)
