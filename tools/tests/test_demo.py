@@ -4,6 +4,7 @@ reference ones. Everything here is simulated."""
 
 from __future__ import annotations
 
+import collections
 import io
 import json
 import os
@@ -21,7 +22,7 @@ from graspguide.link import codec
 from graspguide.link import messages as m
 from graspguide.study import runner as rn
 from graspguide.study import study_protocol as pf
-from graspguide.study.pose_loop import pipeline_window
+from graspguide.study.pose_loop import PipelinedPoses, PoseLoop, TrialOverrun, pipeline_window
 from graspguide.study.progress import Progress
 from graspguide.study.trial_sources import open_runner_source
 
@@ -284,6 +285,61 @@ def test_pipeline_window_only_for_the_virtual_participant():
     assert pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.05", 1), 100.0) == 4
     assert pipeline_window(VirtualParticipant.from_spec("reaction_time_s=0.015", 1), 100.0) == 1
     assert pipeline_window(object(), 100.0) == 1
+
+
+class _AnsweringClient:
+    """Answers every POSE of a batch at once with a TELEMETRY of a running trial, and
+    logs when each batch was written."""
+
+    timeout = 0.1
+
+    def __init__(self, log):
+        self.log = log
+        self.trial_results = collections.deque()
+        self.written = 0
+
+    def pose_batch(self, poses, timeout=None, on_written=None):
+        self.written += len(poses)
+        self.log.append(("written", self.written))
+        if on_written is not None:
+            on_written()
+        flags = m.TELEMETRY_FLAG_TRIAL_RUNNING
+        return [m.Telemetry(host_time_us=t, pwm=(1, 2, 3, 0), flags=flags) for t, _ in poses]
+
+    def drain(self, timeout=0.0):
+        return 0
+
+
+class _StillHand:
+    def act(self, t):
+        return (1.0, 0.0, 0.0, 0.0)
+
+    def feel(self, t, pwm):
+        pass
+
+
+def test_pose_loop_writes_every_frame_once_in_order_while_the_next_batch_is_out():
+    log = []
+    loop = PoseLoop(
+        _AnsweringClient(log),
+        virtual_clock=True,
+        limit_s=0.5,
+        on_frames=lambda first, stamped, tels: log.append(("frames", first, len(tels))),
+    )
+    try:
+        loop.run(PipelinedPoses(_StillHand(), 100.0, 3, 8, RuntimeError))
+    except TrialOverrun as e:
+        assert round(e.t_s, 6) == 0.51  # the first pose past the limit
+    else:
+        raise AssertionError("the trial should have run past its limit")
+    # Batch b's frames are written once batch b + 1 is out; the last batch's (4 frames:
+    # 0.48 .. 0.51 s) on the way out, before run() raises: every frame once, in order.
+    expected = [("written", 8)]
+    for b in range(1, 7):
+        expected += [("written", 8 * (b + 1)), ("frames", 8 * (b - 1), 8)]
+    expected.append(("frames", 48, 4))
+    assert log == expected
+    assert loop.frames == 52
 
 
 # --------------------------------------------------------------------------------------
