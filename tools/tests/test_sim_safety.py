@@ -73,6 +73,37 @@ def test_virtual_clock_trial_of_a_silent_host_ends_in_real_time():
         assert st.state is m.DeviceState.SCENE_SET
 
 
+def test_a_host_that_stops_reading_loses_whole_answers_only():
+    """The simulated device writes its answers in blocks; a host that stops reading loses
+    whole frames (each one given up alone after the write timeout), never gets two frames
+    run together, and is answered again once it reads."""
+    with gsim.SimulatedDevice(virtual_clock=True, stale_ms=60_000) as sim:
+        c = gd.DeviceClient(sim, timeout=2.0)
+        c.set_scene(HAND3, timeout_s=1800.0)
+        c.start_trial(3, WRENCH)
+        fd = sim.serial_transport.serial.fileno()
+        sent = []
+        while len(sent) < 20_000:  # until the device stops reading too
+            times = [10_000 * (len(sent) + i) for i in range(50)]
+            wire = b"".join(gd.encode_pose_fast(i, t, TILTED) or b"" for i, t in enumerate(times))
+            try:
+                n = os.write(fd, b"\x00" + wire)
+            except BlockingIOError:
+                n = 0
+            sent += times
+            if n < len(wire) + 1:
+                break
+            time.sleep(0.005)
+        time.sleep(0.5)  # the device gives up frames meanwhile
+        c.drain(2.0)
+        got = [t.host_time_us for t in c.telemetry_backlog]
+        assert got and set(got) <= set(sent) and got == sorted(got) and len(got) < len(sent)
+        assert c.device_frames_lost > 0  # the frames the device gave up ...
+        assert c.host_bad_frames <= c.device_frames_lost  # ... at most one cut short each
+        tel = c.pose(10_000 * len(sent) + 10_000, TILTED)  # answered again
+        assert tel.host_time_us == 10_000 * len(sent) + 10_000
+
+
 PARENT = r"""
 import subprocess, sys
 # A plain Popen: no PR_SET_PDEATHSIG, no new session. The simulator must notice by itself.
