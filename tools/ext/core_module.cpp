@@ -87,7 +87,7 @@ constexpr gg::Mode kModes[] = {gg::Mode::kC, gg::Mode::kV};
 constexpr gg::ConstraintModel kModels[] = {
     gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal, gg::ConstraintModel::kNone};
 constexpr gg::Decomposition kDecompositions[] = {gg::Decomposition::kStructured,
-                                                  gg::Decomposition::kSVD};
+                                                 gg::Decomposition::kSVD};
 
 const char* policy_name_fn(gg::Policy p) { return gg::policy_name(p); }
 const char* mode_name_fn(gg::Mode m) { return gg::mode_name(m); }
@@ -533,8 +533,8 @@ void frame_outputs(gg::Status s, int k, const gg::FrameResult<T>& fr, const gg::
 
 // One Guidance<T> per instance. Moving posture: every frame sets new contacts (alternately
 // the instance's own and their nudged copy) and runs update(), i.e. contact frames, grasp
-// structure (or the SVD route's decomposition), QP, levels and PWM. Fixed posture: only the orientation changes, so a frame
-// is the orientation error, alpha and the PWM mapping.
+// structure (or the SVD route's decomposition), QP, levels and PWM. Fixed posture: only the
+// orientation changes, so a frame is the orientation error, alpha and the PWM mapping.
 template <typename T>
 nb::dict time_frames_t(const std::vector<ContactList>& contacts,
                        const std::vector<Wrench>& wrenches, const std::vector<Quat4>& orientations,
@@ -684,20 +684,20 @@ nb::dict time_qp(const std::vector<std::vector<double>>& lambda0,
     const bool k4 = m == 12;
     if (is_float && k4)
       time_qp_k<float, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                          violation_rel, reps, batches, warmup, ns, status, lambda,
-                          used, iterations);
+                          violation_rel, reps, batches, warmup, ns, status, lambda, used,
+                          iterations);
     else if (is_float)
       time_qp_k<float, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                          violation_rel, reps, batches, warmup, ns, status, lambda,
-                          used, iterations);
+                          violation_rel, reps, batches, warmup, ns, status, lambda, used,
+                          iterations);
     else if (k4)
       time_qp_k<double, 4>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                           violation_rel, reps, batches, warmup, ns, status, lambda,
-                           used, iterations);
+                           violation_rel, reps, batches, warmup, ns, status, lambda, used,
+                           iterations);
     else
       time_qp_k<double, 3>(lambda0[i], null_basis[i], lambda_des[i], model, max_iterations,
-                           violation_rel, reps, batches, warmup, ns, status, lambda,
-                           used, iterations);
+                           violation_rel, reps, batches, warmup, ns, status, lambda, used,
+                           iterations);
   }
   return timing_result(ns, status, lambda, used, iterations);
 }
@@ -757,8 +757,8 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
         reps, batches, warmup));
     d["qp"] = to_list(time_batches(
         [&](int) {
-          return std::uint32_t(
-              gg::solve_forces_svd<T, K>(*eq, des, o.constraints, o.max_iterations, lambda, used, its));
+          return std::uint32_t(gg::solve_forces_svd<T, K>(*eq, des, o.constraints, o.max_iterations,
+                                                          lambda, used, its));
         },
         reps, batches, warmup));
   } else {
@@ -773,16 +773,16 @@ nb::dict time_stages_k(const ContactList& contacts_in, const Wrench& wrench_in,
         gg::Status::kOk)
       return d;
     lambda = sol.lambda;
-    d["structure"] = to_list(time_batches(
-        [&](int) { return std::uint32_t(gg::grasp_structure<T, K>(fr, *st)); }, reps, batches,
-        warmup));
+    d["structure"] =
+        to_list(time_batches([&](int) { return std::uint32_t(gg::grasp_structure<T, K>(fr, *st)); },
+                             reps, batches, warmup));
     d["forces"] = to_list(time_batches(
         [&](int) {
           w_hat = gg::whitened_wrench<T, K>(*st, w);
           lambda0 = gg::min_norm_forces<T, K>(*st, w_hat);
           const std::uint8_t m = gg::relevance<T, K>(fr, force);
-          start = gg::project_onto_equilibrium<T, K>(*st, w_hat,
-                                                     gg::desired_forces<T, K>(lambda0, m));
+          start =
+              gg::project_onto_equilibrium<T, K>(*st, w_hat, gg::desired_forces<T, K>(lambda0, m));
           return std::uint32_t(m) + std::uint32_t(start(0) > T(0));
         },
         reps, batches, warmup));
@@ -886,20 +886,21 @@ NB_MODULE(_core, m) {
       },
       "name"_a, "What a status means and how to fix it (status.h's status_message).");
 
-  m.def("solve", &solve, "contacts"_a, "wrench"_a, "policy"_a = "F", "mode"_a = "C",
-        "constraints"_a = "paper", "orientation"_a = Quat4{1.0, 0.0, 0.0, 0.0},
-        "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "structured",
-        "max_iterations"_a = gg::kDefaultMaxIterations,
-        (std::string("Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
-                     "orientation in one call).\n\n"
-                     "contacts: k triples [x, y, z] in the hand frame (k must be 3 or 4, anything "
-                     "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
-                     "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "
-                     "'normal' | 'none'; orientation: [w, x, y, z] hand -> world; y_axis: y_O in "
-                     "the hand frame; scalar 'double' | 'float'; decomposition 'structured' | 'svd'; "
-                     "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
-         kResultDoc)
-            .c_str());
+  m.def(
+      "solve", &solve, "contacts"_a, "wrench"_a, "policy"_a = "F", "mode"_a = "C",
+      "constraints"_a = "paper", "orientation"_a = Quat4{1.0, 0.0, 0.0, 0.0},
+      "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "scalar"_a = "double", "decomposition"_a = "structured",
+      "max_iterations"_a = gg::kDefaultMaxIterations,
+      (std::string("Run Algorithm 1 once with graspguide::Guidance<T>::solve (scene, wrench and "
+                   "orientation in one call).\n\n"
+                   "contacts: k triples [x, y, z] in the hand frame (k must be 3 or 4, anything "
+                   "else is status bad_contact_count); wrench: [fx, fy, fz, mx, my, mz] in the "
+                   "object frame; policy 'F' | 'Fperp'; mode 'C' | 'V'; constraints 'paper' | "
+                   "'normal' | 'none'; orientation: [w, x, y, z] hand -> world; y_axis: y_O in "
+                   "the hand frame; scalar 'double' | 'float'; decomposition 'structured' | 'svd'; "
+                   "max_iterations: QP cap (< 1 is bad_config).\n\nReturns a ") +
+       kResultDoc)
+          .c_str());
 
   // .none(): None is an argument like any other here (not plain), not a binding error.
   m.def("solve_plain", &solve_plain, "contacts"_a.none(), "wrench"_a.none(), "policy"_a.none(),
@@ -923,8 +924,8 @@ NB_MODULE(_core, m) {
                          "return a status name ('ok' or the error; on error nothing changes).")
       .def(nb::init<>())
       .def("set_scene", &PyGuidance::set_scene, "contacts"_a, "policy"_a = "F", "mode"_a = "C",
-           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0}, "decomposition"_a = "structured",
-           "max_iterations"_a = gg::kDefaultMaxIterations,
+           "constraints"_a = "paper", "y_axis"_a = Axis3{0.0, 1.0, 0.0},
+           "decomposition"_a = "structured", "max_iterations"_a = gg::kDefaultMaxIterations,
            "Set the contacts (3 or 4 triples) and the scene's parameters; forces a "
            "recomputation. Returns a status name.")
       .def("set_wrench", &PyGuidance::set_wrench, "wrench"_a,
@@ -938,8 +939,8 @@ NB_MODULE(_core, m) {
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
 
-  m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double", "decomposition"_a = "structured",
-        "max_iterations"_a = gg::kDefaultMaxIterations,
+  m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double",
+        "decomposition"_a = "structured", "max_iterations"_a = gg::kDefaultMaxIterations,
         "fixed_posture"_a = false, "reps"_a = 32, "batches"_a = 5, "warmup"_a = 4,
         "Benchmark (graspguide bench): time Guidance<T> frames in a C++ loop. instances: "
         "(contacts, wrenches, orientations, y_axes, policies, modes, constraints), one list "
@@ -951,18 +952,18 @@ NB_MODULE(_core, m) {
         "iterations (of the instance's own contacts after a timed-like previous frame), "
         "recomputed (grasp recomputations among the timed and warm-up frames), "
         "frames_per_instance.");
-  m.def("time_stages", &time_stages, "instances"_a, "scalar"_a = "double", "decomposition"_a = "structured",
-        "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
+  m.def("time_stages", &time_stages, "instances"_a, "scalar"_a = "double",
+        "decomposition"_a = "structured", "reps"_a = 32, "batches"_a = 3, "warmup"_a = 4,
         "Benchmark (graspguide bench): time each stage of a frame (contact_frames, "
         "structure (the whitened grasp matrix; on the SVD route G and its SVD), forces "
         "(lambda0, relevance, desired forces and the unconstrained optimum), qp (with the "
-        "fallback chain), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns one "
+        "fallback chain), levels_pwm (motor levels, alignment, PWM)) in its own C++ loop. Returns "
+        "one "
         "dict per instance, stage -> `batches` samples of mean ns per call; empty for an "
         "instance whose grasp is not ok.");
   m.def("time_qp", &time_qp, "lambda0"_a, "null_basis"_a, "lambda_des"_a, "models"_a,
         "scalar"_a = "double", "max_iterations"_a = gg::kDefaultMaxIterations,
-        "violation_rel"_a = 0.0, "reps"_a = 64, "batches"_a = 5,
-        "warmup"_a = 4,
+        "violation_rel"_a = 0.0, "reps"_a = 64, "batches"_a = 5, "warmup"_a = 4,
         "Benchmark (graspguide bench): time the SVD reference route's null-space QP alone "
         "(solve_forces_svd: step 5 with the fallback paper -> normal -> none) in a C++ loop, "
         "on the float64 data every solver of the bench gets: per instance lambda0 (3k), "

@@ -83,7 +83,7 @@ def _core_motors(protocol, k, policy, wrench):
         orientation=list(protocol.start_quat),
         y_axis=list(protocol.y_axis),
         scalar="double",
-        decomposition="qr",
+        decomposition="structured",
         max_iterations=_core.kDefaultMaxIterations,
     )
     assert r["status"] == "ok"

@@ -104,7 +104,7 @@ int main() {
   g_clock.start();
   uint16_t id = 0;
   for (int k = gg::kMinContacts; k <= gg::kMaxContacts; ++k)
-    if (run_trial(++id, k, gg::Decomposition::kQR)) m4f_trials_ok = m4f_trials_ok + 1;
+    if (run_trial(++id, k, gg::Decomposition::kStructured)) m4f_trials_ok = m4f_trials_ok + 1;
   g_app.stop();
   m4f_stack_peak = m4f_stack_high_water();
   return m4f_trials_ok == id ? 0 : 1;

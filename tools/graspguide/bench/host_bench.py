@@ -1158,9 +1158,11 @@ def machine_info(peers: dict[str, Any]) -> dict[str, Any]:
 def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
     """Host, k=4, double: this project's median full frame (the shipped settings: the
     structured route, default iteration cap) vs DAQP's median internal solve_time for the
-    QP alone on the same instances (issue 12's goal: ratio <= GOAL_RATIO). Also: the fastest double
-    frame variant, and DAQP's setup + solve."""
-    frame = next((r for r in results if r["k"] == 4 and r["name"] == "frame double structured"), None)
+    QP alone on the same instances (issue 12's goal: ratio <= GOAL_RATIO). Also: the
+    fastest double frame variant, and DAQP's setup + solve."""
+    frame = next(
+        (r for r in results if r["k"] == 4 and r["name"] == "frame double structured"), None
+    )
     daqp = next((r for r in results if r["k"] == 4 and r["solver"] == "daqp"), None)
     if frame is None or daqp is None:
         return None
