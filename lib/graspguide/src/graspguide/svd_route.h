@@ -81,14 +81,15 @@ Status solve_forces_svd(const Equilibrium<T, K>& eq, const ForceVec<T, K>& lambd
 // Instantiated once in svd_route.cpp (EXTERN empty) and declared extern everywhere else:
 // Eigen's SVD is slow to compile, and every test would otherwise compile it again.
 #define GRASPGUIDE_SVD_ROUTE(EXTERN, T, K)                                                       \
-  EXTERN template Status equilibrium_svd<T, K>(const GraspMat<T, K>&, const Vec6<T>&,           \
-                                               Equilibrium<T, K>&);                             \
+  EXTERN template Status equilibrium_svd<T, K>(const GraspMat<T, K>&, const Vec6<T>&,            \
+                                               Equilibrium<T, K>&);                              \
   EXTERN template Status solve_forces_svd<T, K>(const Equilibrium<T, K>&, const ForceVec<T, K>&, \
-                                                ConstraintModel, int, ForceVec<T, K>&,          \
+                                                ConstraintModel, int, ForceVec<T, K>&,           \
                                                 ConstraintModel&, int&, T);
-#define GRASPGUIDE_SVD_ROUTES(EXTERN)                                                      \
-  GRASPGUIDE_SVD_ROUTE(EXTERN, float, 3) GRASPGUIDE_SVD_ROUTE(EXTERN, float, 4)            \
-      GRASPGUIDE_SVD_ROUTE(EXTERN, double, 3) GRASPGUIDE_SVD_ROUTE(EXTERN, double, 4)
+#define GRASPGUIDE_SVD_ROUTES(EXTERN)    \
+  GRASPGUIDE_SVD_ROUTE(EXTERN, float, 3) \
+  GRASPGUIDE_SVD_ROUTE(EXTERN, float, 4) \
+  GRASPGUIDE_SVD_ROUTE(EXTERN, double, 3) GRASPGUIDE_SVD_ROUTE(EXTERN, double, 4)
 #if GRASPGUIDE_WITH_SVD_ROUTE && !defined(GRASPGUIDE_INSTANTIATING_SVD_ROUTE)
 GRASPGUIDE_SVD_ROUTES(extern)
 #endif
