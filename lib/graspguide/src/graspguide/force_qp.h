@@ -148,17 +148,16 @@ void projector_column(const GraspStructure<T, K>& st, int j, ForceVec<T, K>& v) 
 template <typename T, int K>
 Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
                       uint16_t constrained, uint16_t fixed, T violation_tol, T rel_tol,
-                      T dependent_tol, int max_iterations, ForceVec<T, K>& lambda,
-                      QpInfo& info) {
+                      T dependent_tol, int max_iterations, ForceVec<T, K>& lambda, QpInfo& info) {
   using Rows = detail::ActiveRows<T, K>;
   using Vec = ForceVec<T, K>;
   constexpr int kMax = Rows::kMax;
   const T inf = std::numeric_limits<T>::infinity();
 
   Rows rows;
-  int w[kMax];             // constraint index of each active row
-  T u[kMax];               // its multiplier
-  bool equality[kMax];     // held by `fixed`: never dropped, multiplier of any sign
+  int w[kMax];          // constraint index of each active row
+  T u[kMax];            // its multiplier
+  bool equality[kMax];  // held by `fixed`: never dropped, multiplier of any sign
   uint16_t active = 0;
   info = QpInfo{};
   lambda = start;

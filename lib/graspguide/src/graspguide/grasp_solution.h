@@ -101,9 +101,10 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   EXTERN template Status solve_grasp<T, K>(const Contacts<T, K>&, const Vec6<T>&, const Vec3<T>&, \
                                            ConstraintModel, Policy, const SolverSettings&,        \
                                            GraspSolution<T>&);                                    \
-  EXTERN template Status solve_forces<T, K>(                                                      \
-      const ContactFrames<T, K>&, const GraspStructure<T, K>&, const Vec6<T>&,                    \
-      const ForceVec<T, K>&, const ForceVec<T, K>&, ConstraintModel, int, ForceSolution<T, K>&, T);
+  EXTERN template Status solve_forces<T, K>(const ContactFrames<T, K>&,                           \
+                                            const GraspStructure<T, K>&, const Vec6<T>&,          \
+                                            const ForceVec<T, K>&, const ForceVec<T, K>&,         \
+                                            ConstraintModel, int, ForceSolution<T, K>&, T);
 #define GRASPGUIDE_GRASP_SOLUTIONS(EXTERN)    \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 3) \
   GRASPGUIDE_GRASP_SOLUTION(EXTERN, float, 4) \

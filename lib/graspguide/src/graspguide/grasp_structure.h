@@ -19,9 +19,9 @@ using WhitenedGrasp = Eigen::Matrix<T, 6, 3 * K>;
 
 template <typename T, int K>
 struct GraspStructure {
-  WhitenedGrasp<T, K> g_hat;        // rows orthonormal
+  WhitenedGrasp<T, K> g_hat;           // rows orthonormal
   Mat3<T> j_factor = Mat3<T>::Zero();  // R_J, upper triangular, J = R_J^T R_J
-  T rank_ratio = T(0);              // sigma_min(G) / sigma_max(G)
+  T rank_ratio = T(0);                 // sigma_min(G) / sigma_max(G)
 };
 
 namespace detail {

@@ -28,7 +28,6 @@ struct ProjectionQp {
                            // norm: the row depends on the active rows
 };
 
-
 namespace detail {
 
 // The active rows as columns, A_W^T = J [R; 0]: J orthogonal, R upper triangular, both
