@@ -162,6 +162,12 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   info = QpInfo{};
   lambda = start;
   Vec v, z;
+  // A running bound on the rounding error the steps have put into lambda: a row's
+  // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
+  // A step along a row 1e-4 long (a near-degenerate vertex) is large, and so is its error;
+  // violations below the bound are rounding, not a reason to move again.
+  T step_error = T(0);
+  const T kStepUlps = T(4) * std::numeric_limits<T>::epsilon();
   T d[kMax], coeff[kMax];
 
   for (int j = 0; j < 3 * K; ++j) {
@@ -171,8 +177,10 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     const T z_norm = rows.split(v, d, z, coeff);
     // Fixed by equilibrium and the rows already held: a step along noise would be wrong.
     // The row stays a constraint, so a value other than zero is still caught below.
-    if (!(z_norm > dependent_tol)) continue;
-    lambda.noalias() -= (lambda(j) / (z_norm * z_norm)) * z;
+    if (!(z_norm > dependent_tol) || rows.n == kMax) continue;
+    const T t_eq = lambda(j) / (z_norm * z_norm);
+    lambda.noalias() -= t_eq * z;
+    step_error += kStepUlps * std::abs(t_eq);
     lambda(j) = T(0);
     w[rows.n] = j;
     u[rows.n] = T(0);
@@ -186,7 +194,8 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     // measured against the larger of the tolerance and its share of the iterate: a
     // paper-model optimum can hold internal forces 1000 times |lambda0|, and in float
     // their rounding alone would otherwise read as a violation.
-    const T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
+    T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
+    if (step_error > tol) tol = step_error;
     int cand = -1;
     T worst = -tol;
     for (int j = 0; j < 3 * K; ++j) {
@@ -203,7 +212,9 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     for (;;) {
       if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
       const T z_norm = rows.split(v, d, z, coeff);
-      const bool dependent = !(z_norm > dependent_tol);
+      // With as many active rows as null(G) has dimensions, nothing is left to move along,
+      // whatever rounding says.
+      const bool dependent = !(z_norm > dependent_tol) || rows.n == kMax;
       // Dual step limit: the first inequality multiplier to reach zero.
       T t_dual = inf;
       int drop = -1;
@@ -218,7 +229,10 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       if (dependent && drop < 0) return Status::kQpInfeasible;
       const T t_primal = dependent ? inf : -lambda(cand) / (z_norm * z_norm);
       const T t = t_primal <= t_dual ? t_primal : t_dual;
-      if (!dependent) lambda.noalias() += t * z;
+      if (!dependent) {
+        lambda.noalias() += t * z;
+        step_error += kStepUlps * std::abs(t);
+      }
       for (int i = 0; i < rows.n; ++i) u[i] -= t * coeff[i];
       u_cand += t;
 
@@ -288,7 +302,7 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
       continue;
     QpInfo info;
     const Status s = project_forces<T, K>(st, start, constrained_bits<K>(m), fixed, violation_tol,
-                                          feasibility_rel, T(Tolerances<T>::kDependentRelTol),
+                                          feasibility_rel, Tolerances<T>::kStructuredDependentTol,
                                           max_iterations, out.lambda, info);
     out.iterations += info.iterations;
     if (s == Status::kQpInfeasible) continue;

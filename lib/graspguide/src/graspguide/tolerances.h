@@ -15,12 +15,16 @@ template <>
 struct Tolerances<float> {
   static constexpr float kFeasRelTol = 1e-4f;
   static constexpr float kDependentRelTol = 1e-4f;
+  // The structured QP's rows are projector columns computed to a few ulps (force_qp.h),
+  // so dependence is judged 10 times finer than on the SVD route's null basis.
+  static constexpr float kStructuredDependentTol = 1e-5f;
 };
 
 template <>
 struct Tolerances<double> {
   static constexpr double kFeasRelTol = 1e-9;
   static constexpr double kDependentRelTol = 1e-9;
+  static constexpr double kStructuredDependentTol = 1e-9;
 };
 
 inline constexpr double kCoincidentRelTol = 1e-4;
