@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from graspguide.bench.pio_build import pio_env, pio_executable, run_build
 from graspguide.bench.targets import TargetError
 from graspguide.core import reference
 
@@ -288,50 +289,28 @@ def check_tools() -> str:
     return cc
 
 
-def _pio(root: Path) -> str:
-    for candidate in (root / ".venv" / "bin" / "pio", Path(shutil.which("pio") or "")):
-        if candidate.name and candidate.is_file() and os.access(candidate, os.X_OK):
-            return str(candidate)
-    raise AvrToolMissing(
-        f"PlatformIO (pio) is not in {root / '.venv' / 'bin'} or on PATH: run tools/bootstrap.sh"
-    )
-
-
-def _run_build(cmd: list[str], root: Path, what: str, env: dict[str, str] | None = None) -> None:
-    try:
-        p = subprocess.run(
-            cmd,
-            cwd=root,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            timeout=BUILD_TIMEOUT_S,
-        )
-    except subprocess.TimeoutExpired:
-        raise AvrBuildFailed(f"`{what}` took over {BUILD_TIMEOUT_S:.0f} s") from None
-    if p.returncode != 0:
-        tail = "\n".join(p.stdout.splitlines()[-20:])
-        raise AvrBuildFailed(f"`{what}` exited {p.returncode}:\n{tail}")
-
-
 def build(root: Path, progress: Callable[[str], None] | None = None) -> None:
     """``pio run -e avr_frame`` (rebuilds only what changed) and the simavr runner (when
     its source is newer than the program)."""
     cc = check_tools()
-    env = dict(os.environ)
-    env.setdefault("PLATFORMIO_CORE_DIR", str(root / ".pio-core"))
-    env.setdefault("PLATFORMIO_DISABLE_UPGRADE_CHECK", "true")
     if progress:
         progress(f"building: pio run -e {ENV}")
-    _run_build([_pio(root), "run", "-e", ENV], root, f"pio run -e {ENV}", env)
+    pio = pio_executable(root, AvrToolMissing)
+    run_build(
+        [pio, "run", "-e", ENV],
+        root,
+        f"pio run -e {ENV}",
+        BUILD_TIMEOUT_S,
+        AvrBuildFailed,
+        pio_env(root),
+    )
     source, program = root / RUNNER_SOURCE, runner_path(root)
     if not program.exists() or program.stat().st_mtime < source.stat().st_mtime:
         if progress:
             progress(f"building the simavr runner: {program}")
         program.parent.mkdir(parents=True, exist_ok=True)
         cmd = [cc, "-O2", "-Wall", "-Wextra", "-o", str(program), str(source), "-lsimavr"]
-        _run_build(cmd, root, " ".join(cmd))
+        run_build(cmd, root, " ".join(cmd), BUILD_TIMEOUT_S, AvrBuildFailed)
 
 
 def run(root: Path, records: Sequence[Record], timeout_s: float = RUN_TIMEOUT_S) -> list[str]:

@@ -25,16 +25,16 @@ regression.
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import statistics
 import subprocess
-import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from graspguide.bench.pio_build import pio_env, pio_executable, run_build
 
 
 @dataclass(frozen=True)
@@ -433,19 +433,6 @@ def build_command(targets: Sequence[Target]) -> str:
     return "pio run " + " ".join(f"-e {t.env}" for t in targets)
 
 
-def _pio(root: Path) -> str:
-    for candidate in (root / ".venv" / "bin" / "pio", Path(sys.executable).parent / "pio"):
-        if candidate.is_file() and os.access(candidate, os.X_OK):
-            return str(candidate)
-    found = shutil.which("pio")
-    if found is None:
-        raise ToolMissing(
-            f"PlatformIO (pio) is not in {root / '.venv' / 'bin'} or on PATH: run "
-            "tools/bootstrap.sh, or pass --no-build to run the images already built"
-        )
-    return found
-
-
 def build(
     root: Path,
     targets: Sequence[Target],
@@ -456,27 +443,11 @@ def build(
     second when nothing did), so the counts are always of the current sources."""
     if shutil.which("arm-none-eabi-g++") is None:
         raise ToolMissing("arm-none-eabi-g++ is not installed: run tools/install-arm.sh")
-    cmd = [_pio(root), "run"] + [a for t in targets for a in ("-e", t.env)]
-    env = dict(os.environ)
-    env.setdefault("PLATFORMIO_CORE_DIR", str(root / ".pio-core"))
-    env.setdefault("PLATFORMIO_DISABLE_UPGRADE_CHECK", "true")
+    pio = pio_executable(root, ToolMissing, ", or pass --no-build to run the images already built")
+    cmd = [pio, "run"] + [a for t in targets for a in ("-e", t.env)]
     if progress:
         progress(f"building: {build_command(targets)}")
-    try:
-        p = subprocess.run(
-            cmd,
-            cwd=root,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            timeout=timeout_s,
-        )
-    except subprocess.TimeoutExpired:
-        raise BuildFailed(f"`{build_command(targets)}` took over {timeout_s:.0f} s") from None
-    if p.returncode != 0:
-        tail = "\n".join(p.stdout.splitlines()[-20:])
-        raise BuildFailed(f"`{build_command(targets)}` exited {p.returncode}:\n{tail}")
+    run_build(cmd, root, build_command(targets), timeout_s, BuildFailed, pio_env(root))
 
 
 def qemu_command(qemu: str, machine: str, elf: Path) -> list[str]:
