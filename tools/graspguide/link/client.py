@@ -250,7 +250,7 @@ ERROR_MEANINGS: dict[str, str] = {
     "coincident_contacts": "two contacts (or a contact and the centroid) coincide",
     "imprecise_contacts": "contacts too far from the origin for float",
     "zero_wrench": "the wrench is zero",
-    "zero_force": "the wrench has no force part",
+    "zero_force": "the wrench has no force part, or one negligible next to its moment",
     "rank_deficient": "contacts (nearly) collinear",
     "qp_infeasible": "no forces satisfy the constraint model",
     "qp_iteration_limit": "the QP hit its iteration cap",

@@ -45,7 +45,7 @@ class ErrorCode(enum.IntEnum):
     COINCIDENT_CONTACTS = 0x05  # two contacts (or a contact and the centroid) coincide
     IMPRECISE_CONTACTS = 0x06  # contacts too far from the origin for float
     ZERO_WRENCH = 0x07  # the wrench is zero
-    ZERO_FORCE = 0x08  # the wrench has no force part
+    ZERO_FORCE = 0x08  # the wrench has no force part, or one negligible next to its moment
     RANK_DEFICIENT = 0x09  # contacts (nearly) collinear
     QP_INFEASIBLE = 0x0A  # no forces satisfy the constraint model
     QP_ITERATION_LIMIT = 0x0B  # the QP hit its iteration cap
@@ -80,7 +80,7 @@ class Policy(enum.IntEnum):
 
 
 class Mode(enum.IntEnum):
-    """graspguide::Mode (scene.h)"""
+    """graspguide::Mode (graspguide_frame/pwm.h)"""
 
     C = 0x00  # constant intensity (C)
     V = 0x01  # intensity proportional to the error (V)

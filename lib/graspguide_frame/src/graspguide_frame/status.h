@@ -29,7 +29,8 @@ namespace graspguide {
   X(kZeroWrench, "zero_wrench",                                                            \
     "the wrench is zero; give the virtual object a non-zero force")                        \
   X(kZeroForce, "zero_force",                                                              \
-    "the wrench has no force part, so there is no direction to align with gravity")        \
+    "the wrench has no force part, or one below 1e-6 of its moment, so there is no"        \
+    " direction to align with gravity")                                                    \
   X(kRankDeficient, "rank_deficient",                                                      \
     "the contacts are (nearly) collinear, so the grasp cannot resist every wrench; spread" \
     " the contacts out")                                                                   \

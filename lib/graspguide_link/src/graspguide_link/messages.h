@@ -42,7 +42,7 @@ enum class ErrorCode : uint8_t {
   kCoincidentContacts = 0x05,  // two contacts (or a contact and the centroid) coincide
   kImpreciseContacts = 0x06,  // contacts too far from the origin for float
   kZeroWrench = 0x07,  // the wrench is zero
-  kZeroForce = 0x08,  // the wrench has no force part
+  kZeroForce = 0x08,  // the wrench has no force part, or one negligible next to its moment
   kRankDeficient = 0x09,  // contacts (nearly) collinear
   kQpInfeasible = 0x0A,  // no forces satisfy the constraint model
   kQpIterationLimit = 0x0B,  // the QP hit its iteration cap
@@ -218,7 +218,7 @@ constexpr const char* enum_name(Policy v) {
   return "unknown";
 }
 
-// graspguide::Mode (scene.h)
+// graspguide::Mode (graspguide_frame/pwm.h)
 enum class Mode : uint8_t {
   kC = 0x00,  // constant intensity (C)
   kV = 0x01,  // intensity proportional to the error (V)
