@@ -3,6 +3,7 @@ known-answer data generated from it."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -314,3 +315,72 @@ def test_known_answers_reproduce():
         assert (m is None) == (e["margin"] is None), name
         if m is not None:
             assert m == pytest.approx(e["margin"], abs=1e-8), name
+
+
+# --------------------------------------------------------------------------------------
+# paper_margin_x_fixed (issue 17's margin)
+# --------------------------------------------------------------------------------------
+def _x_fixed_by_vertices(G, w_l, lam0_norm):
+    """The same LP solved without HiGHS: x = 0 leaves lam_yz = p + N z (least squares and
+    the SVD null basis), and max t s.t. p + N z >= t, t <= 1 is attained at a vertex of
+    (z, t), found by trying every choice of dim(z) + 1 active constraints."""
+    yz = [j for j in range(G.shape[1]) if j % 3]
+    A, b = G[:, yz], -w_l / lam0_norm
+    p = np.linalg.lstsq(A, b, rcond=None)[0]
+    assert np.linalg.norm(A @ p - b) <= 1e-9 * (1 + np.linalg.norm(b))
+    _, s, Vt = np.linalg.svd(A)
+    N = Vt[int(np.sum(s > 1e-10 * s[0])) :].T
+    n, d = N.shape
+    rows = np.vstack([np.hstack([N, -np.ones((n, 1))]), np.eye(d + 1)[-1:] * -1])  # rows v >= rhs
+    rhs = np.concatenate([-p, [-1.0]])
+    best = -math.inf
+    for idx in itertools.combinations(range(n + 1), d + 1):
+        M = rows[list(idx)]
+        if np.linalg.cond(M) > 1e12:
+            continue
+        v = np.linalg.solve(M, rhs[list(idx)])
+        if np.all(rows @ v >= rhs - 1e-9 * (1 + np.abs(rhs))):
+            best = max(best, float(v[-1]))
+    return best
+
+
+def test_x_fixed_margin_of_a_system_solved_by_hand():
+    # y/z columns the identity: lam_yz = -w_L is the only equilibrium, so the margin is
+    # min(-w_L) / ||lam0||, capped at 1; the x columns (random) must not matter.
+    rng = np.random.default_rng(5)
+    G = np.zeros((6, 9))
+    G[:, [1, 2, 4, 5, 7, 8]] = np.eye(6)
+    G[:, [0, 3, 6]] = rng.standard_normal((6, 3))
+    w_l = -np.array([0.3, 0.5, 0.2, 0.9, 0.4, 0.7])
+    assert ref.paper_margin_x_fixed(G, w_l, 2.0) == pytest.approx(0.1, abs=1e-9)
+    assert ref.paper_margin_x_fixed(G, w_l, 0.1) == 1.0  # 0.2 / 0.1 = 2, capped
+    w_l[3] = 0.9  # lam_yz[3] = -0.9: infeasible by 0.9 / ||lam0||
+    assert ref.paper_margin_x_fixed(G, w_l, 3.0) == pytest.approx(-0.3, abs=1e-9)
+
+
+@pytest.mark.parametrize("k", [3, 4])
+def test_x_fixed_margin_agrees_with_vertex_enumeration(k):
+    below_cap = 0
+    for sc in _random(k, 30, seed=21):
+        sc = dict(sc)
+        w = np.asarray(sc["wrench"], float)
+        w[4] = 0.0  # no moment about y_O = [0, 1, 0]: x = 0 can hold equilibrium
+        sc["wrench"] = w.tolist()
+        G, w_l, _ = _system(sc)
+        n0 = float(np.linalg.norm(ref.min_norm_solution(G, w_l)))
+        t = ref.paper_margin_x_fixed(G, w_l, n0)
+        assert t == pytest.approx(_x_fixed_by_vertices(G, w_l, n0), abs=1e-7), sc["name"]
+        below_cap += t < 1.0
+    # Three contacts leave one internal force, so many hands sit below the cap and test
+    # the LP itself; four-contact hands can always squeeze every y/z component positive
+    # (both methods give the cap, 1, on all of these).
+    if k == 3:
+        assert below_cap >= 3
+
+
+def test_x_fixed_margin_refuses_a_moment_about_the_y_axis():
+    sc = _random(3, 1, seed=21)[0]
+    sc = dict(sc, wrench=[0.0, 0.0, -1.0, 0.0, 0.05, 0.0])
+    G, w_l, _ = _system(sc)
+    with pytest.raises(RuntimeError, match="margin LP failed"):
+        ref.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(ref.min_norm_solution(G, w_l))))

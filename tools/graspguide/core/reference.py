@@ -359,6 +359,21 @@ def feasibility_margin(
     return float(res.x[-1])
 
 
+def paper_margin_x_fixed(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> float:
+    """The paper model's margin with every x component fixed to 0 (issue 17):
+    max t s.t. G lam = -w_L, lam_ix = 0, lam_iy, lam_iz >= t ||lam0||, t <= 1.
+
+    Without a moment about y_O, equilibrium forces sum c_i lam_ix = 0, so the paper
+    model's own margin (x >= t too) is never above 0 and cannot tell a strongly feasible
+    scene from a boundary one; with the x columns dropped the y/z margin can. Raises
+    RuntimeError when x = 0 cannot hold equilibrium (a moment about y_O).
+    """
+    yz = [j for j in range(G.shape[1]) if j % 3 != 0]
+    margin = feasibility_margin(G[:, yz], w_l, range(len(yz)), lam0_norm)
+    assert margin is not None  # yz is never empty
+    return margin
+
+
 # --------------------------------------------------------------------------------------
 # Steps 6-7: motor levels, PWM, orientation
 # --------------------------------------------------------------------------------------
@@ -567,6 +582,7 @@ __all__ = [
     "constrained_components",
     "project_enumerate",
     "feasibility_margin",
+    "paper_margin_x_fixed",
     "motor_levels",
     "pwm_from_levels",
     "guidance",
