@@ -24,20 +24,37 @@ COLUMNS = (
 STAGES = ["frames", "grasp", "qp", "full_cold", "full_warm", "fixed"]
 
 
-def scene(name, k, ticks, status="ok", ref_status="ok", pwm=(10, 20, 30, 0), ref=None):
-    """One scene as a dict keyed by column name; ``ticks`` for every stage."""
+def scene(
+    name,
+    k,
+    ticks,
+    status="ok",
+    ref_status="ok",
+    pwm=(10, 20, 30, 0),
+    ref=None,
+    svd=None,
+    svd_status=None,
+):
+    """One scene as a dict keyed by column name; ``ticks`` for every stage. The SVD
+    route answers as the structured one unless ``svd``/``svd_status`` say otherwise."""
     row = {"name": name, "k": k, "status": status, "ref_status": ref_status}
     ref = pwm if ref is None else ref
+    svd = pwm if svd is None else svd
     for i in range(4):
-        row[f"pwm{i}"], row[f"ref{i}"], row[f"svd{i}"] = pwm[i], ref[i], pwm[i]
-    row["svd_status"] = status
+        row[f"pwm{i}"], row[f"ref{i}"], row[f"svd{i}"] = pwm[i], ref[i], svd[i]
+    row["svd_status"] = status if svd_status is None else svd_status
     row.update(ticks)
     return row
 
 
-def harness_lines(rows, columns=COLUMNS, stack=1500, end=True, cal=(0, 5000, 15000)):
+def harness_lines(
+    rows, columns=COLUMNS, stack=1500, end=True, cal=(0, 5000, 15000), scalar="float"
+):
+    # SCALAR goes last of the header lines' kind the parser reads anywhere: the scene
+    # lines keep their line numbers (3, 4, ...) in the messages tested below.
     lines = ["CAL " + " ".join(map(str, cal)), "COLUMNS " + " ".join(columns)]
     lines += ["S " + " ".join(str(r[c]) for c in columns) for r in rows]
+    lines.append(f"SCALAR {scalar}")
     lines.append(f"STACK {stack}")
     if end:
         lines.append(f"END {len(rows)}")
@@ -102,6 +119,15 @@ def test_a_halt_line_is_a_typed_error_with_its_reason_and_the_last_scene():
         (lambda ls: ls[:-1] + ["END 99"], f"END says 99 scenes, the output has {len(ROWS)}"),
         (lambda ls: [ls[0]] + ls[2:], "a scene line before the COLUMNS line"),
         (lambda ls: [x for x in ls if not x.startswith("STACK")], "END before the STACK line"),
+        (lambda ls: [x for x in ls if not x.startswith("SCALAR")], "END before the SCALAR line"),
+        (
+            lambda ls: [x.replace("SCALAR float", "SCALAR half") for x in ls],
+            "SCALAR is 'half', not one of",
+        ),
+        (
+            lambda ls: [ls[0], ls[1].replace(" svd3", "")] + ls[2:],
+            "per-motor columns differ in count: 4 pwm, 4 ref, 3 svd",
+        ),
         (lambda ls: ls[1:], "END before the CAL line"),
         (lambda ls: ls[:2] + [ls[2] + " 5"] + ls[3:], "line 3: 24 values for 23 columns"),
         (lambda ls: ls[:2] + [ls[2].replace(" 10 ", " ten ", 1)] + ls[3:], "line 3: "),
@@ -143,9 +169,83 @@ def test_summary_counts_accepted_scenes_only_and_agreement_with_the_reference():
         "exact": 3,
         "within_1": 4,
         "within_1_share": 4 / 5,
+        "max_diff": 3,
+        "input_rounded": 0,
     }
     st = s["status_vs_float64"]
     assert (st["same"], st["float_only_refusals"], st["different"]) == (6, 1, 0)
+    assert s["scalar"] == "float"
+    # The fixture's SVD route answers as the structured one: the same figures.
+    assert s["svd_pwm_vs_float64"] == s["pwm_vs_float64"]
+    assert s["svd_status_vs_float64"] == st
+
+
+def test_the_svd_route_is_judged_on_its_own_columns():
+    rows = [
+        scene("a3", 3, uniform(10), pwm=(5, 6, 7, 0), svd=(5, 6, 9, 0)),
+        scene("b3", 3, uniform(10), pwm=(5, 6, 7, 0)),
+        scene("c4", 4, uniform(10), svd_status="rank_deficient"),
+    ]
+    s = targets.summarize(targets.parse(harness_lines(rows, scalar="double")))
+    assert s["scalar"] == "double"
+    assert (s["pwm_vs_float64"]["within_1"], s["pwm_vs_float64"]["compared"]) == (3, 3)
+    p = s["svd_pwm_vs_float64"]
+    assert (p["within_1"], p["compared"], p["max_diff"]) == (1, 2, 2)
+    assert s["svd_status_vs_float64"]["differences"] == ["c4: rank_deficient vs reference ok"]
+    text = targets.format_table({"cortex-m7-double": s})
+    assert "cortex-m7-double (double)" in text
+    assert "double svd PWM vs float64 reference: 1/2 within 1 count (1 exact, max 2)" in text
+    # A status the SVD route alone gets wrong fails the check like the structured one's.
+    result = targets.check({"cortex-m7-double": s}, {})
+    assert result.failed and result.status_failures == ["cortex-m7-double"]
+
+
+def test_an_older_harness_without_svd_columns_has_no_svd_figures():
+    columns = [c for c in COLUMNS if not c.startswith("svd")]
+    s = targets.summarize(targets.parse(harness_lines(ROWS, columns)))
+    assert "svd_pwm_vs_float64" not in s and "pwm_vs_float64" in s
+
+
+def known_answers(path: Path, cases) -> Path:
+    """A known_answers.json of (name, contacts) cases, as the harness's scenes' source."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"cases": [{"name": n, "contacts": c} for n, c in cases]}))
+    return path
+
+
+HAND = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.04], [-0.01, 0.1, 0.04]]
+
+
+def test_scenes_whose_inputs_float_cannot_hold_are_left_out_of_the_pwm_comparison(tmp_path):
+    far = [[1e6 + x for x in p] for p in HAND]  # float's spacing at 1e6 is 0.0625
+    path = known_answers(
+        tmp_path / "ka.json",
+        [("a3", HAND), ("b3", far), ("c3", [[float("nan"), 0.0, 0.0]] + HAND[1:])],
+    )
+    rounded = targets.float_rounded_scenes(path)
+    assert rounded == {"b3"}
+    rows = [
+        scene("a3", 3, uniform(10)),
+        scene("b3", 3, uniform(10), pwm=(90, 0, 0, 0), ref=(10, 200, 30, 0)),
+    ]
+    s = targets.summarize(targets.parse(harness_lines(rows, scalar="double")), rounded)
+    p = s["pwm_vs_float64"]
+    assert (p["compared"], p["within_1"], p["input_rounded"]) == (1, 1, 1)
+    assert s["status_vs_float64"]["same"] == 2  # its status is still compared
+    assert "1 left out (inputs float cannot hold)" in targets.format_table({"t": s})
+    # Without the rule the same run disagrees: the rule is what leaves b3 out.
+    assert targets.summarize(targets.parse(harness_lines(rows)))["pwm_vs_float64"]["max_diff"]
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [("{", "cannot read the scenes' float64 inputs"), ('{"cases": [{"name": "x"}]}', "contacts")],
+)
+def test_unreadable_known_answers_are_a_clear_error(tmp_path, content, message):
+    path = tmp_path / "ka.json"
+    path.write_text(content)
+    with pytest.raises(targets.TargetError, match=message):
+        targets.float_rounded_scenes(path)
 
 
 def test_a_status_other_than_the_documented_refusal_is_a_failure():
@@ -180,7 +280,8 @@ def test_json_shape_of_measure(tmp_path, monkeypatch):
         for stage in STAGES:
             assert set(m4f[k][stage]) == {"median", "max", "n"}
             assert isinstance(m4f[k][stage]["median"], int)
-    assert {"compared", "exact", "within_1", "within_1_share"} <= set(m4f["pwm_vs_float64"])
+    for route in ("pwm_vs_float64", "svd_pwm_vs_float64"):
+        assert {"compared", "exact", "within_1", "within_1_share", "max_diff"} <= set(m4f[route])
     assert m4f["stack_bytes"] == 1500
 
 
@@ -266,6 +367,7 @@ def fake_repo(tmp_path: Path) -> Path:
     root = tmp_path / "repo"
     (root / "lib" / "graspguide_link").mkdir(parents=True)
     (root / "platformio.ini").write_text("")
+    known_answers(root / targets.KNOWN_ANSWERS, [("a3", HAND)])
     for t in targets.TARGETS.values():
         elf = targets.image_path(root, t)
         elf.parent.mkdir(parents=True)

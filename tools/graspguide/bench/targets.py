@@ -1,12 +1,14 @@
 """Instruction counts of Algorithm 1 on Cortex-M4F and Cortex-M7 under QEMU
-(``graspguide bench --target m4f|m7``).
+(``graspguide bench --target m4f|m7|m7d``: float on both, and double on the M7's double
+FPU).
 
-The stage-count images (src/harness/stage_counts/, ``pio run -e m4f_stages -e m7_stages``)
-run on qemu-system-arm with ``-icount shift=0`` (one instruction per virtual nanosecond)
-and semihosting. The harness prints::
+The stage-count images (src/harness/stage_counts/, ``pio run -e m4f_stages -e m7_stages
+-e m7_stages_double``) run on qemu-system-arm with ``-icount shift=0`` (one instruction per
+virtual nanosecond) and semihosting. The harness prints::
 
     CAL <empty> <ticks of 200,000 instructions> <ticks of 600,000 instructions>
-    COLUMNS name k status ref_status pwm0 .. ref0 .. <stage> <stage> ..
+    SCALAR float|double
+    COLUMNS name k status ref_status pwm0 .. ref0 .. <stage> <stage> .. [svd_status svd0 ..]
     S <one scene, one value per column>
     STACK <bytes>
     END <scenes>
@@ -15,7 +17,8 @@ or ``HALT <reason> <code>`` when the image traps. Every value is read by its col
 name, and the stages are whatever columns the harness names besides the known ones, so
 the harness can add or drop stages without a change here. Stage values are SysTick ticks
 (25 MHz against the 1 GHz virtual clock: 40 instructions), -1 where a scene did not
-reach the stage.
+reach the stage. ``svd_status`` and ``svd0``.. are the SVD reference route's answer on the
+same scene, judged against the reference like the structured route's.
 
 Counts are deterministic, so the regression baseline (tools/perf/stage_baseline.json) is
 compared exactly: a median or maximum more than 10 % and more than one tick above it is a
@@ -34,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from graspguide.bench.pio_build import pio_env, pio_executable, run_build
 
 
@@ -50,6 +55,7 @@ TARGETS = {
     for t in (
         Target("m4f", "cortex-m4f", "m4f_stages", "mps2-an386"),
         Target("m7", "cortex-m7", "m7_stages", "mps2-an500"),
+        Target("m7d", "cortex-m7-double", "m7_stages_double", "mps2-an500"),
     )
 }
 BASELINE = Path("tools", "perf", "stage_baseline.json")  # relative to the repository
@@ -60,6 +66,14 @@ CALIBRATION_INSTRUCTIONS = 400_000
 # The float core refuses these far-offset hands as imprecise where float64 still solves
 # them (docs/algorithm.md): a documented refusal, not a disagreement.
 FLOAT_ONLY_REFUSALS = frozenset({"imprecise_contacts"})
+# The harness's scene table stores every input in float; the reference solved the float64
+# inputs of test/data/known_answers.json. Where float's rounding moves a contact by more
+# than this share of the hand's size (its farthest contact from the centroid), the target
+# solved another hand, so its PWM is not compared (the 1e6 m offsets: 0.6; a hand near the
+# origin: 1e-7).
+KNOWN_ANSWERS = Path("test", "data", "known_answers.json")  # relative to the repository
+INPUT_ROUNDING_MAX = 1e-4
+SCALARS = ("float", "double")
 # Columns every harness version prints; the stages are read off COLUMNS.
 REQUIRED_COLUMNS = ("name", "k", "status", "ref_status", "full_cold", "fixed")
 # A per-motor column is a word and a motor index (pwm0, ref3, svd1): outputs, not stages.
@@ -105,9 +119,11 @@ class SceneRow:
     k: int
     status: str
     ref_status: str
-    pwm: tuple[int, ...]  # the target's float PWM
+    pwm: tuple[int, ...]  # the target's PWM, structured route
     ref: tuple[int, ...]  # the float64 reference's
     ticks: dict[str, int]  # stage -> SysTick ticks, -1 where the stage did not run
+    svd_status: str | None = None  # the SVD route's, when the harness prints it
+    svd: tuple[int, ...] | None = None
 
 
 @dataclass
@@ -116,6 +132,7 @@ class StageRun:
     rows: list[SceneRow] = field(default_factory=list)
     stack_bytes: int = 0
     empty_ticks: int = 0
+    scalar: str = "float"  # the core's scalar in the image (its SCALAR line)
 
 
 def stage_columns(columns: Sequence[str]) -> list[str]:
@@ -168,11 +185,12 @@ def _halted(reason_code: str, last_scene: str | None) -> TargetHalted:
 
 
 def _scene_row(
-    v: dict[str, str], stages: list[str], cols: tuple[list[str], list[str]], lineno: int
+    v: dict[str, str], stages: list[str], cols: tuple[list[str], ...], lineno: int
 ) -> SceneRow:
     def ints(names: Sequence[str]) -> tuple[int, ...]:
         return tuple(_int(v[c], f"{c} of scene {v['name']}", lineno) for c in names)
 
+    svd = len(cols) > 2
     return SceneRow(
         name=v["name"],
         k=_int(v["k"], f"k of scene {v['name']}", lineno),
@@ -181,6 +199,8 @@ def _scene_row(
         pwm=ints(cols[0]),
         ref=ints(cols[1]),
         ticks=dict(zip(stages, ints(stages))),
+        svd_status=v["svd_status"] if svd else None,
+        svd=ints(cols[2]) if svd else None,
     )
 
 
@@ -188,10 +208,12 @@ def parse(lines: Iterable[str]) -> StageRun:
     """Reads the harness's output (other lines, e.g. QEMU's warnings, are skipped).
     Raises TargetHalted on a HALT line, BadOutput when a line is missing or malformed."""
     columns: list[str] | None = None
-    cols: tuple[list[str], list[str]] = ([], [])  # the PWM columns: target's, reference's
+    # The PWM columns: the target's, the reference's, and the SVD route's when printed.
+    cols: tuple[list[str], ...] = ([], [])
     run: StageRun | None = None
     empty: int | None = None
     stack: int | None = None
+    scalar: str | None = None
     lineno = 0
     for lineno, line in enumerate(lines, 1):
         tag, _, rest = line.strip().partition(" ")
@@ -200,6 +222,10 @@ def parse(lines: Iterable[str]) -> StageRun:
             raise _halted(rest, run.rows[-1].name if run and run.rows else None)
         if tag == "CAL":
             empty = _check_calibration(fields, lineno)
+        elif tag == "SCALAR":
+            if fields not in ([x] for x in SCALARS):
+                raise BadOutput(f"line {lineno}: SCALAR is {rest!r}, not one of {SCALARS}")
+            scalar = fields[0]
         elif tag == "COLUMNS":
             columns = fields
             missing = [c for c in REQUIRED_COLUMNS if c not in columns]
@@ -207,8 +233,11 @@ def parse(lines: Iterable[str]) -> StageRun:
                 raise BadOutput(f"line {lineno}: COLUMNS lacks {', '.join(missing)}")
             run = StageRun(stages=stage_columns(columns))
             cols = (_motor_columns(columns, "pwm"), _motor_columns(columns, "ref"))
-            if len(cols[0]) != len(cols[1]):
-                raise BadOutput(f"line {lineno}: {len(cols[0])} pwm but {len(cols[1])} ref columns")
+            if "svd_status" in columns and "svd0" in columns:
+                cols = (*cols, _motor_columns(columns, "svd"))
+            if any(len(c) != len(cols[0]) for c in cols):
+                counts = ", ".join(f"{len(c)} {c[0][:-1]}" for c in cols)
+                raise BadOutput(f"line {lineno}: per-motor columns differ in count: {counts}")
         elif tag == "S":
             if columns is None or run is None:
                 raise BadOutput(f"line {lineno}: a scene line before the COLUMNS line")
@@ -221,14 +250,23 @@ def parse(lines: Iterable[str]) -> StageRun:
         elif tag == "STACK":
             stack = _int(rest.strip(), "STACK", lineno)
         elif tag == "END":
-            if run is None or empty is None or stack is None:
-                what = "COLUMNS" if run is None else "CAL" if empty is None else "STACK"
+            if run is None or empty is None or stack is None or scalar is None:
+                what = (
+                    "COLUMNS"
+                    if run is None
+                    else "CAL"
+                    if empty is None
+                    else "STACK"
+                    if stack is None
+                    else "SCALAR"
+                )
                 raise BadOutput(f"line {lineno}: END before the {what} line")
             scenes = _int(rest.strip(), "END", lineno)
             if scenes != len(run.rows):
                 raise BadOutput(f"END says {scenes} scenes, the output has {len(run.rows)}")
             run.stack_bytes = stack
             run.empty_ticks = empty
+            run.scalar = scalar
             return run
     last = f", the last scene {run.rows[-1].name}" if run and run.rows else ""
     raise BadOutput(f"the output ended after {lineno} lines without its END line{last}")
@@ -243,11 +281,83 @@ def _stats(values: list[int]) -> dict[str, Any]:
     return {"median": int(statistics.median(values)), "max": max(values), "n": len(values)}
 
 
-def summarize(run: StageRun) -> dict[str, Any]:
+def _agreement(
+    rows: Sequence[tuple[str, str, str, tuple[int, ...], tuple[int, ...]]],
+    rounded: frozenset[str],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """PWM and status of one route against the float64 reference. ``rows``: (scene,
+    status, reference status, PWM, reference PWM); ``rounded``: the scenes whose inputs
+    float cannot hold (:func:`float_rounded_scenes`), whose PWM is not compared."""
+    compared = exact = within1 = left_out = 0
+    worst = 0
+    same = float_only = 0
+    differences: list[str] = []
+    for name, status, ref_status, pwm, ref in rows:
+        if status == ref_status:
+            same += 1
+        elif status in FLOAT_ONLY_REFUSALS and ref_status == "ok":
+            float_only += 1
+        else:
+            differences.append(f"{name}: {status} vs reference {ref_status}")
+        if status == "ok" and ref_status == "ok":
+            if name in rounded:
+                left_out += 1
+                continue
+            d = max(abs(a - b) for a, b in zip(pwm, ref))
+            compared += 1
+            exact += d == 0
+            within1 += d <= 1
+            worst = max(worst, d)
+    pwm_figures = {
+        "compared": compared,
+        "exact": exact,
+        "within_1": within1,
+        "within_1_share": within1 / compared if compared else None,
+        "max_diff": worst if compared else None,
+        "input_rounded": left_out,
+    }
+    status_figures = {
+        "same": same,
+        "float_only_refusals": float_only,
+        "different": len(differences),
+        "differences": differences,
+    }
+    return pwm_figures, status_figures
+
+
+def float_rounded_scenes(known_answers: Path) -> frozenset[str]:
+    """The scenes of ``known_answers`` (the harness's scene table's source) whose contacts
+    float's rounding moves by more than INPUT_ROUNDING_MAX of the hand's size."""
+    try:
+        cases = json.loads(known_answers.read_text())["cases"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise TargetError(
+            f"cannot read the scenes' float64 inputs from {known_answers}: {e}"
+        ) from None
+    out = set()
+    for c in cases:
+        try:
+            contacts = np.asarray(c["contacts"], dtype=np.float64)
+            name = str(c["name"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise TargetError(f"{known_answers}: a case without usable contacts: {e}") from None
+        if not np.all(np.isfinite(contacts)):
+            continue  # a non-finite input is refused whatever the precision
+        moved = np.max(np.abs(contacts.astype(np.float32).astype(np.float64) - contacts))
+        size = np.max(np.linalg.norm(contacts - contacts.mean(axis=0), axis=1))
+        if moved > INPUT_ROUNDING_MAX * size:
+            out.add(name)
+    return frozenset(out)
+
+
+def summarize(run: StageRun, rounded: frozenset[str] = frozenset()) -> dict[str, Any]:
     """Per k: the median and maximum instructions of every stage over the scenes the
-    target solved; the agreement of the target's float PWM and status with the float64
-    reference; the stack high-water mark."""
+    target solved; the agreement of the target's PWM and status with the float64
+    reference, for the structured route and (when the harness prints it) the SVD route,
+    leaving the ``rounded`` scenes (:func:`float_rounded_scenes`) out of the PWM
+    comparison; the stack high-water mark."""
     out: dict[str, Any] = {
+        "scalar": run.scalar,
         "scenes": len(run.rows),
         "stack_bytes": run.stack_bytes,
         "stages": list(run.stages),
@@ -261,33 +371,14 @@ def summarize(run: StageRun) -> dict[str, Any]:
             )
         per_k["slowest_scene"] = max(ok, key=lambda r: r.ticks["full_cold"]).name if ok else None
         out[f"k{k}"] = per_k
-    compared = exact = within1 = 0
-    same = float_only = 0
-    differences: list[str] = []
-    for r in run.rows:
-        if r.status == r.ref_status:
-            same += 1
-        elif r.status in FLOAT_ONLY_REFUSALS and r.ref_status == "ok":
-            float_only += 1
-        else:
-            differences.append(f"{r.name}: {r.status} vs reference {r.ref_status}")
-        if r.status == "ok" and r.ref_status == "ok":
-            d = max(abs(a - b) for a, b in zip(r.pwm, r.ref))
-            compared += 1
-            exact += d == 0
-            within1 += d <= 1
-    out["pwm_vs_float64"] = {
-        "compared": compared,
-        "exact": exact,
-        "within_1": within1,
-        "within_1_share": within1 / compared if compared else None,
-    }
-    out["status_vs_float64"] = {
-        "same": same,
-        "float_only_refusals": float_only,
-        "different": len(differences),
-        "differences": differences,
-    }
+    out["pwm_vs_float64"], out["status_vs_float64"] = _agreement(
+        [(r.name, r.status, r.ref_status, r.pwm, r.ref) for r in run.rows], rounded
+    )
+    if run.rows and all(r.svd is not None for r in run.rows):
+        out["svd_pwm_vs_float64"], out["svd_status_vs_float64"] = _agreement(
+            [(r.name, r.svd_status or "", r.ref_status, r.svd or (), r.ref) for r in run.rows],
+            rounded,
+        )
     return out
 
 
@@ -399,8 +490,8 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
     for target, r in results.items():
         ks = _k_keys(r)
         out.append(
-            f"== {target}: instructions per stage (median / max over accepted scenes), "
-            f"{r['scenes']} scenes, stack high-water {r['stack_bytes']} B"
+            f"== {target} ({r['scalar']}): instructions per stage (median / max over accepted "
+            f"scenes), {r['scenes']} scenes, stack high-water {r['stack_bytes']} B"
         )
         head = "".join(f"{'k=' + k[1:] + ' median':>12}{'k=' + k[1:] + ' max':>10}" for k in ks)
         out.append(f"{'stage':<15}{head}")
@@ -412,13 +503,23 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
                 for k in ks
             )
             out.append(f"{stage:<15}{cells}")
-        p, s = r["pwm_vs_float64"], r["status_vs_float64"]
-        out.append(
-            f"float PWM vs float64 reference: {p['within_1']}/{p['compared']} within 1 count "
-            f"({p['exact']} exact); status: {s['same']} same, {s['float_only_refusals']} "
-            f"float-only refusals, {s['different']} different"
-        )
-        out.extend(f"  differs: {d}" for d in s["differences"])
+        for route, prefix in (("structured", ""), ("svd", "svd_")):
+            if f"{prefix}pwm_vs_float64" not in r:
+                continue
+            p, s = r[f"{prefix}pwm_vs_float64"], r[f"{prefix}status_vs_float64"]
+            rounded = (
+                f", {p['input_rounded']} left out (inputs float cannot hold)"
+                if p["input_rounded"]
+                else ""
+            )
+            out.append(
+                f"{r['scalar']} {route} PWM vs float64 reference: {p['within_1']}/"
+                f"{p['compared']} within 1 count ({p['exact']} exact, max "
+                f"{'-' if p['max_diff'] is None else p['max_diff']}){rounded}; status: "
+                f"{s['same']} same, {s['float_only_refusals']} float-only refusals, "
+                f"{s['different']} different"
+            )
+            out.extend(f"  differs: {d}" for d in s["differences"])
     return "\n".join(out)
 
 
@@ -514,6 +615,7 @@ def measure(
     target key -> summary."""
     if build_first:
         build(root, targets, progress=progress)
+    rounded = float_rounded_scenes(root / KNOWN_ANSWERS)
     results: dict[str, dict[str, Any]] = {}
     for target in targets:
         if progress:
@@ -523,7 +625,7 @@ def measure(
             raw_dir.mkdir(parents=True, exist_ok=True)
             (raw_dir / f"{target.key}.txt").write_text("\n".join(lines) + "\n")
         try:
-            results[target.key] = summarize(parse(lines))
+            results[target.key] = summarize(parse(lines), rounded)
         except BadOutput as e:
             raise BadOutput(f"{target.key} ({image_path(root, target)}): {e}") from None
     return results
@@ -532,7 +634,7 @@ def measure(
 @dataclass
 class Check:
     findings: list[Finding]
-    status_failures: list[str]  # targets whose statuses differ from the reference
+    status_failures: list[str]  # targets whose statuses (either route) differ from the reference
 
     @property
     def failed(self) -> bool:
@@ -555,7 +657,12 @@ class Check:
 def check(results: dict[str, dict[str, Any]], baseline: dict[str, Any]) -> Check:
     return Check(
         findings=compare({t: slim(r) for t, r in results.items()}, baseline),
-        status_failures=[t for t, r in results.items() if r["status_vs_float64"]["different"]],
+        status_failures=[
+            t
+            for t, r in results.items()
+            if r["status_vs_float64"]["different"]
+            or r.get("svd_status_vs_float64", {}).get("different")
+        ],
     )
 
 
@@ -576,6 +683,7 @@ __all__ = [
     "ToolMissing",
     "build",
     "check",
+    "float_rounded_scenes",
     "compare",
     "format_table",
     "load_baseline",

@@ -33,7 +33,7 @@ DESCRIPTION = (
 )
 RAW_DESCRIPTION = False
 
-TARGET_CHOICES = ("m4f", "m7", "avr")
+TARGET_CHOICES = ("m4f", "m7", "m7d", "avr")
 # Options of one mode only: their dest, and the flag a message names.
 HOST_ONLY = {
     "instances": "--instances",
@@ -42,6 +42,7 @@ HOST_ONLY = {
     "quick": "--quick",
     "solvers": "--solvers",
     "max_passes": "--max-passes",
+    "accuracy_scenes": "--accuracy-scenes",
 }
 TARGET_ONLY = {
     "no_build": "--no-build",
@@ -93,6 +94,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="cap on the passes of a noisy series, >= 1 (default 8, --quick 4)",
     )
+    p.add_argument(
+        "--accuracy-scenes",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also judge every frame route (float/double, structured/svd) on N more "
+        "random hands per k against the float64 reference, 0..100000 (default 0: the "
+        "accuracy columns then rest on the timed instances only; the reference takes "
+        "about 10 ms a scene)",
+    )
     t = p.add_argument_group("microcontroller targets (--target)")
     t.add_argument(
         "--target",
@@ -101,11 +112,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=TARGET_CHOICES,
         default=None,
         help="instead of the host benchmark, count instructions on this target under "
-        "QEMU: m4f (Cortex-M4F, mps2-an386), m7 (Cortex-M7, mps2-an500), or the per-frame "
+        "QEMU: m4f (Cortex-M4F, mps2-an386), m7 (Cortex-M7, mps2-an500), m7d (the same "
+        "M7 with the core in double on its double FPU), or the per-frame "
         "layer's cycles on avr (ATmega328P at 8 MHz, simavr); repeatable. "
         '--json then writes {"cortex-m4f": {"k3": {STAGE: {"median", "max"}}, '
-        '..., "pwm_vs_float64", "stack_bytes"}, "atmega328p": {"cycles": {PART: '
-        '{"median", "max"}}, "flash_bytes", "ram_static_bytes", "stack_bytes", ...}}',
+        '..., "pwm_vs_float64", "svd_pwm_vs_float64", "stack_bytes"}, '
+        '"atmega328p": {"cycles": {PART: {"median", "max"}}, "flash_bytes", '
+        '"ram_static_bytes", "stack_bytes", ...}}',
     )
     t.add_argument(
         "--no-build",
