@@ -204,6 +204,36 @@ def _qp_data(inst: Instance) -> None:
         inst.qp[model] = (np.ascontiguousarray(inst.N[S, :]), -inst.lam0[S])
 
 
+def _instance(sc: dict[str, Any], group: str, model: str, policy: str, mode: str) -> Instance:
+    """One scene under one model, policy and mode, with the reference's answer and, when
+    it is ok, the QP data."""
+    inst = Instance(
+        name=f"{sc['name']}/{model}",
+        group=group,
+        k=int(sc["k"]),
+        contacts=[list(map(float, c)) for c in sc["contacts"]],
+        wrench=list(map(float, sc["wrench"])),
+        y_axis=list(map(float, sc["y_axis"])),
+        orientation=list(map(float, sc["orientation"])),
+        constraints=model,
+        policy=policy,
+        mode=mode,
+    )
+    inst.ref = reference.solve(
+        inst.contacts,
+        inst.wrench,
+        policy,
+        mode,
+        model,
+        inst.orientation,
+        inst.y_axis,
+        compute_margins=False,
+    )
+    if inst.ok:
+        _qp_data(inst)
+    return inst
+
+
 def make_instances(
     count: int, seed: int, ks: Sequence[int], progress: Callable[[str], None] | None = None
 ) -> list[Instance]:
@@ -219,31 +249,7 @@ def make_instances(
         for group, scs in groups:
             for sc in scs:
                 for model, policy, mode in RUNS:
-                    inst = Instance(
-                        name=f"{sc['name']}/{model}",
-                        group=group,
-                        k=k,
-                        contacts=[list(map(float, c)) for c in sc["contacts"]],
-                        wrench=list(map(float, sc["wrench"])),
-                        y_axis=list(map(float, sc["y_axis"])),
-                        orientation=list(map(float, sc["orientation"])),
-                        constraints=model,
-                        policy=policy,
-                        mode=mode,
-                    )
-                    inst.ref = reference.solve(
-                        inst.contacts,
-                        inst.wrench,
-                        policy,
-                        mode,
-                        model,
-                        inst.orientation,
-                        inst.y_axis,
-                        compute_margins=False,
-                    )
-                    if inst.ok:
-                        _qp_data(inst)
-                    out.append(inst)
+                    out.append(_instance(sc, group, model, policy, mode))
         if progress:
             progress(
                 f"k={k}: {sum(1 for i in out if i.k == k)} instances with their float64 reference"
@@ -292,9 +298,11 @@ def judge(inst: Instance, out: Outcome, scalar: str = "double") -> dict[str, Any
         "used": out.used,
         "failure": None,
     }
+    rec["agree"] = False  # same status, and where ok the same model and PWM within 1
     if not inst.ok:  # a frame that must fail: it must fail with the reference's status
         if out.status != inst.ref["status"]:
             rec["failure"] = f"status {out.status}, reference {inst.ref['status']}"
+        rec["agree"] = out.status == inst.ref["status"]
         return rec
     if out.status != "ok" or out.lam is None:
         rec["failure"] = out.status if out.status != "ok" else "no solution"
@@ -323,6 +331,7 @@ def judge(inst: Instance, out: Outcome, scalar: str = "double") -> dict[str, Any
         rec["failure"] = f"wrong model: {out.used}, reference {inst.ref['constraints_used']}"
     elif viol > VIOLATION_TOL[scalar]:
         rec["failure"] = "constraint violation"
+    rec["agree"] = out.used == inst.ref["constraints_used"] and rec.get("pwm_diff", 2) <= 1
     return rec
 
 
@@ -339,8 +348,11 @@ def summarize_accuracy(records: list[dict[str, Any]]) -> dict[str, Any]:
         reasons[key] = reasons.get(key, 0) + 1
     diffs = collect("pwm_diff")
     gaps = [abs(g) for g in collect("objective_gap_rel")]
+    agree = sum(1 for r in records if r.get("agree"))
     return {
         "instances": len(records),
+        "agree": agree,
+        "agree_share": agree / len(records) if records else None,
         "failures": len(failures),
         "failure_reasons": reasons,
         "failed": failures,
@@ -359,6 +371,90 @@ def summarize_accuracy(records: list[dict[str, Any]]) -> dict[str, Any]:
         "max_lambda_err_rel": max(collect("lambda_err_rel"), default=None),
         "max_equilibrium_residual_rel": max(collect("equilibrium_residual_rel"), default=None),
     }
+
+
+# --------------------------------------------------------------------------------------
+# The accuracy set (--accuracy-scenes): more hands than the timing can afford, judged
+# like the timed frames, so the cost-against-accuracy table can rest on a larger sample.
+# --------------------------------------------------------------------------------------
+# Its hands are drawn with seed + this offset, so they are not the timing set's hands.
+ACCURACY_SEED_OFFSET = 10
+# Scene i takes combination i mod 12, in the stage scenes' order (policy, mode, model).
+COMBINATIONS = tuple(
+    (model, policy, mode)
+    for policy in ("F", "Fperp")
+    for mode in ("C", "V")
+    for model in ("paper", "normal", "none")
+)
+# The frame configurations the table weighs: (scalar, decomposition), cheapest first.
+FRAME_ROUTES = (
+    ("float", "structured"),
+    ("double", "structured"),
+    ("float", "svd"),
+    ("double", "svd"),
+)
+
+
+def frame_name(scalar: str, decomposition: str) -> str:
+    return f"frame {scalar} {decomposition}"
+
+
+def accuracy_instances(
+    count: int, seed: int, ks: Sequence[int], progress: Callable[[str], None] | None = None
+) -> list[Instance]:
+    """``count`` random hands per k (seed ``seed + ACCURACY_SEED_OFFSET``), scene i under
+    ``COMBINATIONS[i % 12]``, each with its float64 reference."""
+    out: list[Instance] = []
+    for k in ks:
+        t0 = time.perf_counter()
+        for i, sc in enumerate(scenes.random_scenes(seed + ACCURACY_SEED_OFFSET, k, count)):
+            out.append(_instance(sc, "accuracy", *COMBINATIONS[i % len(COMBINATIONS)]))
+        if progress:
+            progress(
+                f"accuracy set k={k}: {count} scenes with their float64 reference "
+                f"in {time.perf_counter() - t0:.0f} s"
+            )
+    return out
+
+
+def run_accuracy_set(insts: list[Instance], ks: Sequence[int]) -> list[dict[str, Any]]:
+    """Every frame route on every instance of the accuracy set, one ``_core.solve`` call
+    each (the same Guidance<T> frame the C++ loop times), judged against the reference."""
+    results = []
+    for k in ks:
+        mine = [i for i in insts if i.k == k]
+        for scalar, dec in FRAME_ROUTES:
+            records = [
+                judge(
+                    inst,
+                    binding_outcome(
+                        _core.solve(
+                            inst.contacts,
+                            inst.wrench,
+                            inst.policy,
+                            inst.mode,
+                            inst.constraints,
+                            inst.orientation,
+                            inst.y_axis,
+                            scalar,
+                            dec,
+                            _core.kDefaultMaxIterations,
+                        )
+                    ),
+                    scalar,
+                )
+                for inst in mine
+            ]
+            results.append(
+                {
+                    "name": frame_name(scalar, dec),
+                    "k": k,
+                    "scalar": scalar,
+                    "decomposition": dec,
+                    "accuracy": summarize_accuracy(records),
+                }
+            )
+    return results
 
 
 # --------------------------------------------------------------------------------------
@@ -981,6 +1077,7 @@ class Options:
     min_passes: int = 3
     max_passes: int = 8
     solvers: tuple[str, ...] = ("daqp", "quadprog", "osqp", "scipy-slsqp")
+    accuracy_scenes: int = 0  # random hands per k of the accuracy set; 0: none
 
 
 def build_configs(insts: list[Instance], opts: Options) -> list[Config]:
@@ -1194,6 +1291,54 @@ def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
     }
 
 
+def _accuracy_figures(a: dict[str, Any]) -> dict[str, Any]:
+    return {
+        key: a[key]
+        for key in (
+            "instances",
+            "agree",
+            "agree_share",
+            "compared_pwm",
+            "pwm_mismatch",
+            "max_pwm_diff",
+            "max_lambda_err_rel",
+        )
+    }
+
+
+def tradeoff(
+    results: list[dict[str, Any]], accuracy_set: dict[str, Any] | None
+) -> list[dict[str, Any]]:
+    """The cost-against-accuracy rows: per k, each frame route's median time (C++ loop)
+    beside its agreement with the float64 reference on the timing instances and, when it
+    ran, on the accuracy set."""
+    extra = {(r["name"], r["k"]): r["accuracy"] for r in (accuracy_set or {}).get("results", [])}
+    rows = []
+    for k in sorted({r["k"] for r in results}):
+        for scalar, dec in FRAME_ROUTES:
+            r = next(
+                (x for x in results if x["k"] == k and x["name"] == frame_name(scalar, dec)),
+                None,
+            )
+            if r is None:
+                continue
+            t = r["timing"]["cxx"]
+            acc = extra.get((r["name"], k))
+            rows.append(
+                {
+                    "k": k,
+                    "config": r["name"],
+                    "scalar": scalar,
+                    "decomposition": dec,
+                    "median_ns": t.get("median_ns"),
+                    "p99_ns": t.get("p99_ns"),
+                    "timing_set": _accuracy_figures(r["accuracy"]),
+                    "accuracy_set": None if acc is None else _accuracy_figures(acc),
+                }
+            )
+    return rows
+
+
 def run_configs(
     opts: Options, progress: Callable[[str], None] | None = None
 ) -> tuple[list[Instance], list[Config]]:
@@ -1207,8 +1352,31 @@ def run_configs(
     return insts, configs
 
 
+def measure_accuracy_set(
+    opts: Options, progress: Callable[[str], None] | None = None
+) -> dict[str, Any] | None:
+    """The accuracy set of ``opts.accuracy_scenes`` hands per k, or None when it is 0."""
+    if not opts.accuracy_scenes:
+        return None
+    t0 = time.perf_counter()
+    insts = accuracy_instances(opts.accuracy_scenes, opts.seed, opts.ks, progress)
+    results = run_accuracy_set(insts, opts.ks)
+    return {
+        "scenes_per_k": opts.accuracy_scenes,
+        "seed": opts.seed + ACCURACY_SEED_OFFSET,
+        "combinations": [list(c) for c in COMBINATIONS],
+        "reference_not_ok": sum(1 for i in insts if not i.ok),
+        "results": results,
+        "elapsed_s": time.perf_counter() - t0,
+    }
+
+
 def report(
-    opts: Options, insts: list[Instance], configs: list[Config], elapsed_s: float
+    opts: Options,
+    insts: list[Instance],
+    configs: list[Config],
+    elapsed_s: float,
+    accuracy_set: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     results = [c.result() for c in configs]
     counts = {}
@@ -1239,11 +1407,14 @@ def report(
             "p99_spread_max": P99_SPREAD_MAX,
             "violation_tol": VIOLATION_TOL,
             "runs": [list(r) for r in RUNS],
+            "accuracy_scenes": opts.accuracy_scenes,
         },
         "machine": machine_info({n: s for n, s in make_peers(opts.solvers).items()}),
         "instances": counts,
         "results": results,
         "goal": goal(results),
+        "accuracy_set": accuracy_set,
+        "tradeoff": tradeoff(results, accuracy_set),
         "elapsed_s": elapsed_s,
     }
 
@@ -1251,7 +1422,8 @@ def report(
 def run_bench(opts: Options, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     t0 = time.perf_counter()
     insts, configs = run_configs(opts, progress)
-    return report(opts, insts, configs, time.perf_counter() - t0)
+    accuracy_set = measure_accuracy_set(opts, progress)
+    return report(opts, insts, configs, time.perf_counter() - t0, accuracy_set)
 
 
 # --------------------------------------------------------------------------------------
@@ -1271,8 +1443,60 @@ def _fmt_e(v: float | None) -> str:
     return "-" if v is None else ("0" if v == 0 else f"{v:.0e}")
 
 
+def _fmt_agree(a: dict[str, Any] | None) -> tuple[str, str, str]:
+    """agree n/N (share), max PWM difference, max relative force error."""
+    if a is None:
+        return ("-", "-", "-")
+    share = "" if a["agree_share"] is None else f" ({100 * a['agree_share']:.2f}%)"
+    return (
+        f"{a['agree']}/{a['instances']}{share}",
+        "-" if a["max_pwm_diff"] is None else str(a["max_pwm_diff"]),
+        _fmt_e(a["max_lambda_err_rel"]),
+    )
+
+
+def format_tradeoff(report: dict[str, Any]) -> list[str]:
+    """The cost-against-accuracy block: per k and frame route, the median frame beside
+    the agreement with the float64 reference (same status, and where ok the same model
+    and PWM within 1 count) on the timed instances and on the accuracy set."""
+    rows = report.get("tradeoff") or []
+    if not rows:
+        return []
+    acc = report.get("accuracy_set")
+    head = ["k", "config", "median", "agree (timed)", "dPWM", "|dλ|/|λ|"]
+    if acc:
+        head += [f"agree ({acc['scenes_per_k']} more/k)", "dPWM", "|dλ|/|λ|"]
+    table = [head]
+    for r in rows:
+        cells = [str(r["k"]), r["config"], _fmt_ns(r["median_ns"]), *_fmt_agree(r["timing_set"])]
+        if acc:
+            cells += list(_fmt_agree(r["accuracy_set"]))
+        table.append(cells)
+    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
+    out = ["", "cost against accuracy (frames, C++ loop; agreement with the float64 reference):"]
+    for row in table:
+        out.append(
+            "  ".join(
+                c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))
+            )
+        )
+    return out
+
+
 def format_table(report: dict[str, Any]) -> str:
-    head = ("config", "time", "median", "p99", "pass", "fail", "viol", "gap", "PWM!=", "dPWM")
+    head = (
+        "config",
+        "time",
+        "median",
+        "p99",
+        "pass",
+        "fail",
+        "agree",
+        "viol",
+        "gap",
+        "PWM!=",
+        "dPWM",
+    )
     rows = []
     for n, k in enumerate(report["settings"]["k"]):
         if n:
@@ -1290,12 +1514,13 @@ def format_table(report: dict[str, Any]) -> str:
                     passes,
                 )
                 if not a["instances"]:  # stage timings: no answer to judge
-                    rows.append(timing + ("-",) * 5)
+                    rows.append(timing + ("-",) * 6)
                     continue
                 rows.append(
                     timing
                     + (
                         f"{a['failures']}/{a['instances']}",
+                        f"{a['agree']}/{a['instances']}",
                         _fmt_e(a["max_violation_rel"]),
                         _fmt_e(a["max_objective_gap_rel"]),
                         f"{a['pwm_mismatch']}/{a['compared_pwm']}",
@@ -1313,6 +1538,7 @@ def format_table(report: dict[str, Any]) -> str:
     out = [fmt(head), line]
     for row in rows:
         out.append(line if row is None else fmt(row))
+    out.extend(format_tradeoff(report))
     g = report.get("goal")
     if g:
         out.append("")
@@ -1375,6 +1601,9 @@ def options_from_args(args) -> Options:
     if max_passes < 1:
         raise BenchError(f"--max-passes must be >= 1, got {max_passes}")
     solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())
+    accuracy_scenes = args.accuracy_scenes
+    if not 0 <= accuracy_scenes <= 100_000:
+        raise BenchError(f"--accuracy-scenes must be between 0 and 100000, got {accuracy_scenes}")
     return Options(
         instances=instances,
         seed=args.seed,
@@ -1383,6 +1612,7 @@ def options_from_args(args) -> Options:
         min_passes=min(2 if quick else 3, max_passes),
         max_passes=max_passes,
         solvers=solvers,
+        accuracy_scenes=accuracy_scenes,
     )
 
 
