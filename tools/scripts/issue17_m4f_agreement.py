@@ -1,0 +1,496 @@
+#!/usr/bin/env python3
+"""Issue 17: does the float core give the float64 reference's constraint model and PWM
+(within 1 count) on `paper` scenes? Measured on the host and on the Cortex-M4F under QEMU,
+so that a before/after record can be taken on any commit.
+
+The scenes are the issue's kind: hand-like contacts (the project's nominal hand,
+``scene_generators.nominal_contacts``, each coordinate moved by up to
+``scene_generators.PERTURBATION_M``), a unit force in a uniform direction and no moment,
+identity orientation, y_O = [0, 1, 0], k = 3 and 4 alternating, policy F and Fperp
+alternating in pairs, mode C, constraints `paper`; plus the 8 scenes of the issue
+(:data:`ISSUE17_SCENES`). ``tools/tests/test_float_paper_agreement.py`` uses the same
+generator and tolerance band.
+
+Run from the repository root with the project's .venv active:
+
+    # 1. the float64 reference on the 8 + N scenes, once (about 10 ms a scene and job)
+    python tools/scripts/issue17_m4f_agreement.py reference --count 100000 --jobs 2 \\
+        --out /tmp/issue17_ref.npz
+    # 2. the float core the interpreter imports against it; for another commit's core put
+    #    that build first on PYTHONPATH (pip install --target DIR ./tools in its worktree)
+    python tools/scripts/issue17_m4f_agreement.py host --reference /tmp/issue17_ref.npz
+    # 3. the M4F: for each worktree, write the 8 + N scenes (float-rounded, with the
+    #    reference's status and PWM on those rounded inputs) into its
+    #    src/harness/stage_counts/stage_scenes.h, `pio run -e m4f_stages` there, run the
+    #    image on qemu-system-arm and count the agreement
+    python tools/scripts/issue17_m4f_agreement.py m4f --count 1300 /tmp/wt_after /tmp/wt_before
+
+Step 3 overwrites the worktrees' stage_scenes.h: give it worktrees (`git worktree add`),
+never the main checkout. The harness prints PWM and status, not the model, so on the M4F
+agreement is the status and PWM within 1 count.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from graspguide.core import scene_generators
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _this_checkouts_reference() -> Any:
+    """This checkout's float64 reference, also when another commit's core is imported
+    (PYTHONPATH) to be measured: the reference and its margin must stay the same."""
+    import importlib.util
+
+    path = ROOT / "tools" / "graspguide" / "core" / "reference.py"
+    spec = importlib.util.spec_from_file_location("issue17_reference", path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot load {path}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+reference = _this_checkouts_reference()
+
+SEED = 17
+POLICIES = ("F", "Fperp")
+# The band of issue 17: the float core may pick another model than float64 only on scenes
+# whose x-fixed paper margin (reference.paper_margin_x_fixed, relative to ||lambda0||)
+# is within this of 0. It is the float core's own feasibility tolerance,
+# Tolerances<float>::kFeasRelTol (lib/graspguide/src/graspguide/tolerances.h): float
+# accepts a violation up to this fraction of ||lambda0||, so a scene whose margin is
+# smaller is feasible to float and infeasible to float64, or the reverse, by design.
+# (Float's epsilon, 1.2e-7, times the internal forces of a paper optimum, which reach
+# ~1000 ||lambda0||, is of the same order.)
+FLOAT_BAND_TOL = 1e-4
+
+# The issue's 8 requests (policy F or Fperp, mode C, constraints paper, no moment).
+ISSUE17_SCENES: list[dict[str, Any]] = [
+    {
+        "contacts": [
+            [0.037160008319188385, -0.006663045636920981, 0.03561343252834991],
+            [-0.017240429598094464, 0.03316225500504811, 0.0726847032889959],
+            [-0.04111005169831705, 0.02374787286847652, 0.08889877899351581],
+        ],
+        "force": [0.05011938700819065, -0.90833882635023, 0.4152211743042617],
+        "policy": "F",
+    },
+    {
+        "contacts": [
+            [0.026021286914099086, -0.0059804942656404465, 0.03608174726920736],
+            [-0.017752846672399156, 0.033504278900886336, 0.10057581130065865],
+            [-0.005245938860003265, 0.02285893468057164, 0.08721554585243048],
+            [-0.01293648934799525, 0.01799662072362494, 0.0031679601016966225],
+        ],
+        "force": [0.6299175468687046, 0.5157666743207229, 0.5806794484111306],
+        "policy": "Fperp",
+    },
+    {
+        "contacts": [
+            [0.02144295669267866, 0.003228034458116806, 0.0537821843363604],
+            [-0.010091286803572665, 0.0169718060081644, 0.08245404972988006],
+            [-0.015464190756852349, 0.019785910219387033, 0.0838414216740177],
+            [0.012756194163362074, 0.018304109319914094, -0.010414226068240941],
+        ],
+        "force": [0.9782489579532001, 0.18817261042920472, 0.08729286882521928],
+        "policy": "Fperp",
+    },
+    {
+        "contacts": [
+            [0.017736046591935707, -0.017874790243182767, 0.04796200469174857],
+            [-0.0037583453062300176, 0.013672038860695866, 0.09953894068831734],
+            [-0.030748993589733827, 0.03278436423272373, 0.09848311313920391],
+            [-0.009559894374844042, -0.013621707542602215, -0.000633945167161061],
+        ],
+        "force": [0.8932893449984581, 0.4494199829925745, 0.007471612890110519],
+        "policy": "Fperp",
+    },
+    {
+        "contacts": [
+            [0.052111615480191394, -0.017894334473437964, 0.048440007547803886],
+            [0.0005858686822280846, 0.007351937482093906, 0.09949963804503763],
+            [-0.025240860453715257, 0.01997191344484333, 0.11965971933978242],
+            [-0.001004548279657875, 0.010441876353048026, 0.0016898528550637372],
+        ],
+        "force": [-0.46756594743893604, 0.798541208959943, 0.3790963233642907],
+        "policy": "F",
+    },
+    {
+        "contacts": [
+            [0.031233355405583037, -0.024828400445275765, 0.04082444114975877],
+            [-0.024134785697345375, 0.036066336143056356, 0.09368925448559674],
+            [-0.005099892551420373, 0.03642351649639351, 0.07553558088243889],
+        ],
+        "force": [0.41003746606116803, 0.774996008485761, 0.48088508321352064],
+        "policy": "F",
+    },
+    {
+        "contacts": [
+            [0.018988089669727135, -0.02156155839971737, 0.07072436162089805],
+            [-0.006957461629819441, 0.01327627653985124, 0.07887631986409734],
+            [-0.03674863778233608, 0.014746335245659641, 0.08732744870040714],
+        ],
+        "force": [0.5682668371035152, 0.46496849751003344, 0.6788792957305657],
+        "policy": "Fperp",
+    },
+    {
+        "contacts": [
+            [0.03136941810723063, -0.003441462612596726, 0.03546189440136882],
+            [0.00868817482604326, 0.025396914609376278, 0.102446516879868],
+            [-0.04998238781538508, 0.01844017207267333, 0.07371293370060483],
+            [-0.007713261682358435, -0.011281163647774756, 0.008342018392464937],
+        ],
+        "force": [0.7978405395726501, 0.00048780375371939005, -0.6028683400726235],
+        "policy": "Fperp",
+    },
+]
+
+
+def random_paper_scenes(count: int, seed: int = SEED) -> list[dict[str, Any]]:
+    """`count` scenes of the issue's kind (module docstring), drawn in one batch."""
+    if count < 0:
+        raise ValueError(f"count must be >= 0, got {count}")
+    rng = np.random.default_rng(seed)
+    p = scene_generators.PERTURBATION_M
+    offsets = rng.uniform(-p, p, (count, 4, 3))
+    forces = rng.standard_normal((count, 3))
+    forces /= np.linalg.norm(forces, axis=1, keepdims=True)
+    nominal = {k: scene_generators.nominal_contacts(k) for k in (3, 4)}
+    out = []
+    for i in range(count):
+        k = 3 + i % 2
+        out.append(
+            {
+                "contacts": (nominal[k] + offsets[i, :k]).tolist(),
+                "force": forces[i].tolist(),
+                "policy": POLICIES[(i // 2) % 2],
+            }
+        )
+    return out
+
+
+def scene_set(count: int) -> list[dict[str, Any]]:
+    """The issue's 8 scenes, then `count` random ones, each with its name."""
+    named = [dict(s, name=f"issue17_{i}") for i, s in enumerate(ISSUE17_SCENES)]
+    named += [dict(s, name=f"p{i:06d}") for i, s in enumerate(random_paper_scenes(count))]
+    return named
+
+
+def wrench(scene: dict[str, Any]) -> list[float]:
+    return [*scene["force"], 0.0, 0.0, 0.0]
+
+
+def as_float32(scene: dict[str, Any]) -> dict[str, Any]:
+    """The scene as a float image reads it from its float literals."""
+    f32 = lambda xs: np.asarray(xs, np.float32).astype(np.float64).tolist()  # noqa: E731
+    return dict(scene, contacts=f32(scene["contacts"]), force=f32(scene["force"]))
+
+
+def reference_answer(scene: dict[str, Any]) -> tuple[str, str, list[int]]:
+    """(status, model, pwm) of the float64 reference on one scene."""
+    r = reference.solve(
+        scene["contacts"], wrench(scene), scene["policy"], "C", "paper", compute_margins=False
+    )
+    return r["status"], r["constraints_used"], list(r["pwm"])
+
+
+def x_fixed_margin(scene: dict[str, Any]) -> float:
+    """reference.paper_margin_x_fixed of one scene (HiGHS: a few ms)."""
+    C = np.asarray(scene["contacts"], np.float64)
+    status, frames = reference.contact_frames(C, np.array([0.0, 1.0, 0.0]))
+    if status != "ok" or frames is None:
+        raise ValueError(f"scene {scene.get('name', '?')}: contacts refused ({status})")
+    G = reference.grasp_matrix(frames)
+    w_l = np.asarray(wrench(scene))
+    lam0 = reference.min_norm_solution(G, w_l)
+    return reference.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(lam0)))
+
+
+def core_answer(scene: dict[str, Any], scalar: str) -> tuple[str, str, list[int]]:
+    """(status, model, pwm) of the core this interpreter imports (its default route)."""
+    from graspguide.core import solver
+
+    r = solver.solve(scene["contacts"], wrench(scene), scene["policy"], "C", "paper", scalar=scalar)
+    return r["status"], r["constraints_used"], list(r["pwm"])
+
+
+def agrees(a: tuple[str, str, list[int]], b: tuple[str, str, list[int]]) -> bool:
+    """Same status and model, every PWM within 1 count."""
+    return a[0] == b[0] and a[1] == b[1] and max_pwm_diff(a[2], b[2]) <= 1
+
+
+def max_pwm_diff(a: Sequence[int], b: Sequence[int]) -> int:
+    if len(a) != len(b):
+        raise ValueError(f"PWM lengths differ: {list(a)} against {list(b)}")
+    return max(abs(int(x) - int(y)) for x, y in zip(a, b))
+
+
+# ---------------------------------------------------------------------------- reference
+def _ref_chunk(args: tuple[int, int, int, bool]) -> list[tuple[str, str, list[int]]]:
+    count, start, stop, rounded = args
+    scenes = scene_set(count)[start:stop]
+    return [reference_answer(as_float32(s) if rounded else s) for s in scenes]
+
+
+def reference_all(count: int, jobs: int, rounded: bool = False) -> list[tuple[str, str, list[int]]]:
+    total = count + len(ISSUE17_SCENES)
+    step = max(1, min(2000, -(-total // max(1, jobs))))
+    chunks = [(count, a, min(a + step, total), rounded) for a in range(0, total, step)]
+    if jobs <= 1:
+        return [r for c in chunks for r in _ref_chunk(c)]
+    with ProcessPoolExecutor(jobs) as pool:
+        return [r for part in pool.map(_ref_chunk, chunks) for r in part]
+
+
+def save_reference(path: Path, count: int, answers: list[tuple[str, str, list[int]]]) -> None:
+    pwm = np.full((len(answers), 4), -1, np.int16)
+    for i, a in enumerate(answers):
+        pwm[i, : len(a[2])] = a[2]
+    np.savez_compressed(
+        path,
+        count=count,
+        seed=SEED,
+        status=np.array([a[0] for a in answers]),
+        model=np.array([a[1] for a in answers]),
+        pwm=pwm,
+    )
+
+
+def load_reference(path: Path) -> tuple[int, list[tuple[str, str, list[int]]]]:
+    d = np.load(path)
+    if int(d["seed"]) != SEED:
+        raise ValueError(f"{path}: seed {int(d['seed'])}, this script draws with seed {SEED}")
+    answers = [
+        (str(s), str(m), [int(v) for v in p if v >= 0])
+        for s, m, p in zip(d["status"], d["model"], d["pwm"])
+    ]
+    return int(d["count"]), answers
+
+
+# ---------------------------------------------------------------------------------- host
+def host(count: int, ref_answers: list[tuple[str, str, list[int]]]) -> dict[str, Any]:
+    from graspguide.core import _core
+
+    scenes = scene_set(count)
+    if len(scenes) != len(ref_answers):
+        raise ValueError(f"the reference has {len(ref_answers)} answers for {len(scenes)} scenes")
+    bad = [
+        i
+        for i, (s, r) in enumerate(zip(scenes, ref_answers))
+        if not agrees(core_answer(s, "float"), r)
+    ]
+    margins = {i: x_fixed_margin(scenes[i]) for i in bad}
+    n8 = len(ISSUE17_SCENES)
+    return {
+        "core": str(Path(_core.__file__).resolve()),
+        "issue_scenes": n8,
+        "issue_agree": n8 - sum(i < n8 for i in bad),
+        "random_scenes": count,
+        "random_agree": count - sum(i >= n8 for i in bad),
+        "disagreements_outside_band": sum(
+            i >= n8 and abs(margins[i]) > FLOAT_BAND_TOL for i in bad
+        ),
+        "disagreements": [
+            {
+                "name": scenes[i]["name"],
+                "float": core_answer(scenes[i], "float"),
+                "reference": ref_answers[i],
+                "x_fixed_margin": margins[i],
+            }
+            for i in bad
+        ],
+    }
+
+
+# ----------------------------------------------------------------------------------- m4f
+POLICY_CPP = {"F": "graspguide::Policy::kF", "Fperp": "graspguide::Policy::kFperp"}
+
+
+def _f32_literal(x: float) -> str:
+    return f"{float(np.float32(x))!r}f"
+
+
+def render_header(scenes: list[dict[str, Any]], answers: list[tuple[str, str, list[int]]]) -> str:
+    """stage_scenes.h in the StageScene layout both the before and the after harness read."""
+    lines = [
+        "// GENERATED by tools/scripts/issue17_m4f_agreement.py for a measurement in a worktree.",
+        "#pragma once",
+        "#include <cmath>",
+        "#include <cstdint>",
+        "",
+        '#include "graspguide/scene.h"',
+        "",
+        "namespace stages {",
+        "struct StageScene {",
+        "  const char* name;",
+        "  int k;",
+        "  float contacts[4][3];",
+        "  float wrench[6];",
+        "  float y_axis[3];",
+        "  float orientation[4];",
+        "  graspguide::Policy policy;",
+        "  graspguide::Mode mode;",
+        "  graspguide::ConstraintModel constraints;",
+        "  const char* status;  // the float64 reference's status name",
+        "  int16_t pwm[4];      // the reference's PWM (0 when status is not ok)",
+        "};",
+        "inline const StageScene kStageScenes[] = {",
+    ]
+    arr = lambda xs: "{" + ", ".join(_f32_literal(v) for v in xs) + "}"  # noqa: E731
+    for s, (status, _model, pwm) in zip(scenes, answers):
+        contacts = list(s["contacts"]) + [[0.0, 0.0, 0.0]] * (4 - len(s["contacts"]))
+        pwm4 = list(pwm) + [0] * (4 - len(pwm))
+        lines.append(
+            f'  {{"{s["name"]}", {len(s["contacts"])}, {{{", ".join(arr(c) for c in contacts)}}}, '
+            f"{arr(wrench(s))}, {{0.0f, 1.0f, 0.0f}}, {{1.0f, 0.0f, 0.0f, 0.0f}}, "
+            f"{POLICY_CPP[s['policy']]}, graspguide::Mode::kC, "
+            f'graspguide::ConstraintModel::kPaper, "{status}", {{{", ".join(map(str, pwm4))}}}}},'
+        )
+    lines += [
+        "};",
+        f"inline constexpr int kStageSceneCount = {len(scenes)};",
+        "}  // namespace stages",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def run_m4f(worktree: Path, header: str) -> list[str]:
+    """Write the header into `worktree`, build m4f_stages there, run it under QEMU."""
+    from graspguide.bench import targets
+
+    dest = worktree / "src" / "harness" / "stage_counts" / "stage_scenes.h"
+    if not dest.exists():
+        raise FileNotFoundError(f"{dest} is missing: is {worktree} a GraspGuide worktree?")
+    if (worktree / ".git").is_dir():
+        raise ValueError(f"{worktree} is a main checkout: give a `git worktree add` folder")
+    dest.write_text(header)
+    env = dict(
+        os.environ,
+        PLATFORMIO_CORE_DIR=os.environ.get("PLATFORMIO_CORE_DIR", str(ROOT / ".pio-core")),
+        PLATFORMIO_DISABLE_UPGRADE_CHECK="true",
+        PLATFORMIO_SETTING_ENABLE_TELEMETRY="No",
+    )
+    pio = str(Path(sys.executable).with_name("pio"))
+    build = subprocess.run(
+        ["flock", "/tmp/pio.lock", pio, "run", "-e", "m4f_stages"],
+        cwd=worktree,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    if build.returncode != 0:
+        tail = "\n".join((build.stdout + build.stderr).splitlines()[-30:])
+        raise RuntimeError(f"`pio run -e m4f_stages` failed in {worktree}:\n{tail}")
+    size = re.search(r"Flash:.*", build.stdout)
+    print(f"{worktree}: built m4f_stages ({size.group(0) if size else 'size not printed'})")
+    target = targets.TARGETS["m4f"]
+    elf = worktree / ".pio" / "build" / target.env / "firmware.elf"
+    cmd = targets.qemu_command("qemu-system-arm", target.machine, elf)
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+    lines = p.stderr.splitlines()
+    if p.returncode != 0 or not any(ln.startswith("END ") for ln in lines):
+        raise RuntimeError(f"QEMU exited {p.returncode} in {worktree}: {lines[-5:]}")
+    return lines
+
+
+def m4f_agreement(lines: list[str], n_issue: int) -> dict[str, Any]:
+    """Status equal and PWM within 1 count, read by the harness's COLUMNS names."""
+    columns = next(ln.split()[1:] for ln in lines if ln.startswith("COLUMNS "))
+    col = {name: i for i, name in enumerate(columns)}
+    out = {"issue": [0, 0], "random": [0, 0], "failed": []}
+    for ln in lines:
+        if not ln.startswith("S "):
+            continue
+        f = ln.split()[1:]
+        k = int(f[col["k"]])
+        pwm = [int(f[col[f"pwm{i}"]]) for i in range(k)]
+        ref = [int(f[col[f"ref{i}"]]) for i in range(k)]
+        ok = f[col["status"]] == f[col["ref_status"]] and max_pwm_diff(pwm, ref) <= 1
+        group = "issue" if f[col["name"]].startswith("issue17_") else "random"
+        out[group][0] += ok
+        out[group][1] += 1
+        if not ok:
+            out["failed"].append(f"{f[col['name']]} float {pwm} reference {ref}")
+    if out["issue"][1] != n_issue:
+        raise ValueError(f"the harness printed {out['issue'][1]} of the {n_issue} issue scenes")
+    return out
+
+
+# ---------------------------------------------------------------------------------- main
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    a = sub.add_parser("reference", help="the float64 reference on the 8 + N scenes")
+    a.add_argument("--count", type=int, default=100_000)
+    a.add_argument("--jobs", type=int, default=1)
+    a.add_argument("--out", type=Path, required=True)
+    h = sub.add_parser("host", help="the imported float core against a saved reference")
+    h.add_argument("--reference", type=Path, required=True)
+    h.add_argument("--json", type=Path, help="also write the figures and every disagreement")
+    m = sub.add_parser("m4f", help="the M4F image of each worktree under QEMU")
+    m.add_argument("--count", type=int, default=1300)
+    m.add_argument("--jobs", type=int, default=2)
+    m.add_argument("worktrees", type=Path, nargs="+")
+    args = ap.parse_args(argv)
+
+    t0 = time.perf_counter()
+    if args.command == "reference":
+        answers = reference_all(args.count, args.jobs)
+        save_reference(args.out, args.count, answers)
+        print(f"wrote {args.out}: {len(answers)} scenes in {time.perf_counter() - t0:.0f} s")
+        return 0
+    if args.command == "host":
+        count, answers = load_reference(args.reference)
+        res = host(count, answers)
+        print(f"core: {res['core']}")
+        print(
+            "issue's scenes: float agrees with float64 on "
+            f"{res['issue_agree']}/{res['issue_scenes']}"
+        )
+        print(
+            f"random paper scenes: float agrees with float64 on "
+            f"{res['random_agree']}/{res['random_scenes']}; disagreements with "
+            f"|x-fixed margin| > {FLOAT_BAND_TOL:g}: {res['disagreements_outside_band']}"
+        )
+        for d in res["disagreements"]:
+            print(
+                f"  {d['name']}: float {d['float']} reference {d['reference']} "
+                f"margin {d['x_fixed_margin']:.3g}"
+            )
+        if args.json:
+            args.json.write_text(json.dumps(res, indent=1))
+        print(f"({time.perf_counter() - t0:.0f} s)")
+        return 0
+    scenes = [as_float32(s) for s in scene_set(args.count)]
+    answers = reference_all(args.count, args.jobs, rounded=True)
+    header = render_header(scenes, answers)
+    for wt in args.worktrees:
+        res = m4f_agreement(run_m4f(wt.resolve(), header), len(ISSUE17_SCENES))
+        print(
+            f"{wt}: M4F float agrees with float64 (status, PWM within 1) on "
+            f"{res['issue'][0]}/{res['issue'][1]} issue scenes and "
+            f"{res['random'][0]}/{res['random'][1]} random paper scenes"
+        )
+        for line in res["failed"]:
+            print(f"  {line}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
