@@ -21,10 +21,11 @@ Format (every key is checked; an unknown key is an error, so a typo is never ign
     hold_s = 0.5                 # [0, 600] seconds, at most timeout_s
     timeout_s = 90.0             # (0, 1800] seconds
 
-The [trial] ranges are the core's (``graspguide.core._core.TRIAL_LIMITS``, from graspguide_frame/trial_config.h), so
-the file, the core and the device accept the same values. The contacts must span like a
-hand in the stated unit (:func:`hand_span_problem`: the two farthest 5 mm to 0.5 m
-apart), so a file in millimetres that says ``units = "m"`` is refused, not guided.
+The [trial] ranges are the core's (``graspguide.core._core.TRIAL_LIMITS``, from
+graspguide_frame/trial_config.h), so the file, the core and the device accept the same
+values. The contacts must span like a hand in the stated unit (:func:`hand_span_problem`:
+the two farthest 5 mm to 0.5 m apart), so a file in millimetres that says ``units = "m"``
+is refused, not guided.
 
 :func:`load_scene` returns a :class:`Scene`; :meth:`Scene.to_dict` is its normalised form
 (metres, every default filled in) and :meth:`Scene.config_hash` the sha256 of that form as

@@ -7,7 +7,11 @@
 // reorthogonalisation, Givens rotations when a row leaves), so a row that depends on the
 // active ones is recognised to working precision and never produces a primal step, only
 // a dual step or an infeasibility certificate: the degenerate vertices of the paper's
-// model are the common case, not an accident. No null-space basis is ever formed.
+// model are the common case, not an accident. Such a dependent row's value on the current
+// face is taken from equilibrium alone (lambda0 and its coefficients on the active rows),
+// not from the iterate, whose large steps carry rounding that float would otherwise read
+// as a violation and turn into a false infeasibility (issue 17). No null-space basis is
+// ever formed.
 //
 // The paper model and the x-components: the moment about y_O is sum_i c_i lambda_ix with
 // c_i = |s_i x y_O| > 0 (docs/algorithm.md, step 5), so with no such moment every
@@ -169,6 +173,11 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   T step_error = T(0);
   const T kStepUlps = T(4) * std::numeric_limits<T>::epsilon();
   T d[kMax], coeff[kMax];
+  // Rows found to hold at the current vertex although rounding shows them violated;
+  // cleared whenever the active set changes.
+  uint16_t settled = 0;
+  Vec lambda0;  // -G_hat^T w_hat, formed the first time a dependent row needs it
+  bool have_lambda0 = false;
 
   for (int j = 0; j < 3 * K; ++j) {
     if (!(fixed & (1u << j))) continue;
@@ -199,7 +208,7 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     int cand = -1;
     T worst = -tol;
     for (int j = 0; j < 3 * K; ++j) {
-      if (!(constrained & (1u << j)) || (active & (1u << j))) continue;
+      if (!(constrained & (1u << j)) || ((active | settled) & (1u << j))) continue;
       if (lambda(j) < worst) {
         worst = lambda(j);
         cand = j;
@@ -215,6 +224,27 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       // With as many active rows as null(G) has dimensions, nothing is left to move along,
       // whatever rounding says.
       const bool dependent = !(z_norm > dependent_tol) || rows.n == kMax;
+      if (dependent && u_cand == T(0)) {
+        // A row the active ones determine: on this face its value follows from
+        // equilibrium alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of
+        // the rounding the iterate carries from large steps. A degenerate vertex (the
+        // paper model's common case) holds it at zero; only a value below zero beyond
+        // that formula's own rounding is a real violation.
+        if (!have_lambda0) {
+          const Vec6<T> g_start = st.g_hat * start;
+          lambda0.noalias() = st.g_hat.transpose() * g_start;
+          have_lambda0 = true;
+        }
+        T value = lambda0(cand), size = std::abs(lambda0(cand));
+        for (int i = 0; i < rows.n; ++i) {
+          value -= coeff[i] * lambda0(w[i]);
+          size += std::abs(coeff[i] * lambda0(w[i]));
+        }
+        if (value >= -(violation_tol + kStepUlps * size)) {
+          settled = static_cast<uint16_t>(settled | (1u << cand));
+          break;
+        }
+      }
       // Dual step limit: the first inequality multiplier to reach zero.
       T t_dual = inf;
       int drop = -1;
@@ -243,10 +273,12 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
         equality[rows.n] = false;
         active = static_cast<uint16_t>(active | (1u << cand));
         rows.add(d, z, z_norm);
+        settled = 0;
         break;
       }
       // A partial step: the blocking row leaves, the candidate stays violated.
       active = static_cast<uint16_t>(active & ~(1u << w[drop]));
+      settled = 0;
       for (int i = drop; i + 1 < rows.n; ++i) {
         w[i] = w[i + 1];
         u[i] = u[i + 1];
