@@ -3,7 +3,7 @@
 (median ns per full frame, `graspguide bench --json`) against accuracy (share of instances
 whose PWM differs from the float64 reference, plus the worst equilibrium residual), one
 point per configuration, and the Cortex-M instruction counts per stage
-(tools/scripts/qemu_stages.py --json).
+(`graspguide bench --target m4f --target m7 --target m7d --json`).
 
     python tools/scripts/plot_tradeoff.py docs/perf/bench_host.json docs/perf/qemu_stages.json
 """
@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-STAGES = ["frames", "grasp", "decomposition", "qp", "mapping"]
+STAGES = ["frames", "structure", "forces", "qp", "mapping"]
 
 
 def main(bench_path: str, stages_path: str, out: str = "docs/perf/tradeoff.png") -> int:
@@ -52,14 +52,15 @@ def main(bench_path: str, stages_path: str, out: str = "docs/perf/tradeoff.png")
     ax.set_ylabel("PWM != float64 or failed (share, floor 1e-4)")
     ax.set_title("Host: cost vs accuracy (blue: this project, red: peer QP solvers)")
     width = 0.35
-    for i, (target, colour) in enumerate((("cortex-m4f", "C0"), ("cortex-m7", "C1"))):
+    targets = (("cortex-m4f", "C0"), ("cortex-m7", "C1"), ("cortex-m7-double", "C2"))
+    for i, (target, colour) in enumerate(targets):
         if target not in stages:
             continue
         for j, k in enumerate(("k3", "k4")):
             vals = [stages[target][k][s]["median"] for s in STAGES]
-            xs = [x + (2 * i + j) * width / 2 for x in range(len(STAGES))]
-            bx.bar(xs, vals, width / 2, color=colour, alpha=0.5 + 0.4 * j, label=f"{target} {k}")
-    bx.set_xticks([x + 0.25 for x in range(len(STAGES))], STAGES)
+            xs = [x + (2 * i + j) * width / 3 for x in range(len(STAGES))]
+            bx.bar(xs, vals, width / 3, color=colour, alpha=0.5 + 0.4 * j, label=f"{target} {k}")
+    bx.set_xticks([x + 0.3 for x in range(len(STAGES))], STAGES)
     bx.set_ylabel("instructions (median over accepted scenes)")
     bx.set_title("On target (QEMU -icount): where a full frame goes")
     bx.legend(fontsize=7)
