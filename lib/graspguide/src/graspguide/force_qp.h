@@ -15,10 +15,12 @@
 //
 // The paper model and the x-components: the moment about y_O is sum_i c_i lambda_ix with
 // c_i = |s_i x y_O| > 0 (docs/algorithm.md, step 5), so with no such moment every
-// lambda_ix >= 0 forces lambda_ix = 0. Those rows are made active (as equalities) before
-// the first iteration instead of being discovered one degenerate step at a time, which is
-// both faster and what keeps float on the same vertex as double (issue 17); a moment of
-// the wrong sign decides infeasibility in closed form.
+// lambda_ix >= 0 forces lambda_ix = 0. Those rows join equilibrium as equalities before the
+// first iteration instead of being discovered one degenerate step at a time; a moment of
+// the wrong sign decides infeasibility in closed form. The equalities are then
+// orthonormalised from the rows themselves: projecting e_x through I - G_hat^T G_hat and
+// stepping along it would square the conditioning of a hand whose x components
+// equilibrium nearly fixes, which float cannot resolve (issue 17).
 #pragma once
 
 #include <cmath>
@@ -29,6 +31,10 @@
 #include "graspguide/scene.h"
 
 namespace graspguide {
+
+// How many ulps of the equality basis, divided by its shortest kept row, a projected row
+// must exceed to count as independent of the active rows.
+inline constexpr double kBasisNoiseUlps = 4.0;
 
 template <typename T, int K>
 struct ForceSolution {
@@ -125,29 +131,93 @@ struct ActiveRows {
   }
 };
 
-// P e_j: the column of the projector onto null(G). G_hat's rows are orthonormal only to
-// working precision, so I - G_hat^T G_hat is a projector only to working precision too:
-// a column that mostly cancels (a component that equilibrium nearly fixes, |P e_j| ~ 1e-4
-// next to a contact on the y_O axis) would keep an absolute error of ~eps, a relative
-// one of 1e-3 in float, and a step of 1e7 along it would carry that error into the forces.
-// Projecting such a column once more removes what is left in the row space.
+// The equality rows in force space: an orthonormal basis q_0..q_(n-1) of the rows of
+// [G_hat; e_j for every fixed j], and the coordinates c_i = q_i . lambda that every
+// solution shares. With no fixed row they are G_hat's own rows, already orthonormal.
+// With fixed rows (the paper model's x components) the basis comes from the rows
+// themselves by Gram-Schmidt, not from projecting e_j through I - G_hat^T G_hat: a
+// component that equilibrium nearly fixes has |P e_j| ~ 1e-4, and stepping along it
+// squares that into a 1e7 amplification, which in float is all rounding (issue 17).
 template <typename T, int K>
-void projector_column(const GraspStructure<T, K>& st, int j, ForceVec<T, K>& v) {
-  v.noalias() = -st.g_hat.transpose() * st.g_hat.col(j);
-  v(j) += T(1);
-  if (v.squaredNorm() < T(0.25)) {
-    const Vec6<T> rest = st.g_hat * v;
-    v.noalias() -= st.g_hat.transpose() * rest;
+struct EqualityRows {
+  static constexpr int kMaxRows = 6 + K;
+  ForceVec<T, K> q[kMaxRows];
+  T c[kMaxRows];
+  int n = 0;
+  T smallest = T(1);  // the shortest row Gram-Schmidt kept, before normalising
+
+  // P e_j, the column of the projector onto the free directions. The basis is orthonormal
+  // only to working precision, so a column that mostly cancels is projected once more.
+  void column(int j, ForceVec<T, K>& v) const {
+    v.setZero();
+    v(j) = T(1);
+    for (int i = 0; i < n; ++i) v.noalias() -= q[i](j) * q[i];
+    if (v.squaredNorm() < T(0.25))
+      for (int i = 0; i < n; ++i) v.noalias() -= q[i].dot(v) * q[i];
   }
+
+  // The part every solution shares, sum_i c_i q_i: for no fixed row, lambda0.
+  void shared_part(ForceVec<T, K>& out) const {
+    out.setZero();
+    for (int i = 0; i < n; ++i) out.noalias() += c[i] * q[i];
+  }
+};
+
+// G_hat's rows; start is any solution of the equilibrium.
+template <typename T, int K>
+void whitened_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
+                   EqualityRows<T, K>& eq) {
+  eq.n = 6;
+  for (int r = 0; r < 6; ++r) {
+    eq.q[r] = st.g_hat.row(r).transpose();
+    eq.c[r] = eq.q[r].dot(start);
+  }
+}
+
+// The rows lambda_j = 0 (j in fixed), then G_hat's rows lambda = -w_hat (read off start),
+// orthonormalised by Gram-Schmidt twice. A row that the earlier ones span to within
+// dependent_tol adds nothing, if its right-hand side agrees within consistency_tol;
+// otherwise the equalities contradict each other (equilibrium needs a fixed component
+// that is not zero) and the result is kQpInfeasible.
+template <typename T, int K>
+Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, uint16_t fixed,
+                  T dependent_tol, T consistency_tol, EqualityRows<T, K>& eq) {
+  eq.n = 0;
+  for (int j = 0; j < 3 * K; ++j) {
+    if (!(fixed & (1u << j))) continue;
+    eq.q[eq.n].setZero();
+    eq.q[eq.n](j) = T(1);
+    eq.c[eq.n++] = T(0);
+  }
+  for (int r = 0; r < 6; ++r) {
+    ForceVec<T, K> v = st.g_hat.row(r).transpose();
+    T rhs = v.dot(start);
+    for (int pass = 0; pass < 2; ++pass)
+      for (int i = 0; i < eq.n; ++i) {
+        const T d = eq.q[i].dot(v);
+        v.noalias() -= d * eq.q[i];
+        rhs -= d * eq.c[i];
+      }
+    const T norm = v.norm();
+    if (!(norm > dependent_tol)) {
+      if (!(std::abs(rhs) <= consistency_tol)) return Status::kQpInfeasible;
+      continue;
+    }
+    eq.q[eq.n] = v / norm;
+    eq.c[eq.n++] = rhs / norm;
+    if (norm < eq.smallest) eq.smallest = norm;
+  }
+  return Status::kOk;
 }
 
 }  // namespace detail
 
-// From start (on the equilibrium set), makes the rows in `fixed` active as equalities,
-// then projects onto lambda_j >= -max(violation_tol, rel_tol |lambda|) for every j in
-// `constrained`. A row
+// From start (on the equilibrium set), holds the rows in `fixed` at zero as equalities
+// (kQpInfeasible if equilibrium contradicts that), then projects onto
+// lambda_j >= -max(violation_tol, rel_tol |lambda|) for every j in `constrained`. A row
 // whose projection onto the remaining free directions is shorter than dependent_tol
-// (|P e_j| <= 1) counts as dependent on the active rows. Returns kOk, kQpInfeasible or
+// (|P e_j| <= 1), or than the equality basis's own rounding, counts as dependent on the
+// active rows. Returns kOk, kQpInfeasible or
 // kQpIterationLimit; lambda is valid only on kOk.
 template <typename T, int K>
 Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
@@ -159,13 +229,33 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   const T inf = std::numeric_limits<T>::infinity();
 
   Rows rows;
-  int w[kMax];          // constraint index of each active row
-  T u[kMax];            // its multiplier
-  bool equality[kMax];  // held by `fixed`: never dropped, multiplier of any sign
-  uint16_t active = 0;
+  int w[kMax];  // constraint index of each active row
+  T u[kMax];    // its multiplier
   info = QpInfo{};
-  lambda = start;
   Vec v, z;
+  // The equalities: equilibrium, and the fixed rows held at zero. lambda starts at the
+  // unconstrained optimum on them: their shared part plus the free part of start.
+  detail::EqualityRows<T, K> eq;
+  if (fixed == 0) {
+    detail::whitened_rows<T, K>(st, start, eq);
+    lambda = start;
+  } else {
+    const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol, eq);
+    if (s != Status::kOk) return s;
+    eq.shared_part(lambda);
+    Vec free_part = start;
+    for (int i = 0; i < eq.n; ++i) free_part.noalias() -= eq.q[i].dot(start) * eq.q[i];
+    lambda += free_part;
+    for (int j = 0; j < 3 * K; ++j)
+      if (fixed & (1u << j)) lambda(j) = T(0);
+  }
+  // The basis is as accurate as its shortest kept row allows: Gram-Schmidt divided that
+  // row's rounding (a few eps) by its length, so a column shorter than that is noise.
+  const T basis_noise = T(kBasisNoiseUlps) * std::numeric_limits<T>::epsilon() / eq.smallest;
+  const T dep_tol = dependent_tol > basis_noise ? dependent_tol : basis_noise;
+  // At most this many independent inequality rows fit beside the equalities.
+  const int limit = 3 * K - eq.n;
+  uint16_t active = fixed;  // fixed rows are held by eq, never by `rows`
   // A running bound on the rounding error the steps have put into lambda: a row's
   // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
   // A step along a row 1e-4 long (a near-degenerate vertex) is large, and so is its error;
@@ -176,27 +266,8 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   // Rows found to hold at the current vertex although rounding shows them violated;
   // cleared whenever the active set changes.
   uint16_t settled = 0;
-  Vec lambda0;  // -G_hat^T w_hat, formed the first time a dependent row needs it
-  bool have_lambda0 = false;
-
-  for (int j = 0; j < 3 * K; ++j) {
-    if (!(fixed & (1u << j))) continue;
-    if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
-    detail::projector_column<T, K>(st, j, v);
-    const T z_norm = rows.split(v, d, z, coeff);
-    // Fixed by equilibrium and the rows already held: a step along noise would be wrong.
-    // The row stays a constraint, so a value other than zero is still caught below.
-    if (!(z_norm > dependent_tol) || rows.n == kMax) continue;
-    const T t_eq = lambda(j) / (z_norm * z_norm);
-    lambda.noalias() -= t_eq * z;
-    step_error += kStepUlps * std::abs(t_eq);
-    lambda(j) = T(0);
-    w[rows.n] = j;
-    u[rows.n] = T(0);
-    equality[rows.n] = true;
-    active = static_cast<uint16_t>(active | (1u << j));
-    rows.add(d, z, z_norm);
-  }
+  Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
+  bool have_shared = false;
 
   for (;;) {
     // The most violated inactive constraint (lowest index on ties). Violations are
@@ -216,29 +287,28 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     }
     if (cand < 0) break;
 
-    detail::projector_column<T, K>(st, cand, v);
+    eq.column(cand, v);
     T u_cand = T(0);
     for (;;) {
       if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
       const T z_norm = rows.split(v, d, z, coeff);
       // With as many active rows as null(G) has dimensions, nothing is left to move along,
       // whatever rounding says.
-      const bool dependent = !(z_norm > dependent_tol) || rows.n == kMax;
+      const bool dependent = !(z_norm > dep_tol) || rows.n >= limit;
       if (dependent && u_cand == T(0)) {
         // A row the active ones determine: on this face its value follows from
         // equilibrium alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of
         // the rounding the iterate carries from large steps. A degenerate vertex (the
         // paper model's common case) holds it at zero; only a value below zero beyond
         // that formula's own rounding is a real violation.
-        if (!have_lambda0) {
-          const Vec6<T> g_start = st.g_hat * start;
-          lambda0.noalias() = st.g_hat.transpose() * g_start;
-          have_lambda0 = true;
+        if (!have_shared) {
+          eq.shared_part(shared);
+          have_shared = true;
         }
-        T value = lambda0(cand), size = std::abs(lambda0(cand));
+        T value = shared(cand), size = std::abs(shared(cand));
         for (int i = 0; i < rows.n; ++i) {
-          value -= coeff[i] * lambda0(w[i]);
-          size += std::abs(coeff[i] * lambda0(w[i]));
+          value -= coeff[i] * shared(w[i]);
+          size += std::abs(coeff[i] * shared(w[i]));
         }
         if (value >= -(violation_tol + kStepUlps * size)) {
           settled = static_cast<uint16_t>(settled | (1u << cand));
@@ -249,7 +319,7 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       T t_dual = inf;
       int drop = -1;
       for (int i = 0; i < rows.n; ++i) {
-        if (equality[i] || !(coeff[i] > T(0))) continue;
+        if (!(coeff[i] > T(0))) continue;
         const T ratio = u[i] / coeff[i];
         if (ratio < t_dual) {
           t_dual = ratio;
@@ -270,7 +340,6 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
         lambda(cand) = T(0);
         w[rows.n] = cand;
         u[rows.n] = u_cand;
-        equality[rows.n] = false;
         active = static_cast<uint16_t>(active | (1u << cand));
         rows.add(d, z, z_norm);
         settled = 0;
@@ -282,7 +351,6 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       for (int i = drop; i + 1 < rows.n; ++i) {
         w[i] = w[i + 1];
         u[i] = u[i + 1];
-        equality[i] = equality[i + 1];
       }
       rows.drop(drop);
     }
@@ -293,10 +361,12 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
 
 // What the paper model can decide before iterating, from the moment about y_O (the
 // budget b = tau . y_O = sum_i c_i lambda_ix): kQpInfeasible when b is negative beyond the
-// tolerance; otherwise, when b is zero within it, `fixed` gets the x rows it forces to
-// zero, all but the one of the contact with the largest c_i, `implied`, which equilibrium
-// then holds at b / c_i by itself (it stays an ordinary constraint, checked like any other:
-// in a hand whose plane contains y_O equilibrium fixes every x, and not always at zero).
+// tolerance; otherwise, when b is zero within it, the x rows it forces to zero: `fixed`,
+// all but the one of the contact with the largest c_i, and `implied`, which the others and
+// equilibrium hold at b / c_i. solve_forces holds all of them; the moment row about y_O
+// then depends on them and drops out, with |b| within the tolerance. In a hand whose
+// plane contains y_O, equilibrium may need an x component other than zero: the
+// equalities then contradict each other and the model is infeasible.
 template <typename T, int K>
 Status paper_x_rows(const ContactFrames<T, K>& frames, const Vec6<T>& w, T violation_tol,
                     uint16_t& fixed, uint16_t& implied) {
@@ -333,9 +403,9 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
         paper_x_rows<T, K>(frames, w, violation_tol, fixed, implied) == Status::kQpInfeasible)
       continue;
     QpInfo info;
-    const Status s = project_forces<T, K>(st, start, constrained_bits<K>(m), fixed, violation_tol,
-                                          feasibility_rel, Tolerances<T>::kStructuredDependentTol,
-                                          max_iterations, out.lambda, info);
+    const Status s = project_forces<T, K>(
+        st, start, constrained_bits<K>(m), static_cast<uint16_t>(fixed | implied), violation_tol,
+        feasibility_rel, Tolerances<T>::kStructuredDependentTol, max_iterations, out.lambda, info);
     out.iterations += info.iterations;
     if (s == Status::kQpInfeasible) continue;
     if (s != Status::kOk) return s;
