@@ -355,6 +355,15 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       rows.drop(drop);
     }
   }
+  // Rows held at the optimum are zero there by definition: what the later steps left in
+  // them is rounding, and a motor whose forces are all held must be off, not at the 1e-3
+  // level that turns it on (float at internal forces 1000 times |lambda0|). A dependent row
+  // found to hold is zeroed too when it sits within the tolerance.
+  T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
+  if (step_error > tol) tol = step_error;
+  for (int j = 0; j < 3 * K; ++j)
+    if ((active & (1u << j)) || ((settled & (1u << j)) && std::abs(lambda(j)) <= tol))
+      lambda(j) = T(0);
   info.active = active;
   return lambda.allFinite() ? Status::kOk : Status::kNonFiniteInput;
 }
