@@ -131,80 +131,86 @@ struct ActiveRows {
   }
 };
 
-// The equality rows in force space: an orthonormal basis q_0..q_(n-1) of the rows of
-// [G_hat; e_j for every fixed j], and the coordinates c_i = q_i . lambda that every
-// solution shares. With no fixed row they are G_hat's own rows, already orthonormal.
-// With fixed rows (the paper model's x components) the basis comes from the rows
-// themselves by Gram-Schmidt, not from projecting e_j through I - G_hat^T G_hat: a
-// component that equilibrium nearly fixes has |P e_j| ~ 1e-4, and stepping along it
-// squares that into a 1e7 amplification, which in float is all rounding (issue 17).
+// The equality rows in force space: the unit rows e_j of the fixed components, and an
+// orthonormal basis q_0..q_(n-1) of the rest, orthogonal to them, with the coordinates
+// c_i = q_i . lambda that every solution shares. With no fixed row the q are G_hat's own
+// rows, already orthonormal. With fixed rows (the paper model's x components) they come
+// from the rows themselves by Gram-Schmidt, not from projecting e_j through
+// I - G_hat^T G_hat: a component that equilibrium nearly fixes has |P e_j| ~ 1e-4, and
+// stepping along it squares that into a 1e7 amplification, all rounding in float
+// (issue 17).
 template <typename T, int K>
 struct EqualityRows {
-  static constexpr int kMaxRows = 6 + K;
-  ForceVec<T, K> q[kMaxRows];
-  T c[kMaxRows];
+  WhitenedGrasp<T, K> own;                 // the fixed path's q as rows, zero beyond n
+  const WhitenedGrasp<T, K>* q = nullptr;  // the rows in use: G_hat or own
+  Vec6<T> c = Vec6<T>::Zero();
   int n = 0;
-  T smallest = T(1);  // the shortest row Gram-Schmidt kept, before normalising
+  uint16_t fixed = 0;
+  bool have_c = false;  // c is formed on demand for G_hat's rows
+  T smallest = T(1);    // the shortest row Gram-Schmidt kept, before normalising
 
-  // P e_j, the column of the projector onto the free directions. The basis is orthonormal
-  // only to working precision, so a column that mostly cancels is projected once more.
+  int rank() const { return n + __builtin_popcount(fixed); }
+
+  // P e_j (j not fixed), the column of the projector onto the free directions. The basis
+  // is orthonormal only to working precision, so a column that mostly cancels is
+  // projected once more. The unit rows need nothing: e_j has no fixed component, and
+  // the q have none either.
   void column(int j, ForceVec<T, K>& v) const {
-    v.setZero();
-    v(j) = T(1);
-    for (int i = 0; i < n; ++i) v.noalias() -= q[i](j) * q[i];
-    if (v.squaredNorm() < T(0.25))
-      for (int i = 0; i < n; ++i) v.noalias() -= q[i].dot(v) * q[i];
+    v.noalias() = -q->transpose() * q->col(j);
+    v(j) += T(1);
+    if (v.squaredNorm() < T(0.25)) {
+      const Vec6<T> rest = *q * v;
+      v.noalias() -= q->transpose() * rest;
+    }
   }
 
-  // The part every solution shares, sum_i c_i q_i: for no fixed row, lambda0.
-  void shared_part(ForceVec<T, K>& out) const {
-    out.setZero();
-    for (int i = 0; i < n; ++i) out.noalias() += c[i] * q[i];
+  // The part every solution shares, sum_i c_i q_i: with no fixed row, lambda0.
+  void shared_part(const ForceVec<T, K>& start, ForceVec<T, K>& out) {
+    if (!have_c) c.noalias() = *q * start;
+    have_c = true;
+    out.noalias() = q->transpose() * c;
   }
 };
 
-// G_hat's rows; start is any solution of the equilibrium.
+// G_hat's rows.
 template <typename T, int K>
-void whitened_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
-                   EqualityRows<T, K>& eq) {
+void whitened_rows(const GraspStructure<T, K>& st, EqualityRows<T, K>& eq) {
+  eq.q = &st.g_hat;
   eq.n = 6;
-  for (int r = 0; r < 6; ++r) {
-    eq.q[r] = st.g_hat.row(r).transpose();
-    eq.c[r] = eq.q[r].dot(start);
-  }
 }
 
-// The rows lambda_j = 0 (j in fixed), then G_hat's rows lambda = -w_hat (read off start),
-// orthonormalised by Gram-Schmidt twice. A row that the earlier ones span to within
+// The rows lambda_j = 0 (j in fixed), then G_hat's rows, G_hat lambda = -w_hat read off
+// start, orthogonalised against them (which only zeroes their fixed components) and
+// against each other by Gram-Schmidt twice. A row that the earlier ones span to within
 // dependent_tol adds nothing, if its right-hand side agrees within consistency_tol;
 // otherwise the equalities contradict each other (equilibrium needs a fixed component
 // that is not zero) and the result is kQpInfeasible.
 template <typename T, int K>
 Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, uint16_t fixed,
                   T dependent_tol, T consistency_tol, EqualityRows<T, K>& eq) {
+  eq.own.setZero();
+  eq.q = &eq.own;
   eq.n = 0;
-  for (int j = 0; j < 3 * K; ++j) {
-    if (!(fixed & (1u << j))) continue;
-    eq.q[eq.n].setZero();
-    eq.q[eq.n](j) = T(1);
-    eq.c[eq.n++] = T(0);
-  }
+  eq.fixed = fixed;
+  eq.have_c = true;
   for (int r = 0; r < 6; ++r) {
     ForceVec<T, K> v = st.g_hat.row(r).transpose();
     T rhs = v.dot(start);
+    for (int j = 0; j < 3 * K; ++j)
+      if (fixed & (1u << j)) v(j) = T(0);  // lambda_j = 0: no right-hand side to carry
     for (int pass = 0; pass < 2; ++pass)
       for (int i = 0; i < eq.n; ++i) {
-        const T d = eq.q[i].dot(v);
-        v.noalias() -= d * eq.q[i];
-        rhs -= d * eq.c[i];
+        const T d = eq.own.row(i).dot(v.transpose());
+        v.noalias() -= d * eq.own.row(i).transpose();
+        rhs -= d * eq.c(i);
       }
     const T norm = v.norm();
     if (!(norm > dependent_tol)) {
       if (!(std::abs(rhs) <= consistency_tol)) return Status::kQpInfeasible;
       continue;
     }
-    eq.q[eq.n] = v / norm;
-    eq.c[eq.n++] = rhs / norm;
+    eq.own.row(eq.n) = v.transpose() / norm;
+    eq.c(eq.n++) = rhs / norm;
     if (norm < eq.smallest) eq.smallest = norm;
   }
   return Status::kOk;
@@ -237,15 +243,16 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   // unconstrained optimum on them: their shared part plus the free part of start.
   detail::EqualityRows<T, K> eq;
   if (fixed == 0) {
-    detail::whitened_rows<T, K>(st, start, eq);
+    detail::whitened_rows<T, K>(st, eq);
     lambda = start;
   } else {
     const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol, eq);
     if (s != Status::kOk) return s;
-    eq.shared_part(lambda);
-    Vec free_part = start;
-    for (int i = 0; i < eq.n; ++i) free_part.noalias() -= eq.q[i].dot(start) * eq.q[i];
-    lambda += free_part;
+    // The shared part plus the free part of start (start less its parts along the q and
+    // its fixed components).
+    const Vec6<T> along = eq.c - eq.own * start;
+    lambda = start;
+    lambda.noalias() += eq.own.transpose() * along;
     for (int j = 0; j < 3 * K; ++j)
       if (fixed & (1u << j)) lambda(j) = T(0);
   }
@@ -254,7 +261,7 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   const T basis_noise = T(kBasisNoiseUlps) * std::numeric_limits<T>::epsilon() / eq.smallest;
   const T dep_tol = dependent_tol > basis_noise ? dependent_tol : basis_noise;
   // At most this many independent inequality rows fit beside the equalities.
-  const int limit = 3 * K - eq.n;
+  const int limit = 3 * K - eq.rank();
   uint16_t active = fixed;  // fixed rows are held by eq, never by `rows`
   // A running bound on the rounding error the steps have put into lambda: a row's
   // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
@@ -302,7 +309,7 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
         // paper model's common case) holds it at zero; only a value below zero beyond
         // that formula's own rounding is a real violation.
         if (!have_shared) {
-          eq.shared_part(shared);
+          eq.shared_part(start, shared);
           have_shared = true;
         }
         T value = shared(cand), size = std::abs(shared(cand));
