@@ -22,7 +22,7 @@ reference, to tell a scene inside the band from a real disagreement.
 
 from __future__ import annotations
 
-import importlib.util
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -40,16 +40,8 @@ OUTSIDE_BAND_CEILING = 10
 _SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "issue17_m4f_agreement.py"
 
 
-def _load_script() -> Any:
-    spec = importlib.util.spec_from_file_location("issue17_m4f_agreement", _SCRIPT)
-    if spec is None or spec.loader is None:
-        raise ImportError(f"cannot load {_SCRIPT}")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-issue17 = _load_script()
+sys.path.insert(0, str(_SCRIPT.parent))
+import issue17_m4f_agreement as issue17  # noqa: E402
 
 
 def _describe(scene: dict[str, Any], core: tuple, ref: tuple, margin: float) -> str:

@@ -417,6 +417,20 @@ def accuracy_instances(
     return out
 
 
+def solve_args(inst: Instance, scalar: str) -> tuple[Any, ...]:
+    """The positional arguments _core.solve and solver.solve share, up to the scalar."""
+    return (
+        inst.contacts,
+        inst.wrench,
+        inst.policy,
+        inst.mode,
+        inst.constraints,
+        inst.orientation,
+        inst.y_axis,
+        scalar,
+    )
+
+
 def run_accuracy_set(insts: list[Instance], ks: Sequence[int]) -> list[dict[str, Any]]:
     """Every frame route on every instance of the accuracy set, one ``_core.solve`` call
     each (the same Guidance<T> frame the C++ loop times), judged against the reference."""
@@ -428,18 +442,7 @@ def run_accuracy_set(insts: list[Instance], ks: Sequence[int]) -> list[dict[str,
                 judge(
                     inst,
                     binding_outcome(
-                        _core.solve(
-                            inst.contacts,
-                            inst.wrench,
-                            inst.policy,
-                            inst.mode,
-                            inst.constraints,
-                            inst.orientation,
-                            inst.y_axis,
-                            scalar,
-                            dec,
-                            _core.kDefaultMaxIterations,
-                        )
+                        _core.solve(*solve_args(inst, scalar), dec, _core.kDefaultMaxIterations)
                     ),
                     scalar,
                 )
@@ -990,16 +993,7 @@ def py_solve_config(name, insts, k, scalar, calls) -> Config:
     """The existing one-shot binding (_core.solve: scene, wrench and pose in one call)."""
 
     def time_instance(inst: Instance, samples: dict[str, list[int]]) -> Outcome:
-        args = (
-            inst.contacts,
-            inst.wrench,
-            inst.policy,
-            inst.mode,
-            inst.constraints,
-            inst.orientation,
-            inst.y_axis,
-            scalar,
-        )
+        args = solve_args(inst, scalar)
         for r in range(calls):
             d = _timed_pair(r, lambda: _core.solve(*args), lambda: solver.solve(*args), samples)
         return binding_outcome(d)
