@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "graspguide.h"
+#include "graspguide_frame/gravity_estimator.h"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -396,6 +397,73 @@ class PyGuidance {
 
  private:
   std::unique_ptr<gg::Guidance<double>> g_;  // heap: Eigen members need 16-byte alignment
+};
+
+// The device's gravity estimator (graspguide_frame/gravity_estimator.h) in float (as the
+// MCU runs it) or double, so Python can run the same C++ on an IMU stream.
+template <typename T>
+struct GravityState {
+  gg::GravityEstimator<T> est;
+
+  std::string configure(double kp, double ki, double gate) {
+    gg::GravityGains<T> g;
+    g.kp_per_s = T(kp);
+    g.ki_per_s2 = T(ki);
+    g.accel_gate_mps2 = T(gate);
+    return gg::status_name(est.configure(g));
+  }
+  std::string update(const Axis3& a, const Axis3& w, double dt) {
+    const T at[3] = {T(a[0]), T(a[1]), T(a[2])}, wt[3] = {T(w[0]), T(w[1]), T(w[2])};
+    return gg::status_name(est.update(at, wt, T(dt)));
+  }
+  std::string set_fused(const Axis3& v) {
+    const T vt[3] = {T(v[0]), T(v[1]), T(v[2])};
+    return gg::status_name(est.set_fused(vt));
+  }
+  static Axis3 out(const T* v) { return {double(v[0]), double(v[1]), double(v[2])}; }
+};
+
+class PyGravityEstimator {
+ public:
+  explicit PyGravityEstimator(const std::string& scalar) : is_float_(is_float_scalar(scalar)) {}
+
+  std::string configure(double kp, double ki, double gate) {
+    return is_float_ ? f_.configure(kp, ki, gate) : d_.configure(kp, ki, gate);
+  }
+  std::string update(const Axis3& accel, const Axis3& gyro, double dt) {
+    return is_float_ ? f_.update(accel, gyro, dt) : d_.update(accel, gyro, dt);
+  }
+  // A whole stream in one call: the gravity estimate after each sample, or the first
+  // refused sample's index and status as a ValueError (earlier samples stay applied).
+  std::vector<Axis3> run(const std::vector<Axis3>& accel, const std::vector<Axis3>& gyro,
+                         double dt) {
+    if (accel.size() != gyro.size())
+      throw nb::value_error(("accel and gyro must have the same length, got " +
+                             std::to_string(accel.size()) + " and " + std::to_string(gyro.size()))
+                                .c_str());
+    std::vector<Axis3> out;
+    out.reserve(accel.size());
+    for (std::size_t i = 0; i < accel.size(); ++i) {
+      const std::string s = update(accel[i], gyro[i], dt);
+      if (s != "ok")
+        throw nb::value_error(("sample " + std::to_string(i) + " refused: " + s).c_str());
+      out.push_back(gravity());
+    }
+    return out;
+  }
+  std::string set_fused(const Axis3& v) { return is_float_ ? f_.set_fused(v) : d_.set_fused(v); }
+  void reset() { is_float_ ? f_.est.reset() : d_.est.reset(); }
+  Axis3 gravity() const { return is_float_ ? f_.out(f_.est.gravity()) : d_.out(d_.est.gravity()); }
+  Axis3 bias() const {
+    return is_float_ ? f_.out(f_.est.bias_radps()) : d_.out(d_.est.bias_radps());
+  }
+  bool initialised() const { return is_float_ ? f_.est.initialised() : d_.est.initialised(); }
+  bool accel_trusted() const { return is_float_ ? f_.est.accel_trusted() : d_.est.accel_trusted(); }
+
+ private:
+  bool is_float_;
+  GravityState<float> f_;
+  GravityState<double> d_;
 };
 
 nb::dict tolerances(bool is_float) {
@@ -938,6 +1006,35 @@ NB_MODULE(_core, m) {
            (std::string("One frame for the hand orientation [w, x, y, z]. Returns a ") + kResultDoc)
                .c_str())
       .def_prop_ro("k", &PyGuidance::k, "The scene's contact count.");
+
+  m.attr("GRAVITY_DEFAULTS") =
+      nb::make_tuple(GRASPGUIDE_GRAVITY_KP_PER_S, GRASPGUIDE_GRAVITY_KI_PER_S2,
+                     GRASPGUIDE_GRAVITY_ACCEL_GATE_MPS2);
+  nb::class_<PyGravityEstimator>(
+      m, "GravityEstimator",
+      "The device's gravity estimator (graspguide_frame/gravity_estimator.h): unit gravity "
+      "in the hand frame (pointing down) from accelerometer [m/s^2, specific force] and gyro "
+      "[rad/s] samples, with gyro-bias estimation; or a fused chip's gravity report. Methods "
+      "return a status name ('ok' or the error; on error nothing changes).")
+      .def(nb::init<const std::string&>(), "scalar"_a = "float")
+      .def("configure", &PyGravityEstimator::configure, "kp_per_s"_a, "ki_per_s2"_a,
+           "accel_gate_mps2"_a,
+           "Set the gains (GRAVITY_DEFAULTS holds the built-in ones); ki_per_s2 = 0 turns bias "
+           "estimation off. Returns a status name (bad_config for a negative or non-finite "
+           "gain or a gate <= 0).")
+      .def("update", &PyGravityEstimator::update, "accel_mps2"_a, "gyro_radps"_a, "dt_s"_a,
+           "One IMU sample. Returns a status name.")
+      .def("run", &PyGravityEstimator::run, "accel_mps2"_a, "gyro_radps"_a, "dt_s"_a,
+           "update() for each sample of a stream at a fixed interval; returns the gravity "
+           "estimate after each. A refused sample raises ValueError naming it.")
+      .def("set_fused", &PyGravityEstimator::set_fused, "gravity"_a,
+           "A fused chip's gravity report (accelerometer sign, any unit). Returns a status name.")
+      .def("reset", &PyGravityEstimator::reset, "Forget the estimate and the bias.")
+      .def_prop_ro("gravity", &PyGravityEstimator::gravity, "Unit gravity, hand frame.")
+      .def_prop_ro("bias_radps", &PyGravityEstimator::bias, "The gyro bias estimate.")
+      .def_prop_ro("initialised", &PyGravityEstimator::initialised)
+      .def_prop_ro("accel_trusted", &PyGravityEstimator::accel_trusted,
+                   "Whether the last sample's accelerometer passed the gate.");
 
   m.def("time_frames", &time_frames, "instances"_a, "scalar"_a = "double",
         "decomposition"_a = "structured", "max_iterations"_a = gg::kDefaultMaxIterations,
