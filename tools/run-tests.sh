@@ -6,7 +6,7 @@
 #   3. pio test -e native        (GoogleTest suites in test/test_*/, offline), and the
 #      Arduino board compiled on the host against a stub of the Arduino API (1 case)
 #   4. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
-#      pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages, m7_stages_double and the QEMU
+#      pio run -e cortex_m4f, m4f_firmware, m4f_stages, m7_stages, m7_stages_double, m4f_imu and the QEMU
 #      stage counts vs tools/perf/stage_baseline.json (each is 1 case), and the
 #      per-frame layer's cycles on the ATmega328P under simavr (1 case)
 #   5. pytest tools/tests        (if that directory exists; its QEMU firmware test
@@ -203,7 +203,7 @@ run_case "Arduino board compile check (host, Arduino API stub)" arduino_check \
 # is one test case; the stage counts under QEMU (and their check against
 # tools/perf/stage_baseline.json) are one more. The toolchain and QEMU (about 400 MB)
 # are installed here, not by bootstrap.sh, so that tools/run-main.sh does without them.
-ARM_ENVS=(cortex_m4f m4f_firmware m4f_stages m7_stages m7_stages_double)
+ARM_ENVS=(cortex_m4f m4f_firmware m4f_stages m7_stages m7_stages_double m4f_imu)
 arm_why=""
 if [[ -n ${GRASPGUIDE_NO_ARM:-} ]]; then
     arm_why="GRASPGUIDE_NO_ARM is set"
@@ -234,6 +234,15 @@ if [[ -z $qemu_why ]]; then
         --json "$REPORT_DIR/qemu_stages.json"
 else
     firmware_unavailable "QEMU stage counts (graspguide bench --target m4f --target m7 --target m7d)" "$qemu_why"
+fi
+if [[ -z $qemu_why ]]; then
+    # The gravity estimator's instructions per update (host-less mode), and that the image's
+    # estimate tracked its stream.
+    run_case "QEMU gravity-estimator cost" imu_cost \
+        "$ROOT/.venv/bin/python" "$ROOT/tools/scripts/imu_cost.py" --no-build \
+        --json "$REPORT_DIR/imu_cost.json"
+else
+    firmware_unavailable "QEMU gravity-estimator cost (tools/scripts/imu_cost.py)" "$qemu_why"
 fi
 
 # The per-frame layer on the paper's ATmega328P, built with Debian's gcc-avr (installed by

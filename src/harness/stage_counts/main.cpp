@@ -16,6 +16,7 @@
 #include "line_buffer.h"
 #include "semihosting.h"
 #include "stage_scenes.h"
+#include "systick_counter.h"
 
 extern "C" {
 uint32_t m4f_stack_high_water(void);  // startup.c
@@ -30,38 +31,15 @@ uint32_t m4f_stack_high_water(void);  // startup.c
 namespace {
 
 namespace gg = graspguide;
+using stages::elapsed;
+using stages::known_loop;
+using stages::start_counter;
+using stages::ticks;
 // The scene set is stored in float (stage_scenes.h), so a double image solves the
 // float-rounded inputs: a relative change of about 1e-7 for a hand near the origin, but
 // the 1e6 m offsets lose their geometry (targets.py leaves those out of the PWM check).
 using T = gg::Real;
 constexpr const char* kScalarName = sizeof(T) == sizeof(double) ? "double" : "float";
-
-struct SysTickRegs {
-  volatile uint32_t csr, rvr, cvr, calib;
-};
-SysTickRegs& systick() { return *reinterpret_cast<SysTickRegs*>(uintptr_t{0xE000E010u}); }
-constexpr uint32_t kTickMask = 0xFFFFFFu;
-
-void start_counter() {
-  systick().csr = 0;
-  systick().rvr = kTickMask;
-  systick().cvr = 0;
-  systick().csr = 0x5u;  // processor clock, no interrupt, enabled
-}
-
-// The barrier keeps the compiler from moving work across the read.
-inline uint32_t ticks() {
-  __asm__ volatile("" ::: "memory");
-  const uint32_t v = systick().cvr;
-  __asm__ volatile("" ::: "memory");
-  return v;
-}
-inline int32_t elapsed(uint32_t from, uint32_t to) { return int32_t((from - to) & kTickMask); }
-
-// Exactly 2 * n instructions (subs + bne per iteration) plus a constant.
-__attribute__((noinline)) void known_loop(uint32_t n) {
-  __asm__ volatile("1: subs %0, %0, #1\n bne 1b" : "+r"(n) : : "cc");
-}
 
 // Results go through here so the compiler cannot drop the work being timed.
 volatile uint32_t g_sink;
