@@ -6,7 +6,7 @@
 #   3. ./.venv with the pinned tools/requirements-dev.txt (re-installed only
 #      when that file changes);
 #   4. the Python package in tools/ (if tools/pyproject.toml exists),
-#      re-installed only when its sources (tools/, lib/graspguide/) change;
+#      re-installed only when its sources (tools/, lib/graspguide/, lib/graspguide_frame/) change;
 #   5. the simulated device (.pio/build/sim/program, `pio run -e sim`) when
 #      platformio.ini has [env:sim]; pio rebuilds only what changed.
 # Exports nothing. Set GRASPGUIDE_PYTHON to choose the interpreter for .venv
