@@ -52,6 +52,10 @@ class ErrorCode(enum.IntEnum):
     NOTHING_TO_DISPLAY = 0x0C  # every motor level is zero for this policy
     TIME_WENT_BACKWARDS = 0x0D  # host_time_us decreased within a trial
     BAD_CONFIG = 0x0E  # threshold, hold or timeout out of range
+    IMU_STALE = 0x0F  # no IMU sample for GRASPGUIDE_IMU_STALE_MS (motors off)
+    IMU_STUCK = 0x10  # the IMU repeated one reading GRASPGUIDE_IMU_STUCK_SAMPLES times (motors off)
+    IMU_OUT_OF_RANGE = 0x11  # an IMU reading is non-finite or beyond the part's full scale (motors off)
+    BAD_IMU_CONFIG = 0x12  # an IMU health setting is out of range
     BAD_CRC = 0x40  # frame CRC mismatch (counted; never answered, the header cannot be trusted)
     BAD_COBS = 0x41  # COBS block ran past the delimiter (counted; never answered)
     TOO_LONG = 0x42  # frame longer than the largest message (counted; never answered)
@@ -321,7 +325,7 @@ class Telemetry(Message):
         FieldSpec("alpha", "f32", (), None, 4, "", "mode V gain ||R f - g|| / 2 * 185 (PWM counts); 0 when solver_status is not ok", "f"),
         FieldSpec("pwm", "u8", (4,), None, 1, "", "duty applied to motors 1..4", "4B"),
         FieldSpec("constraints_used", "enum", (), ConstraintModel, 1, "", "model the QP used after fallbacks (paper -> normal -> none)", "B"),
-        FieldSpec("solver_status", "enum", (), ErrorCode, 1, "", "core status of this POSE (0..14); motors are off unless ok", "B"),
+        FieldSpec("solver_status", "enum", (), ErrorCode, 1, "", "core status of this POSE (0..18); motors are off unless ok", "B"),
         FieldSpec("iterations", "u8", (), None, 1, "", "QP iterations, saturated at 255", "B"),
         FieldSpec("flags", "u8", (), None, 1, "", "TELEMETRY_FLAG_* bits", "B"),
         FieldSpec("compute_time_us", "u32", (), None, 4, "us", "device time spent on Algorithm 1 for this POSE", "I"),

@@ -1,5 +1,5 @@
 // In-memory hardware for tests and host tools: a clock set by hand, motors that record
-// every write.
+// every write, an IMU and a button fed by the test.
 #pragma once
 
 #include <cstring>
@@ -35,6 +35,55 @@ class RecordingMotors final : public MotorOutputs {
  private:
   Pwm last_;
   uint32_t writes_ = 0;
+};
+
+// An IMU whose next sample the test sets; read() hands it out once.
+class FakeImu final : public Imu {
+ public:
+  FakeImu(ImuOutput output, float accel_full_scale_mps2, float gyro_full_scale_radps)
+      : output_(output), accel_fs_(accel_full_scale_mps2), gyro_fs_(gyro_full_scale_radps) {}
+
+  ImuOutput output() const override { return output_; }
+  float accel_full_scale_mps2() const override { return accel_fs_; }
+  float gyro_full_scale_radps() const override { return gyro_fs_; }
+
+  void push(const ImuSample& s) {
+    next_ = s;
+    ready_ = true;
+  }
+  bool read(ImuSample& out) override {
+    if (!ready_) return false;
+    out = next_;
+    ready_ = false;
+    ++reads_;
+    return true;
+  }
+  uint32_t reads() const { return reads_; }
+
+ private:
+  ImuOutput output_;
+  float accel_fs_, gyro_fs_;
+  ImuSample next_;
+  bool ready_ = false;
+  uint32_t reads_ = 0;
+};
+
+// A button already debounced: the test presses and releases it, each poll reports one edge.
+class FakeButton final : public Button {
+ public:
+  void press() { pending_ = down_ ? pending_ : ButtonEdge::kPressed; }
+  void release() { pending_ = down_ ? ButtonEdge::kReleased : pending_; }
+  ButtonEdge poll() override {
+    const ButtonEdge e = pending_;
+    pending_ = ButtonEdge::kNone;
+    if (e != ButtonEdge::kNone) down_ = e == ButtonEdge::kPressed;
+    return e;
+  }
+  bool down() const override { return down_; }
+
+ private:
+  ButtonEdge pending_ = ButtonEdge::kNone;
+  bool down_ = false;
 };
 
 // Two in-memory queues: what the host sends (read by the device) and what the device

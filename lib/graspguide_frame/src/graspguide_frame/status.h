@@ -44,7 +44,19 @@ namespace graspguide {
     "timestamps must not decrease within a trial")                                         \
   X(kBadConfig, "bad_config",                                                              \
     "a trial parameter is out of range: 0 <= threshold_deg <= 180, 0 <= hold_s <= 600 and" \
-    " hold_s <= timeout_s, 0 < timeout_s <= 1800 (max_iterations >= 1)")
+    " hold_s <= timeout_s, 0 < timeout_s <= 1800 (max_iterations >= 1)")                \
+  X(kImuStale, "imu_stale",                                                                \
+    "no IMU sample for GRASPGUIDE_IMU_STALE_MS (or none yet); check the IMU's wiring, power" \
+    " and I2C address")                                                                    \
+  X(kImuStuck, "imu_stuck",                                                                \
+    "the IMU repeated the same reading GRASPGUIDE_IMU_STUCK_SAMPLES times in a row; a live"  \
+    " sensor's noise never does: power-cycle it and check the bus")                        \
+  X(kImuOutOfRange, "imu_out_of_range",                                                    \
+    "an IMU reading is NaN, infinite or beyond the part's configured full scale; check the" \
+    " range the board sets against the limits it reports")                                 \
+  X(kBadImuConfig, "bad_imu_config",                                                       \
+    "an IMU health setting is out of range: 1 <= stale_ms <= 60000, stuck_samples >= 2,"   \
+    " recovery_samples >= 1, full scales finite and > 0")
 // clang-format on
 
 enum class Status : uint8_t {
@@ -53,7 +65,10 @@ enum class Status : uint8_t {
 #undef GRASPGUIDE_STATUS_ENUMERATOR
 };
 
-constexpr int kStatusCount = static_cast<int>(Status::kBadConfig) + 1;
+// Counted from the list itself, so a new row cannot be left out.
+#define GRASPGUIDE_STATUS_ONE(id, name, message) +1
+constexpr int kStatusCount = 0 GRASPGUIDE_STATUSES(GRASPGUIDE_STATUS_ONE);
+#undef GRASPGUIDE_STATUS_ONE
 
 // Tables, not switches: each is linked only where it is used (the messages stay out of
 // images that only log names; on an AVR either table would sit in RAM). A class template's

@@ -12,7 +12,7 @@
 
 namespace graspguide_link {
 
-static_assert(graspguide::kStatusCount == 15,
+static_assert(graspguide::kStatusCount == 19,
               "graspguide::Status and the schema's core ErrorCodes differ in number");
 constexpr bool same_value(graspguide::Status s, ErrorCode e) {
   return static_cast<uint8_t>(s) == static_cast<uint8_t>(e);
@@ -47,6 +47,14 @@ static_assert(same_value(graspguide::Status::kTimeWentBackwards, ErrorCode::kTim
               "graspguide::Status::kTimeWentBackwards is not ErrorCode::kTimeWentBackwards");
 static_assert(same_value(graspguide::Status::kBadConfig, ErrorCode::kBadConfig),
               "graspguide::Status::kBadConfig is not ErrorCode::kBadConfig");
+static_assert(same_value(graspguide::Status::kImuStale, ErrorCode::kImuStale),
+              "graspguide::Status::kImuStale is not ErrorCode::kImuStale");
+static_assert(same_value(graspguide::Status::kImuStuck, ErrorCode::kImuStuck),
+              "graspguide::Status::kImuStuck is not ErrorCode::kImuStuck");
+static_assert(same_value(graspguide::Status::kImuOutOfRange, ErrorCode::kImuOutOfRange),
+              "graspguide::Status::kImuOutOfRange is not ErrorCode::kImuOutOfRange");
+static_assert(same_value(graspguide::Status::kBadImuConfig, ErrorCode::kBadImuConfig),
+              "graspguide::Status::kBadImuConfig is not ErrorCode::kBadImuConfig");
 
 // The ErrorCode that reports a core status (the same name and value, checked above).
 constexpr ErrorCode error_code_of(graspguide::Status s) {

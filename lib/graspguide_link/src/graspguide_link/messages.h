@@ -49,6 +49,10 @@ enum class ErrorCode : uint8_t {
   kNothingToDisplay = 0x0C,  // every motor level is zero for this policy
   kTimeWentBackwards = 0x0D,  // host_time_us decreased within a trial
   kBadConfig = 0x0E,  // threshold, hold or timeout out of range
+  kImuStale = 0x0F,  // no IMU sample for GRASPGUIDE_IMU_STALE_MS (motors off)
+  kImuStuck = 0x10,  // the IMU repeated one reading GRASPGUIDE_IMU_STUCK_SAMPLES times (motors off)
+  kImuOutOfRange = 0x11,  // an IMU reading is non-finite or beyond the part's full scale (motors off)
+  kBadImuConfig = 0x12,  // an IMU health setting is out of range
   kBadCrc = 0x40,  // frame CRC mismatch (counted; never answered, the header cannot be trusted)
   kBadCobs = 0x41,  // COBS block ran past the delimiter (counted; never answered)
   kTooLong = 0x42,  // frame longer than the largest message (counted; never answered)
@@ -62,7 +66,7 @@ enum class ErrorCode : uint8_t {
 };
 template <>
 struct EnumInfo<ErrorCode> {
-  static constexpr size_t kCount = 25;
+  static constexpr size_t kCount = 29;
   static constexpr ErrorCode kValues[kCount] = {
       ErrorCode::kOk,
       ErrorCode::kNonFiniteInput,
@@ -79,6 +83,10 @@ struct EnumInfo<ErrorCode> {
       ErrorCode::kNothingToDisplay,
       ErrorCode::kTimeWentBackwards,
       ErrorCode::kBadConfig,
+      ErrorCode::kImuStale,
+      ErrorCode::kImuStuck,
+      ErrorCode::kImuOutOfRange,
+      ErrorCode::kBadImuConfig,
       ErrorCode::kBadCrc,
       ErrorCode::kBadCobs,
       ErrorCode::kTooLong,
@@ -108,6 +116,10 @@ constexpr bool is_valid(ErrorCode v) {
     case ErrorCode::kNothingToDisplay:
     case ErrorCode::kTimeWentBackwards:
     case ErrorCode::kBadConfig:
+    case ErrorCode::kImuStale:
+    case ErrorCode::kImuStuck:
+    case ErrorCode::kImuOutOfRange:
+    case ErrorCode::kBadImuConfig:
     case ErrorCode::kBadCrc:
     case ErrorCode::kBadCobs:
     case ErrorCode::kTooLong:
@@ -140,6 +152,10 @@ constexpr const char* enum_name(ErrorCode v) {
     case ErrorCode::kNothingToDisplay: return "nothing_to_display";
     case ErrorCode::kTimeWentBackwards: return "time_went_backwards";
     case ErrorCode::kBadConfig: return "bad_config";
+    case ErrorCode::kImuStale: return "imu_stale";
+    case ErrorCode::kImuStuck: return "imu_stuck";
+    case ErrorCode::kImuOutOfRange: return "imu_out_of_range";
+    case ErrorCode::kBadImuConfig: return "bad_imu_config";
     case ErrorCode::kBadCrc: return "bad_crc";
     case ErrorCode::kBadCobs: return "bad_cobs";
     case ErrorCode::kTooLong: return "too_long";
@@ -613,7 +629,7 @@ struct Telemetry {
   float alpha = {};  // f32: mode V gain ||R f - g|| / 2 * 185 (PWM counts); 0 when solver_status is not ok
   uint8_t pwm[4] = {};  // u8[4]: duty applied to motors 1..4
   ConstraintModel constraints_used = {};  // ConstraintModel: model the QP used after fallbacks (paper -> normal -> none)
-  ErrorCode solver_status = {};  // ErrorCode: core status of this POSE (0..14); motors are off unless ok
+  ErrorCode solver_status = {};  // ErrorCode: core status of this POSE (0..18); motors are off unless ok
   uint8_t iterations = {};  // u8: QP iterations, saturated at 255
   uint8_t flags = {};  // u8: TELEMETRY_FLAG_* bits
   uint32_t compute_time_us = {};  // u32 [us]: device time spent on Algorithm 1 for this POSE
