@@ -8,13 +8,17 @@
 // input-only (34..39), adjacent on the header.
 #define GRASPGUIDE_BOARD_DEFAULT_NAME "featheresp32"
 #define GRASPGUIDE_BOARD_DEFAULT_PINS 13, 12, 27, 33
+// GPIO32: next to 33 on the header, not a strapping pin, has an internal pull-up.
+#define GRASPGUIDE_BOARD_DEFAULT_BUTTON_PIN 32
 #elif defined(ARDUINO_TEENSY40) || defined(GRASPGUIDE_BOARD_TEENSY40)
 // Teensy 4.0: pins 2..5 are FlexPWM outputs.
 #define GRASPGUIDE_BOARD_DEFAULT_NAME "teensy40"
 #define GRASPGUIDE_BOARD_DEFAULT_PINS 2, 3, 4, 5
+#define GRASPGUIDE_BOARD_DEFAULT_BUTTON_PIN 6
 #else
 #define GRASPGUIDE_BOARD_DEFAULT_NAME "arduino"
 #define GRASPGUIDE_BOARD_DEFAULT_PINS 3, 5, 6, 9
+#define GRASPGUIDE_BOARD_DEFAULT_BUTTON_PIN 2
 #endif
 
 // Reported in HELLO_REPLY (at most 15 characters).
@@ -25,6 +29,34 @@
 // One output pin per motor, thumb, index, middle, palm.
 #ifndef GRASPGUIDE_MOTOR_PINS
 #define GRASPGUIDE_MOTOR_PINS GRASPGUIDE_BOARD_DEFAULT_PINS
+#endif
+
+// The IMU on the back of the hand, on the board's default I2C bus (Wire) at the part's
+// default address. LSM6DSOX: a 6-axis part (accelerometer + gyroscope; the device estimates
+// gravity). BNO055: on-chip fusion, the chip's gravity vector. NONE: no IMU (tracker only).
+#define GRASPGUIDE_IMU_NONE 0
+#define GRASPGUIDE_IMU_LSM6DSOX 1
+#define GRASPGUIDE_IMU_BNO055 2
+#ifndef GRASPGUIDE_IMU
+#define GRASPGUIDE_IMU GRASPGUIDE_IMU_LSM6DSOX
+#endif
+
+// One IMU read per 10 ms (100 Hz): the rate the health thresholds are argued for
+// (graspguide_frame/imu_watchdog.h). Slower than the LSM6DSOX's 104 Hz output, so every read
+// is a fresh conversion; the BNO055 fuses at 100 Hz.
+#ifndef GRASPGUIDE_IMU_PERIOD_US
+#define GRASPGUIDE_IMU_PERIOD_US 10000
+#endif
+
+// The button that starts a host-less trial, between this pin and GND (internal pull-up).
+#ifndef GRASPGUIDE_BUTTON_PIN
+#define GRASPGUIDE_BUTTON_PIN GRASPGUIDE_BOARD_DEFAULT_BUTTON_PIN
+#endif
+
+// A level must hold this long to count: tactile switches bounce for under 10 ms, and a
+// deliberate press lasts 100 ms or more.
+#ifndef GRASPGUIDE_BUTTON_DEBOUNCE_MS
+#define GRASPGUIDE_BUTTON_DEBOUNCE_MS 20
 #endif
 
 // Above hearing and well above an ERM's mechanical bandwidth, so the motor only sees

@@ -12,9 +12,13 @@
 constexpr uint8_t LOW = 0;
 constexpr uint8_t HIGH = 1;
 constexpr uint8_t OUTPUT = 1;
+constexpr uint8_t INPUT_PULLUP = 2;
+
+typedef bool boolean;
 
 void pinMode(uint8_t pin, uint8_t mode);
 void digitalWrite(uint8_t pin, uint8_t value);
+int digitalRead(uint8_t pin);
 void analogWrite(uint8_t pin, int value);
 unsigned long millis();
 unsigned long micros();

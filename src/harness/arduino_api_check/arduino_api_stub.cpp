@@ -6,6 +6,7 @@ HardwareSerial Serial;
 
 void pinMode(uint8_t, uint8_t) {}
 void digitalWrite(uint8_t, uint8_t) {}
+int digitalRead(uint8_t) { return HIGH; }
 void analogWrite(uint8_t, int) {}
 unsigned long millis() { return 0; }
 unsigned long micros() { return 0; }

@@ -1,0 +1,65 @@
+// The fused-chip path: a Bosch BNO055 through Adafruit's BNO055 library (lib_deps
+// adafruit/Adafruit BNO055). The chip fuses its accelerometer and gyroscope itself and gives
+// the gravity vector in its own axes; the device uses that instead of its estimator.
+#pragma once
+
+#include <Adafruit_BNO055.h>
+#include <Arduino.h>
+
+#include "graspguide_device/hal.h"
+
+namespace graspguide::board {
+
+class Bno055Imu final : public device::Imu {
+ public:
+  Bno055Imu(device::Clock& clock, uint32_t period_us) : clock_(clock), period_us_(period_us) {}
+
+  // IMUPLUS: accelerometer and gyroscope fusion without the magnetometer, whose yaw the
+  // guidance does not need and whose disturbances (motors, metal) would only add error.
+  bool begin() {
+    if (!part_.begin(OPERATION_MODE_IMUPLUS)) return false;
+    part_.setExtCrystalUse(true);  // the Adafruit breakout's 32 kHz crystal: steadier timing
+    started_ = true;
+    last_read_us_ = clock_.now_us() - period_us_;
+    return true;
+  }
+
+  device::ImuOutput output() const override { return device::ImuOutput::kFusedGravity; }
+  // The chip's power-on ranges, which IMUPLUS keeps: +-4 g and +-2000 dps. Its gravity
+  // vector's magnitude never exceeds the accelerometer's range.
+  float accel_full_scale_mps2() const override { return 4.0f * kStandardGravity_mps2; }
+  float gyro_full_scale_radps() const override { return 2000.0f * kRadPerDeg; }
+
+  // Gravity and the calibrated rate: the rate keeps the stuck rule meaningful while the
+  // hand rests, when the fused gravity alone may hold its 0.01 m/s^2 step for a while.
+  bool read(device::ImuSample& out) override {
+    if (!started_) return false;
+    const uint32_t now_us = clock_.now_us();
+    if (static_cast<int32_t>(now_us - last_read_us_) < static_cast<int32_t>(period_us_))
+      return false;
+    last_read_us_ = now_us;
+    sensors_event_t gravity, gyro;
+    if (!part_.getEvent(&gravity, Adafruit_BNO055::VECTOR_GRAVITY)) return false;
+    if (!part_.getEvent(&gyro, Adafruit_BNO055::VECTOR_GYROSCOPE)) return false;
+    out.time_us = now_us;
+    out.accel_mps2[0] = gravity.acceleration.x;
+    out.accel_mps2[1] = gravity.acceleration.y;
+    out.accel_mps2[2] = gravity.acceleration.z;
+    out.gyro_radps[0] = gyro.gyro.x;
+    out.gyro_radps[1] = gyro.gyro.y;
+    out.gyro_radps[2] = gyro.gyro.z;
+    return true;
+  }
+
+ private:
+  static constexpr float kStandardGravity_mps2 = 9.80665f;
+  static constexpr float kRadPerDeg = 0.0174532925f;
+
+  device::Clock& clock_;
+  uint32_t period_us_;
+  uint32_t last_read_us_ = 0;
+  bool started_ = false;
+  Adafruit_BNO055 part_;
+};
+
+}  // namespace graspguide::board
