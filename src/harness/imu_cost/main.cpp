@@ -117,8 +117,11 @@ int main() {
 
   sort(g_each, kSamples);
   stages::write0(line.str("IMU samples ").num(kSamples).str(" failed ").num(failed).end());
-  stages::write0(line.str("EACH median ").num(g_each[kSamples / 2]).str(" max ")
-                     .num(g_each[kSamples - 1]).end());
+  stages::write0(line.str("EACH median ")
+                     .num(g_each[kSamples / 2])
+                     .str(" max ")
+                     .num(g_each[kSamples - 1])
+                     .end());
   stages::write0(line.str("TOTAL ").num(total).end());
   stages::write0(line.str("ERROR_MDEG ").num(error_mdeg).end());
   stages::write0(line.str("STACK ").num(m4f_stack_high_water()).end());
