@@ -196,7 +196,7 @@ fi
 # That proves it compiles, not that it runs.
 run_case "Arduino board compile check (host, Arduino API stub)" arduino_check \
     "$ROOT/.venv/bin/pio" run -e arduino_check_generic -e arduino_check_featheresp32 \
-    -e arduino_check_teensy40
+    -e arduino_check_teensy40 -e arduino_check_featheresp32_bno055
 
 # --- 4. Bare-metal ARM builds and QEMU runs -----------------------------------------
 # Before pytest, because its QEMU firmware test needs the m4f_firmware image. Each build
