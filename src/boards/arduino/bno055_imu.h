@@ -6,21 +6,20 @@
 #include <Adafruit_BNO055.h>
 #include <Arduino.h>
 
-#include "graspguide_device/hal.h"
+#include "polled_imu.h"
 
 namespace graspguide::board {
 
-class Bno055Imu final : public device::Imu {
+class Bno055Imu final : public PolledImu {
  public:
-  Bno055Imu(device::Clock& clock, uint32_t period_us) : clock_(clock), period_us_(period_us) {}
+  Bno055Imu(device::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
 
   // IMUPLUS: accelerometer and gyroscope fusion without the magnetometer, whose yaw the
   // guidance does not need and whose disturbances (motors, metal) would only add error.
   bool begin() {
     if (!part_.begin(OPERATION_MODE_IMUPLUS)) return false;
     part_.setExtCrystalUse(true);  // the Adafruit breakout's 32 kHz crystal: steadier timing
-    started_ = true;
-    last_read_us_ = clock_.now_us() - period_us_;
+    started();
     return true;
   }
 
@@ -33,32 +32,16 @@ class Bno055Imu final : public device::Imu {
   // Gravity and the calibrated rate: the rate keeps the stuck rule meaningful while the
   // hand rests, when the fused gravity alone may hold its 0.01 m/s^2 step for a while.
   bool read(device::ImuSample& out) override {
-    if (!started_) return false;
-    const uint32_t now_us = clock_.now_us();
-    if (static_cast<int32_t>(now_us - last_read_us_) < static_cast<int32_t>(period_us_))
-      return false;
-    last_read_us_ = now_us;
+    uint32_t now_us = 0;
+    if (!due(now_us)) return false;
     sensors_event_t gravity, gyro;
     if (!part_.getEvent(&gravity, Adafruit_BNO055::VECTOR_GRAVITY)) return false;
     if (!part_.getEvent(&gyro, Adafruit_BNO055::VECTOR_GYROSCOPE)) return false;
-    out.time_us = now_us;
-    out.accel_mps2[0] = gravity.acceleration.x;
-    out.accel_mps2[1] = gravity.acceleration.y;
-    out.accel_mps2[2] = gravity.acceleration.z;
-    out.gyro_radps[0] = gyro.gyro.x;
-    out.gyro_radps[1] = gyro.gyro.y;
-    out.gyro_radps[2] = gyro.gyro.z;
+    fill(now_us, gravity, gyro, out);
     return true;
   }
 
  private:
-  static constexpr float kStandardGravity_mps2 = 9.80665f;
-  static constexpr float kRadPerDeg = 0.0174532925f;
-
-  device::Clock& clock_;
-  uint32_t period_us_;
-  uint32_t last_read_us_ = 0;
-  bool started_ = false;
   Adafruit_BNO055 part_;
 };
 

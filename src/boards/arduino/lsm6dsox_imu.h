@@ -6,13 +6,13 @@
 #include <Adafruit_LSM6DSOX.h>
 #include <Arduino.h>
 
-#include "graspguide_device/hal.h"
+#include "polled_imu.h"
 
 namespace graspguide::board {
 
-class Lsm6dsoxImu final : public device::Imu {
+class Lsm6dsoxImu final : public PolledImu {
  public:
-  Lsm6dsoxImu(device::Clock& clock, uint32_t period_us) : clock_(clock), period_us_(period_us) {}
+  Lsm6dsoxImu(device::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
 
   // False when no part answers at the default address: read() then never has a sample.
   bool begin() {
@@ -23,8 +23,7 @@ class Lsm6dsoxImu final : public device::Imu {
     part_.setGyroRange(LSM6DS_GYRO_RANGE_2000_DPS);
     part_.setAccelDataRate(LSM6DS_RATE_104_HZ);
     part_.setGyroDataRate(LSM6DS_RATE_104_HZ);
-    started_ = true;
-    last_read_us_ = clock_.now_us() - period_us_;
+    started();
     return true;
   }
 
@@ -35,31 +34,15 @@ class Lsm6dsoxImu final : public device::Imu {
   float gyro_full_scale_radps() const override { return 2000.0f * kRadPerDeg; }
 
   bool read(device::ImuSample& out) override {
-    if (!started_) return false;
-    const uint32_t now_us = clock_.now_us();
-    if (static_cast<int32_t>(now_us - last_read_us_) < static_cast<int32_t>(period_us_))
-      return false;
-    last_read_us_ = now_us;
+    uint32_t now_us = 0;
+    if (!due(now_us)) return false;
     sensors_event_t accel, gyro, temp;
     if (!part_.getEvent(&accel, &gyro, &temp)) return false;
-    out.time_us = now_us;
-    out.accel_mps2[0] = accel.acceleration.x;
-    out.accel_mps2[1] = accel.acceleration.y;
-    out.accel_mps2[2] = accel.acceleration.z;
-    out.gyro_radps[0] = gyro.gyro.x;
-    out.gyro_radps[1] = gyro.gyro.y;
-    out.gyro_radps[2] = gyro.gyro.z;
+    fill(now_us, accel, gyro, out);
     return true;
   }
 
  private:
-  static constexpr float kStandardGravity_mps2 = 9.80665f;
-  static constexpr float kRadPerDeg = 0.0174532925f;
-
-  device::Clock& clock_;
-  uint32_t period_us_;
-  uint32_t last_read_us_ = 0;
-  bool started_ = false;
   Adafruit_LSM6DSOX part_;
 };
 

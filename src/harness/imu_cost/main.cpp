@@ -9,18 +9,10 @@
 #include <cstdint>
 
 #include "../stage_counts/line_buffer.h"
+#include "../stage_counts/qemu_halt.h"
 #include "../stage_counts/semihosting.h"
 #include "../stage_counts/systick_counter.h"
 #include "graspguide_frame/gravity_estimator.h"
-
-extern "C" {
-uint32_t m4f_stack_high_water(void);  // startup.c
-[[noreturn]] void m4f_halt(int reason, int code) {
-  stages::LineBuffer line;
-  stages::write0(line.str("HALT ").num(reason).sp().num(code).end());
-  stages::exit(100 + reason);
-}
-}
 
 namespace {
 

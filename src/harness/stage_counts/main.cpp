@@ -14,19 +14,10 @@
 
 #include "graspguide.h"
 #include "line_buffer.h"
+#include "qemu_halt.h"
 #include "semihosting.h"
 #include "stage_scenes.h"
 #include "systick_counter.h"
-
-extern "C" {
-uint32_t m4f_stack_high_water(void);  // startup.c
-// Replaces syscalls.cpp's weak halt: under QEMU, a trap must end the run with a code.
-[[noreturn]] void m4f_halt(int reason, int code) {
-  stages::LineBuffer line;
-  stages::write0(line.str("HALT ").num(reason).sp().num(code).end());
-  stages::exit(100 + reason);
-}
-}
 
 namespace {
 
