@@ -260,8 +260,9 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   // row's rounding (a few eps) by its length, so a column shorter than that is noise.
   const T basis_noise = T(kBasisNoiseUlps) * std::numeric_limits<T>::epsilon() / eq.smallest;
   const T dep_tol = dependent_tol > basis_noise ? dependent_tol : basis_noise;
-  // At most this many independent inequality rows fit beside the equalities.
-  const int limit = 3 * K - eq.rank();
+  // At most this many independent inequality rows fit beside the equalities, and never
+  // more than the active-row arrays hold, whatever a degenerate hand's rank.
+  const int limit = 3 * K - eq.rank() < kMax ? 3 * K - eq.rank() : kMax;
   uint16_t active = fixed;  // fixed rows are held by eq, never by `rows`
   // A running bound on the rounding error the steps have put into lambda: a row's
   // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
