@@ -73,7 +73,7 @@ def _scenes():
 # --------------------------------------------------------------------------------------
 def test_module_constants():
     assert _core.STATUS_NAMES[0] == "ok"
-    assert len(set(_core.STATUS_NAMES)) == len(_core.STATUS_NAMES) == 15
+    assert len(set(_core.STATUS_NAMES)) == len(_core.STATUS_NAMES) == 19
     for name in (
         "non_finite_input",
         "bad_contact_count",
