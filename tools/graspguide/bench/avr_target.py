@@ -27,7 +27,6 @@ compared exactly, and a median or maximum more than 10 % above it is a regressio
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import shutil
@@ -41,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from graspguide.bench import baseline_file
 from graspguide.bench.pio_build import pio_env, pio_executable, run_build
 from graspguide.bench.targets import TargetError
 from graspguide.core import reference
@@ -529,29 +529,11 @@ def slim(summary: dict[str, Any]) -> dict[str, dict[str, int]]:
 
 
 def write_baseline(path: Path, results: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    data = {key: slim(r) for key, r in results.items()}
-    path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    baseline_file.write(path, {key: slim(r) for key, r in results.items()})
 
 
 def load_baseline(path: Path) -> dict[str, Any]:
-    if not path.exists():
-        raise AvrTargetError(f"no AVR baseline {path}: write it with --update-baseline")
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise AvrTargetError(f"cannot read the AVR baseline {path}: {e}") from None
-    ok = isinstance(data, dict) and all(
-        isinstance(parts, dict)
-        and all(
-            isinstance(s, dict) and all(isinstance(s.get(k), int) for k in ("median", "max"))
-            for s in parts.values()
-        )
-        for parts in data.values()
-    )
-    if not ok:
-        raise AvrTargetError(f'AVR baseline {path}: not {{mcu: {{part: {{"median", "max"}}}}}}')
-    return data
+    return baseline_file.read(path, 2, AvrTargetError, "AVR baseline", "MCUs")
 
 
 def check(results: dict[str, Any], baseline: dict[str, Any]) -> tuple[bool, list[str]]:

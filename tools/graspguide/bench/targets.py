@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from graspguide.bench import baseline_file
 from graspguide.bench.pio_build import pio_env, pio_executable, run_build
 
 
@@ -458,31 +459,14 @@ class BadBaseline(TargetError):
 
 
 def load_baseline(path: Path) -> dict[str, Any]:
-    if not path.exists():
-        raise BadBaseline(f"no baseline {path}: write it with --update-baseline")
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise BadBaseline(f"cannot read the baseline {path}: {e}") from None
-    if not isinstance(data, dict):
-        raise BadBaseline(f"baseline {path}: not a JSON object of targets")
-    for target, ks in data.items():
-        for k, stages in ks.items() if isinstance(ks, dict) else [(None, None)]:
-            for stage, stats in stages.items() if isinstance(stages, dict) else [(None, None)]:
-                where = " ".join(str(x) for x in (target, k, stage) if x is not None)
-                if not isinstance(stats, dict) or not all(
-                    isinstance(stats.get(s), int) for s in ("median", "max")
-                ):
-                    raise BadBaseline(f'baseline {path}: {where} is not {{"median": N, "max": N}}')
-    return data
+    return baseline_file.read(path, 3, BadBaseline, "baseline", "targets")
 
 
 def write_baseline(path: Path, results: dict[str, dict[str, Any]]) -> None:
     """Writes the measured targets' figures into ``path``, keeping the other targets'."""
     data = load_baseline(path) if path.exists() else {}
     data.update({target: slim(summary) for target, summary in results.items()})
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    baseline_file.write(path, data)
 
 
 def format_table(results: dict[str, dict[str, Any]]) -> str:
