@@ -360,8 +360,8 @@ TEST(Schema, IdsAreUniqueAndSizesConsistent) {
   EXPECT_FALSE(gl::payload_size_of(0x3F, &size));
   EXPECT_STREQ(gl::message_name(0x03), "POSE");
   EXPECT_STREQ(gl::message_name(0x7F), "unknown");
-  EXPECT_EQ(gl::kMaxWireFrameSize, 84u);  // docs/protocol.md: SET_SCENE is the largest frame
-  EXPECT_EQ(gl::kProtocolVersion, 1);
+  EXPECT_EQ(gl::kMaxWireFrameSize, 156u);  // docs/protocol.md: PLAN_BEGIN is the largest frame
+  EXPECT_EQ(gl::kProtocolVersion, 2);
 }
 
 TEST(Schema, ParseEventsNameTheirErrorCodes) {
@@ -662,14 +662,14 @@ TEST(Parser, HeaderErrorsKeepATrustedHeader) {
     uint8_t msg_id;
   };
   const Case cases[] = {
-      {forge(2, 0x01, 77, hello_payload), gl::ParseEvent::kBadVersion, 0x01},
-      {forge(0, 0x01, 77, hello_payload), gl::ParseEvent::kBadVersion, 0x01},
-      {forge(1, 0x3F, 77, hello_payload), gl::ParseEvent::kUnknownId, 0x3F},
-      {forge(1, 0x00, 77, {}), gl::ParseEvent::kUnknownId, 0x00},
-      {forge(1, 0xFF, 77, {}), gl::ParseEvent::kUnknownId, 0xFF},
-      {forge(1, 0x01, 77, {}), gl::ParseEvent::kBadLength, 0x01},
-      {forge(1, 0x01, 77, {1, 2}), gl::ParseEvent::kBadLength, 0x01},
-      {forge(1, 0x05, 77, {0}), gl::ParseEvent::kBadLength, 0x05},
+      {forge(gl::kProtocolVersion + 1, 0x01, 77, hello_payload), gl::ParseEvent::kBadVersion, 0x01},
+      {forge(gl::kProtocolVersion - 2, 0x01, 77, hello_payload), gl::ParseEvent::kBadVersion, 0x01},
+      {forge(gl::kProtocolVersion, 0x3F, 77, hello_payload), gl::ParseEvent::kUnknownId, 0x3F},
+      {forge(gl::kProtocolVersion, 0x00, 77, {}), gl::ParseEvent::kUnknownId, 0x00},
+      {forge(gl::kProtocolVersion, 0xFF, 77, {}), gl::ParseEvent::kUnknownId, 0xFF},
+      {forge(gl::kProtocolVersion, 0x01, 77, {}), gl::ParseEvent::kBadLength, 0x01},
+      {forge(gl::kProtocolVersion, 0x01, 77, {1, 2}), gl::ParseEvent::kBadLength, 0x01},
+      {forge(gl::kProtocolVersion, 0x05, 77, {0}), gl::ParseEvent::kBadLength, 0x05},
   };
   for (const Case& c : cases) {
     Bytes stream = c.wire;
@@ -795,7 +795,7 @@ TEST(Parser, RecoversEveryFrameFromRandomStreams) {
 // ---------------------------------------------------------------------------------------
 
 TEST(Writer, BufferTooSmallAndPayloadTooLong) {
-  const gl::SetScene scene;
+  const gl::PlanBegin scene;  // the largest message
   const Bytes wire = wire_of(scene, 3);
   EXPECT_EQ(wire.size(), gl::kMaxWireFrameSize);
   uint8_t buf[gl::kMaxWireFrameSize];

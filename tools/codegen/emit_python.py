@@ -94,6 +94,12 @@ def render(schema: Schema) -> str:
         for v in e.values:
             L.append(f"    {v.name.upper()} = 0x{v.value:02X}  # {v.doc}")
         L += ["", ""]
+    # What each error code means, for the host's messages (the enum's comments are not
+    # readable at run time).
+    L.append("ERROR_MEANINGS: dict[str, str] = {")
+    for v in s.enums["ErrorCode"].values:
+        L.append(f"    {v.name!r}: {v.doc!r},")
+    L += ["}", "", ""]
     L.append("class MsgId(enum.IntEnum):")
     L.append('    """Message ids."""')
     L.append("")
@@ -155,7 +161,7 @@ def render(schema: Schema) -> str:
         "__all__ = [",
         '    "FieldSpec", "PROTOCOL_VERSION", "LINK_ERROR_BASE", "MAX_PAYLOAD_SIZE",',
         '    "HOST_TO_DEVICE_IDS", "DEVICE_TO_HOST_IDS", "MsgId", "MESSAGES",',
-        '    "message_class", "payload_size_of", "unpack_payload",',
+        '    "message_class", "payload_size_of", "unpack_payload", "ERROR_MEANINGS",',
     ]
     names = (
         [c.name.upper() for c in s.named_constants]

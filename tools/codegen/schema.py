@@ -314,6 +314,15 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
             if f.name == "board":
                 _require(f.size == const_by_name["board_name_size"], f"{m.name}.board size")
 
+    for m in messages:
+        # C++ and Python name a message's struct and an enum alike: they would collide.
+        _require(m.class_name not in enums, f"{m.name}: its class name {m.class_name} is an enum's")
+        for f in m.fields:
+            if f.name == "participant":
+                _require(f.size == const_by_name["participant_id_size"], f"{m.name}.participant")
+            if f.name == "config_hash":
+                _require(f.shape == (const_by_name["config_hash_size"],), f"{m.name}.config_hash")
+
     schema = Schema(version, base, constants, enums, flags, messages, [])
     by_name = {m.name: m for m in messages}
     for g in raw.get("golden", []):

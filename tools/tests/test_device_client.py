@@ -403,12 +403,14 @@ def test_pose_batch_times_out_on_silence():
 # Protocol versions
 # --------------------------------------------------------------------------------------
 def test_hello_reply_of_another_version_is_a_mismatch():
-    def v2(msg, seq):
-        return [m.HelloReply(request_seq=seq, protocol_version=2, board="future")]
+    future = m.PROTOCOL_VERSION + 1
 
-    with pytest.raises(gd.ProtocolMismatch, match="version 2") as info:
-        client_for(v2).hello()
-    assert info.value.device_version == 2
+    def newer(msg, seq):
+        return [m.HelloReply(request_seq=seq, protocol_version=future, board="future")]
+
+    with pytest.raises(gd.ProtocolMismatch, match=f"version {future}") as info:
+        client_for(newer).hello()
+    assert info.value.device_version == future
 
 
 def test_frames_of_another_version_are_a_mismatch_not_a_timeout():

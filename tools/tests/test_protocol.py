@@ -351,13 +351,13 @@ def test_every_flipped_bit_is_caught():
 @pytest.mark.parametrize(
     "version,msg_id,payload,event,error",
     [
-        (2, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
+        (M.PROTOCOL_VERSION + 1, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
         (0, 0x01, b"\x01", ParseEvent.BAD_VERSION, gp.BadVersionError),
-        (1, 0x3F, b"\x01", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
-        (1, 0xFF, b"", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
-        (1, 0x01, b"", ParseEvent.BAD_LENGTH, gp.BadLengthError),
-        (1, 0x01, b"\x01\x02", ParseEvent.BAD_LENGTH, gp.BadLengthError),
-        (1, 0x05, b"\x00", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+        (M.PROTOCOL_VERSION, 0x3F, b"\x01", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
+        (M.PROTOCOL_VERSION, 0xFF, b"", ParseEvent.UNKNOWN_ID, gp.UnknownIdError),
+        (M.PROTOCOL_VERSION, 0x01, b"", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+        (M.PROTOCOL_VERSION, 0x01, b"\x01\x02", ParseEvent.BAD_LENGTH, gp.BadLengthError),
+        (M.PROTOCOL_VERSION, 0x05, b"\x00", ParseEvent.BAD_LENGTH, gp.BadLengthError),
     ],
 )
 def test_header_errors_keep_a_trusted_header(version, msg_id, payload, event, error):

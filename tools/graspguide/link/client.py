@@ -57,6 +57,7 @@ from graspguide.link.codec import (
 )
 from graspguide.link.errors import BadCobsError, BadEnumValueError, ProtocolError
 from graspguide.link.messages import (
+    ERROR_MEANINGS,
     MAX_CONTACTS,
     MESSAGES,
     PROTOCOL_VERSION,
@@ -238,41 +239,6 @@ def _telemetry_frame(enc: bytes) -> tuple[int, Telemetry] | None:
     )
     return seq, tel
 
-
-# What each ErrorCode means: the schema's text (tools/codegen/link_messages.toml), checked
-# against it by tools/tests/test_device_client.py so the two cannot drift.
-ERROR_MEANINGS: dict[str, str] = {
-    "ok": "no error",
-    "non_finite_input": "an input is NaN or infinite",
-    "bad_contact_count": "k is not 3 or 4",
-    "bad_axis": "y_axis is zero or not finite",
-    "bad_quaternion": "quat_wxyz is zero or not finite",
-    "coincident_contacts": "two contacts (or a contact and the centroid) coincide",
-    "imprecise_contacts": "contacts too far from the origin for float",
-    "zero_wrench": "the wrench is zero",
-    "zero_force": "the wrench has no force part, or one negligible next to its moment",
-    "rank_deficient": "contacts (nearly) collinear",
-    "qp_infeasible": "no forces satisfy the constraint model",
-    "qp_iteration_limit": "the QP hit its iteration cap",
-    "nothing_to_display": "every motor level is zero for this policy",
-    "time_went_backwards": "host_time_us decreased within a trial",
-    "bad_config": "threshold, hold or timeout out of range",
-    "imu_stale": "no IMU sample for GRASPGUIDE_IMU_STALE_MS (motors off)",
-    "imu_stuck": "the IMU repeated one reading GRASPGUIDE_IMU_STUCK_SAMPLES times (motors off)",
-    "imu_out_of_range": "an IMU reading is non-finite or beyond the part's full scale (motors off)",
-    "bad_imu_config": "an IMU health setting is out of range",
-    "bad_crc": "frame CRC mismatch (counted; never answered, the header cannot be trusted)",
-    "bad_cobs": "COBS block ran past the delimiter (counted; never answered)",
-    "too_long": "frame longer than the largest message (counted; never answered)",
-    "too_short": "frame shorter than header + CRC (counted; never answered)",
-    "bad_version": "frame version is not this protocol's; detail = the version received",
-    "unknown_id": "no message has this id (or it is a device -> host id); detail = the id",
-    "bad_length": "payload size does not match the id; detail = the id",
-    "not_allowed_in_state": "request refused in the device's state; detail = STATUS.state",
-    "no_scene": "POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id",
-    "bad_enum_value": "an enum, bool or ascii field holds an unlisted value; detail = the "
-    "field's index",
-}
 
 # The names the core and `graspguide solve` use (the vocabulary), and the wire enums.
 POLICY_NAMES = {name: Policy[name.upper()] for name in POLICIES}

@@ -16,7 +16,7 @@ from graspguide.link.errors import UnknownIdError
 from graspguide.link.message_base import FieldSpec, Message
 
 # Frames of any other are bad_version.
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 # ErrorCode values below this are graspguide::Status values; from it, link codes.
 LINK_ERROR_BASE = 0x40
 # Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -25,11 +25,25 @@ POSE_WATCHDOG_MS = 200
 MAX_CONTACTS = 4
 # Bytes of HELLO_REPLY.board, NUL-padded ASCII
 BOARD_NAME_SIZE = 16
+# Trials a host-less study plan can hold (the paper's protocol: 100 per participant)
+MAX_PLAN_TRIALS = 128
+# Bytes of a plan's participant id, NUL-padded ASCII
+PARTICIPANT_ID_SIZE = 8
+# Bytes of a plan's config_hash: the first 8 bytes of the protocol's sha256
+CONFIG_HASH_SIZE = 8
+# LOG_ERASE.key must hold this ('ERAS'): an erase is never an accident
+LOG_ERASE_KEY = 1163018579
 # the grasp part (steps 1-3) ran for this POSE
 TELEMETRY_FLAG_GRASP_RECOMPUTED = 0x01
 # the trial still runs after this POSE (also when its solver_status is an error)
 TELEMETRY_FLAG_TRIAL_RUNNING = 0x02
-MAX_PAYLOAD_SIZE = 76
+# Algorithm 1 runs on the device (SET_SCENE, START_TRIAL, POSE)
+CAPABILITY_FULL_SOLVE = 0x01
+# stores a plan and a results log, runs trials from an IMU and a button (PLAN_*, LOG_*, HOSTLESS_RUN)
+CAPABILITY_HOSTLESS = 0x02
+# a simulated device: takes SIM_IMU_SAMPLE and SIM_BUTTON (real boards answer sim_only)
+CAPABILITY_SIM_MESSAGES = 0x04
+MAX_PAYLOAD_SIZE = 148
 HOST_TO_DEVICE_IDS = range(0x01, 0x40)
 DEVICE_TO_HOST_IDS = range(0x80, 0xC0)
 
@@ -66,6 +80,13 @@ class ErrorCode(enum.IntEnum):
     NOT_ALLOWED_IN_STATE = 0x47  # request refused in the device's state; detail = STATUS.state
     NO_SCENE = 0x48  # POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id
     BAD_ENUM_VALUE = 0x49  # an enum, bool or ascii field holds an unlisted value; detail = the field's index
+    NO_PLAN = 0x4A  # HOSTLESS_RUN, PLAN_TRIAL or PLAN_COMMIT without a plan begun or stored; detail = the request's id
+    BAD_PLAN = 0x4B  # a plan field is out of range or the plan is incomplete; detail = the field's index (PLAN_BEGIN, PLAN_TRIAL) or the trial's position (PLAN_COMMIT)
+    LOG_FULL = 0x4C  # the results log has no room for another record; nothing stored was overwritten (download it, then LOG_ERASE)
+    LOG_NOT_EMPTY = 0x4D  # PLAN_COMMIT of another plan while the log holds records; download them, then LOG_ERASE
+    STORAGE_FAILED = 0x4E  # the non-volatile storage refused a write or read (motors off)
+    NO_RECORD = 0x4F  # LOG_READ of an index at or past LOG_INFO.records; detail = 0
+    SIM_ONLY = 0x50  # a simulation-only message (SIM_*) sent to a real board; detail = the id
 
 
 class ConstraintModel(enum.IntEnum):
@@ -99,6 +120,68 @@ class DeviceState(enum.IntEnum):
     STOPPED = 0x03  # STOP or a fault turned the motors off
 
 
+class WrenchClass(enum.IntEnum):
+    """A planned trial's wrench class (docs/study.md): single/multi in the reference condition"""
+
+    NONE = 0x00  # not classified (familiarization, or another condition)
+    SINGLE = 0x01  # drives a single motor
+    MULTI = 0x02  # drives several motors
+
+
+class RunEvent(enum.IntEnum):
+    """HOSTLESS_EVENT.event: what the host-less runner just did"""
+
+    REST = 0x00  # a rest began (motors off) before the next trial
+    READY = 0x01  # the ready pattern played; the button starts the trial
+    TRIAL_STARTED = 0x02  # the button started a trial
+    SUCCESS = 0x03  # the trial succeeded; its record is stored
+    TIMEOUT = 0x04  # the trial timed out; its record is stored
+    PLAN_DONE = 0x05  # every trial of the plan has a record; motors off
+    LOG_FULL = 0x06  # no room for the next record: the run stopped before the trial
+    STORAGE_FAILED = 0x07  # a record could not be stored: the run stopped
+    IMU_FAULT = 0x08  # the IMU went stale, stuck or out of range: motors off (detail in STATUS.last_error)
+
+
+ERROR_MEANINGS: dict[str, str] = {
+    'ok': 'no error',
+    'non_finite_input': 'an input is NaN or infinite',
+    'bad_contact_count': 'k is not 3 or 4',
+    'bad_axis': 'y_axis is zero or not finite',
+    'bad_quaternion': 'quat_wxyz is zero or not finite',
+    'coincident_contacts': 'two contacts (or a contact and the centroid) coincide',
+    'imprecise_contacts': 'contacts too far from the origin for float',
+    'zero_wrench': 'the wrench is zero',
+    'zero_force': 'the wrench has no force part, or one negligible next to its moment',
+    'rank_deficient': 'contacts (nearly) collinear',
+    'qp_infeasible': 'no forces satisfy the constraint model',
+    'qp_iteration_limit': 'the QP hit its iteration cap',
+    'nothing_to_display': 'every motor level is zero for this policy',
+    'time_went_backwards': 'host_time_us decreased within a trial',
+    'bad_config': 'threshold, hold or timeout out of range',
+    'imu_stale': 'no IMU sample for GRASPGUIDE_IMU_STALE_MS (motors off)',
+    'imu_stuck': 'the IMU repeated one reading GRASPGUIDE_IMU_STUCK_SAMPLES times (motors off)',
+    'imu_out_of_range': "an IMU reading is non-finite or beyond the part's full scale (motors off)",
+    'bad_imu_config': 'an IMU health setting is out of range',
+    'bad_crc': 'frame CRC mismatch (counted; never answered, the header cannot be trusted)',
+    'bad_cobs': 'COBS block ran past the delimiter (counted; never answered)',
+    'too_long': 'frame longer than the largest message (counted; never answered)',
+    'too_short': 'frame shorter than header + CRC (counted; never answered)',
+    'bad_version': "frame version is not this protocol's; detail = the version received",
+    'unknown_id': 'no message has this id (or it is a device -> host id); detail = the id',
+    'bad_length': 'payload size does not match the id; detail = the id',
+    'not_allowed_in_state': "request refused in the device's state; detail = STATUS.state",
+    'no_scene': "POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id",
+    'bad_enum_value': "an enum, bool or ascii field holds an unlisted value; detail = the field's index",
+    'no_plan': "HOSTLESS_RUN, PLAN_TRIAL or PLAN_COMMIT without a plan begun or stored; detail = the request's id",
+    'bad_plan': "a plan field is out of range or the plan is incomplete; detail = the field's index (PLAN_BEGIN, PLAN_TRIAL) or the trial's position (PLAN_COMMIT)",
+    'log_full': 'the results log has no room for another record; nothing stored was overwritten (download it, then LOG_ERASE)',
+    'log_not_empty': 'PLAN_COMMIT of another plan while the log holds records; download them, then LOG_ERASE',
+    'storage_failed': 'the non-volatile storage refused a write or read (motors off)',
+    'no_record': 'LOG_READ of an index at or past LOG_INFO.records; detail = 0',
+    'sim_only': 'a simulation-only message (SIM_*) sent to a real board; detail = the id',
+}
+
+
 class MsgId(enum.IntEnum):
     """Message ids."""
 
@@ -109,12 +192,24 @@ class MsgId(enum.IntEnum):
     STOP = 0x05
     SET_MOTORS = 0x06
     GET_STATUS = 0x07
+    PLAN_BEGIN = 0x08
+    PLAN_TRIAL = 0x09
+    PLAN_COMMIT = 0x0A
+    HOSTLESS_RUN = 0x0B
+    LOG_INFO_GET = 0x0C
+    LOG_READ = 0x0D
+    LOG_ERASE = 0x0E
+    SIM_IMU_SAMPLE = 0x10
+    SIM_BUTTON = 0x11
     ACK = 0x80
     ERROR = 0x81
     HELLO_REPLY = 0x82
     TELEMETRY = 0x83
     TRIAL_RESULT = 0x84
     STATUS = 0x85
+    LOG_INFO = 0x86
+    LOG_RECORD = 0x87
+    HOSTLESS_EVENT = 0x88
 
 
 @dataclass(frozen=True)
@@ -130,7 +225,7 @@ class Hello(Message):
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<B")
 
-    protocol_version: int = 1
+    protocol_version: int = 2
 
 
 @dataclass(frozen=True)
@@ -248,6 +343,194 @@ class GetStatus(Message):
 
 
 @dataclass(frozen=True)
+class PlanBegin(Message):
+    """PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while a trial or a host-less run goes on."""
+
+    MSG_ID: ClassVar[int] = MsgId.PLAN_BEGIN
+    NAME: ClassVar[str] = "PLAN_BEGIN"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 148
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("participant", "ascii", (), None, 8, "", "participant id (U1, ...), NUL-padded", "8s"),
+        FieldSpec("simulated", "bool", (), None, 1, "", "1: the participant is simulated (the record says so)", "B"),
+        FieldSpec("config_hash", "u8", (8,), None, 1, "", "first 8 bytes of the protocol's sha256 (study.json config_hash)", "8B"),
+        FieldSpec("trial_count", "u16", (), None, 2, "", "PLAN_TRIALs that follow, 1..max_plan_trials", "H"),
+        FieldSpec("constraints", "enum", (), ConstraintModel, 1, "", "constraint model of every trial", "B"),
+        FieldSpec("y_axis", "f32", (3,), None, 4, "", "axis y_O in the hand frame", "3f"),
+        FieldSpec("threshold_deg", "f32", (), None, 4, "deg", "success threshold", "f"),
+        FieldSpec("hold_s", "f32", (), None, 4, "s", "hold time below the threshold", "f"),
+        FieldSpec("timeout_s", "f32", (), None, 4, "s", "trial timeout", "f"),
+        FieldSpec("rest_s", "f32", (), None, 4, "s", "rest before each trial's ready pattern, 0..600", "f"),
+        FieldSpec("hand_k3", "f32", (3, 3), None, 4, "m", "fixed posture of 3-contact trials: thumb, index, middle, hand frame", "9f"),
+        FieldSpec("hand_k4", "f32", (4, 3), None, 4, "m", "fixed posture of 4-contact trials: thumb, index, middle, palm", "12f"),
+        FieldSpec("imu_to_hand_wxyz", "f32", (4,), None, 4, "", "how the IMU sits on the hand: rotation from IMU axes to hand axes, scalar first", "4f"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<8sB8BHB3fffff9f12f4f")
+
+    participant: str = ""
+    simulated: bool = False
+    config_hash: tuple[int, ...] = (0,) * 8
+    trial_count: int = 0
+    constraints: ConstraintModel = ConstraintModel.PAPER
+    y_axis: tuple[float, ...] = (0.0, 1.0, 0.0,)
+    threshold_deg: float = 3.0
+    hold_s: float = 0.5
+    timeout_s: float = 90.0
+    rest_s: float = 2.0
+    hand_k3: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
+    hand_k4: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 4
+    imu_to_hand_wxyz: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0,)
+
+
+@dataclass(frozen=True)
+class PlanTrial(Message):
+    """PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan."""
+
+    MSG_ID: ClassVar[int] = MsgId.PLAN_TRIAL
+    NAME: ClassVar[str] = "PLAN_TRIAL"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 37
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("position", "u16", (), None, 2, "", "0..trial_count-1, sent in order", "H"),
+        FieldSpec("trial_index", "u16", (), None, 2, "", "the study's trial_index (1..N), echoed in the record", "H"),
+        FieldSpec("session", "u8", (), None, 1, "", "0: familiarization; 1..S the session", "B"),
+        FieldSpec("session_trial", "u8", (), None, 1, "", "1..n within the session", "B"),
+        FieldSpec("k", "u8", (), None, 1, "", "3 or 4: which fixed posture", "B"),
+        FieldSpec("policy", "enum", (), Policy, 1, "", "F or F-perp", "B"),
+        FieldSpec("mode", "enum", (), Mode, 1, "", "C or V", "B"),
+        FieldSpec("familiarization", "bool", (), None, 1, "", "1: a familiarization trial (not analysed)", "B"),
+        FieldSpec("single_motor", "bool", (), None, 1, "", "the plan's single-motor flag of this wrench", "B"),
+        FieldSpec("wrench_class", "enum", (), WrenchClass, 1, "", "the plan's wrench class", "B"),
+        FieldSpec("wrench_number", "u8", (), None, 1, "", "the wrench's number (W01 = 1; F01 = 1 in familiarization)", "B"),
+        FieldSpec("wrench", "f32", (6,), None, 4, "", "fx, fy, fz [N], mx, my, mz [N m]", "6f"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<HHBBBBBBBBB6f")
+
+    position: int = 0
+    trial_index: int = 0
+    session: int = 0
+    session_trial: int = 0
+    k: int = 3
+    policy: Policy = Policy.F
+    mode: Mode = Mode.C
+    familiarization: bool = False
+    single_motor: bool = False
+    wrench_class: WrenchClass = WrenchClass.NONE
+    wrench_number: int = 0
+    wrench: tuple[float, ...] = (0.0,) * 6
+
+
+@dataclass(frozen=True)
+class PlanCommit(Message):
+    """PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed."""
+
+    MSG_ID: ClassVar[int] = MsgId.PLAN_COMMIT
+    NAME: ClassVar[str] = "PLAN_COMMIT"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 2
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("trial_count", "u16", (), None, 2, "", "must equal PLAN_BEGIN.trial_count", "H"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<H")
+
+    trial_count: int = 0
+
+
+@dataclass(frozen=True)
+class HostlessRun(Message):
+    """HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full. STOP ends the run."""
+
+    MSG_ID: ClassVar[int] = MsgId.HOSTLESS_RUN
+    NAME: ClassVar[str] = "HOSTLESS_RUN"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 0
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<")
+
+
+@dataclass(frozen=True)
+class LogInfoGet(Message):
+    """LOG_INFO_GET (0x0C, host -> device): Asks for a LOG_INFO."""
+
+    MSG_ID: ClassVar[int] = MsgId.LOG_INFO_GET
+    NAME: ClassVar[str] = "LOG_INFO_GET"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 0
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<")
+
+
+@dataclass(frozen=True)
+class LogRead(Message):
+    """LOG_READ (0x0D, host -> device): Asks for one stored record. Answer: LOG_RECORD, or ERROR no_record."""
+
+    MSG_ID: ClassVar[int] = MsgId.LOG_READ
+    NAME: ClassVar[str] = "LOG_READ"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 2
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("index", "u16", (), None, 2, "", "0..LOG_INFO.records-1, in the order stored", "H"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<H")
+
+    index: int = 0
+
+
+@dataclass(frozen=True)
+class LogErase(Message):
+    """LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state during a run."""
+
+    MSG_ID: ClassVar[int] = MsgId.LOG_ERASE
+    NAME: ClassVar[str] = "LOG_ERASE"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 4
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("key", "u32", (), None, 4, "", "log_erase_key", "I"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<I")
+
+    key: int = 0
+
+
+@dataclass(frozen=True)
+class SimImuSample(Message):
+    """SIM_IMU_SAMPLE (0x10, host -> device): SIMULATION ONLY: one IMU sample of the simulated world (the device's clock follows time_us). Answer during a host-less run: TELEMETRY (host_time_us = time_us); otherwise ACK. Real boards answer ERROR sim_only."""
+
+    MSG_ID: ClassVar[int] = MsgId.SIM_IMU_SAMPLE
+    NAME: ClassVar[str] = "SIM_IMU_SAMPLE"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 28
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("time_us", "u32", (), None, 4, "us", "time of the sample on the world's clock", "I"),
+        FieldSpec("accel_mps2", "f32", (3,), None, 4, "m/s^2", "specific force in the IMU's axes", "3f"),
+        FieldSpec("gyro_radps", "f32", (3,), None, 4, "rad/s", "angular rate in the IMU's axes", "3f"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<I3f3f")
+
+    time_us: int = 0
+    accel_mps2: tuple[float, ...] = (0.0,) * 3
+    gyro_radps: tuple[float, ...] = (0.0,) * 3
+
+
+@dataclass(frozen=True)
+class SimButton(Message):
+    """SIM_BUTTON (0x11, host -> device): SIMULATION ONLY: the button is pressed (1) or released (0). Answer: ACK; real boards answer ERROR sim_only."""
+
+    MSG_ID: ClassVar[int] = MsgId.SIM_BUTTON
+    NAME: ClassVar[str] = "SIM_BUTTON"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 1
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("pressed", "bool", (), None, 1, "", "1: pressed", "B"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<B")
+
+    pressed: bool = False
+
+
+@dataclass(frozen=True)
 class Ack(Message):
     """ACK (0x80, device -> host): A request was accepted."""
 
@@ -290,7 +573,7 @@ class HelloReply(Message):
     MSG_ID: ClassVar[int] = MsgId.HELLO_REPLY
     NAME: ClassVar[str] = "HELLO_REPLY"
     DIRECTION: ClassVar[str] = "device_to_host"
-    PAYLOAD_SIZE: ClassVar[int] = 28
+    PAYLOAD_SIZE: ClassVar[int] = 29
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
         FieldSpec("request_seq", "u16", (), None, 2, "", "seq of the HELLO", "H"),
         FieldSpec("protocol_version", "u8", (), None, 1, "", "the device's protocol version", "B"),
@@ -299,8 +582,9 @@ class HelloReply(Message):
         FieldSpec("scalar", "u8", (), None, 1, "bytes", "sizeof(graspguide::Real): 4 float, 8 double", "B"),
         FieldSpec("max_contacts", "u8", (), None, 1, "", "graspguide::kMaxContacts of the firmware", "B"),
         FieldSpec("build_id", "u32", (), None, 4, "", "identifies the firmware build (e.g. the first 8 hex digits of its commit)", "I"),
+        FieldSpec("capabilities", "u8", (), None, 1, "", "CAPABILITY_* bits: what this device can do", "B"),
     )
-    STRUCT: ClassVar[struct.Struct] = struct.Struct("<HB3B16sBBI")
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<HB3B16sBBIB")
 
     request_seq: int = 0
     protocol_version: int = 0
@@ -309,6 +593,7 @@ class HelloReply(Message):
     scalar: int = 0
     max_contacts: int = 0
     build_id: int = 0
+    capabilities: int = 0
 
 
 @dataclass(frozen=True)
@@ -391,6 +676,110 @@ class Status(Message):
     last_error: ErrorCode = ErrorCode.OK
 
 
+@dataclass(frozen=True)
+class LogInfo(Message):
+    """LOG_INFO (0x86, device -> host): Answer to LOG_INFO_GET: the stored plan and results log."""
+
+    MSG_ID: ClassVar[int] = MsgId.LOG_INFO
+    NAME: ClassVar[str] = "LOG_INFO"
+    DIRECTION: ClassVar[str] = "device_to_host"
+    PAYLOAD_SIZE: ClassVar[int] = 27
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("plan_stored", "bool", (), None, 1, "", "1: a checked plan is stored", "B"),
+        FieldSpec("participant", "ascii", (), None, 8, "", "the plan's participant id", "8s"),
+        FieldSpec("simulated", "bool", (), None, 1, "", "the plan's simulated flag", "B"),
+        FieldSpec("config_hash", "u8", (8,), None, 1, "", "the plan's config_hash prefix", "8B"),
+        FieldSpec("plan_trials", "u16", (), None, 2, "", "trials in the plan", "H"),
+        FieldSpec("records", "u16", (), None, 2, "", "complete records stored", "H"),
+        FieldSpec("capacity", "u16", (), None, 2, "", "records the log can hold", "H"),
+        FieldSpec("torn_records", "u16", (), None, 2, "", "records found torn (cut by a power loss) and skipped", "H"),
+        FieldSpec("running", "bool", (), None, 1, "", "1: a host-less run goes on", "B"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<B8sB8BHHHHB")
+
+    plan_stored: bool = False
+    participant: str = ""
+    simulated: bool = False
+    config_hash: tuple[int, ...] = (0,) * 8
+    plan_trials: int = 0
+    records: int = 0
+    capacity: int = 0
+    torn_records: int = 0
+    running: bool = False
+
+
+@dataclass(frozen=True)
+class LogRecord(Message):
+    """LOG_RECORD (0x87, device -> host): Answer to LOG_READ: one completed host-less trial, as stored."""
+
+    MSG_ID: ClassVar[int] = MsgId.LOG_RECORD
+    NAME: ClassVar[str] = "LOG_RECORD"
+    DIRECTION: ClassVar[str] = "device_to_host"
+    PAYLOAD_SIZE: ClassVar[int] = 56
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("index", "u16", (), None, 2, "", "LOG_READ.index", "H"),
+        FieldSpec("trial_index", "u16", (), None, 2, "", "the plan trial's trial_index", "H"),
+        FieldSpec("session", "u8", (), None, 1, "", "the plan trial's session", "B"),
+        FieldSpec("session_trial", "u8", (), None, 1, "", "the plan trial's session_trial", "B"),
+        FieldSpec("k", "u8", (), None, 1, "", "3 or 4", "B"),
+        FieldSpec("policy", "enum", (), Policy, 1, "", "F or F-perp", "B"),
+        FieldSpec("mode", "enum", (), Mode, 1, "", "C or V", "B"),
+        FieldSpec("familiarization", "bool", (), None, 1, "", "familiarization trial", "B"),
+        FieldSpec("single_motor", "bool", (), None, 1, "", "single-motor flag", "B"),
+        FieldSpec("wrench_class", "enum", (), WrenchClass, 1, "", "wrench class", "B"),
+        FieldSpec("wrench_number", "u8", (), None, 1, "", "wrench number", "B"),
+        FieldSpec("wrench", "f32", (6,), None, 4, "", "the wrench rendered", "6f"),
+        FieldSpec("success", "bool", (), None, 1, "", "1: success", "B"),
+        FieldSpec("completion_s", "f32", (), None, 4, "s", "time to success, or timeout_s", "f"),
+        FieldSpec("first_entry_s", "f32", (), None, 4, "s", "first time within the threshold; -1 if never", "f"),
+        FieldSpec("final_error_deg", "f32", (), None, 4, "deg", "estimated error at the end", "f"),
+        FieldSpec("samples", "u32", (), None, 4, "", "IMU samples the trial used", "I"),
+        FieldSpec("imu_faults", "u16", (), None, 2, "", "IMU faults (stale, stuck, out of range) during the trial", "H"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<HHBBBBBBBBB6fBfffIH")
+
+    index: int = 0
+    trial_index: int = 0
+    session: int = 0
+    session_trial: int = 0
+    k: int = 0
+    policy: Policy = Policy.F
+    mode: Mode = Mode.C
+    familiarization: bool = False
+    single_motor: bool = False
+    wrench_class: WrenchClass = WrenchClass.NONE
+    wrench_number: int = 0
+    wrench: tuple[float, ...] = (0.0,) * 6
+    success: bool = False
+    completion_s: float = 0.0
+    first_entry_s: float = 0.0
+    final_error_deg: float = 0.0
+    samples: int = 0
+    imu_faults: int = 0
+
+
+@dataclass(frozen=True)
+class HostlessEvent(Message):
+    """HOSTLESS_EVENT (0x88, device -> host): Sent unprompted during a host-less run, when anyone is listening: what the runner just did."""
+
+    MSG_ID: ClassVar[int] = MsgId.HOSTLESS_EVENT
+    NAME: ClassVar[str] = "HOSTLESS_EVENT"
+    DIRECTION: ClassVar[str] = "device_to_host"
+    PAYLOAD_SIZE: ClassVar[int] = 9
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("event", "enum", (), RunEvent, 1, "", "what happened", "B"),
+        FieldSpec("position", "u16", (), None, 2, "", "plan position of the trial concerned", "H"),
+        FieldSpec("trial_index", "u16", (), None, 2, "", "its trial_index", "H"),
+        FieldSpec("device_time_us", "u32", (), None, 4, "us", "the device's clock", "I"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BHHI")
+
+    event: RunEvent = RunEvent.REST
+    position: int = 0
+    trial_index: int = 0
+    device_time_us: int = 0
+
+
 MESSAGES: dict[int, type[Message]] = {
     MsgId.HELLO: Hello,
     MsgId.SET_SCENE: SetScene,
@@ -399,12 +788,24 @@ MESSAGES: dict[int, type[Message]] = {
     MsgId.STOP: Stop,
     MsgId.SET_MOTORS: SetMotors,
     MsgId.GET_STATUS: GetStatus,
+    MsgId.PLAN_BEGIN: PlanBegin,
+    MsgId.PLAN_TRIAL: PlanTrial,
+    MsgId.PLAN_COMMIT: PlanCommit,
+    MsgId.HOSTLESS_RUN: HostlessRun,
+    MsgId.LOG_INFO_GET: LogInfoGet,
+    MsgId.LOG_READ: LogRead,
+    MsgId.LOG_ERASE: LogErase,
+    MsgId.SIM_IMU_SAMPLE: SimImuSample,
+    MsgId.SIM_BUTTON: SimButton,
     MsgId.ACK: Ack,
     MsgId.ERROR: Error,
     MsgId.HELLO_REPLY: HelloReply,
     MsgId.TELEMETRY: Telemetry,
     MsgId.TRIAL_RESULT: TrialResult,
     MsgId.STATUS: Status,
+    MsgId.LOG_INFO: LogInfo,
+    MsgId.LOG_RECORD: LogRecord,
+    MsgId.HOSTLESS_EVENT: HostlessEvent,
 }
 
 
@@ -430,10 +831,14 @@ def unpack_payload(msg_id: int, payload: bytes) -> Message:
 __all__ = [
     "FieldSpec", "PROTOCOL_VERSION", "LINK_ERROR_BASE", "MAX_PAYLOAD_SIZE",
     "HOST_TO_DEVICE_IDS", "DEVICE_TO_HOST_IDS", "MsgId", "MESSAGES",
-    "message_class", "payload_size_of", "unpack_payload",
+    "message_class", "payload_size_of", "unpack_payload", "ERROR_MEANINGS",
     "PROTOCOL_VERSION", "LINK_ERROR_BASE", "POSE_WATCHDOG_MS", "MAX_CONTACTS",
-    "BOARD_NAME_SIZE", "TELEMETRY_FLAG_GRASP_RECOMPUTED", "TELEMETRY_FLAG_TRIAL_RUNNING",
-    "ErrorCode", "ConstraintModel", "Policy", "Mode", "DeviceState", "Hello", "SetScene",
-    "Pose", "StartTrial", "Stop", "SetMotors", "GetStatus", "Ack", "Error", "HelloReply",
-    "Telemetry", "TrialResult", "Status",
+    "BOARD_NAME_SIZE", "MAX_PLAN_TRIALS", "PARTICIPANT_ID_SIZE", "CONFIG_HASH_SIZE",
+    "LOG_ERASE_KEY", "TELEMETRY_FLAG_GRASP_RECOMPUTED", "TELEMETRY_FLAG_TRIAL_RUNNING",
+    "CAPABILITY_FULL_SOLVE", "CAPABILITY_HOSTLESS", "CAPABILITY_SIM_MESSAGES", "ErrorCode",
+    "ConstraintModel", "Policy", "Mode", "DeviceState", "WrenchClass", "RunEvent", "Hello",
+    "SetScene", "Pose", "StartTrial", "Stop", "SetMotors", "GetStatus", "PlanBegin",
+    "PlanTrial", "PlanCommit", "HostlessRun", "LogInfoGet", "LogRead", "LogErase",
+    "SimImuSample", "SimButton", "Ack", "Error", "HelloReply", "Telemetry", "TrialResult",
+    "Status", "LogInfo", "LogRecord", "HostlessEvent",
 ]

@@ -45,6 +45,7 @@ struct DeviceInfo {
   uint8_t firmware_version[3] = {0, 1, 0};
   const char* board = "unknown";
   uint32_t build_id = 0;
+  uint8_t capabilities = link::kCapabilityFullSolve;  // link::kCapability* bits
 };
 
 // Told the host time of every POSE before it is handled: the simulated device's virtual
@@ -124,6 +125,7 @@ class LinkDevice {
     r.scalar = sizeof(Real);
     r.max_contacts = kMaxContacts;
     r.build_id = info_.build_id;
+    r.capabilities = info_.capabilities;
     send(r);
   }
 

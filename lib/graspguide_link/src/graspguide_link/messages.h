@@ -14,7 +14,7 @@
 namespace graspguide_link {
 
 // Frames of any other are bad_version.
-inline constexpr uint8_t kProtocolVersion = 1;
+inline constexpr uint8_t kProtocolVersion = 2;
 // ErrorCode values below this are graspguide::Status values; from it, link codes.
 inline constexpr uint8_t kLinkErrorBase = 0x40;
 // Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -23,10 +23,24 @@ inline constexpr uint32_t kPoseWatchdogMs = 200;
 inline constexpr uint8_t kMaxContacts = 4;
 // Bytes of HELLO_REPLY.board, NUL-padded ASCII
 inline constexpr uint8_t kBoardNameSize = 16;
+// Trials a host-less study plan can hold (the paper's protocol: 100 per participant)
+inline constexpr uint16_t kMaxPlanTrials = 128;
+// Bytes of a plan's participant id, NUL-padded ASCII
+inline constexpr uint8_t kParticipantIdSize = 8;
+// Bytes of a plan's config_hash: the first 8 bytes of the protocol's sha256
+inline constexpr uint8_t kConfigHashSize = 8;
+// LOG_ERASE.key must hold this ('ERAS'): an erase is never an accident
+inline constexpr uint32_t kLogEraseKey = 1163018579;
 // the grasp part (steps 1-3) ran for this POSE
 inline constexpr uint8_t kTelemetryFlagGraspRecomputed = 0x01;
 // the trial still runs after this POSE (also when its solver_status is an error)
 inline constexpr uint8_t kTelemetryFlagTrialRunning = 0x02;
+// Algorithm 1 runs on the device (SET_SCENE, START_TRIAL, POSE)
+inline constexpr uint8_t kCapabilityFullSolve = 0x01;
+// stores a plan and a results log, runs trials from an IMU and a button (PLAN_*, LOG_*, HOSTLESS_RUN)
+inline constexpr uint8_t kCapabilityHostless = 0x02;
+// a simulated device: takes SIM_IMU_SAMPLE and SIM_BUTTON (real boards answer sim_only)
+inline constexpr uint8_t kCapabilitySimMessages = 0x04;
 
 // Every schema enum has an EnumInfo: its values in schema order.
 template <class E>
@@ -63,10 +77,17 @@ enum class ErrorCode : uint8_t {
   kNotAllowedInState = 0x47,  // request refused in the device's state; detail = STATUS.state
   kNoScene = 0x48,  // POSE or START_TRIAL before a valid SET_SCENE; detail = the request's id
   kBadEnumValue = 0x49,  // an enum, bool or ascii field holds an unlisted value; detail = the field's index
+  kNoPlan = 0x4A,  // HOSTLESS_RUN, PLAN_TRIAL or PLAN_COMMIT without a plan begun or stored; detail = the request's id
+  kBadPlan = 0x4B,  // a plan field is out of range or the plan is incomplete; detail = the field's index (PLAN_BEGIN, PLAN_TRIAL) or the trial's position (PLAN_COMMIT)
+  kLogFull = 0x4C,  // the results log has no room for another record; nothing stored was overwritten (download it, then LOG_ERASE)
+  kLogNotEmpty = 0x4D,  // PLAN_COMMIT of another plan while the log holds records; download them, then LOG_ERASE
+  kStorageFailed = 0x4E,  // the non-volatile storage refused a write or read (motors off)
+  kNoRecord = 0x4F,  // LOG_READ of an index at or past LOG_INFO.records; detail = 0
+  kSimOnly = 0x50,  // a simulation-only message (SIM_*) sent to a real board; detail = the id
 };
 template <>
 struct EnumInfo<ErrorCode> {
-  static constexpr size_t kCount = 29;
+  static constexpr size_t kCount = 36;
   static constexpr ErrorCode kValues[kCount] = {
       ErrorCode::kOk,
       ErrorCode::kNonFiniteInput,
@@ -97,6 +118,13 @@ struct EnumInfo<ErrorCode> {
       ErrorCode::kNotAllowedInState,
       ErrorCode::kNoScene,
       ErrorCode::kBadEnumValue,
+      ErrorCode::kNoPlan,
+      ErrorCode::kBadPlan,
+      ErrorCode::kLogFull,
+      ErrorCode::kLogNotEmpty,
+      ErrorCode::kStorageFailed,
+      ErrorCode::kNoRecord,
+      ErrorCode::kSimOnly,
   };
 };
 constexpr bool is_valid(ErrorCode v) {
@@ -130,6 +158,13 @@ constexpr bool is_valid(ErrorCode v) {
     case ErrorCode::kNotAllowedInState:
     case ErrorCode::kNoScene:
     case ErrorCode::kBadEnumValue:
+    case ErrorCode::kNoPlan:
+    case ErrorCode::kBadPlan:
+    case ErrorCode::kLogFull:
+    case ErrorCode::kLogNotEmpty:
+    case ErrorCode::kStorageFailed:
+    case ErrorCode::kNoRecord:
+    case ErrorCode::kSimOnly:
       return true;
   }
   return false;
@@ -166,6 +201,13 @@ constexpr const char* enum_name(ErrorCode v) {
     case ErrorCode::kNotAllowedInState: return "not_allowed_in_state";
     case ErrorCode::kNoScene: return "no_scene";
     case ErrorCode::kBadEnumValue: return "bad_enum_value";
+    case ErrorCode::kNoPlan: return "no_plan";
+    case ErrorCode::kBadPlan: return "bad_plan";
+    case ErrorCode::kLogFull: return "log_full";
+    case ErrorCode::kLogNotEmpty: return "log_not_empty";
+    case ErrorCode::kStorageFailed: return "storage_failed";
+    case ErrorCode::kNoRecord: return "no_record";
+    case ErrorCode::kSimOnly: return "sim_only";
   }
   return "unknown";
 }
@@ -302,6 +344,98 @@ constexpr const char* enum_name(DeviceState v) {
   return "unknown";
 }
 
+// A planned trial's wrench class (docs/study.md): single/multi in the reference condition
+enum class WrenchClass : uint8_t {
+  kNone = 0x00,  // not classified (familiarization, or another condition)
+  kSingle = 0x01,  // drives a single motor
+  kMulti = 0x02,  // drives several motors
+};
+template <>
+struct EnumInfo<WrenchClass> {
+  static constexpr size_t kCount = 3;
+  static constexpr WrenchClass kValues[kCount] = {
+      WrenchClass::kNone,
+      WrenchClass::kSingle,
+      WrenchClass::kMulti,
+  };
+};
+constexpr bool is_valid(WrenchClass v) {
+  switch (v) {
+    case WrenchClass::kNone:
+    case WrenchClass::kSingle:
+    case WrenchClass::kMulti:
+      return true;
+  }
+  return false;
+}
+// The schema's snake_case name; "unknown" for a value outside the enum.
+constexpr const char* enum_name(WrenchClass v) {
+  switch (v) {
+    case WrenchClass::kNone: return "none";
+    case WrenchClass::kSingle: return "single";
+    case WrenchClass::kMulti: return "multi";
+  }
+  return "unknown";
+}
+
+// HOSTLESS_EVENT.event: what the host-less runner just did
+enum class RunEvent : uint8_t {
+  kRest = 0x00,  // a rest began (motors off) before the next trial
+  kReady = 0x01,  // the ready pattern played; the button starts the trial
+  kTrialStarted = 0x02,  // the button started a trial
+  kSuccess = 0x03,  // the trial succeeded; its record is stored
+  kTimeout = 0x04,  // the trial timed out; its record is stored
+  kPlanDone = 0x05,  // every trial of the plan has a record; motors off
+  kLogFull = 0x06,  // no room for the next record: the run stopped before the trial
+  kStorageFailed = 0x07,  // a record could not be stored: the run stopped
+  kImuFault = 0x08,  // the IMU went stale, stuck or out of range: motors off (detail in STATUS.last_error)
+};
+template <>
+struct EnumInfo<RunEvent> {
+  static constexpr size_t kCount = 9;
+  static constexpr RunEvent kValues[kCount] = {
+      RunEvent::kRest,
+      RunEvent::kReady,
+      RunEvent::kTrialStarted,
+      RunEvent::kSuccess,
+      RunEvent::kTimeout,
+      RunEvent::kPlanDone,
+      RunEvent::kLogFull,
+      RunEvent::kStorageFailed,
+      RunEvent::kImuFault,
+  };
+};
+constexpr bool is_valid(RunEvent v) {
+  switch (v) {
+    case RunEvent::kRest:
+    case RunEvent::kReady:
+    case RunEvent::kTrialStarted:
+    case RunEvent::kSuccess:
+    case RunEvent::kTimeout:
+    case RunEvent::kPlanDone:
+    case RunEvent::kLogFull:
+    case RunEvent::kStorageFailed:
+    case RunEvent::kImuFault:
+      return true;
+  }
+  return false;
+}
+// The schema's snake_case name; "unknown" for a value outside the enum.
+constexpr const char* enum_name(RunEvent v) {
+  switch (v) {
+    case RunEvent::kRest: return "rest";
+    case RunEvent::kReady: return "ready";
+    case RunEvent::kTrialStarted: return "trial_started";
+    case RunEvent::kSuccess: return "success";
+    case RunEvent::kTimeout: return "timeout";
+    case RunEvent::kPlanDone: return "plan_done";
+    case RunEvent::kLogFull: return "log_full";
+    case RunEvent::kStorageFailed: return "storage_failed";
+    case RunEvent::kImuFault: return "imu_fault";
+  }
+  return "unknown";
+}
+
 enum class MsgId : uint8_t {
   kHello = 0x01,
   kSetScene = 0x02,
@@ -310,15 +444,27 @@ enum class MsgId : uint8_t {
   kStop = 0x05,
   kSetMotors = 0x06,
   kGetStatus = 0x07,
+  kPlanBegin = 0x08,
+  kPlanTrial = 0x09,
+  kPlanCommit = 0x0A,
+  kHostlessRun = 0x0B,
+  kLogInfoGet = 0x0C,
+  kLogRead = 0x0D,
+  kLogErase = 0x0E,
+  kSimImuSample = 0x10,
+  kSimButton = 0x11,
   kAck = 0x80,
   kError = 0x81,
   kHelloReply = 0x82,
   kTelemetry = 0x83,
   kTrialResult = 0x84,
   kStatus = 0x85,
+  kLogInfo = 0x86,
+  kLogRecord = 0x87,
+  kHostlessEvent = 0x88,
 };
-inline constexpr size_t kMessageCount = 13;
-inline constexpr size_t kMaxPayloadSize = 76;
+inline constexpr size_t kMessageCount = 25;
+inline constexpr size_t kMaxPayloadSize = 148;
 
 constexpr bool is_host_to_device_id(uint8_t id) {
   return id >= 0x01 && id <= 0x3F;
@@ -337,12 +483,24 @@ constexpr const char* message_name(uint8_t msg_id) {
     case 0x05: return "STOP";
     case 0x06: return "SET_MOTORS";
     case 0x07: return "GET_STATUS";
+    case 0x08: return "PLAN_BEGIN";
+    case 0x09: return "PLAN_TRIAL";
+    case 0x0A: return "PLAN_COMMIT";
+    case 0x0B: return "HOSTLESS_RUN";
+    case 0x0C: return "LOG_INFO_GET";
+    case 0x0D: return "LOG_READ";
+    case 0x0E: return "LOG_ERASE";
+    case 0x10: return "SIM_IMU_SAMPLE";
+    case 0x11: return "SIM_BUTTON";
     case 0x80: return "ACK";
     case 0x81: return "ERROR";
     case 0x82: return "HELLO_REPLY";
     case 0x83: return "TELEMETRY";
     case 0x84: return "TRIAL_RESULT";
     case 0x85: return "STATUS";
+    case 0x86: return "LOG_INFO";
+    case 0x87: return "LOG_RECORD";
+    case 0x88: return "HOSTLESS_EVENT";
   }
   return "unknown";
 }
@@ -357,12 +515,24 @@ constexpr bool payload_size_of(uint8_t msg_id, size_t* size) {
     case 0x05: *size = 0; return true;
     case 0x06: *size = 4; return true;
     case 0x07: *size = 0; return true;
+    case 0x08: *size = 148; return true;
+    case 0x09: *size = 37; return true;
+    case 0x0A: *size = 2; return true;
+    case 0x0B: *size = 0; return true;
+    case 0x0C: *size = 0; return true;
+    case 0x0D: *size = 2; return true;
+    case 0x0E: *size = 4; return true;
+    case 0x10: *size = 28; return true;
+    case 0x11: *size = 1; return true;
     case 0x80: *size = 2; return true;
     case 0x81: *size = 4; return true;
-    case 0x82: *size = 28; return true;
+    case 0x82: *size = 29; return true;
     case 0x83: *size = 24; return true;
     case 0x84: *size = 15; return true;
     case 0x85: *size = 14; return true;
+    case 0x86: *size = 27; return true;
+    case 0x87: *size = 56; return true;
+    case 0x88: *size = 9; return true;
   }
   return false;
 }
@@ -372,7 +542,7 @@ struct Hello {
   static constexpr MsgId kId = MsgId::kHello;
   static constexpr const char* kName = "HELLO";
   static constexpr size_t kPayloadSize = 1;
-  uint8_t protocol_version = {1u};  // u8: the host's protocol version
+  uint8_t protocol_version = {2u};  // u8: the host's protocol version
 };
 
 // Calls fn("name", member) for every field, in wire order: pack, unpack and ==
@@ -538,6 +708,254 @@ void for_each_field(GetStatus& m, Fn&& fn) {
   (void)fn;
 }
 
+// PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while a trial or a host-less run goes on.
+struct PlanBegin {
+  static constexpr MsgId kId = MsgId::kPlanBegin;
+  static constexpr const char* kName = "PLAN_BEGIN";
+  static constexpr size_t kPayloadSize = 148;
+  char participant[8] = {};  // ascii[8]: participant id (U1, ...), NUL-padded
+  bool simulated = {};  // bool: 1: the participant is simulated (the record says so)
+  uint8_t config_hash[8] = {};  // u8[8]: first 8 bytes of the protocol's sha256 (study.json config_hash)
+  uint16_t trial_count = {};  // u16: PLAN_TRIALs that follow, 1..max_plan_trials
+  ConstraintModel constraints = {};  // ConstraintModel: constraint model of every trial
+  float y_axis[3] = {0.0f, 1.0f, 0.0f};  // f32[3]: axis y_O in the hand frame
+  float threshold_deg = {3.0f};  // f32 [deg]: success threshold
+  float hold_s = {0.5f};  // f32 [s]: hold time below the threshold
+  float timeout_s = {90.0f};  // f32 [s]: trial timeout
+  float rest_s = {2.0f};  // f32 [s]: rest before each trial's ready pattern, 0..600
+  float hand_k3[3][3] = {};  // f32[3][3] [m]: fixed posture of 3-contact trials: thumb, index, middle, hand frame
+  float hand_k4[4][3] = {};  // f32[4][3] [m]: fixed posture of 4-contact trials: thumb, index, middle, palm
+  float imu_to_hand_wxyz[4] = {1.0f, 0.0f, 0.0f, 0.0f};  // f32[4]: how the IMU sits on the hand: rotation from IMU axes to hand axes, scalar first
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const PlanBegin& m, Fn&& fn) {
+  fn("participant", m.participant);
+  fn("simulated", m.simulated);
+  fn("config_hash", m.config_hash);
+  fn("trial_count", m.trial_count);
+  fn("constraints", m.constraints);
+  fn("y_axis", m.y_axis);
+  fn("threshold_deg", m.threshold_deg);
+  fn("hold_s", m.hold_s);
+  fn("timeout_s", m.timeout_s);
+  fn("rest_s", m.rest_s);
+  fn("hand_k3", m.hand_k3);
+  fn("hand_k4", m.hand_k4);
+  fn("imu_to_hand_wxyz", m.imu_to_hand_wxyz);
+}
+template <class Fn>
+void for_each_field(PlanBegin& m, Fn&& fn) {
+  fn("participant", m.participant);
+  fn("simulated", m.simulated);
+  fn("config_hash", m.config_hash);
+  fn("trial_count", m.trial_count);
+  fn("constraints", m.constraints);
+  fn("y_axis", m.y_axis);
+  fn("threshold_deg", m.threshold_deg);
+  fn("hold_s", m.hold_s);
+  fn("timeout_s", m.timeout_s);
+  fn("rest_s", m.rest_s);
+  fn("hand_k3", m.hand_k3);
+  fn("hand_k4", m.hand_k4);
+  fn("imu_to_hand_wxyz", m.imu_to_hand_wxyz);
+}
+
+// PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan.
+struct PlanTrial {
+  static constexpr MsgId kId = MsgId::kPlanTrial;
+  static constexpr const char* kName = "PLAN_TRIAL";
+  static constexpr size_t kPayloadSize = 37;
+  uint16_t position = {};  // u16: 0..trial_count-1, sent in order
+  uint16_t trial_index = {};  // u16: the study's trial_index (1..N), echoed in the record
+  uint8_t session = {};  // u8: 0: familiarization; 1..S the session
+  uint8_t session_trial = {};  // u8: 1..n within the session
+  uint8_t k = {3u};  // u8: 3 or 4: which fixed posture
+  Policy policy = {};  // Policy: F or F-perp
+  Mode mode = {};  // Mode: C or V
+  bool familiarization = {};  // bool: 1: a familiarization trial (not analysed)
+  bool single_motor = {};  // bool: the plan's single-motor flag of this wrench
+  WrenchClass wrench_class = {};  // WrenchClass: the plan's wrench class
+  uint8_t wrench_number = {};  // u8: the wrench's number (W01 = 1; F01 = 1 in familiarization)
+  float wrench[6] = {};  // f32[6]: fx, fy, fz [N], mx, my, mz [N m]
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const PlanTrial& m, Fn&& fn) {
+  fn("position", m.position);
+  fn("trial_index", m.trial_index);
+  fn("session", m.session);
+  fn("session_trial", m.session_trial);
+  fn("k", m.k);
+  fn("policy", m.policy);
+  fn("mode", m.mode);
+  fn("familiarization", m.familiarization);
+  fn("single_motor", m.single_motor);
+  fn("wrench_class", m.wrench_class);
+  fn("wrench_number", m.wrench_number);
+  fn("wrench", m.wrench);
+}
+template <class Fn>
+void for_each_field(PlanTrial& m, Fn&& fn) {
+  fn("position", m.position);
+  fn("trial_index", m.trial_index);
+  fn("session", m.session);
+  fn("session_trial", m.session_trial);
+  fn("k", m.k);
+  fn("policy", m.policy);
+  fn("mode", m.mode);
+  fn("familiarization", m.familiarization);
+  fn("single_motor", m.single_motor);
+  fn("wrench_class", m.wrench_class);
+  fn("wrench_number", m.wrench_number);
+  fn("wrench", m.wrench);
+}
+
+// PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed.
+struct PlanCommit {
+  static constexpr MsgId kId = MsgId::kPlanCommit;
+  static constexpr const char* kName = "PLAN_COMMIT";
+  static constexpr size_t kPayloadSize = 2;
+  uint16_t trial_count = {};  // u16: must equal PLAN_BEGIN.trial_count
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const PlanCommit& m, Fn&& fn) {
+  fn("trial_count", m.trial_count);
+}
+template <class Fn>
+void for_each_field(PlanCommit& m, Fn&& fn) {
+  fn("trial_count", m.trial_count);
+}
+
+// HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full. STOP ends the run.
+struct HostlessRun {
+  static constexpr MsgId kId = MsgId::kHostlessRun;
+  static constexpr const char* kName = "HOSTLESS_RUN";
+  static constexpr size_t kPayloadSize = 0;
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const HostlessRun& m, Fn&& fn) {
+  (void)m;
+  (void)fn;
+}
+template <class Fn>
+void for_each_field(HostlessRun& m, Fn&& fn) {
+  (void)m;
+  (void)fn;
+}
+
+// LOG_INFO_GET (0x0C, host -> device): Asks for a LOG_INFO.
+struct LogInfoGet {
+  static constexpr MsgId kId = MsgId::kLogInfoGet;
+  static constexpr const char* kName = "LOG_INFO_GET";
+  static constexpr size_t kPayloadSize = 0;
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const LogInfoGet& m, Fn&& fn) {
+  (void)m;
+  (void)fn;
+}
+template <class Fn>
+void for_each_field(LogInfoGet& m, Fn&& fn) {
+  (void)m;
+  (void)fn;
+}
+
+// LOG_READ (0x0D, host -> device): Asks for one stored record. Answer: LOG_RECORD, or ERROR no_record.
+struct LogRead {
+  static constexpr MsgId kId = MsgId::kLogRead;
+  static constexpr const char* kName = "LOG_READ";
+  static constexpr size_t kPayloadSize = 2;
+  uint16_t index = {};  // u16: 0..LOG_INFO.records-1, in the order stored
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const LogRead& m, Fn&& fn) {
+  fn("index", m.index);
+}
+template <class Fn>
+void for_each_field(LogRead& m, Fn&& fn) {
+  fn("index", m.index);
+}
+
+// LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state during a run.
+struct LogErase {
+  static constexpr MsgId kId = MsgId::kLogErase;
+  static constexpr const char* kName = "LOG_ERASE";
+  static constexpr size_t kPayloadSize = 4;
+  uint32_t key = {};  // u32: log_erase_key
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const LogErase& m, Fn&& fn) {
+  fn("key", m.key);
+}
+template <class Fn>
+void for_each_field(LogErase& m, Fn&& fn) {
+  fn("key", m.key);
+}
+
+// SIM_IMU_SAMPLE (0x10, host -> device): SIMULATION ONLY: one IMU sample of the simulated world (the device's clock follows time_us). Answer during a host-less run: TELEMETRY (host_time_us = time_us); otherwise ACK. Real boards answer ERROR sim_only.
+struct SimImuSample {
+  static constexpr MsgId kId = MsgId::kSimImuSample;
+  static constexpr const char* kName = "SIM_IMU_SAMPLE";
+  static constexpr size_t kPayloadSize = 28;
+  uint32_t time_us = {};  // u32 [us]: time of the sample on the world's clock
+  float accel_mps2[3] = {};  // f32[3] [m/s^2]: specific force in the IMU's axes
+  float gyro_radps[3] = {};  // f32[3] [rad/s]: angular rate in the IMU's axes
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const SimImuSample& m, Fn&& fn) {
+  fn("time_us", m.time_us);
+  fn("accel_mps2", m.accel_mps2);
+  fn("gyro_radps", m.gyro_radps);
+}
+template <class Fn>
+void for_each_field(SimImuSample& m, Fn&& fn) {
+  fn("time_us", m.time_us);
+  fn("accel_mps2", m.accel_mps2);
+  fn("gyro_radps", m.gyro_radps);
+}
+
+// SIM_BUTTON (0x11, host -> device): SIMULATION ONLY: the button is pressed (1) or released (0). Answer: ACK; real boards answer ERROR sim_only.
+struct SimButton {
+  static constexpr MsgId kId = MsgId::kSimButton;
+  static constexpr const char* kName = "SIM_BUTTON";
+  static constexpr size_t kPayloadSize = 1;
+  bool pressed = {};  // bool: 1: pressed
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const SimButton& m, Fn&& fn) {
+  fn("pressed", m.pressed);
+}
+template <class Fn>
+void for_each_field(SimButton& m, Fn&& fn) {
+  fn("pressed", m.pressed);
+}
+
 // ACK (0x80, device -> host): A request was accepted.
 struct Ack {
   static constexpr MsgId kId = MsgId::kAck;
@@ -586,7 +1004,7 @@ void for_each_field(Error& m, Fn&& fn) {
 struct HelloReply {
   static constexpr MsgId kId = MsgId::kHelloReply;
   static constexpr const char* kName = "HELLO_REPLY";
-  static constexpr size_t kPayloadSize = 28;
+  static constexpr size_t kPayloadSize = 29;
   uint16_t request_seq = {};  // u16: seq of the HELLO
   uint8_t protocol_version = {};  // u8: the device's protocol version
   uint8_t firmware_version[3] = {};  // u8[3]: major, minor, patch
@@ -594,6 +1012,7 @@ struct HelloReply {
   uint8_t scalar = {};  // u8 [bytes]: sizeof(graspguide::Real): 4 float, 8 double
   uint8_t max_contacts = {};  // u8: graspguide::kMaxContacts of the firmware
   uint32_t build_id = {};  // u32: identifies the firmware build (e.g. the first 8 hex digits of its commit)
+  uint8_t capabilities = {};  // u8: CAPABILITY_* bits: what this device can do
 };
 
 // Calls fn("name", member) for every field, in wire order: pack, unpack and ==
@@ -607,6 +1026,7 @@ void for_each_field(const HelloReply& m, Fn&& fn) {
   fn("scalar", m.scalar);
   fn("max_contacts", m.max_contacts);
   fn("build_id", m.build_id);
+  fn("capabilities", m.capabilities);
 }
 template <class Fn>
 void for_each_field(HelloReply& m, Fn&& fn) {
@@ -617,6 +1037,7 @@ void for_each_field(HelloReply& m, Fn&& fn) {
   fn("scalar", m.scalar);
   fn("max_contacts", m.max_contacts);
   fn("build_id", m.build_id);
+  fn("capabilities", m.capabilities);
 }
 
 // TELEMETRY (0x83, device -> host): Result of one POSE, sent after it was handled.
@@ -724,9 +1145,150 @@ void for_each_field(Status& m, Fn&& fn) {
   fn("last_error", m.last_error);
 }
 
+// LOG_INFO (0x86, device -> host): Answer to LOG_INFO_GET: the stored plan and results log.
+struct LogInfo {
+  static constexpr MsgId kId = MsgId::kLogInfo;
+  static constexpr const char* kName = "LOG_INFO";
+  static constexpr size_t kPayloadSize = 27;
+  bool plan_stored = {};  // bool: 1: a checked plan is stored
+  char participant[8] = {};  // ascii[8]: the plan's participant id
+  bool simulated = {};  // bool: the plan's simulated flag
+  uint8_t config_hash[8] = {};  // u8[8]: the plan's config_hash prefix
+  uint16_t plan_trials = {};  // u16: trials in the plan
+  uint16_t records = {};  // u16: complete records stored
+  uint16_t capacity = {};  // u16: records the log can hold
+  uint16_t torn_records = {};  // u16: records found torn (cut by a power loss) and skipped
+  bool running = {};  // bool: 1: a host-less run goes on
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const LogInfo& m, Fn&& fn) {
+  fn("plan_stored", m.plan_stored);
+  fn("participant", m.participant);
+  fn("simulated", m.simulated);
+  fn("config_hash", m.config_hash);
+  fn("plan_trials", m.plan_trials);
+  fn("records", m.records);
+  fn("capacity", m.capacity);
+  fn("torn_records", m.torn_records);
+  fn("running", m.running);
+}
+template <class Fn>
+void for_each_field(LogInfo& m, Fn&& fn) {
+  fn("plan_stored", m.plan_stored);
+  fn("participant", m.participant);
+  fn("simulated", m.simulated);
+  fn("config_hash", m.config_hash);
+  fn("plan_trials", m.plan_trials);
+  fn("records", m.records);
+  fn("capacity", m.capacity);
+  fn("torn_records", m.torn_records);
+  fn("running", m.running);
+}
+
+// LOG_RECORD (0x87, device -> host): Answer to LOG_READ: one completed host-less trial, as stored.
+struct LogRecord {
+  static constexpr MsgId kId = MsgId::kLogRecord;
+  static constexpr const char* kName = "LOG_RECORD";
+  static constexpr size_t kPayloadSize = 56;
+  uint16_t index = {};  // u16: LOG_READ.index
+  uint16_t trial_index = {};  // u16: the plan trial's trial_index
+  uint8_t session = {};  // u8: the plan trial's session
+  uint8_t session_trial = {};  // u8: the plan trial's session_trial
+  uint8_t k = {};  // u8: 3 or 4
+  Policy policy = {};  // Policy: F or F-perp
+  Mode mode = {};  // Mode: C or V
+  bool familiarization = {};  // bool: familiarization trial
+  bool single_motor = {};  // bool: single-motor flag
+  WrenchClass wrench_class = {};  // WrenchClass: wrench class
+  uint8_t wrench_number = {};  // u8: wrench number
+  float wrench[6] = {};  // f32[6]: the wrench rendered
+  bool success = {};  // bool: 1: success
+  float completion_s = {};  // f32 [s]: time to success, or timeout_s
+  float first_entry_s = {};  // f32 [s]: first time within the threshold; -1 if never
+  float final_error_deg = {};  // f32 [deg]: estimated error at the end
+  uint32_t samples = {};  // u32: IMU samples the trial used
+  uint16_t imu_faults = {};  // u16: IMU faults (stale, stuck, out of range) during the trial
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const LogRecord& m, Fn&& fn) {
+  fn("index", m.index);
+  fn("trial_index", m.trial_index);
+  fn("session", m.session);
+  fn("session_trial", m.session_trial);
+  fn("k", m.k);
+  fn("policy", m.policy);
+  fn("mode", m.mode);
+  fn("familiarization", m.familiarization);
+  fn("single_motor", m.single_motor);
+  fn("wrench_class", m.wrench_class);
+  fn("wrench_number", m.wrench_number);
+  fn("wrench", m.wrench);
+  fn("success", m.success);
+  fn("completion_s", m.completion_s);
+  fn("first_entry_s", m.first_entry_s);
+  fn("final_error_deg", m.final_error_deg);
+  fn("samples", m.samples);
+  fn("imu_faults", m.imu_faults);
+}
+template <class Fn>
+void for_each_field(LogRecord& m, Fn&& fn) {
+  fn("index", m.index);
+  fn("trial_index", m.trial_index);
+  fn("session", m.session);
+  fn("session_trial", m.session_trial);
+  fn("k", m.k);
+  fn("policy", m.policy);
+  fn("mode", m.mode);
+  fn("familiarization", m.familiarization);
+  fn("single_motor", m.single_motor);
+  fn("wrench_class", m.wrench_class);
+  fn("wrench_number", m.wrench_number);
+  fn("wrench", m.wrench);
+  fn("success", m.success);
+  fn("completion_s", m.completion_s);
+  fn("first_entry_s", m.first_entry_s);
+  fn("final_error_deg", m.final_error_deg);
+  fn("samples", m.samples);
+  fn("imu_faults", m.imu_faults);
+}
+
+// HOSTLESS_EVENT (0x88, device -> host): Sent unprompted during a host-less run, when anyone is listening: what the runner just did.
+struct HostlessEvent {
+  static constexpr MsgId kId = MsgId::kHostlessEvent;
+  static constexpr const char* kName = "HOSTLESS_EVENT";
+  static constexpr size_t kPayloadSize = 9;
+  RunEvent event = {};  // RunEvent: what happened
+  uint16_t position = {};  // u16: plan position of the trial concerned
+  uint16_t trial_index = {};  // u16: its trial_index
+  uint32_t device_time_us = {};  // u32 [us]: the device's clock
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const HostlessEvent& m, Fn&& fn) {
+  fn("event", m.event);
+  fn("position", m.position);
+  fn("trial_index", m.trial_index);
+  fn("device_time_us", m.device_time_us);
+}
+template <class Fn>
+void for_each_field(HostlessEvent& m, Fn&& fn) {
+  fn("event", m.event);
+  fn("position", m.position);
+  fn("trial_index", m.trial_index);
+  fn("device_time_us", m.device_time_us);
+}
+
 template <class... Messages>
 struct MessageList {};
-using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, Ack, Error, HelloReply, Telemetry, TrialResult, Status>;
+using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, PlanBegin, PlanTrial, PlanCommit, HostlessRun, LogInfoGet, LogRead, LogErase, SimImuSample, SimButton, Ack, Error, HelloReply, Telemetry, TrialResult, Status, LogInfo, LogRecord, HostlessEvent>;
 
 // Unpacks a payload into the struct its id names and calls visitor(message).
 // kUnknownId, or unpack()'s status, without calling the visitor when it fails.
@@ -783,6 +1345,69 @@ LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Vi
       visitor(m);
       return LinkStatus::kOk;
     }
+    case 0x08: {
+      PlanBegin m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x09: {
+      PlanTrial m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x0A: {
+      PlanCommit m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x0B: {
+      HostlessRun m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x0C: {
+      LogInfoGet m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x0D: {
+      LogRead m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x0E: {
+      LogErase m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x10: {
+      SimImuSample m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x11: {
+      SimButton m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
     case 0x80: {
       Ack m;
       const LinkStatus status = unpack(payload, size, &m, bad_field);
@@ -820,6 +1445,27 @@ LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Vi
     }
     case 0x85: {
       Status m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x86: {
+      LogInfo m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x87: {
+      LogRecord m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x88: {
+      HostlessEvent m;
       const LinkStatus status = unpack(payload, size, &m, bad_field);
       if (status != LinkStatus::kOk) return status;
       visitor(m);
