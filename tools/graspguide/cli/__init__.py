@@ -20,7 +20,18 @@ from graspguide.cli.common import ArgumentParser
 from graspguide.exit_codes import EXIT_INTERRUPTED, EXIT_USAGE
 
 #: Every subcommand, once, in the order `graspguide --help` lists them.
-COMMANDS = ("solve", "ports", "info", "stream", "bench", "trial", "analyze", "demo", "sweep")
+COMMANDS = (
+    "solve",
+    "ports",
+    "info",
+    "stream",
+    "bench",
+    "trial",
+    "analyze",
+    "demo",
+    "sweep",
+    "device",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

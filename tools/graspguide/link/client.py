@@ -58,6 +58,8 @@ from graspguide.link.codec import (
 from graspguide.link.errors import BadCobsError, BadEnumValueError, ProtocolError
 from graspguide.link.messages import (
     ERROR_MEANINGS,
+    LINK_ERROR_BASE,
+    LOG_ERASE_KEY,
     MAX_CONTACTS,
     MESSAGES,
     PROTOCOL_VERSION,
@@ -70,12 +72,24 @@ from graspguide.link.messages import (
     GetStatus,
     Hello,
     HelloReply,
+    HostlessEvent,
+    HostlessRun,
+    LogErase,
+    LogInfo,
+    LogInfoGet,
+    LogRead,
+    LogRecord,
     Mode,
     MsgId,
+    PlanBegin,
+    PlanCommit,
+    PlanTrial,
     Policy,
     Pose,
     SetMotors,
     SetScene,
+    SimButton,
+    SimImuSample,
     StartTrial,
     Status,
     Stop,
@@ -94,6 +108,9 @@ from graspguide.link.transport import (
 DEFAULT_TIMEOUT = 1.0  # s, per request: a board answers in a few ms at 115200 baud
 READ_CHUNK = 4096  # bytes per transport read
 POLL_INTERVAL = 0.05  # s, longest single blocking read (keeps deadlines responsive)
+# PLAN_COMMIT solves every trial of the plan once before it answers (100 solves, plus a
+# write to non-volatile storage): a board needs longer than for one request.
+PLAN_COMMIT_TIMEOUT_S = 10.0
 
 # Fast paths of the per-pose traffic (a study streams ~10^6 POSE/TELEMETRY pairs): a POSE
 # without contacts packed by the generated Pose.STRUCT with its all-zero tail's COBS blocks
@@ -141,6 +158,7 @@ _new = object.__new__
 _TOTALS = ("bytes_received", "frames_received", "host_bad_frames", "device_frames_lost")
 _QUEUES = {
     "trial_results_queued": "trial_results",
+    "hostless_events_queued": "hostless_events",
     "unmatched": "unmatched",
     "telemetry_backlog": "telemetry_backlog",
 }
@@ -288,6 +306,7 @@ class DeviceError(LinkError):
         code: int,
         detail: int = 0,
         source: str = "ERROR",
+        context: str = "",
     ):
         try:
             self.code: ErrorCode | int = ErrorCode(code)
@@ -298,6 +317,7 @@ class DeviceError(LinkError):
         self.request = request
         self.request_seq = request_seq
         self.source = source
+        self.context = context
         self.meaning = ERROR_MEANINGS.get(self.code_name, "unknown error code")
         super().__init__(self._describe())
 
@@ -330,24 +350,61 @@ class DeviceError(LinkError):
             text = _trial_field_text(d)
             if text:
                 return text
+        if name == "bad_plan":
+            return _plan_detail_text(self.request, d)
+        if name == "no_plan":
+            return (
+                f"; {_msg_name(d)} needs a plan: PLAN_BEGIN before PLAN_TRIAL and "
+                "PLAN_COMMIT, a stored plan before HOSTLESS_RUN (upload one with "
+                "`graspguide trial --hostless`)"
+            )
+        if name == "sim_only":
+            return f"; {_msg_name(d)} is for the simulated device only"
+        if self.request == PlanCommit.NAME and int(self.code) < LINK_ERROR_BASE:
+            # A core status of PLAN_COMMIT: the trial at this position cannot be solved.
+            return f"; the plan's trial at position {d} cannot be solved"
         return f"; detail {d}" if d else ""
 
     def _describe(self) -> str:
         seq = "" if self.request_seq is None else f" (seq {self.request_seq})"
         verb = "refused" if self.source == "ERROR" else "could not solve"
         meaning = self.meaning.split("; detail = ")[0]  # the detail is spelled out below
+        context = f" ({self.context})" if self.context else ""
         return (
-            f"device {verb} {self.request}{seq}: {self.code_name} -- {meaning}{self._detail_text()}"
+            f"device {verb} {self.request}{seq}{context}: {self.code_name} -- "
+            f"{meaning}{self._detail_text()}"
         )
 
 
-def _trial_field_text(index: int) -> str:
-    """'; field 'hold_s' (index 7) must be in [0, 600] s ...' for the SET_SCENE field a
-    bad_config's detail names, with the core's range (TRIAL_LIMITS); '' when the index is
-    not a trial field (a device that does not name it sends 0, the index of k)."""
-    if not 0 <= index < len(SetScene.FIELDS):
+def _plan_detail_text(request: str, index: int) -> str:
+    """What a bad_plan's detail names: the field of PLAN_BEGIN / PLAN_TRIAL (with the
+    core's range for a trial setting, else the schema's description), the first missing
+    trial of PLAN_COMMIT, the wrong key of LOG_ERASE."""
+    if request == PlanCommit.NAME:
+        return (
+            f"; the plan's trial at position {index} is missing or the trial count differs "
+            "from PLAN_BEGIN's: upload the whole plan again"
+        )
+    if request == LogErase.NAME:
+        return f"; LOG_ERASE.key must be 0x{LOG_ERASE_KEY:08X}"
+    cls: Any = {PlanBegin.NAME: PlanBegin, PlanTrial.NAME: PlanTrial}.get(request)
+    if cls is None or not 0 <= index < len(cls.FIELDS):
+        return f"; detail {index}"
+    text = _trial_field_text(index, cls)
+    if text:
+        return text
+    f = cls.FIELDS[index]
+    return f"; field {f.name!r} (index {index}) is out of range: {f.doc}"
+
+
+def _trial_field_text(index: int, cls: Any = SetScene) -> str:
+    """'; field 'hold_s' (index 7) must be in [0, 600] s ...' for the SET_SCENE (or
+    ``cls``) field a bad_config's detail names, with the core's range (TRIAL_LIMITS); ''
+    when the index is not a trial field (a device that does not name it sends 0, the
+    index of k)."""
+    if not 0 <= index < len(cls.FIELDS):
         return ""
-    f = SetScene.FIELDS[index]
+    f = cls.FIELDS[index]
     try:
         from graspguide.core._core import TRIAL_LIMITS  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - host tools without the built extension
@@ -471,6 +528,8 @@ class DeviceClient:
         self.trial_results: deque[TrialResult] = deque()
         self.telemetry_backlog: deque[Telemetry] = deque()
         self.unmatched: deque[Any] = deque()
+        # HOSTLESS_EVENTs of a host-less run (unprompted), oldest first.
+        self.hostless_events: list[HostlessEvent] = []
         self.device_info: HelloReply | None = None
         self.device_version: int | None = None  # set when frames of another version came
         self.bytes_received = 0
@@ -617,6 +676,8 @@ class DeviceClient:
         msg = item.message
         if isinstance(msg, TrialResult):
             self.trial_results.append(msg)
+        elif isinstance(msg, HostlessEvent):
+            self.hostless_events.append(msg)
         elif isinstance(msg, Telemetry):
             self.telemetry_backlog.append(msg)
         else:
@@ -939,6 +1000,119 @@ class DeviceClient:
         item = self._wait(lambda it: isinstance(it.message, TrialResult), "a TRIAL_RESULT", timeout)
         return item.message
 
+    # ---- host-less: the plan, the results log, the run (docs/protocol.md)
+    def require_capability(self, bit: int, what: str) -> None:
+        """LinkError unless the device's HELLO_REPLY (sent first if not yet) lists the
+        CAPABILITY_* ``bit``; ``what`` names the feature in the message."""
+        info = self.device_info or self.hello()
+        if not info.capabilities & bit:
+            where = getattr(self.transport, "name", "the device")
+            raise LinkError(
+                f"{where} ({info.board}, firmware "
+                f"{'.'.join(map(str, info.firmware_version))}) cannot do {what} "
+                f"(HELLO_REPLY.capabilities 0x{info.capabilities:02x}): flash firmware that "
+                "supports it"
+            )
+
+    def upload_plan(
+        self, begin: PlanBegin, trials: Sequence[PlanTrial], timeout: float | None = None
+    ) -> None:
+        """PLAN_BEGIN, every PLAN_TRIAL (``position`` 0..n-1 in order), then PLAN_COMMIT
+        (the device solves each trial once and stores the plan). Each is ACKed; an ERROR
+        raises DeviceError naming the refused field or trial. ``begin.trial_count`` must
+        be ``len(trials)``."""
+        trials = list(trials)
+        if begin.trial_count != len(trials):
+            raise ValueError(
+                f"PLAN_BEGIN.trial_count is {begin.trial_count} but {len(trials)} PLAN_TRIALs "
+                "were given: make them agree"
+            )
+        for i, t in enumerate(trials):
+            if t.position != i:
+                raise ValueError(
+                    f"PLAN_TRIAL number {i} has position {t.position}: positions must be "
+                    "0..n-1 in the order sent"
+                )
+        self._request(begin, Ack, timeout)
+        for t in trials:
+            try:
+                self._request(t, Ack, timeout)
+            except DeviceError as e:
+                raise DeviceError(
+                    e.request,
+                    e.request_seq,
+                    int(e.code),
+                    e.detail,
+                    context=f"plan position {t.position}, trial_index {t.trial_index}",
+                ) from None
+        commit_timeout = max(self.timeout if timeout is None else timeout, PLAN_COMMIT_TIMEOUT_S)
+        self._request(PlanCommit(trial_count=len(trials)), Ack, commit_timeout)
+
+    def log_info(self, timeout: float | None = None) -> LogInfo:
+        """LOG_INFO_GET -> LOG_INFO: the stored plan (participant, config_hash, trials) and
+        the results log (records, capacity, torn records, running)."""
+        return self._request(LogInfoGet(), LogInfo, timeout, match=lambda m: isinstance(m, LogInfo))
+
+    def log_read(self, index: int, timeout: float | None = None) -> LogRecord:
+        """LOG_READ -> the LOG_RECORD stored at ``index`` (0..records-1); ERROR no_record
+        past the end."""
+        index = int(index)
+        if not 0 <= index <= 0xFFFF:
+            raise ValueError(f"log index must be in 0..65535, got {index}")
+        return self._request(
+            LogRead(index=index),
+            LogRecord,
+            timeout,
+            match=lambda m: isinstance(m, LogRecord) and m.index == index,
+        )
+
+    def log_erase(self, timeout: float | None = None) -> Ack:
+        """LOG_ERASE with its key: every record goes (the plan stays). Download first."""
+        return self._request(LogErase(key=LOG_ERASE_KEY), Ack, timeout)
+
+    def hostless_run(self, timeout: float | None = None) -> Ack:
+        """HOSTLESS_RUN: the device runs the stored plan from its first trial without a
+        record; HOSTLESS_EVENTs arrive in :attr:`hostless_events`. STOP ends it."""
+        return self._request(HostlessRun(), Ack, timeout)
+
+    def sim_button(self, pressed: bool, timeout: float | None = None) -> Ack:
+        """SIMULATION ONLY: SIM_BUTTON (a real board answers sim_only)."""
+        return self._request(SimButton(pressed=bool(pressed)), Ack, timeout)
+
+    def sim_imu_sample(
+        self,
+        time_us: int,
+        accel_mps2: Sequence[float],
+        gyro_radps: Sequence[float],
+        timeout: float | None = None,
+    ) -> Telemetry | None:
+        """SIMULATION ONLY: one IMU sample of the simulated world. During a host-less run
+        the answer is the TELEMETRY the sample produced (returned); otherwise an ACK
+        (None). The device sends a HOSTLESS_EVENT or TRIAL_RESULT the sample caused
+        before that TELEMETRY, so they are in :attr:`hostless_events` /
+        :attr:`trial_results` when this returns."""
+        t_us = int(time_us) & 0xFFFFFFFF
+        msg = SimImuSample(
+            time_us=t_us,
+            accel_mps2=_floats(accel_mps2, 3, "accel_mps2"),
+            gyro_radps=_floats(gyro_radps, 3, "gyro_radps"),
+        )
+        self._pump(0.0)
+        self._settle()
+        seq = self._send(msg)
+
+        def is_answer(item: _Received) -> bool:
+            m = item.message
+            if type(m) is Telemetry:
+                return m.host_time_us == t_us
+            return isinstance(m, (Ack, Error)) and m.request_seq == seq
+
+        m = self._wait(is_answer, f"{msg.NAME} (seq {seq})", timeout).message
+        if isinstance(m, Error):
+            raise DeviceError(msg.NAME, seq, m.code, m.detail)
+        self._settle()
+        return m if isinstance(m, Telemetry) else None
+
 
 __all__ = [
     "DeviceClient",
@@ -957,4 +1131,5 @@ __all__ = [
     "MODE_NAMES",
     "CONSTRAINT_NAMES",
     "DEFAULT_TIMEOUT",
+    "PLAN_COMMIT_TIMEOUT_S",
 ]

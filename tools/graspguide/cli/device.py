@@ -1,0 +1,168 @@
+"""`graspguide device`: a host-less device's stored plan and results log
+(graspguide.hostless.device_log): `log` downloads it, `info` shows it, `erase` empties it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from graspguide.cli.common import add_port_arguments
+from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, report
+
+HELP = "a host-less device's plan and results log: download (log), show (info), erase"
+
+DESCRIPTION = """\
+A host-less device (issue 13, docs/hostless.md) stores one participant's study plan and
+appends one checksummed record per completed trial to its non-volatile results log.
+
+  log    download every record into OUT/<participant>/ in the runner's folder format
+         (trials.jsonl, tlx.jsonl with scales null, device_log.json), so
+         `graspguide analyze OUT` reads it unchanged; downloading again gives the same
+         records; a folder holding another participant's or protocol's trials is refused
+  info   print LOG_INFO: the plan (participant, simulated, config_hash, trials) and the
+         log (records, capacity, torn records, running)
+  erase  delete every record (the plan stays); needs --yes. Download first.
+
+--port sim starts the simulated device on the store file --store FILE (its
+non-volatile memory: the plan and the log of an earlier simulated run)."""
+
+EPILOG = """\
+examples:
+  graspguide device log --port /dev/ttyACM0 --out runs/hostless
+  graspguide device info --port sim --store runs/hostless/U1.store
+  graspguide device erase --port /dev/ttyACM0 --yes
+
+exit status: 0 done, 1 on a link or disk error or a device without a plan, 2 on a usage
+error (a folder holding another study, erase without --yes, --port sim without --store)."""
+
+ACTIONS = ("log", "info", "erase")
+
+
+def _add_device_arguments(p: argparse.ArgumentParser) -> None:
+    add_port_arguments(p, required=True)
+    p.add_argument(
+        "--store",
+        metavar="FILE",
+        help="with --port sim: the simulated device's non-volatile store file (required)",
+    )
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    log = sub.add_parser("log", help="download the results log into OUT/<participant>/")
+    _add_device_arguments(log)
+    log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
+    info = sub.add_parser("info", help="print the stored plan and log (LOG_INFO)")
+    _add_device_arguments(info)
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    erase = sub.add_parser("erase", help="delete every record of the log (the plan stays)")
+    _add_device_arguments(erase)
+    erase.add_argument(
+        "--yes", action="store_true", help="really erase (the records are gone for good)"
+    )
+
+
+class _Usage(Exception):
+    pass
+
+
+def _open(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(transport, client after HELLO) for --port / --store."""
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.sim import SIM_PORT
+    from graspguide.link.transport import open_port
+
+    if args.port == SIM_PORT:
+        if not args.store:
+            raise _Usage(
+                "--port sim needs --store FILE: the simulated device's non-volatile store "
+                "that holds the plan and the log"
+            )
+        transport = open_port(args.port, baudrate=args.baud, extra_args=["--store", args.store])
+    else:
+        if args.store:
+            raise _Usage("--store is for --port sim only (a board has its own storage)")
+        transport = open_port(args.port, baudrate=args.baud)
+    try:
+        client = DeviceClient(transport, timeout=args.timeout)
+        client.hello()
+    except BaseException:
+        transport.close()
+        raise
+    return transport, client
+
+
+def _print_info(data: dict[str, Any]) -> None:
+    rows = [
+        ("plan stored", "yes" if data["plan_stored"] else "no"),
+        ("participant", data["participant"] or "-"),
+        ("simulated", "yes" if data["simulated"] else "no"),
+        ("config hash", data["config_hash"]),
+        ("plan trials", str(data["plan_trials"])),
+        ("records", f"{data['records']} of {data['capacity']}"),
+        ("torn records", str(data["torn_records"])),
+        ("running", "yes" if data["running"] else "no"),
+    ]
+    for key, value in rows:
+        print(f"{key + ':':<14}{value}")
+
+
+def _act(args: argparse.Namespace, client: Any) -> int:
+    from graspguide.hostless.device_log import download_log, log_info_dict
+    from graspguide.link.messages import CAPABILITY_HOSTLESS
+
+    client.require_capability(CAPABILITY_HOSTLESS, "a host-less results log")
+    if args.action == "log":
+        s = download_log(client, args.out, err=sys.stderr)
+        kind = "SIMULATED participant" if s.simulated else "participant"
+        print(
+            f"{s.folder}: {s.records} record(s) of {s.plan_trials} planned trials downloaded "
+            f"({s.new} new, {s.total} in trials.jsonl) for {kind} {s.participant}, "
+            f"config_hash {s.config_hash}; torn records: {s.torn_records}"
+        )
+        return EXIT_OK
+    if args.action == "info":
+        data = log_info_dict(client.log_info())
+        if args.json:
+            print(json.dumps(data))
+        else:
+            _print_info(data)
+        return EXIT_OK
+    info = client.log_info()
+    client.log_erase()
+    print(f"erased {info.records} record(s) of {info.participant or 'no plan'}; the plan stays")
+    return EXIT_OK
+
+
+def run(args: argparse.Namespace) -> int:
+    from graspguide.hostless.device_log import DeviceLogError
+    from graspguide.link.transport import LinkError
+    from graspguide.study.records import RecordWriteError
+
+    command = f"device {args.action}"
+    if args.action == "erase" and not args.yes:
+        report(
+            command,
+            "erasing deletes every record on the device for good: download them first "
+            "(`graspguide device log`), then add --yes",
+        )
+        return EXIT_USAGE
+    try:
+        transport, client = _open(args)
+    except _Usage as e:
+        return fail(command, e, EXIT_USAGE)
+    except LinkError as e:
+        return fail(command, e)
+    try:
+        return _act(args, client)
+    except DeviceLogError as e:
+        return fail(command, e, EXIT_USAGE if e.usage else EXIT_FAILURE)
+    except (LinkError, RecordWriteError) as e:
+        return fail(command, e, EXIT_FAILURE)
+    finally:
+        transport.close()
+
+
+__all__ = ["ACTIONS", "add_arguments", "run", "HELP", "DESCRIPTION", "EPILOG"]
