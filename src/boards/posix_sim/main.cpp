@@ -9,6 +9,7 @@
 
 #include <unistd.h>
 
+#include "file_storage.h"
 #include "graspguide_device/link_device.h"
 #include "pty_stream.h"
 #include "sim_clock.h"
@@ -20,6 +21,15 @@
 
 namespace {
 
+// The simulated board's non-volatile store: 64 KiB, what a small flash partition or an
+// external EEPROM gives; room for a plan and a few hundred trial records.
+constexpr long kDefaultStoreBytes = 64 * 1024;
+constexpr long kMaxStoreBytes = 16 * 1024 * 1024;
+// The simulated IMU's ranges: the LSM6DSOX settings of the Arduino boards (+-8 g,
+// +-2000 deg/s), so the IMU health rule judges the world's samples as it would a board's.
+constexpr float kSimAccelFullScale_mps2 = 8.0f * 9.80665f;
+constexpr float kSimGyroFullScale_radps = 2000.0f * 3.14159265f / 180.0f;
+
 volatile std::sig_atomic_t g_stop = 0;
 void on_signal(int) { g_stop = 1; }
 
@@ -27,11 +37,14 @@ struct Options {
   bool virtual_clock = false;
   const char* trace_path = nullptr;
   long stale_ms = GRASPGUIDE_STALE_TIMEOUT_MS;
+  const char* store_path = nullptr;
+  long store_bytes = kDefaultStoreBytes;
 };
 
 void usage(FILE* out) {
   std::fprintf(out,
                "usage: graspguide-sim [--virtual-clock] [--trace FILE.csv] [--stale-ms N]\n"
+               "                      [--store FILE [--store-bytes N]]\n"
                "  Opens a pseudo-terminal and prints 'GRASPGUIDE_SIM_PTY <path>' on stdout;\n"
                "  connect to <path> as to a board's serial port (any baud rate).\n"
                "  --virtual-clock  device time = the host's POSE timestamps (default: real time);\n"
@@ -39,6 +52,11 @@ void usage(FILE* out) {
                "                   real time, so the watchdog fires whatever else arrives\n"
                "  --trace FILE     append every motor change as device_time_us,pwm0..pwm3\n"
                "  --stale-ms N     POSE watchdog in ms (default %d)\n"
+               "  --store FILE     the device's non-volatile store (host-less plan and results\n"
+               "                   log), created filled with 0xFF when missing; with it the\n"
+               "                   device takes the host-less messages, SIM_IMU_SAMPLE and\n"
+               "                   SIM_BUTTON (their time drives --virtual-clock like POSE's)\n"
+               "  --store-bytes N  its size when created (default 65536)\n"
                "  Exits (motors off) on SIGINT, SIGTERM, SIGHUP and when its parent process\n"
                "  exits, so a host that dies leaves no simulator behind.\n",
                GRASPGUIDE_STALE_TIMEOUT_MS);
@@ -55,6 +73,16 @@ bool parse(int argc, char** argv, Options& o) {
       o.stale_ms = std::strtol(argv[++i], &end, 10);
       if (*end != '\0' || o.stale_ms <= 0 || o.stale_ms > 60000) {
         std::fprintf(stderr, "graspguide-sim: --stale-ms wants 1..60000, got '%s'\n", argv[i]);
+        return false;
+      }
+    } else if (std::strcmp(argv[i], "--store") == 0 && i + 1 < argc) {
+      o.store_path = argv[++i];
+    } else if (std::strcmp(argv[i], "--store-bytes") == 0 && i + 1 < argc) {
+      char* end = nullptr;
+      o.store_bytes = std::strtol(argv[++i], &end, 10);
+      if (*end != '\0' || o.store_bytes < 1024 || o.store_bytes > kMaxStoreBytes) {
+        std::fprintf(stderr, "graspguide-sim: --store-bytes wants 1024..%ld, got '%s'\n",
+                     kMaxStoreBytes, argv[i]);
         return false;
       }
     } else if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
@@ -117,6 +145,14 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  gs::FileStorage store;
+  if (opt.store_path) {
+    std::string why;
+    if (!store.open(opt.store_path, uint32_t(opt.store_bytes), &why)) {
+      std::fprintf(stderr, "graspguide-sim: --store %s: %s\n", opt.store_path, why.c_str());
+      return 2;
+    }
+  }
   gs::PtyStream stream;
   if (!stream.open()) {
     std::perror("graspguide-sim: cannot open a pseudo-terminal");
@@ -137,7 +173,20 @@ int main(int argc, char** argv) {
   gd::DeviceInfo info;
   info.board = "sim-posix";
   info.build_id = GRASPGUIDE_BUILD_ID;
-  gd::LinkDevice device(stream, app, info, opt.virtual_clock ? &virtual_time : nullptr);
+  // The runner holds the plan in RAM (a few KB): static, not on the stack.
+  static gd::HostlessRunner hostless(motors, clock, store, gd::ImuOutput::kSixAxis,
+                                     kSimAccelFullScale_mps2, kSimGyroFullScale_radps);
+  if (opt.store_path) {
+    if (hostless.boot() != gd::StoreStatus::kOk) {
+      std::fprintf(stderr, "graspguide-sim: --store %s holds no usable results log\n",
+                   opt.store_path);
+      return 2;
+    }
+    info.capabilities = uint8_t(info.capabilities | graspguide_link::kCapabilityHostless |
+                                graspguide_link::kCapabilitySimMessages);
+  }
+  gd::LinkDevice device(stream, app, info, opt.virtual_clock ? &virtual_time : nullptr,
+                        opt.store_path ? &hostless : nullptr);
 
   std::printf("GRASPGUIDE_SIM_PTY %s\n", stream.slave_path().c_str());
   std::fflush(stdout);
@@ -150,6 +199,7 @@ int main(int argc, char** argv) {
     device.poll();
     stream.flush();  // the answers to everything poll() read, in one write
   }
+  hostless.stop();
   app.stop();  // motors off on the way out, and in the trace
   stream.flush();
   if (trace) std::fclose(trace);

@@ -91,8 +91,27 @@ class Guidance {
 
   Status update(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
     out = FrameResult<T>{};
-    out.status = run(orientation_wxyz, out);
+    T gravity[3];
+    out.status = gravity_in_hand<T>(orientation_wxyz.data(), gravity);
+    if (out.status == Status::kOk)
+      out.status =
+          run(out, [&](const T* f_hat) { return alignment_to_gravity<T>(f_hat, gravity); });
     if (out.status != Status::kOk) out.pwm = Pwm{};  // motors off on any error
+    return out.status;
+  }
+
+  // The same frame from gravity measured in the hand frame (pointing down, any finite
+  // non-zero length): a host-less device's IMU estimate instead of a tracker's orientation.
+  Status update_gravity(const T gravity_down[3], FrameResult<T>& out) {
+    out = FrameResult<T>{};
+    Status checked = Status::kOk;
+    out.status = run(out, [&](const T* f_hat) {
+      Alignment<T> a;
+      checked = alignment_from_gravity<T>(gravity_down, f_hat, a);
+      return a;
+    });
+    if (out.status == Status::kOk) out.status = checked;
+    if (out.status != Status::kOk) out.pwm = Pwm{};
     return out.status;
   }
 
@@ -100,10 +119,9 @@ class Guidance {
   const Scene<T>& scene() const { return scene_; }
 
  private:
-  Status run(const QuatVec& orientation_wxyz, FrameResult<T>& out) {
-    T gravity[3];
-    Status s = gravity_in_hand<T>(orientation_wxyz.data(), gravity);
-    if (s != Status::kOk) return s;
+  // align(f_hat) -> Alignment: the frame's gravity, from a quaternion or an IMU.
+  template <class Align>
+  Status run(FrameResult<T>& out, Align&& align) {
     if (!has_wrench_) return Status::kZeroWrench;
     if (dirty_) {
       grasp_status_ = scene_.k == 3 ? solve_k<3>() : solve_k<4>();
@@ -113,7 +131,7 @@ class Guidance {
     }
     if (grasp_status_ != Status::kOk) return grasp_status_;
     // The rest is the per-frame layer's: what a frame costs while the posture holds.
-    const Alignment<T> a = alignment_to_gravity<T>(grasp_.force_unit.data(), gravity);
+    const Alignment<T> a = align(grasp_.force_unit.data());
     out.error_deg = a.error_deg;
     out.alpha = a.alpha;
     out.pwm = pwm_from_plan(pwm_plan_, pwm_gain(scene_.mode, a.alpha));

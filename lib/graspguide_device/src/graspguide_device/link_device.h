@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "graspguide_device/application.h"
+#include "graspguide_device/hostless_app.h"
 #include "graspguide_link/core_status.h"
 #include "graspguide_link/parser.h"
 #include "graspguide_link/writer.h"
@@ -40,6 +41,10 @@ static_assert(uint8_t(link::DeviceState::kTrialRunning) == uint8_t(DeviceState::
                   uint8_t(link::DeviceState::kStopped) == uint8_t(DeviceState::kStopped),
               "device states must match the protocol schema");
 static_assert(link::kMaxContacts == kMaxContacts, "contact slots must match the schema");
+static_assert(link::kMaxPlanTrials == kMaxPlanTrials, "plan size must match the schema");
+static_assert(uint8_t(link::RunEvent::kImuFault) == uint8_t(RunEventCode::kImuFault) &&
+                  uint8_t(link::RunEvent::kPlanDone) == uint8_t(RunEventCode::kPlanDone),
+              "run events must match the protocol schema");
 
 struct DeviceInfo {
   uint8_t firmware_version[3] = {0, 1, 0};
@@ -60,9 +65,12 @@ class PoseTimeListener {
 
 class LinkDevice {
  public:
+  // hostless: the host-less runner of a board that has storage (and an IMU), else nullptr
+  // (the PLAN_*, LOG_* and HOSTLESS_RUN requests are then unknown_id). pose_time also
+  // hears SIM_IMU_SAMPLE's time.
   LinkDevice(ByteStream& stream, Application& app, const DeviceInfo& info,
-             PoseTimeListener* pose_time = nullptr)
-      : stream_(stream), app_(app), info_(info), pose_time_(pose_time) {}
+             PoseTimeListener* pose_time = nullptr, HostlessRunner* hostless = nullptr)
+      : stream_(stream), app_(app), info_(info), pose_time_(pose_time), hostless_(hostless) {}
 
   // Reads what the stream has, handles every complete frame, runs the watchdog.
   // Returns the number of bytes read.
@@ -83,6 +91,10 @@ class LinkDevice {
     }
     TrialReport report;
     if (app_.tick(&report)) send_trial_result(report);
+    if (hostless_) {
+      hostless_->tick(now);
+      send_hostless_news();
+    }
     return total;
   }
 
@@ -129,7 +141,16 @@ class LinkDevice {
     send(r);
   }
 
+  // While the wearable runs its plan, the tracker-driven requests would fight it for the
+  // motors: refused until STOP.
+  bool hostless_busy() {
+    if (!hostless_ || !hostless_->running()) return false;
+    send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+    return true;
+  }
+
   void on(const link::SetScene& m) {
+    if (hostless_busy()) return;
     Scene<Real> scene;
     scene.k = m.k;
     for (int i = 0; i < kMaxContacts; ++i)
@@ -150,12 +171,14 @@ class LinkDevice {
   }
 
   void on(const link::StartTrial& m) {
+    if (hostless_busy()) return;
     Vec6<Real> w;
     for (int j = 0; j < 6; ++j) w(j) = m.wrench[j];
     answer(app_.start_trial(m.trial_id, w), link::MsgId::kStartTrial);
   }
 
   void on(const link::Pose& m) {
+    if (hostless_busy()) return;
     if (pose_time_) {
       pose_time_->on_pose_time(m.host_time_us);
       // A jump in virtual time is a silence the watchdog and the trial's clock must see.
@@ -204,11 +227,13 @@ class LinkDevice {
   }
 
   void on(const link::Stop&) {
+    if (hostless_) hostless_->stop();
     app_.stop();
     answer(Reply{}, link::MsgId::kStop);
   }
 
   void on(const link::SetMotors& m) {
+    if (hostless_busy()) return;
     Pwm pwm;
     for (int i = 0; i < kMaxContacts; ++i) pwm.duty[i] = m.pwm[i];
     answer(app_.set_motors(pwm), link::MsgId::kSetMotors);
@@ -222,6 +247,225 @@ class LinkDevice {
     s.stale_events = app_.counters().stale_events;
     s.last_error = last_error_;
     send(s);
+  }
+
+  // ---- host-less: the plan, the run, the log
+  bool hostless_missing(link::MsgId id) {
+    if (hostless_) return false;
+    send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(id));
+    return true;
+  }
+
+  void on(const link::PlanBegin& m) {
+    if (hostless_missing(link::MsgId::kPlanBegin)) return;
+    PlanHeader h;
+    std::memcpy(h.participant, m.participant, sizeof h.participant);
+    h.simulated = m.simulated;
+    std::memcpy(h.config_hash, m.config_hash, sizeof h.config_hash);
+    h.trial_count = m.trial_count;
+    h.constraints = uint8_t(m.constraints);
+    std::memcpy(h.y_axis, m.y_axis, sizeof h.y_axis);
+    h.threshold_deg = m.threshold_deg;
+    h.hold_s = m.hold_s;
+    h.timeout_s = m.timeout_s;
+    h.rest_s = m.rest_s;
+    std::memcpy(h.hand_k3, m.hand_k3, sizeof h.hand_k3);
+    std::memcpy(h.hand_k4, m.hand_k4, sizeof h.hand_k4);
+    std::memcpy(h.imu_to_hand_wxyz, m.imu_to_hand_wxyz, sizeof h.imu_to_hand_wxyz);
+    answer(hostless_->begin_plan(h), link::MsgId::kPlanBegin);
+  }
+
+  void on(const link::PlanTrial& m) {
+    if (hostless_missing(link::MsgId::kPlanTrial)) return;
+    PlanTrial t;
+    t.trial_index = m.trial_index;
+    t.session = m.session;
+    t.session_trial = m.session_trial;
+    t.k = m.k;
+    t.policy = uint8_t(m.policy);
+    t.mode = uint8_t(m.mode);
+    t.familiarization = m.familiarization;
+    t.single_motor = m.single_motor;
+    t.wrench_class = uint8_t(m.wrench_class);
+    t.wrench_number = m.wrench_number;
+    std::memcpy(t.wrench, m.wrench, sizeof t.wrench);
+    answer(hostless_->add_trial(m.position, t), link::MsgId::kPlanTrial);
+  }
+
+  void on(const link::PlanCommit& m) {
+    if (hostless_missing(link::MsgId::kPlanCommit)) return;
+    answer(hostless_->commit_plan(m.trial_count), link::MsgId::kPlanCommit);
+  }
+
+  void on(const link::HostlessRun&) {
+    if (hostless_missing(link::MsgId::kHostlessRun)) return;
+    if (app_.state() == DeviceState::kTrialRunning) {
+      send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+      return;
+    }
+    app_.motors_off();
+    answer(hostless_->start(), link::MsgId::kHostlessRun);
+    send_hostless_news();
+  }
+
+  void on(const link::LogInfoGet&) {
+    if (hostless_missing(link::MsgId::kLogInfoGet)) return;
+    link::LogInfo r;
+    r.plan_stored = hostless_->plan_stored();
+    if (r.plan_stored) {
+      const PlanHeader& h = hostless_->plan().header;
+      std::memcpy(r.participant, h.participant, sizeof r.participant);
+      r.simulated = h.simulated;
+      std::memcpy(r.config_hash, h.config_hash, sizeof r.config_hash);
+      r.plan_trials = h.trial_count;
+    }
+    ResultsLog& log = hostless_->log();
+    r.records = log.records();
+    r.capacity = log.capacity();
+    r.torn_records = log.torn();
+    r.running = hostless_->running();
+    send(r);
+  }
+
+  void on(const link::LogRead& m) {
+    if (hostless_missing(link::MsgId::kLogRead)) return;
+    LogRecord rec;
+    const StoreStatus s = hostless_->log().read(m.index, rec);
+    if (s != StoreStatus::kOk) {
+      send_error(request_seq_,
+                 s == StoreStatus::kNoRecord ? link::ErrorCode::kNoRecord
+                                             : link::ErrorCode::kStorageFailed,
+                 0);
+      return;
+    }
+    link::LogRecord r;
+    r.index = m.index;
+    r.trial_index = rec.trial.trial_index;
+    r.session = rec.trial.session;
+    r.session_trial = rec.trial.session_trial;
+    r.k = rec.trial.k;
+    r.policy = static_cast<link::Policy>(rec.trial.policy);
+    r.mode = static_cast<link::Mode>(rec.trial.mode);
+    r.familiarization = rec.trial.familiarization;
+    r.single_motor = rec.trial.single_motor;
+    r.wrench_class = static_cast<link::WrenchClass>(rec.trial.wrench_class);
+    r.wrench_number = rec.trial.wrench_number;
+    std::memcpy(r.wrench, rec.trial.wrench, sizeof r.wrench);
+    r.success = rec.success;
+    r.completion_s = rec.completion_s;
+    r.first_entry_s = rec.first_entry_s;
+    r.final_error_deg = rec.final_error_deg;
+    r.samples = rec.samples;
+    r.imu_faults = rec.imu_faults;
+    send(r);
+  }
+
+  void on(const link::LogErase& m) {
+    if (hostless_missing(link::MsgId::kLogErase)) return;
+    if (hostless_->running()) {
+      send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+    } else if (m.key != link::kLogEraseKey) {
+      send_error(request_seq_, link::ErrorCode::kBadPlan, 0);
+    } else if (hostless_->log().erase() != StoreStatus::kOk) {
+      send_error(request_seq_, link::ErrorCode::kStorageFailed, 0);
+    } else {
+      answer(Reply{}, link::MsgId::kLogErase);
+    }
+  }
+
+  // Only a simulated device takes the world's samples and presses from the host; a real
+  // board has its own IMU and button, and a host pretending otherwise is an error.
+  bool refuse_sim_only(link::MsgId id) {
+    if (hostless_ && (info_.capabilities & link::kCapabilitySimMessages)) return false;
+    send_error(request_seq_, link::ErrorCode::kSimOnly, uint8_t(id));
+    return true;
+  }
+
+  void on(const link::SimImuSample& m) {
+    if (refuse_sim_only(link::MsgId::kSimImuSample)) return;
+    if (pose_time_) pose_time_->on_pose_time(m.time_us);
+    const bool was_running = hostless_->running();
+    ImuSample s;
+    s.time_us = app_.now_us();
+    std::memcpy(s.accel_mps2, m.accel_mps2, sizeof s.accel_mps2);
+    std::memcpy(s.gyro_radps, m.gyro_radps, sizeof s.gyro_radps);
+    const HostlessFrame f = hostless_->on_sample(s);
+    // What the sample caused goes first, so a host that has this sample's answer has heard
+    // everything before it.
+    send_hostless_news();
+    if (!was_running) {
+      answer(Reply{}, link::MsgId::kSimImuSample);
+      return;
+    }
+    link::Telemetry t;
+    t.host_time_us = m.time_us;
+    t.error_deg = float(f.error_deg);
+    t.alpha = float(f.alpha);
+    for (int i = 0; i < kMaxContacts; ++i) t.pwm[i] = f.pwm.duty[i];
+    t.constraints_used = static_cast<link::ConstraintModel>(hostless_->plan().header.constraints);
+    t.solver_status = link::error_code_of(f.status);
+    t.flags = uint8_t(f.trial_running ? link::kTelemetryFlagTrialRunning : 0);
+    if (f.status != Status::kOk) last_error_ = t.solver_status;
+    send(t);
+  }
+
+  void on(const link::SimButton& m) {
+    if (refuse_sim_only(link::MsgId::kSimButton)) return;
+    hostless_->on_button(m.pressed, app_.now_us());
+    answer(Reply{}, link::MsgId::kSimButton);
+    send_hostless_news();
+  }
+
+  void send_hostless_news() {
+    RunEvent e;
+    while (hostless_->pop_event(e)) {
+      link::HostlessEvent m;
+      m.event = static_cast<link::RunEvent>(e.code);
+      m.position = e.position;
+      m.trial_index = e.trial_index;
+      m.device_time_us = e.time_us;
+      if (e.code == RunEventCode::kImuFault)
+        last_error_ = link::error_code_of(hostless_->imu_status());
+      send(m);
+    }
+    TrialReport report;
+    uint16_t trial_index = 0;
+    if (hostless_->pop_result(trial_index, report.result)) {
+      report.trial_id = trial_index;
+      send_trial_result(report);
+    }
+  }
+
+  void answer(const HostlessReply& r, link::MsgId id) {
+    switch (r.refusal) {
+      case HostlessRefusal::kNone:
+        answer(Reply{}, id);
+        return;
+      case HostlessRefusal::kNoPlan:
+        send_error(request_seq_, link::ErrorCode::kNoPlan, uint8_t(id));
+        return;
+      case HostlessRefusal::kBadPlan:
+        send_error(request_seq_, link::ErrorCode::kBadPlan, r.detail);
+        return;
+      case HostlessRefusal::kCoreStatus:
+        send_error(request_seq_, link::error_code_of(r.status), r.detail);
+        return;
+      case HostlessRefusal::kLogFull:
+        send_error(request_seq_, link::ErrorCode::kLogFull, 0);
+        return;
+      case HostlessRefusal::kLogNotEmpty:
+        send_error(request_seq_, link::ErrorCode::kLogNotEmpty, 0);
+        return;
+      case HostlessRefusal::kStorageFailed:
+        send_error(request_seq_, link::ErrorCode::kStorageFailed, 0);
+        return;
+      case HostlessRefusal::kNoRecord:
+        send_error(request_seq_, link::ErrorCode::kNoRecord, 0);
+        return;
+      case HostlessRefusal::kNotAllowed:
+        send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+        return;
+    }
   }
 
   // Device -> host ids never reach here (the parser accepts host -> device only).
@@ -269,6 +513,7 @@ class LinkDevice {
   Application& app_;
   DeviceInfo info_;
   PoseTimeListener* pose_time_;
+  HostlessRunner* hostless_;
   link::FrameParser parser_{link::Accept::kHostToDevice};
   link::SequenceCounter seq_;
   uint16_t request_seq_ = 0;
