@@ -262,8 +262,8 @@ TEST(HostlessRunner, ThePressOnlyCountsOnceReady) {
   EXPECT_EQ(rig.runner.phase(), gd::RunPhase::kTrial);
 }
 
-TEST(HostlessRunner, AStaleImuTurnsTheMotorsOffWithinItsTimeoutAndTheTrialStillEnds) {
-  Rig rig;
+// A one-trial plan whose trial runs, the hand held 45 degrees off its force: motors on.
+void start_guiding(Rig& rig) {
   const gd::PlanHeader h = header(1);
   const gd::PlanTrial t = trial(1, 4, kSideways);
   ASSERT_TRUE(rig.upload(h, {t}).ok());
@@ -271,10 +271,15 @@ TEST(HostlessRunner, AStaleImuTurnsTheMotorsOffWithinItsTimeoutAndTheTrialStillE
   rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
   rig.runner.on_button(true, rig.clock.now_us());
   const Eigen::Vector3d f = force_direction(h, t);
-  const Eigen::Vector3d off = (f + across(f)).normalized();  // 45 degrees: motors on
-  rig.turn_to(off);
-  for (int i = 0; i < 20; ++i) rig.sample(off);
+  rig.turn_to((f + across(f)).normalized());
+  for (int i = 0; i < 20; ++i) rig.sample(rig.g_hand);
   ASSERT_FALSE(rig.motors.all_off());
+}
+
+TEST(HostlessRunner, AStaleImuTurnsTheMotorsOffWithinItsTimeoutAndTheTrialStillEnds) {
+  Rig rig;
+  start_guiding(rig);
+  if (HasFatalFailure()) return;
   // The IMU goes silent: the control loop ticks every millisecond.
   const uint32_t last_sample = rig.clock.now_us();
   while (!rig.motors.all_off() && rig.clock.now_us() - last_sample < 1'000 * kMs) {
@@ -304,17 +309,9 @@ TEST(HostlessRunner, AStaleImuTurnsTheMotorsOffWithinItsTimeoutAndTheTrialStillE
 
 TEST(HostlessRunner, AStuckImuHoldsTheMotorsOff) {
   Rig rig;
-  const gd::PlanHeader h = header(1);
-  const gd::PlanTrial t = trial(1, 4, kSideways);
-  ASSERT_TRUE(rig.upload(h, {t}).ok());
-  ASSERT_TRUE(rig.runner.start().ok());
-  rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
-  rig.runner.on_button(true, rig.clock.now_us());
-  const Eigen::Vector3d f = force_direction(h, t);
-  const Eigen::Vector3d off = (f + across(f)).normalized();
-  rig.turn_to(off);
-  for (int i = 0; i < 20; ++i) rig.sample(off);
-  ASSERT_FALSE(rig.motors.all_off());
+  start_guiding(rig);
+  if (HasFatalFailure()) return;
+  const Eigen::Vector3d off = rig.g_hand;
   gd::ImuSample frozen;
   for (int i = 0; i < 3; ++i) frozen.accel_mps2[i] = float(-off[i]) * kG;
   int on_after_stuck = 0;
@@ -383,8 +380,7 @@ TEST(HostlessRunner, CommitRefusesPlansThatCannotGuideAndKeepsTheStoredOne) {
   EXPECT_EQ(short_plan.detail, 1);  // the first missing position
   // Out of order.
   ASSERT_TRUE(rig.runner.begin_plan(header(2)).ok());
-  EXPECT_EQ(rig.runner.add_trial(1, trial(2, 4, kSideways)).refusal,
-            gd::HostlessRefusal::kBadPlan);
+  EXPECT_EQ(rig.runner.add_trial(1, trial(2, 4, kSideways)).refusal, gd::HostlessRefusal::kBadPlan);
   // Without a begin.
   gd::HostlessRunner fresh(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
                            kGyroFs);
