@@ -479,3 +479,105 @@ def test_device_command_is_registered():
     assert r.returncode == 0, r.stderr
     for word in ("--port", "--out", "--store"):
         assert word in r.stdout.decode(), word
+
+
+# --------------------------------------------------------------------------------------
+# The real simulated device (--store FILE: its non-volatile memory)
+# --------------------------------------------------------------------------------------
+def sim_client(store) -> gd.DeviceClient:
+    from graspguide.link.sim import SimulatedDevice
+
+    device = SimulatedDevice(virtual_clock=True, extra_args=["--store", str(store)]).start()
+    c = gd.DeviceClient(device, timeout=2.0)
+    c.hello()
+    return c
+
+
+def test_sim_stores_the_paper_plan_across_restarts(paper, tmp_path, capsys):
+    protocol, _, begin, trials = paper
+    store = tmp_path / "U1.store"
+    with sim_client(store) as c:
+        caps = c.device_info.capabilities
+        assert caps & m.CAPABILITY_HOSTLESS and caps & m.CAPABILITY_SIM_MESSAGES
+        assert not c.log_info().plan_stored
+        with pytest.raises(dl.DeviceLogError, match="no host-less plan"):
+            dl.download_log(c, str(tmp_path / "none"))
+        with pytest.raises(gd.DeviceError, match="'rest_s'"):
+            c.upload_plan(dataclasses.replace(begin, rest_s=pu.REST_S_RANGE[1] * 2), trials)
+        c.upload_plan(begin, trials)
+    with sim_client(store) as c:  # a power cycle: the plan is still there
+        info = c.log_info()
+        assert info.plan_stored and info.participant == "U1" and info.simulated
+        assert (info.plan_trials, info.records, info.running) == (len(trials), 0, False)
+        assert bytes(info.config_hash).hex() == protocol.config_hash[:16]
+    out = tmp_path / "study"
+    args = ["--port", "sim", "--store", str(store)]
+    assert cli_main(["device", "info", *args, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["plan_trials"] == len(trials)
+    assert cli_main(["device", "log", *args, "--out", str(out)]) == 0
+    assert "0 record(s) of 100 planned trials" in capsys.readouterr().out
+    assert (out / "U1" / "trials.jsonl").read_text() == ""
+    with pytest.raises(analysis.AnalysisError, match="no trials in"):
+        analysis.load([str(out)])
+
+
+def test_sim_hostless_run_answers_samples_with_telemetry(paper, tmp_path):
+    _, _, begin, trials = paper
+    with sim_client(tmp_path / "U1.store") as c:
+        assert c.sim_imu_sample(1000, (0, 0, 9.81), (0, 0, 0)) is None  # no run: ACK
+        c.upload_plan(dataclasses.replace(begin, rest_s=0.0), trials)
+        c.hostless_run()
+        assert c.log_info().running
+        t_us = 2000
+        tel = c.sim_imu_sample(t_us, (0, 0, 9.81), (0, 0, 0))
+        assert tel is not None and tel.host_time_us == t_us
+        c.stop()
+        assert not c.log_info().running
+
+
+SAMPLE_PERIOD_US = 10_000  # the world's IMU at 100 Hz
+SHORT_TIMEOUT_S = 1.0  # every trial of the short plan times out after this
+GRAVITY_MPS2 = 9.81
+
+
+def test_sim_records_download_and_analyse(paper, tmp_path):
+    """Three session trials run host-less on the simulated device (a hand held still, a
+    little sensor noise so the IMU is not stuck), the button pressed at each ready
+    pattern; the downloaded log holds their records and the analysis reads them."""
+    protocol, planned, begin, trials = paper
+    first = next(i for i, p in enumerate(planned) if not p.familiarization)
+    short = [dataclasses.replace(t, position=i) for i, t in enumerate(trials[first : first + 3])]
+    begin = dataclasses.replace(
+        begin, trial_count=3, timeout_s=SHORT_TIMEOUT_S, hold_s=0.2, rest_s=0.0
+    )
+    max_samples = 3 * 4 * int(SHORT_TIMEOUT_S * 1e6 / SAMPLE_PERIOD_US)  # ample
+    with sim_client(tmp_path / "U1.store") as c:
+        c.upload_plan(begin, short)
+        c.hostless_run()
+        t_us, pressed = 0, 0
+        for n in range(max_samples):
+            t_us += SAMPLE_PERIOD_US
+            noise = 1e-3 * (n % 3)
+            tel = c.sim_imu_sample(t_us, (noise, 0, GRAVITY_MPS2), (0, noise, 0))
+            assert tel is not None and tel.host_time_us == t_us
+            last = c.hostless_events[-1].event if c.hostless_events else None
+            if last == m.RunEvent.READY and pressed < len(c.hostless_events):
+                c.sim_button(True)
+                c.sim_button(False)
+                pressed = len(c.hostless_events)
+            if last == m.RunEvent.PLAN_DONE:
+                break
+        events = [e.event for e in c.hostless_events]
+        assert events[-1] == m.RunEvent.PLAN_DONE, events
+        assert events.count(m.RunEvent.TRIAL_STARTED) == 3
+        s = dl.download_log(c, str(tmp_path / "out"))
+    assert (s.records, s.new, s.torn_records, s.running) == (3, 3, 0, False)
+    recs = _lines(tmp_path / "out" / "U1" / "trials.jsonl")
+    assert [r["trial_index"] for r in recs] == [t.trial_index for t in short]
+    assert [r["wrench_id"] for r in recs] == [p.wrench_id for p in planned[first : first + 3]]
+    for r in recs:
+        assert r["success"] is False and r["completion_s"] == SHORT_TIMEOUT_S
+        assert r["poses"] > 0 and r["hostless"] is True
+    frames, tlx = analysis.load([str(tmp_path / "out")])
+    assert len(frames) == 3 and not frames["familiarization"].any()
+    assert list(tlx["session"]) == [planned[first].session]
