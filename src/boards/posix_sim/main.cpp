@@ -25,6 +25,9 @@ namespace {
 // external EEPROM gives; room for a plan and a few hundred trial records.
 constexpr long kDefaultStoreBytes = 64 * 1024;
 constexpr long kMaxStoreBytes = 16 * 1024 * 1024;
+// A plan and one record.
+constexpr long kMinStoreBytes =
+    long(graspguide::device::kPlanRegionBytes + graspguide::device::kLogSlotBytes);
 // The simulated IMU's ranges: the LSM6DSOX settings of the Arduino boards (+-8 g,
 // +-2000 deg/s), so the IMU health rule judges the world's samples as it would a board's.
 constexpr float kSimAccelFullScale_mps2 = 8.0f * 9.80665f;
@@ -80,9 +83,9 @@ bool parse(int argc, char** argv, Options& o) {
     } else if (std::strcmp(argv[i], "--store-bytes") == 0 && i + 1 < argc) {
       char* end = nullptr;
       o.store_bytes = std::strtol(argv[++i], &end, 10);
-      if (*end != '\0' || o.store_bytes < 1024 || o.store_bytes > kMaxStoreBytes) {
-        std::fprintf(stderr, "graspguide-sim: --store-bytes wants 1024..%ld, got '%s'\n",
-                     kMaxStoreBytes, argv[i]);
+      if (*end != '\0' || o.store_bytes < kMinStoreBytes || o.store_bytes > kMaxStoreBytes) {
+        std::fprintf(stderr, "graspguide-sim: --store-bytes wants %ld..%ld, got '%s'\n",
+                     kMinStoreBytes, kMaxStoreBytes, argv[i]);
         return false;
       }
     } else if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
