@@ -86,9 +86,10 @@ def _posture(protocol: Protocol, k: int, used: bool) -> tuple[tuple[float, ...],
 
 
 def _check_participant(participant: str) -> None:
-    if not participant or len(participant) > PARTICIPANT_ID_SIZE or not participant.isascii():
+    printable = participant.isascii() and participant.isprintable()
+    if not participant or len(participant) > PARTICIPANT_ID_SIZE or not printable:
         raise ValueError(
-            f"participant {participant!r}: a host-less plan holds an ASCII id of 1.."
+            f"participant {participant!r}: a host-less plan holds a printable ASCII id of 1.."
             f"{PARTICIPANT_ID_SIZE} characters (PLAN_BEGIN.participant); use a shorter id "
             "such as U1"
         )
@@ -147,17 +148,17 @@ def plan_trial(position: int, trial: PlannedTrial) -> PlanTrial:
 def plan_messages(
     protocol: Protocol,
     participant: str,
-    planned: Sequence[PlannedTrial],
+    planned_trials: Sequence[PlannedTrial],
     simulated: bool,
     rest_s: float,
     imu_to_hand_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
 ) -> tuple[PlanBegin, list[PlanTrial]]:
-    """(PLAN_BEGIN, the PLAN_TRIALs in run order) of ``planned`` (the runner's plan of
-    ``participant``). ValueError naming the field and the fix for a plan the device
+    """(PLAN_BEGIN, the PLAN_TRIALs in run order) of ``planned_trials`` (the runner's plan
+    of ``participant``). ValueError naming the field and the fix for a plan the device
     cannot hold: more than MAX_PLAN_TRIALS trials, an id longer than
     PARTICIPANT_ID_SIZE, a wrench number beyond 255, a rest out of REST_S_RANGE."""
     _check_participant(participant)
-    planned = list(planned)
+    planned = list(planned_trials)
     if not 1 <= len(planned) <= MAX_PLAN_TRIALS:
         raise ValueError(
             f"the plan of {participant} has {len(planned)} trials; a host-less device holds "
