@@ -409,6 +409,9 @@ def test_no_plan_torn_records_and_a_damaged_record(paper, tmp_path, capsys):
     fake.torn = 2
     s = dl.download_log(c, str(tmp_path))
     assert s.torn_records == 2 and "2 torn record(s)" in capsys.readouterr().err
+    fake.capacity = 3
+    dl.download_log(c, str(tmp_path))
+    assert "log is full (3 of 3 records)" in capsys.readouterr().err
     fake.records[1] = dataclasses.replace(fake.records[1], completion_s=float("nan"))
     with pytest.raises(dl.DeviceLogError, match="record 1 .*completion_s"):
         dl.download_log(c, str(tmp_path / "other"))

@@ -382,6 +382,14 @@ def download_log(
             file=err,
             flush=True,
         )
+    if info.capacity and info.records >= info.capacity:
+        print(
+            f"graspguide device log: warning: the device's log is full ({info.records} of "
+            f"{info.capacity} records): it runs no further trial until erased; now that "
+            "they are downloaded, `graspguide device erase --yes` frees it",
+            file=err,
+            flush=True,
+        )
     if info.running:
         print(
             "graspguide device log: warning: a host-less run goes on; records stored after "
