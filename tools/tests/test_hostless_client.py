@@ -477,6 +477,7 @@ def test_device_command_is_registered():
         [sys.executable, "-m", "graspguide", "device", "log", "--help"],
         capture_output=True,
         env=subprocess_env(),
+        cwd=REPO_ROOT,  # not tools/: `-m graspguide` must find the installed package
         timeout=60,
     )
     assert r.returncode == 0, r.stderr
