@@ -29,6 +29,11 @@ trials.jsonl, one fsync'ed line per trial) and every trial runs exactly once; a
 completed study is only analysed again. Use another --out (or delete OUT) for a fresh
 study.
 
+--hostless: every participant runs host-less (`graspguide trial --hostless`): the plan
+stored on the simulated device, which runs the trials from a simulated IMU on the
+participant's hand and a simulated button; the log is downloaded into the study folder
+(default logs/demo-hostless). SIMULATED as well.
+
 Exit status: 0 done, 1 a participant's run or the analysis failed (its log is named),
 2 usage error, 130 interrupted (run the same command again to resume).
 """
@@ -61,6 +66,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="the virtual participant: participant[:key=value,...] "
         "(graspguide.study.participant parameters; default: the documented "
         "defaults)",
+    )
+    p.add_argument(
+        "--hostless",
+        action="store_true",
+        help="run every participant host-less on the simulated device (plan stored on the "
+        "device, simulated IMU and button; `graspguide trial --hostless`); default study "
+        "folder logs/demo-hostless",
     )
 
 

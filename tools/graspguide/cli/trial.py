@@ -12,6 +12,22 @@ from graspguide.cli.common import (
     signals_interrupt,
 )
 
+# The host-less runner's default (graspguide.hostless.runner.DEFAULT_REST_S; not imported
+# here so `graspguide --help` stays fast).
+_DEFAULT_REST_S = 2.0
+_REST_S_MAX = 600.0
+
+
+def _rest_s(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not (0 <= v <= _REST_S_MAX):
+        raise argparse.ArgumentTypeError(f"must be in [0, {_REST_S_MAX:g}] seconds, got {text}")
+    return v
+
+
 HELP = "run a participant's trials of a study protocol (resumable; NASA-TLX after each session)"
 
 DESCRIPTION = """\
@@ -36,6 +52,14 @@ sources: participant[:PARAMS] (the virtual participant, closed loop), synthetic[
 With --port sim the simulated device runs on its virtual clock for simulated sources (a
 90 s trial takes about a second).
 
+--hostless (with --port sim and a simulated closed-loop source): the study runs on the
+simulated device with no host: the plan is uploaded and stored in the device's store
+(--store, default OUT/PID/device-store.bin), the device runs each trial after a rest
+(--rest-s) and a button press, from the IMU samples of a simulated hand that the virtual
+participant moves; the device's log is then downloaded into OUT (docs/hostless.md).
+SIMULATED, like every simulated source. Run again to resume: the device skips the trials
+it has records of.
+
 --tlx FILE: JSON Lines, one object per session, e.g.
   {"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}
   (optional "participant", "modality", "k" are checked against the plan)."""
@@ -44,6 +68,8 @@ EPILOG = """\
 examples:
   graspguide trial --protocol protocols/paper.toml --participant U1 --port sim \\
       --source participant --out runs/pilot
+  graspguide trial --protocol protocols/paper.toml --participant U1 --port sim \\
+      --source participant --hostless --out runs/hostless
   graspguide trial --protocol protocols/paper.toml --participant U3 --port /dev/ttyACM0 \\
       --source plugin:my_lab.vicon:ViconHand --out runs/study --tlx u3_tlx.jsonl
 
@@ -79,10 +105,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="NASA-TLX answers, JSON Lines, one object per session (see above)",
     )
+    p.add_argument(
+        "--hostless",
+        action="store_true",
+        help="run the study host-less on the simulated device (--port sim): plan stored on "
+        "the device, trials started by a simulated button, the hand seen through a "
+        "simulated IMU; the device's log downloaded into OUT",
+    )
+    p.add_argument(
+        "--store",
+        metavar="FILE",
+        default=None,
+        help="with --hostless: the simulated device's non-volatile store, kept across runs "
+        "(default OUT/PID/device-store.bin)",
+    )
+    p.add_argument(
+        "--rest-s",
+        type=_rest_s,
+        default=None,
+        metavar="S",
+        help=f"with --hostless: rest before each trial's ready pattern, seconds "
+        f"(default {_DEFAULT_REST_S:g})",
+    )
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def run(args: argparse.Namespace) -> int:
+    if args.hostless:
+        from graspguide.hostless.runner import hostless_trial_command
+
+        if args.rest_s is None:
+            args.rest_s = _DEFAULT_REST_S
+        return call_with_options(hostless_trial_command, args)
+    if args.store is not None or args.rest_s is not None:
+        from graspguide.exit_codes import EXIT_USAGE, report
+
+        report("trial", "--store and --rest-s go with --hostless only")
+        return EXIT_USAGE
     from graspguide.study.runner import trial_command
 
     return call_with_options(trial_command, args)

@@ -71,7 +71,7 @@ class ImuStream:
         return 1.0 / self.rate_hz
 
 
-def _rotmat(q: np.ndarray) -> np.ndarray:
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
     """R(q) for unit [w, x, y, z] rows (n x 3 x 3), hand -> world."""
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     r = np.empty((len(q), 3, 3))
@@ -87,9 +87,10 @@ def _rotmat(q: np.ndarray) -> np.ndarray:
     return r
 
 
-def body_rates(rot: np.ndarray, dt_s: float) -> np.ndarray:
-    """The constant body angular velocity taking R_k to R_{k+1} (last row repeated)."""
-    rel = np.einsum("nji,njk->nik", rot[:-1], rot[1:])  # R_k^T R_{k+1}
+def interval_rates(rot_from: np.ndarray, rot_to: np.ndarray, dt_s: float) -> np.ndarray:
+    """The constant body angular velocity (n x 3, rad/s, body axes) that turns each
+    ``rot_from`` into its ``rot_to`` in ``dt_s`` (exact over the interval)."""
+    rel = np.einsum("nji,njk->nik", rot_from, rot_to)  # R_a^T R_b
     cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
     angle = np.arccos(cos)
     vee = np.stack(
@@ -98,8 +99,76 @@ def body_rates(rot: np.ndarray, dt_s: float) -> np.ndarray:
     )
     s = np.sin(angle)
     scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, 2 * s, 1.0), 0.5)
-    w = vee * scale[:, None] / dt_s
+    return vee * scale[:, None] / dt_s
+
+
+def body_rates(rot: np.ndarray, dt_s: float) -> np.ndarray:
+    """The constant body angular velocity taking R_k to R_{k+1} (last row repeated)."""
+    w = interval_rates(rot[:-1], rot[1:], dt_s)
     return np.vstack([w, w[-1:]])
+
+
+def lever_arm_accel(omega: np.ndarray, alpha: np.ndarray, noise: ImuNoise) -> np.ndarray:
+    """The IMU's acceleration from turning about the wrist (n x 3, hand frame, m/s^2):
+    alpha x r + omega x (omega x r), r = ``noise.lever_arm_m``."""
+    r = np.asarray(noise.lever_arm_m, dtype=float)
+    return _cross(alpha, r) + _cross(omega, _cross(omega, r))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b for n x 3 rows (b may be one 3-vector): np.cross's arithmetic
+    without its per-call axis handling, which dominates a one-sample stream."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+#: Sinusoids per axis in the arm's random translation.
+TRANSLATION_TONES = 8
+
+
+@dataclass(frozen=True)
+class ArmTranslation:
+    """The arm's smooth random translation: its world-frame acceleration is a sum of
+    TRANSLATION_TONES sinusoids per axis across TRANSLATION_BAND_HZ, scaled to the stated
+    RMS per axis. Draws its frequencies and phases (in that order) from ``rng``."""
+
+    freqs_hz: np.ndarray  # 3 x TRANSLATION_TONES
+    phases: np.ndarray  # 3 x TRANSLATION_TONES
+    rms_mps2: float
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, rms_mps2: float) -> ArmTranslation:
+        lo, hi = TRANSLATION_BAND_HZ
+        freqs = rng.uniform(lo, hi, size=(3, TRANSLATION_TONES))
+        phases = rng.uniform(0, 2 * math.pi, size=(3, TRANSLATION_TONES))
+        return cls(freqs, phases, float(rms_mps2))
+
+    def accel_world_mps2(self, t_s: np.ndarray) -> np.ndarray:
+        """Acceleration at the times ``t_s`` (n) -> n x 3, world frame."""
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        a = np.sin(2 * math.pi * self.freqs_hz[None] * t[:, None, None] + self.phases[None]).sum(
+            axis=2
+        )
+        return a * (self.rms_mps2 / math.sqrt(TRANSLATION_TONES / 2))
+
+
+GRAVITY_WORLD_MPS2 = np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])
+
+
+def specific_force_hand(rot: np.ndarray, accel_world_mps2: np.ndarray) -> np.ndarray:
+    """What an ideal accelerometer on the hand reads (n x 3, hand frame): R^T (a - g)."""
+    return np.einsum("nji,nj->ni", rot, accel_world_mps2 - GRAVITY_WORLD_MPS2)
+
+
+def accel_noise_sigma_mps2(noise: ImuNoise, rate_hz: float) -> float:
+    """White accelerometer noise per sample at ``rate_hz`` (bandwidth rate / 2)."""
+    return noise.accel_noise_ug_rthz * 1e-6 * STANDARD_GRAVITY_MPS2 * math.sqrt(rate_hz / 2)
+
+
+def gyro_noise_sigma_radps(noise: ImuNoise, rate_hz: float) -> float:
+    """White gyroscope noise per sample at ``rate_hz`` (bandwidth rate / 2)."""
+    return math.radians(noise.gyro_noise_dps_rthz) * math.sqrt(rate_hz / 2)
 
 
 def participant_poses(
@@ -177,31 +246,15 @@ def imu_from_poses(
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate_hz
     n = len(poses)
-    rot = _rotmat(poses)
+    rot = rotation_matrices(poses)
     omega = body_rates(rot, dt)
     alpha = np.gradient(omega, dt, axis=0)
-    r = np.asarray(noise.lever_arm_m, dtype=float)
-    # About the wrist: alpha x r + omega x (omega x r), in the hand frame.
-    a_rot = np.cross(alpha, r) + np.cross(omega, np.cross(omega, r))
-    # The arm: a sum of sinusoids across the band, scaled to the stated RMS per axis.
     t = np.arange(n) * dt
-    lo, hi = TRANSLATION_BAND_HZ
-    freqs = rng.uniform(lo, hi, size=(3, 8))
-    phases = rng.uniform(0, 2 * math.pi, size=(3, 8))
-    a_world = np.sin(2 * math.pi * freqs[None] * t[:, None, None] + phases[None]).sum(axis=2)
-    a_world *= noise.translation_accel_rms_mps2 / math.sqrt(8 / 2)
-    gravity_world = np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])
-    specific_world = a_world - gravity_world
-    accel = np.einsum("nji,nj->ni", rot, specific_world) + a_rot
-    accel += rng.normal(
-        0.0,
-        noise.accel_noise_ug_rthz * 1e-6 * STANDARD_GRAVITY_MPS2 * math.sqrt(rate_hz / 2),
-        (n, 3),
-    )
+    arm = ArmTranslation.draw(rng, noise.translation_accel_rms_mps2)
+    accel = specific_force_hand(rot, arm.accel_world_mps2(t)) + lever_arm_accel(omega, alpha, noise)
+    accel += rng.normal(0.0, accel_noise_sigma_mps2(noise, rate_hz), (n, 3))
     gyro = omega + np.radians(noise.gyro_bias_dps)
-    gyro += rng.normal(
-        0.0, math.radians(noise.gyro_noise_dps_rthz) * math.sqrt(rate_hz / 2), (n, 3)
-    )
+    gyro += rng.normal(0.0, gyro_noise_sigma_radps(noise, rate_hz), (n, 3))
     g_true = -rot[:, 2, :]  # R^T (0, 0, -1)
     scored = t >= REST_S
     return ImuStream(name, rate_hz, accel, gyro, g_true, scored, noise)

@@ -145,7 +145,9 @@ def die_with_parent() -> Callable[[], None] | None:
     return preexec
 
 
-def _sim_options(virtual_clock: bool, trace: str | None, stale_ms: int | None) -> list[str]:
+def _sim_options(
+    virtual_clock: bool, trace: str | None, stale_ms: int | None, store: str | None = None
+) -> list[str]:
     """The simulated device's command-line options for these settings (see
     :class:`SimulatedDevice`)."""
     options = ["--virtual-clock"] if virtual_clock else []
@@ -153,6 +155,8 @@ def _sim_options(virtual_clock: bool, trace: str | None, stale_ms: int | None) -
         options += ["--trace", os.fspath(trace)]
     if stale_ms is not None:
         options += ["--stale-ms", str(int(stale_ms))]
+    if store:
+        options += ["--store", os.fspath(store)]
     return options
 
 
@@ -166,7 +170,10 @@ class SimulatedDevice(Transport):
     (the device switches its motors off and exits) and SIGKILL after ``grace`` seconds.
 
     ``virtual_clock``: device time = the POSE timestamps (a 90 s trial runs as fast as the
-    host streams); ``trace``: CSV of every motor change; ``stale_ms``: POSE watchdog.
+    host streams); ``trace``: CSV of every motor change; ``stale_ms``: POSE watchdog;
+    ``store``: the device's non-volatile store file (the host-less plan and results log,
+    created on first use, kept across restarts like flash); without it the device has no
+    host-less capability.
     After start: ``pty_path``, ``process``, ``start_time_s`` (spawn to pty line).
     """
 
@@ -176,6 +183,7 @@ class SimulatedDevice(Transport):
         trace: str | None = None,
         stale_ms: int | None = None,
         binary: str | None = None,
+        store: str | None = None,
         start_timeout: float = DEFAULT_SIM_START_TIMEOUT,
         grace: float = DEFAULT_SIM_GRACE,
         baudrate: int = DEFAULT_BAUDRATE,
@@ -183,7 +191,11 @@ class SimulatedDevice(Transport):
         start: bool = False,
     ):
         self.binary = find_sim_binary(binary)
-        self.command = [self.binary, *_sim_options(virtual_clock, trace, stale_ms), *extra_args]
+        self.command = [
+            self.binary,
+            *_sim_options(virtual_clock, trace, stale_ms, store),
+            *extra_args,
+        ]
         self.start_timeout = start_timeout
         self.grace = grace
         self.baudrate = baudrate

@@ -246,7 +246,7 @@ class SerialTransport(Transport):
 def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transport:
     """A started Transport for a ``--port`` value: ``"sim"`` starts the simulated device
     (keyword arguments go to :class:`SimulatedDevice`: virtual_clock, trace, stale_ms,
-    binary, start_timeout), anything else opens that serial port (keyword arguments go to
+    binary, start_timeout, store), anything else opens that serial port (keyword arguments go to
     :class:`SerialTransport`). Close it (or use ``with``) when done."""
     if not port:
         raise DeviceNotFound(

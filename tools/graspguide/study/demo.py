@@ -10,6 +10,11 @@ Each participant is one ``graspguide trial --port sim --source participant`` pro
 with its own simulated device; ``--jobs`` of them run at a time (default: the CPU
 count). Their output goes to ``OUT/demo-logs/PID.log``.
 
+``--hostless``: each participant runs host-less instead (``graspguide trial --hostless``,
+graspguide.hostless.runner): the plan stored on the simulated device, the trials run by
+the device from a simulated IMU and button, the log downloaded; default study folder
+``logs/demo-hostless``.
+
 Resume: the study folder ``OUT`` (default ``logs/demo-study`` in the repository) is the
 runner's (docs/study.md): completed trials are fsync'ed to ``OUT/PID/trials.jsonl`` one
 line each, so killing the demo at any point and running the same command again completes
@@ -19,6 +24,7 @@ again. Everything here is labelled SIMULATED: no human took part.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -35,8 +41,16 @@ from graspguide.study.jobs import (
 )
 
 
-def default_out() -> str:
-    return _default_out("demo-study")
+def default_out(hostless: bool = False) -> str:
+    return _default_out("demo-hostless" if hostless else "demo-study")
+
+
+@dataclasses.dataclass
+class HostlessTrialJob(TrialJob):
+    """A participant's `graspguide trial --hostless` (its device store in its folder)."""
+
+    def command(self) -> list[str]:
+        return [*super().command(), "--hostless"]
 
 
 def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
@@ -64,18 +78,20 @@ def run(
     out: str | None = None,
     jobs: int | None = None,
     source: str = "participant",
+    hostless: bool = False,
 ) -> int:
     """`graspguide demo`: ``participants`` virtual participants through ``protocol``
     (default protocols/paper.toml) into the study folder ``out`` (default
-    logs/demo-study), ``jobs`` at a time (default the CPU count), then the analysis.
-    Returns the exit code."""
+    logs/demo-study, logs/demo-hostless with ``hostless``), ``jobs`` at a time (default
+    the CPU count), host-less on the simulated device with ``hostless``, then the
+    analysis. Returns the exit code."""
     from graspguide.study.errors import RunnerError
     from graspguide.study.study_protocol import ProtocolFileError, load_protocol
     from graspguide.study.trial_sources import open_runner_source
 
     t0 = time.monotonic()
     protocol_path = protocol or default_protocol()
-    out = out or default_out()
+    out = out or default_out(hostless)
     jobs = jobs or os.cpu_count() or 1
     try:
         loaded = load_protocol(protocol_path)
@@ -90,7 +106,8 @@ def run(
     logs = os.path.join(out, "demo-logs")
     os.makedirs(logs, exist_ok=True)
     print(
-        f"SIMULATED study (virtual participants, not human data): protocol {protocol_path}, "
+        f"SIMULATED {'host-less ' if hostless else ''}study (virtual participants, not human "
+        f"data): protocol {protocol_path}, "
         f"{len(pids)} participants {pids[0]}..{pids[-1]}, source {source}, "
         f"{min(jobs, len(pids))} at a time; study folder {out}",
         flush=True,
@@ -108,7 +125,7 @@ def run(
             flush=True,
         )
 
-    code = _run_participants(source, protocol_path, out, logs, todo, jobs, total, status)
+    code = _run_participants(source, protocol_path, out, logs, todo, jobs, total, status, hostless)
     if code != EXIT_OK:
         return code
     run_s = time.monotonic() - t0
@@ -124,12 +141,12 @@ def _run_participants(
     jobs: int,
     total: int,
     status: dict[str, tuple[int, int, bool]],
+    hostless: bool = False,
 ) -> int:
     if not todo:
         return EXIT_OK
-    tasks = [
-        TrialJob(protocol_path, out, pid, source, os.path.join(logs, f"{pid}.log")) for pid in todo
-    ]
+    job = HostlessTrialJob if hostless else TrialJob
+    tasks = [job(protocol_path, out, pid, source, os.path.join(logs, f"{pid}.log")) for pid in todo]
     next_report = [time.monotonic() + 5.0]
 
     def done_trials() -> int:

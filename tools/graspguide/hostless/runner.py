@@ -1,0 +1,680 @@
+"""`graspguide trial --hostless`: a participant's study run host-less on the simulated
+device. SIMULATED throughout.
+
+The host uploads the plan (unless the device already stores this participant's plan of
+this protocol), starts the device's own run (HOSTLESS_RUN) and from then on is only the
+physical world:
+
+* it sends an IMU sample (graspguide.hostless.imu_world) every 1 / pose_rate_hz of the
+  device's virtual clock, which follows the samples, at rest and while waiting too;
+* between trials the hand goes back to the protocol's ``start_quat`` (a minimum-jerk turn
+  at HAND_RETURN_PEAK_DPS) and rests there; ``reaction_s`` after the device's ``ready``
+  (and after the hand is back) the participant presses the button for BUTTON_PRESS_S;
+* from ``trial_started`` the hand is the virtual participant's, stepped with the PWM of
+  the last TELEMETRY, exactly as the tracker-driven runner steps it;
+* at ``plan_done`` it downloads the device's log (graspguide.hostless.device_log) into
+  the runner's folder format, so `graspguide analyze` reads it unchanged.
+
+It also writes what the tracker runner writes around the trials, with that runner's own
+code: OUT/study.json, OUT/PID/plan.json, OUT/PID/runs.jsonl; the download writes
+OUT/PID/trials.jsonl and OUT/PID/tlx.jsonl with null scales (a simulated participant
+answers no questionnaire; none is invented).
+
+Errors and Ctrl-C send STOP; the device's store keeps every completed trial, and running
+again resumes at the first trial without a record.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TextIO
+
+import numpy as np
+
+from graspguide.hostless.imu_world import ImuWorld, unit_quaternion
+from graspguide.imu.synthetic import ImuNoise
+from graspguide.study.errors import RunnerError
+from graspguide.study.progress import Progress
+from graspguide.study.runner import RESULT_MARGIN_S, StudyRunner, read_run_jsonl
+from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
+
+#: Rest before each trial's ready pattern [s] (the plan's rest_s; the schema allows 0..600).
+DEFAULT_REST_S = 2.0
+REST_S_MAX = 600.0
+#: From the ready pattern to the button press [s]: a simple tactile reaction (about 0.2 s)
+#: plus reaching for the button.
+DEFAULT_REACTION_S = 0.5
+REACTION_S_MAX = 60.0
+#: How long the button is held down [s].
+BUTTON_PRESS_S = 0.1
+#: Peak speed of the hand going back to the start pose after a trial [deg/s]: faster than
+#: guided motion (the person knows where the start is) but within the gyroscope's range.
+HAND_RETURN_PEAK_DPS = 180.0
+#: A rest, a ready or a trial start later than expected by this much of device time is an
+#: error (the device stopped following the samples or the button).
+EVENT_MARGIN_S = 5.0
+#: The protocol's clock is in microseconds on a 32-bit counter; the device compares times
+#: modulo 2^32.
+_U32 = 0xFFFFFFFF
+#: Minimum jerk: peak speed = this x amplitude / duration.
+_MIN_JERK_PEAK = 1.875
+
+
+@dataclass
+class HostlessSummary:
+    participant: str
+    planned: int
+    completed: int
+    before: int  # records stored before this run
+    ran: int  # TRIAL_RESULTs seen in this run
+    uploaded: bool
+    device_s: float
+    results: list[Any] = field(default_factory=list)
+    download: Any = None
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, u: float) -> np.ndarray:
+    d = float(np.dot(q0, q1))
+    if d < 0:
+        q1, d = -q1, -d
+    if d > 0.9995:
+        q = q0 + u * (q1 - q0)
+        return q / np.linalg.norm(q)
+    th = math.acos(d)
+    return (math.sin((1 - u) * th) * q0 + math.sin(u * th) * q1) / math.sin(th)
+
+
+class _HandReturn:
+    """A minimum-jerk turn from ``q_from`` to ``q_to`` starting at ``t0_s``."""
+
+    def __init__(self, q_from: Sequence[float], q_to: np.ndarray, t0_s: float):
+        self.q0 = unit_quaternion(q_from, "hand orientation")
+        self.q1 = q_to
+        d = min(1.0, abs(float(np.dot(self.q0, self.q1))))
+        angle_deg = math.degrees(2 * math.acos(d))
+        self.t0_s = t0_s
+        self.duration_s = _MIN_JERK_PEAK * angle_deg / HAND_RETURN_PEAK_DPS
+        self.end_s = t0_s + self.duration_s
+
+    def at(self, t_s: float) -> np.ndarray:
+        if t_s >= self.end_s or self.duration_s <= 0:
+            return self.q1
+        s = max(0.0, (t_s - self.t0_s) / self.duration_s)
+        u = s * s * s * (10 - 15 * s + 6 * s * s)
+        return _slerp(self.q0, self.q1, u)
+
+
+def check_settings(rest_s: float, reaction_s: float, imu_to_hand: Sequence[float]) -> None:
+    """RunnerError (usage) naming the option when one is out of its range."""
+    if not (
+        isinstance(rest_s, (int, float)) and math.isfinite(rest_s) and 0 <= rest_s <= REST_S_MAX
+    ):
+        raise RunnerError(
+            f"--rest-s must be in [0, {REST_S_MAX:g}] seconds, got {rest_s!r}", usage=True
+        )
+    if not (
+        isinstance(reaction_s, (int, float))
+        and math.isfinite(reaction_s)
+        and 0 <= reaction_s <= REACTION_S_MAX
+    ):
+        raise RunnerError(
+            f"reaction_s must be in [0, {REACTION_S_MAX:g}] seconds, got {reaction_s!r}", usage=True
+        )
+    try:
+        unit_quaternion(imu_to_hand, "--imu-to-hand")
+    except ValueError as e:
+        raise RunnerError(str(e), usage=True) from None
+
+
+class _Source:
+    """The StudyRunner's view of the virtual participant behind the IMU world (its files
+    are labelled with it: simulated, no TLX asked)."""
+
+    closed_loop = True
+    simulated = True
+    live = False
+
+    def __init__(self, model: Any, spec: str):
+        self.model = model
+        self.rate_hz = float(getattr(model, "rate_hz", 0.0))
+        self.spec = spec
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "source": self.spec,
+            "kind": "hostless_world",
+            "class": type(self.model).__name__,
+            "simulated": True,
+        }
+
+
+class HostlessWorld:
+    """One host-less run: the device's events in, IMU samples and button presses out."""
+
+    def __init__(
+        self,
+        protocol: Protocol,
+        client: Any,
+        model: Any,
+        plan_by_index: dict[int, PlannedTrial],
+        world: ImuWorld,
+        rest_s: float,
+        reaction_s: float,
+        clock_start_us: int,
+        on_trial_result: Callable[[Any], None] | None,
+        progress: Progress,
+        total: int,
+    ):
+        self.p = protocol
+        self.client = client
+        self.model = model
+        self.plan_by_index = plan_by_index
+        self.world = world
+        self.rest_s = rest_s
+        self.reaction_s = reaction_s
+        self.on_trial_result = on_trial_result
+        self.progress = progress
+        self.total = total
+        self.period_us = 1e6 / protocol.pose_rate_hz
+        self.t0_us = int(clock_start_us)
+        self.i = 0
+        self.t_us = self.t0_us
+        self.start_q = unit_quaternion(protocol.start_quat, "[trial] start_quat")
+        self.q = self.start_q.copy()
+        self.state = "wait_rest"  # wait_rest, rest, ready, trial, done
+        self.state_since_s = self._t_s()
+        self.ret: _HandReturn | None = None
+        self.press_at_s: float | None = None
+        self.release_at_s: float | None = None
+        self.trial: PlannedTrial | None = None
+        self.trial_t0_s = 0.0
+        self.pwm: list[int] = [0, 0, 0, 0]
+        self.results: list[Any] = []
+
+    def _t_s(self) -> float:
+        return self.t_us / 1e6
+
+    def _event_time_s(self, device_time_us: int) -> float:
+        """A device time (u32) as this world's time: the latest time at or before now
+        with those low 32 bits."""
+        back = (self.t_us - int(device_time_us)) & _U32
+        return (self.t_us - back) / 1e6
+
+    # ---- the device's events
+    def _events(self) -> None:
+        from graspguide.link.messages import RunEvent
+
+        events = list(self.client.hostless_events)
+        self.client.hostless_events.clear()
+        for ev in events:
+            kind = RunEvent(int(ev.event))
+            t_s = self._event_time_s(ev.device_time_us)
+            if kind is RunEvent.REST:
+                self.state, self.state_since_s = "rest", t_s
+            elif kind is RunEvent.READY:
+                self.state, self.state_since_s = "ready", t_s
+                back_s = self.ret.end_s if self.ret is not None else t_s
+                self.press_at_s = max(t_s, back_s) + self.reaction_s
+            elif kind is RunEvent.TRIAL_STARTED:
+                self._begin_trial(int(ev.trial_index), t_s)
+            elif kind in (RunEvent.SUCCESS, RunEvent.TIMEOUT):
+                self.state, self.state_since_s = "wait_rest", t_s
+                self.trial = None
+                self.ret = _HandReturn(self.q, self.start_q, self._t_s())
+            elif kind is RunEvent.PLAN_DONE:
+                self.state = "done"
+            else:
+                raise RunnerError(
+                    f"the device ended the host-less run: {kind.name.lower()} at plan position "
+                    f"{ev.position} (trial {ev.trial_index}); completed trials are stored: "
+                    + {
+                        RunEvent.LOG_FULL: "download the log (graspguide device log), erase "
+                        "it, and run again",
+                        RunEvent.STORAGE_FAILED: "check the device's store file",
+                        RunEvent.IMU_FAULT: "the simulated IMU stream was refused (see the "
+                        "device's STATUS.last_error)",
+                    }.get(kind, "see the device's STATUS")
+                )
+        results = list(self.client.trial_results)
+        self.client.trial_results.clear()
+        for r in results:
+            self.results.append(r)
+            t = self.plan_by_index.get(int(r.trial_id))
+            if t is not None:
+                outcome = f"success {float(r.completion_s):.2f} s" if r.success else "timeout"
+                self.progress.line(
+                    f"[{t.trial_index}/{self.total}] "
+                    + ("familiarization" if t.familiarization else f"session {t.session}")
+                    + f" {t.modality} k={t.k} {t.wrench_id}: {outcome} (host-less, simulated)"
+                )
+            if self.on_trial_result is not None:
+                self.on_trial_result(r)
+
+    def _begin_trial(self, trial_index: int, t_s: float) -> None:
+        trial = self.plan_by_index.get(trial_index)
+        if trial is None:
+            raise RunnerError(
+                f"the device started trial {trial_index}, which is not in this participant's "
+                "plan: the device stores another plan; download and erase its log, then run again"
+            )
+        self.trial = trial
+        self.trial_t0_s = t_s
+        self.state, self.state_since_s = "trial", t_s
+        self.ret = None
+        self.model.begin_trial(
+            contacts=[list(c) for c in self.p.hands[trial.k]],
+            y_axis=list(self.p.y_axis),
+            wrench=list(trial.wrench),
+            policy=trial.policy,
+            mode=trial.mode,
+            start_quat=list(self.p.start_quat),
+        )
+        # The trial's first pose (t = 0) is the sample that started it, whose hand was at
+        # rest at start_quat: step there with nothing felt, as the tracker runner does.
+        self.model.step(0.0, [0] * trial.k)
+
+    # ---- the world
+    def _hand(self, t_s: float) -> np.ndarray:
+        if self.state == "trial" and self.trial is not None:
+            k = self.trial.k
+            return np.asarray(self.model.step(t_s - self.trial_t0_s, self.pwm[:k]), dtype=float)
+        if self.ret is not None:
+            return self.ret.at(t_s)
+        return self.start_q
+
+    def _button(self, t_s: float) -> None:
+        if self.press_at_s is not None and t_s >= self.press_at_s:
+            self.client.sim_button(True)
+            self.press_at_s = None
+            self.release_at_s = t_s + BUTTON_PRESS_S
+        elif self.release_at_s is not None and t_s >= self.release_at_s:
+            self.client.sim_button(False)
+            self.release_at_s = None
+        else:
+            return
+        self._events()
+
+    def _check_stall(self, t_s: float) -> None:
+        late = t_s - self.state_since_s
+        if self.state == "trial":
+            if late > self.p.timeout_s + RESULT_MARGIN_S:
+                raise RunnerError(
+                    f"trial {self.trial.trial_index if self.trial else '?'}: no result "
+                    f"{late:.1f} s into a {self.p.timeout_s:g} s trial; is the device's clock "
+                    "following the IMU samples?"
+                )
+            return
+        limit = self.rest_s + self.reaction_s + BUTTON_PRESS_S + EVENT_MARGIN_S
+        if self.ret is not None:
+            limit += self.ret.duration_s
+        if late > limit:
+            expected = {
+                "wait_rest": "a rest (HOSTLESS_EVENT rest)",
+                "rest": "the ready pattern",
+                "ready": "the trial to start after the button press",
+            }[self.state]
+            raise RunnerError(
+                f"the device sent no event for {late:.1f} s of its clock; expected "
+                f"{expected}. Is it running the host-less plan (LOG_INFO.running)?"
+            )
+
+    def run(self) -> float:
+        """Samples until plan_done; returns the device time used [s]."""
+        self._events()  # anything HOSTLESS_RUN's answer brought
+        while self.state != "done":
+            self.i += 1
+            self.t_us = self.t0_us + int(round(self.i * self.period_us))
+            t_s = self._t_s()
+            self._button(t_s)
+            if self.state == "done":
+                break
+            self.q = self._hand(t_s)
+            s = self.world.sample(t_s, self.q)
+            tel = self.client.sim_imu_sample(self.t_us & _U32, s.accel_mps2, s.gyro_radps)
+            self._events()
+            if tel is None:
+                if self.state == "done":
+                    break
+                raise RunnerError(
+                    "the device acknowledged an IMU sample instead of answering it with "
+                    "TELEMETRY: its host-less run is not going (stopped, or never started)"
+                )
+            self.pwm = list(tel.pwm)
+            self._check_stall(t_s)
+        return (self.t_us - self.t0_us) / 1e6
+
+
+def _plan_matches(info: Any, participant: str, hash8: bytes, n: int) -> bool:
+    return (
+        bool(info.plan_stored)
+        and str(info.participant).rstrip("\0") == participant
+        and bytes(info.config_hash) == hash8
+        and int(info.plan_trials) == n
+    )
+
+
+def run_hostless(
+    protocol: Protocol,
+    participant: str,
+    client: Any,
+    out_dir: str,
+    source_model: Any,
+    rest_s: float = DEFAULT_REST_S,
+    reaction_s: float = DEFAULT_REACTION_S,
+    imu_to_hand: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+    *,
+    source_spec: str = "participant",
+    imu_noise: ImuNoise | None = None,
+    clock_start_us: int = 0,
+    on_trial_result: Callable[[Any], None] | None = None,
+    progress: Progress | None = None,
+    err: TextIO | None = None,
+    protocol_file: str | None = None,
+    port: str = "",
+) -> HostlessSummary:
+    """Run what is left of ``participant``'s plan host-less on ``client`` (a DeviceClient
+    of a device with CAPABILITY_HOSTLESS and CAPABILITY_SIM_MESSAGES), then download its log
+    into ``out_dir``. ``source_model``: the virtual participant (begin_trial, step).
+    ``on_trial_result`` is called with every TRIAL_RESULT as it arrives. Raises
+    RunnerError, LinkError (DeviceError), KeyboardInterrupt; STOP is sent on every way
+    out, and the device's store keeps every completed trial."""
+    from graspguide.hostless.device_log import download_log
+    from graspguide.hostless.plan_upload import plan_messages
+    from graspguide.link.client import DeviceError
+    from graspguide.link.messages import CAPABILITY_HOSTLESS, CAPABILITY_SIM_MESSAGES
+
+    check_settings(rest_s, reaction_s, imu_to_hand)
+    progress = progress or Progress()
+    err = err or sys.stderr
+    source = _Source(source_model, source_spec)
+    runner = StudyRunner(
+        protocol,
+        participant,
+        out_dir,
+        source,  # type: ignore[arg-type]
+        client,
+        virtual_clock=True,
+        progress=progress,
+        protocol_file=protocol_file,
+        err=err,
+        port=port,
+    )
+    runner._lock()
+    try:
+        runner.prepare()
+        info = client.hello()
+        caps = int(getattr(info, "capabilities", 0))
+        need = CAPABILITY_HOSTLESS | CAPABILITY_SIM_MESSAGES
+        if caps & need != need:
+            raise RunnerError(
+                f"the device at {port or 'this port'} ({info.board}, capabilities "
+                f"0x{caps:02x}) cannot run a simulated host-less study: it needs "
+                "CAPABILITY_HOSTLESS and CAPABILITY_SIM_MESSAGES, which only the simulated "
+                "device built from this tree has (`pio run -e sim`); use --port sim"
+            )
+        client.stop()  # a run left going by an earlier host
+        hash8 = bytes.fromhex(protocol.config_hash)[:8]
+        n = len(runner.plan)
+        log = client.log_info()
+        uploaded = False
+        if not _plan_matches(log, participant, hash8, n):
+            begin, trials = plan_messages(
+                protocol,
+                participant,
+                runner.plan,
+                simulated=True,
+                rest_s=float(rest_s),
+                imu_to_hand_wxyz=tuple(float(x) for x in imu_to_hand),
+            )
+            try:
+                client.upload_plan(begin, trials)
+            except DeviceError as e:
+                if e.code_name == "log_not_empty":
+                    raise RunnerError(
+                        f"the device's log holds records of another plan (participant "
+                        f"{str(log.participant).rstrip(chr(0)) or '?'}): download them "
+                        "(`graspguide device log --port P --out DIR`), erase them "
+                        "(`graspguide device erase --port P --yes`), then run again"
+                    ) from None
+                raise
+            uploaded = True
+            log = client.log_info()
+        before = int(log.records)
+        runner._log_run(
+            "start",
+            config_hash=runner.config_hash,
+            source=source.describe(),
+            port=port,
+            hostless=True,
+            simulated=True,
+            rest_s=rest_s,
+            reaction_s=reaction_s,
+            imu_to_hand_wxyz=list(imu_to_hand),
+            imu_noise=dataclasses.asdict(imu_noise or ImuNoise()),
+            plan_uploaded=uploaded,
+            records_before=before,
+            device={
+                "board": info.board,
+                "build_id": f"{info.build_id:08x}",
+                "firmware": ".".join(map(str, info.firmware_version)),
+                "capabilities": caps,
+            },
+        )
+        if before:
+            progress.line(
+                f"resuming {participant} host-less: {before} of {n} trials are already "
+                "stored on the device and are skipped"
+            )
+        world = ImuWorld(
+            protocol.pose_rate_hz,
+            derive_seed(protocol.seed, "imu-world", participant) % 2**32,
+            imu_noise,
+            imu_to_hand,
+        )
+        hw = HostlessWorld(
+            protocol,
+            client,
+            source_model,
+            {t.trial_index & 0xFFFF: t for t in runner.plan},
+            world,
+            float(rest_s),
+            float(reaction_s),
+            clock_start_us,
+            on_trial_result,
+            progress,
+            n,
+        )
+        outcome = "error"
+        device_s = 0.0
+        try:
+            if before < n:
+                client.hostless_run()
+                device_s = hw.run()
+            outcome = "complete"
+        except KeyboardInterrupt:
+            outcome = "interrupted"
+            raise
+        finally:
+            try:
+                client.stop()
+            except Exception as e:
+                if outcome == "complete":
+                    raise
+                print(f"graspguide trial: STOP failed: {e}", file=err, flush=True)
+            if outcome != "complete":
+                try:
+                    runner._log_run("end", outcome=outcome, ran=len(hw.results), hostless=True)
+                except Exception as e:  # the error that ended the run is the one to report
+                    print(f"graspguide trial: warning: {e}", file=err, flush=True)
+        download = download_log(client, out_dir)
+        records = read_run_jsonl(runner.trials_path).records
+        done = {r.get("trial_index") for r in records}
+        missing = [t.trial_index for t in runner.plan if t.trial_index not in done]
+        if missing:
+            raise RunnerError(
+                f"the device said plan_done but its log lacks trials {missing[:5]}"
+                f"{'...' if len(missing) > 5 else ''}; inspect `graspguide device info`"
+            )
+        runner._log_run(
+            "end",
+            outcome="complete",
+            ran=len(hw.results),
+            completed=len(done),
+            planned=n,
+            device_s=round(device_s, 3),
+            hostless=True,
+        )
+        return HostlessSummary(
+            participant,
+            n,
+            len(done),
+            before,
+            len(hw.results),
+            uploaded,
+            device_s,
+            hw.results,
+            download,
+        )
+    finally:
+        runner._unlock()
+
+
+def hostless_trial_command(
+    *,
+    protocol: str,
+    participant: str,
+    source: str,
+    port: str,
+    baud: int,
+    timeout: float,
+    out: str,
+    store: str | None,
+    rest_s: float,
+    tlx: str | None,
+) -> int:
+    """`graspguide trial --hostless`: ``participant``'s study run host-less on the
+    simulated device (its store ``store``, default OUT/PID/device-store.bin), the world
+    driven by the source ``source``; the log downloaded into ``out``. Returns the exit
+    code."""
+    import os
+
+    from graspguide.exit_codes import (
+        EXIT_FAILURE,
+        EXIT_INTERRUPTED,
+        EXIT_OK,
+        EXIT_USAGE,
+        fail,
+        report,
+    )
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.sim import SIM_PORT
+    from graspguide.link.transport import LinkError, open_port
+    from graspguide.study.runner import summary_lines
+    from graspguide.study.study_protocol import ProtocolFileError, load_protocol, participant_number
+    from graspguide.study.trial_sources import open_runner_source
+
+    try:
+        if port != SIM_PORT:
+            raise RunnerError(
+                "--hostless simulates the physical world for the simulated device: use "
+                "--port sim (a board runs host-less from its own IMU and button; fetch its "
+                "results with `graspguide device log`)",
+                usage=True,
+            )
+        if tlx is not None:
+            raise RunnerError(
+                "--tlx does not go with --hostless: the host-less participant is simulated "
+                "and its questionnaires are recorded as absent",
+                usage=True,
+            )
+        check_settings(rest_s, DEFAULT_REACTION_S, (1.0, 0.0, 0.0, 0.0))
+        loaded = load_protocol(protocol)
+        participant_number(participant)
+        src = open_runner_source(source, loaded, participant)
+        if not (src.closed_loop and src.simulated):
+            raise RunnerError(
+                f"--hostless needs a simulated closed-loop source (participant[:PARAMS] or a "
+                f"closed-loop plugin class), got --source {source}",
+                usage=True,
+            )
+    except (ProtocolFileError, RunnerError) as e:
+        report("trial", e)
+        return EXIT_USAGE
+    store_path = store or os.path.join(out, participant, "device-store.bin")
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(store_path)), exist_ok=True)
+    except OSError as e:
+        report("trial", RunnerError(f"--store {store_path}: cannot create its folder: {e}"))
+        return EXIT_USAGE
+    try:
+        transport = open_port(port, baudrate=baud, virtual_clock=True, store=store_path)
+    except LinkError as e:
+        return fail("trial", e)
+    client = DeviceClient(transport, timeout=timeout)
+    code = EXIT_OK
+    summary: HostlessSummary | None = None
+    print(
+        f"SIMULATED host-less study: {participant}, the simulated device's store {store_path}",
+        flush=True,
+    )
+    try:
+        summary = run_hostless(
+            loaded,
+            participant,
+            client,
+            out,
+            src.model,  # type: ignore[attr-defined]
+            rest_s=rest_s,
+            source_spec=source,
+            protocol_file=protocol,
+            port=port,
+        )
+        print(
+            f"{participant}: all {summary.planned} trials stored on the device and downloaded "
+            f"({summary.ran} run now, {summary.before} from earlier runs; "
+            f"{summary.device_s:.1f} s of device time); {os.path.join(out, participant)}"
+        )
+        for line in summary_lines(out, participant):
+            print(line)
+    except (ProtocolFileError, ValueError) as e:
+        report("trial", e)
+        code = EXIT_USAGE
+    except RunnerError as e:
+        report("trial", e)
+        code = EXIT_USAGE if e.usage else EXIT_FAILURE
+    except LinkError as e:
+        code = fail("trial", e)
+    except KeyboardInterrupt:
+        code = EXIT_INTERRUPTED
+        print(
+            "\ngraspguide trial: interrupted; every completed trial is in the device's store "
+            f"({store_path}): run the same command again to resume",
+            file=sys.stderr,
+        )
+    finally:
+        try:
+            client.stop()
+        except (LinkError, OSError) as e:
+            print(f"graspguide trial: STOP failed: {e}", file=sys.stderr)
+            code = code or EXIT_FAILURE
+        except KeyboardInterrupt:
+            pass
+        finally:
+            transport.close()
+    return code
+
+
+__all__ = [
+    "hostless_trial_command",
+    "run_hostless",
+    "HostlessSummary",
+    "HostlessWorld",
+    "check_settings",
+    "DEFAULT_REST_S",
+    "DEFAULT_REACTION_S",
+    "HAND_RETURN_PEAK_DPS",
+]

@@ -1,0 +1,149 @@
+#!/usr/bin/env python3
+"""Success rates and mean completion times of the host-less simulated study beside the
+tracker-driven one (issue 13): the same protocol, virtual participants U1..Un and seeds,
+each run both ways on its own simulated device. SIMULATED: virtual participants.
+
+* tracker-driven: `graspguide trial --port sim --source participant` (the device gets the
+  participant's exact hand pose);
+* host-less: `graspguide trial ... --hostless` (the device estimates gravity from a
+  simulated IMU on the hand and runs the trials from its stored plan).
+
+    python tools/scripts/hostless_vs_tracker.py [--participants N] [--protocol FILE]
+        [--out DIR] [--jobs J] [--json FILE]
+
+Both studies go to OUT/tracker and OUT/hostless (default logs/hostless-vs-tracker); they
+resume like the demo, so running again only compares again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from graspguide.study.demo import HostlessTrialJob
+from graspguide.study.jobs import TrialJob, default_out, default_protocol, run_trial_jobs
+from graspguide.study.records import read_jsonl
+from graspguide.study.study_protocol import load_protocol
+
+KINDS = ("tracker", "hostless")
+
+
+def _rows(study_dir: str, pids: Sequence[str]) -> dict[tuple[int, str], list[dict[str, Any]]]:
+    """The main (not familiarization) trials of ``pids`` by (k, modality)."""
+    rows: dict[tuple[int, str], list[dict[str, Any]]] = {}
+    for pid in pids:
+        for r in read_jsonl(os.path.join(study_dir, pid, "trials.jsonl")).records:
+            if not r.get("familiarization"):
+                rows.setdefault((r["k"], r["modality"]), []).append(r)
+    return rows
+
+
+def _stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in recs if r["success"]]
+    return {
+        "trials": len(recs),
+        "successes": len(ok),
+        "success_rate": len(ok) / len(recs) if recs else None,
+        # completion_s counts a failure as the timeout, as the analysis does
+        "mean_completion_s": sum(r["completion_s"] for r in recs) / len(recs) if recs else None,
+        "mean_success_time_s": sum(r["completion_s"] for r in ok) / len(ok) if ok else None,
+    }
+
+
+def compare(out: str, pids: Sequence[str]) -> dict[str, Any]:
+    by_kind = {kind: _rows(os.path.join(out, kind), pids) for kind in KINDS}
+    keys = sorted(set(by_kind["tracker"]) | set(by_kind["hostless"]))
+    table = []
+    for k, modality in keys:
+        table.append(
+            {
+                "k": k,
+                "modality": modality,
+                **{kind: _stats(by_kind[kind].get((k, modality), [])) for kind in KINDS},
+            }
+        )
+    total = {kind: _stats([r for rs in by_kind[kind].values() for r in rs]) for kind in KINDS}
+    return {"simulated": True, "participants": list(pids), "by_condition": table, "all": total}
+
+
+def _fmt(s: dict[str, Any]) -> str:
+    if not s["trials"]:
+        return f"{'-':>22}"
+    return (
+        f"{s['successes']:>3}/{s['trials']:<3} {100 * s['success_rate']:5.1f}%"
+        f" {s['mean_completion_s']:7.2f} s"
+    )
+
+
+def format_table(res: dict[str, Any]) -> str:
+    lines = [
+        f"SIMULATED: virtual participants {', '.join(res['participants'])}; main trials; "
+        "successes, rate, mean completion time (a failure counts as the timeout)",
+        f"{'condition':<14} {'tracker-driven':>22}   {'host-less (IMU)':>22}",
+    ]
+    for row in res["by_condition"]:
+        cond = f"k={row['k']} {row['modality']}"
+        lines.append(f"{cond:<14} {_fmt(row['tracker'])}   {_fmt(row['hostless'])}")
+    lines.append(f"{'all':<14} {_fmt(res['all']['tracker'])}   {_fmt(res['all']['hostless'])}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--participants", type=int, default=1, metavar="N")
+    p.add_argument("--protocol", default=None, help="default protocols/paper.toml")
+    p.add_argument("--out", default=None, help="default logs/hostless-vs-tracker")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--json", default=None, metavar="FILE", help="also write the figures here")
+    a = p.parse_args(argv)
+    if not 1 <= a.participants <= 256:
+        p.error(f"--participants must be in 1..256, got {a.participants}")
+    if a.jobs < 1:
+        p.error(f"--jobs must be at least 1, got {a.jobs}")
+    protocol = a.protocol or default_protocol()
+    load_protocol(protocol)  # a bad file fails here, with its message
+    out = a.out or default_out("hostless-vs-tracker")
+    pids = [f"U{i}" for i in range(1, a.participants + 1)]
+    tasks: list[TrialJob] = []
+    for kind, job in (("tracker", TrialJob), ("hostless", HostlessTrialJob)):
+        study = os.path.join(out, kind)
+        for pid in pids:
+            tasks.append(
+                job(
+                    protocol,
+                    study,
+                    pid,
+                    "participant",
+                    os.path.join(out, "logs", f"{kind}-{pid}.log"),
+                )
+            )
+
+    def on_exit(job: TrialJob, rc: int) -> None:
+        kind = "hostless" if isinstance(job, HostlessTrialJob) else "tracker"
+        print(f"{kind} {job.participant}: exit {rc} ({job.log})", file=sys.stderr, flush=True)
+
+    interrupted, failed = run_trial_jobs(tasks, a.jobs, on_exit)
+    if interrupted:
+        print("interrupted; run again to resume", file=sys.stderr)
+        return 130
+    if failed:
+        print(
+            "failed: " + ", ".join(f"{j.participant} ({j.log})" for j, _ in failed),
+            file=sys.stderr,
+        )
+        return 1
+    res = compare(out, pids)
+    print(format_table(res))
+    if a.json:
+        with open(a.json, "w", encoding="utf-8") as f:
+            json.dump(res, f, indent=2)
+            f.write("\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
