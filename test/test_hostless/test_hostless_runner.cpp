@@ -328,6 +328,33 @@ TEST(HostlessRunner, AStuckImuHoldsTheMotorsOff) {
   EXPECT_EQ(rig.runner.imu_faults().stuck, 1u);
 }
 
+TEST(HostlessRunner, AFaultThatBeganBeforeTheTrialIsInItsRecord) {
+  Rig rig;
+  ASSERT_TRUE(rig.upload(header(1), {trial(1, 4, kSideways)}).ok());
+  ASSERT_TRUE(rig.runner.start().ok());
+  rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
+  gd::ImuSample frozen;  // frozen from here on: stuck before the press
+  frozen.accel_mps2[2] = kG;
+  for (int i = 0; i <= GRASPGUIDE_IMU_STUCK_SAMPLES; ++i) {
+    rig.clock.advance_us(kSamplePeriodUs);
+    frozen.time_us = rig.clock.now_us();
+    rig.runner.on_sample(frozen);
+  }
+  ASSERT_EQ(rig.runner.imu_status(), gg::Status::kImuStuck);
+  rig.runner.on_button(true, rig.clock.now_us());
+  for (int i = 0; i < 600 && rig.runner.phase() == gd::RunPhase::kTrial; ++i) {
+    rig.clock.advance_us(kSamplePeriodUs);
+    frozen.time_us = rig.clock.now_us();
+    EXPECT_EQ(rig.runner.on_sample(frozen).status, gg::Status::kImuStuck);
+    EXPECT_TRUE(rig.motors.all_off());
+  }
+  gd::LogRecord r;
+  ASSERT_EQ(rig.runner.log().read(0, r), gd::StoreStatus::kOk);
+  EXPECT_FALSE(r.success);
+  EXPECT_EQ(r.imu_faults, 1);
+  EXPECT_FLOAT_EQ(r.first_entry_s, -1.0f);
+}
+
 TEST(HostlessRunner, TheMountingRotatesTheImuIntoTheHand) {
   // The IMU turned 90 degrees about the hand's z: its x is the hand's y.
   Rig plain, mounted;

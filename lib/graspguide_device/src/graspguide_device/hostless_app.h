@@ -23,14 +23,14 @@ namespace graspguide::device {
 // Why a host-less request was refused; the link maps each to its ErrorCode.
 enum class HostlessRefusal : uint8_t {
   kNone = 0,
-  kNoPlan,        // no plan begun (upload) or stored (run)
-  kBadPlan,       // detail: the field (begin, trial) or the trial's position (commit)
-  kCoreStatus,    // a trial the core cannot solve; status says why, detail its position
-  kLogFull,       // no room for another record
-  kLogNotEmpty,   // records of another plan are stored
+  kNoPlan,       // no plan begun (upload) or stored (run)
+  kBadPlan,      // detail: the field (begin, trial) or the trial's position (commit)
+  kCoreStatus,   // a trial the core cannot solve; status says why, detail its position
+  kLogFull,      // no room for another record
+  kLogNotEmpty,  // records of another plan are stored
   kStorageFailed,
   kNoRecord,
-  kNotAllowed,    // a run goes on
+  kNotAllowed,  // a run goes on
 };
 
 struct HostlessReply {
@@ -173,7 +173,9 @@ class HostlessRunner {
     trial_started_us_ = now_us;
     trial_elapsed_us_ = 0;
     samples_ = 0;
-    faults_at_start_ = fault_total();
+    // A fault already holding the motors off counts for this trial too: its record must
+    // not read as a clean one.
+    faults_at_start_ = fault_total() - (imu_.motors_allowed() ? 0u : 1u);
     trial_.start(scene_.trial, 0);
     emit(RunEventCode::kTrialStarted);
   }
@@ -284,8 +286,8 @@ class HostlessRunner {
   void adopt_plan() {
     plan_id_valid_ = false;
     const float* q = plan_.header.imu_to_hand_wxyz;
-    const Real n = frame_math::sqrt_of(Real(q[0]) * q[0] + Real(q[1]) * q[1] +
-                                       Real(q[2]) * q[2] + Real(q[3]) * q[3]);
+    const Real n = frame_math::sqrt_of(Real(q[0]) * q[0] + Real(q[1]) * q[1] + Real(q[2]) * q[2] +
+                                       Real(q[3]) * q[3]);
     const Real w = q[0] / n, x = q[1] / n, y = q[2] / n, z = q[3] / n;
     const Real r[3][3] = {
         {1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
