@@ -48,6 +48,29 @@
 #define GRASPGUIDE_IMU_PERIOD_US 10000
 #endif
 
+// The host-less mode (issue 13: a stored plan run with the IMU and the button, no PC) needs
+// an IMU and a store that holds the plan region (8 KiB) and its log: the ESP32's LittleFS
+// partition. The Teensy 4.0's EEPROM emulation is 1,080 bytes and a generic core has no file
+// API common to all boards, so those builds have no host-less mode. 1 on a board without
+// LittleFS is an error, not a silent fallback.
+#ifndef GRASPGUIDE_HOSTLESS
+#if defined(ARDUINO_ARCH_ESP32) && GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE
+#define GRASPGUIDE_HOSTLESS 1
+#else
+#define GRASPGUIDE_HOSTLESS 0
+#endif
+#endif
+
+// The host-less store: a file on the LittleFS partition (labelled "spiffs"; the core's
+// default.csv partition table gives it 1.375 MiB of a 4 MB flash). 64 KiB holds the plan region and
+// 796 trial records, six 128-trial plans' worth, like the simulated device's default store.
+#ifndef GRASPGUIDE_STORE_PATH
+#define GRASPGUIDE_STORE_PATH "/graspguide.bin"
+#endif
+#ifndef GRASPGUIDE_STORE_BYTES
+#define GRASPGUIDE_STORE_BYTES 65536
+#endif
+
 // The button that starts a host-less trial, between this pin and GND (internal pull-up).
 #ifndef GRASPGUIDE_BUTTON_PIN
 #define GRASPGUIDE_BUTTON_PIN GRASPGUIDE_BOARD_DEFAULT_BUTTON_PIN

@@ -1,6 +1,7 @@
-// The wearable controller's Arduino entry point: wires the board's serial ports, clock
-// and motor outputs to the portable device application (lib/graspguide_device) and polls
-// it. Everything that decides anything lives there and is tested on the host.
+// The wearable controller's Arduino entry point: wires the board's serial ports, clock,
+// motor outputs, IMU, button and (host-less builds) non-volatile store to the portable
+// device code (lib/graspguide_device) and polls it. Everything that decides anything lives
+// there and is tested on the host.
 #include <Arduino.h>
 
 #include "arduino_hal.h"
@@ -17,6 +18,16 @@
 #elif GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE
 #error \
     "GRASPGUIDE_IMU must be GRASPGUIDE_IMU_NONE, GRASPGUIDE_IMU_LSM6DSOX or GRASPGUIDE_IMU_BNO055"
+#endif
+
+#if GRASPGUIDE_HOSTLESS
+#if GRASPGUIDE_IMU == GRASPGUIDE_IMU_NONE
+#error "GRASPGUIDE_HOSTLESS=1 needs an IMU: set GRASPGUIDE_IMU to LSM6DSOX or BNO055"
+#endif
+#if !defined(ARDUINO_ARCH_ESP32)
+#error "GRASPGUIDE_HOSTLESS=1 needs the ESP32's LittleFS; this board has no store for a plan"
+#endif
+#include "littlefs_storage.h"
 #endif
 
 #if GRASPGUIDE_USE_BLUETOOTH
@@ -43,24 +54,57 @@ gd::DeviceInfo board_info() {
   gd::DeviceInfo i;
   i.board = GRASPGUIDE_BOARD_NAME;
   i.build_id = GRASPGUIDE_BUILD_ID;
+  // Never kCapabilitySimMessages: a real board has its own IMU and button, so LinkDevice
+  // answers SIM_IMU_SAMPLE and SIM_BUTTON with sim_only.
+#if GRASPGUIDE_HOSTLESS
+  i.capabilities = uint8_t(i.capabilities | graspguide_link::kCapabilityHostless);
+#endif
   return i;
 }
 // Links copy it when they are built, below.
 const gd::DeviceInfo info = board_info();
 
-gb::SerialByteStream usb_stream(Serial, /*check_space=*/true);
-gd::LinkDevice usb_link(usb_stream, app, info);
-
-// The IMU and the button are read and the IMU's health decided every loop, but in this
-// tracker-driven firmware nothing acts on them yet: the host-less mode (issue 13) gates its
-// motors on imu_health.motors_allowed() and starts trials on a press. A board without an IMU
-// keeps working as before (its IMU is simply stale).
 #if GRASPGUIDE_IMU == GRASPGUIDE_IMU_LSM6DSOX
 gb::Lsm6dsoxImu imu(clock_us, GRASPGUIDE_IMU_PERIOD_US);
 #elif GRASPGUIDE_IMU == GRASPGUIDE_IMU_BNO055
 gb::Bno055Imu imu(clock_us, GRASPGUIDE_IMU_PERIOD_US);
 #endif
-#if GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE
+
+gb::DebouncedButton button(GRASPGUIDE_BUTTON_PIN, GRASPGUIDE_BUTTON_DEBOUNCE_MS);
+
+#if GRASPGUIDE_HOSTLESS
+static_assert(GRASPGUIDE_STORE_BYTES >=
+                  gd::kPlanRegionBytes + uint32_t(gd::kMaxPlanTrials) * gd::kLogSlotBytes,
+              "GRASPGUIDE_STORE_BYTES must hold the plan region and a full plan's records");
+gb::LittleFsStorage store(GRASPGUIDE_STORE_PATH, GRASPGUIDE_STORE_BYTES);
+// The IMU's own health rule (stale, stuck, out of range) lives in the runner and gates its
+// motors; its ranges are the ones the driver set the part to.
+gd::HostlessRunner hostless(motors, clock_us, store, imu.output(), imu.accel_full_scale_mps2(),
+                            imu.gyro_full_scale_radps());
+gd::HostlessRunner* const hostless_link = &hostless;
+
+void poll_hostless() {
+  gd::ImuSample s;
+  if (imu.read(s)) hostless.on_sample(s);
+  const gd::ButtonEdge edge = button.poll();
+  if (edge != gd::ButtonEdge::kNone)
+    hostless.on_button(edge == gd::ButtonEdge::kPressed, clock_us.now_us());
+  // The links tick the runner too; this one keeps its timers going whatever the links do.
+  hostless.tick(clock_us.now_us());
+}
+#else
+gd::HostlessRunner* const hostless_link = nullptr;
+#endif
+
+// Both links take the plan and log requests, and both refuse tracker-driven requests while
+// a plan runs, so neither host can fight the wearer's trial for the motors. The run's
+// events go out on whichever link polls first (USB).
+gb::SerialByteStream usb_stream(Serial, /*check_space=*/true);
+gd::LinkDevice usb_link(usb_stream, app, info, nullptr, hostless_link);
+
+// Without the host-less mode the IMU is still read and judged every loop, so a board
+// reports a broken IMU the same way, but nothing acts on it: guidance needs a host's poses.
+#if GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE && !GRASPGUIDE_HOSTLESS
 graspguide::ImuWatchdogConfig<float> imu_health_config() {
   graspguide::ImuWatchdogConfig<float> c;
   c.accel_full_scale_mps2 = imu.accel_full_scale_mps2();
@@ -76,14 +120,12 @@ void poll_imu() {
 }
 #endif
 
-gb::DebouncedButton button(GRASPGUIDE_BUTTON_PIN, GRASPGUIDE_BUTTON_DEBOUNCE_MS);
-
 #if GRASPGUIDE_USE_BLUETOOTH
 BluetoothSerial bt_port;
 gb::SerialByteStream bt_stream(bt_port, /*check_space=*/false);
 // Each link has its own parser and answers its own requests; both drive one application,
 // so a STOP from either ends whatever the other started.
-gd::LinkDevice bt_link(bt_stream, app, info);
+gd::LinkDevice bt_link(bt_stream, app, info, nullptr, hostless_link);
 #endif
 
 }  // namespace
@@ -100,10 +142,23 @@ void setup() {
   bt_port.begin(GRASPGUIDE_BT_NAME);
 #endif
 #if GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE
-  imu.begin();  // no IMU answering is not an error here: the health rule reports it stale
+  // No IMU answering is not an error here: the health rule reports it stale.
+  const bool imu_found = imu.begin();
+#endif
+#if GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE && !GRASPGUIDE_HOSTLESS
+  (void)imu_found;
   imu_health.restart(clock_us.now_us());
 #endif
   button.begin();
+#if GRASPGUIDE_HOSTLESS
+  // A store that did not open leaves the runner with no room: boot() finds no plan, and the
+  // host's plan and log requests are answered storage_failed or no_plan.
+  store.begin();
+  hostless.boot();
+  // A stored plan runs at power-up: the wearable needs no host. Not with no IMU answering:
+  // every trial would time out with its motors off and use up the plan's records.
+  if (imu_found && hostless.plan_stored()) hostless.start();
+#endif
 }
 
 void loop() {
@@ -111,8 +166,12 @@ void loop() {
 #if GRASPGUIDE_USE_BLUETOOTH
   bt_link.poll();
 #endif
+#if GRASPGUIDE_HOSTLESS
+  poll_hostless();
+#else
 #if GRASPGUIDE_IMU != GRASPGUIDE_IMU_NONE
   poll_imu();
 #endif
   button.poll();  // debounced every loop, so its edges are ready when a consumer comes
+#endif
 }
