@@ -525,6 +525,30 @@ def test_sim_stores_the_paper_plan_across_restarts(paper, tmp_path, capsys):
         analysis.load([str(out)])
 
 
+def test_device_plan_and_run_commands_on_the_sim(tmp_path, capsys):
+    store = tmp_path / "U2.store"
+    args = ["--port", "sim", "--store", str(store)]
+    plan = ["device", "plan", *args, "--protocol", PAPER, "--participant", "U2"]
+    # A mounting that is no rotation, and a bad participant id: refused before anything.
+    with pytest.raises(SystemExit) as refused:
+        cli_main([*plan, "--imu-to-hand", "0,0,0,0"])
+    assert refused.value.code == 2 and "not all zero" in capsys.readouterr().err
+    assert cli_main([*plan[:-1], "Bob"]) == 2
+    assert "ending with a number" in capsys.readouterr().err
+    quarter_turn = "0.70710678,0,0,0.70710678"
+    assert cli_main([*plan, "--simulated", "--rest-s", "1.5", "--imu-to-hand", quarter_turn]) == 0
+    assert "100 trials" in capsys.readouterr().out
+    with sim_client(store) as c:
+        info = c.log_info()
+        assert (info.participant, info.simulated, info.plan_trials) == ("U2", True, 100)
+        assert not info.running
+    assert cli_main(["device", "run", *args]) == 0
+    assert "0 of 100 trials already have a record" in capsys.readouterr().out
+    # The same participant's plan again is accepted (nothing recorded yet), a person's too.
+    assert cli_main(plan) == 0
+    assert "stored the plan of participant U2" in capsys.readouterr().out
+
+
 def test_sim_hostless_run_answers_samples_with_telemetry(paper, tmp_path):
     _, _, begin, trials = paper
     with sim_client(tmp_path / "U1.store") as c:

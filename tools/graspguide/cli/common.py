@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import inspect
+import math
 import re
 import signal
 from collections.abc import Callable, Iterator
@@ -157,3 +158,34 @@ def connect(args: argparse.Namespace) -> tuple[Any, Any]:
         transport.close()
         raise
     return transport, client
+
+
+# The host-less runner's rest before each trial (graspguide.hostless.runner.DEFAULT_REST_S
+# and the device's plan range; not imported here so `graspguide --help` stays fast).
+DEFAULT_REST_S = 2.0
+_REST_S_MAX = 600.0
+
+
+def rest_s_arg(text: str) -> float:
+    """--rest-s: seconds in [0, 600], the range a host-less plan holds."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not (0 <= v <= _REST_S_MAX):
+        raise argparse.ArgumentTypeError(f"must be in [0, {_REST_S_MAX:g}] seconds, got {text}")
+    return v
+
+
+def quaternion_arg(text: str) -> tuple[float, float, float, float]:
+    """w,x,y,z: four finite numbers, not all zero (normalised by whoever uses it)."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        q = tuple(float(x) for x in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"want w,x,y,z numbers, got {text!r}") from None
+    if len(q) != 4 or not all(math.isfinite(x) for x in q) or not any(q):
+        raise argparse.ArgumentTypeError(
+            f"want four finite numbers w,x,y,z, not all zero (e.g. 1,0,0,0), got {text!r}"
+        )
+    return (q[0], q[1], q[2], q[3])

@@ -1,5 +1,6 @@
 """`graspguide device`: a host-less device's stored plan and results log
-(graspguide.hostless.device_log): `log` downloads it, `info` shows it, `erase` empties it."""
+(graspguide.hostless): `plan` stores a participant's plan, `run` starts it, `log`
+downloads the records, `info` shows them, `erase` empties the log."""
 
 from __future__ import annotations
 
@@ -8,15 +9,26 @@ import json
 import sys
 from typing import Any
 
-from graspguide.cli.common import add_port_arguments
+from graspguide.cli.common import (
+    DEFAULT_REST_S,
+    add_port_arguments,
+    add_protocol_argument,
+    quaternion_arg,
+    rest_s_arg,
+)
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, report
 
-HELP = "a host-less device's plan and results log: download (log), show (info), erase"
+HELP = "a host-less device's plan and results log: store a plan, run it, download, show, erase"
 
 DESCRIPTION = """\
 A host-less device (issue 13, docs/hostless.md) stores one participant's study plan and
 appends one checksummed record per completed trial to its non-volatile results log.
 
+  plan   store one participant's plan of --protocol on the device (checked there: every
+         trial solved once), with --imu-to-hand (how the IMU sits on the hand) and
+         --rest-s; refused while the log holds another plan's records
+  run    start the stored plan now (a board with a plan also starts it at power-up);
+         the wearer then works through it with the button, no host needed
   log    download every record into OUT/<participant>/ in the runner's folder format
          (trials.jsonl, tlx.jsonl with scales null, device_log.json), so
          `graspguide analyze OUT` reads it unchanged; downloading again gives the same
@@ -30,6 +42,9 @@ non-volatile memory: the plan and the log of an earlier simulated run)."""
 
 EPILOG = """\
 examples:
+  graspguide device plan --port /dev/ttyACM0 --protocol protocols/paper.toml \\
+      --participant U3 --imu-to-hand 0.7071,0,0,0.7071
+  graspguide device run --port /dev/ttyACM0
   graspguide device log --port /dev/ttyACM0 --out runs/hostless
   graspguide device info --port sim --store runs/hostless/U1.store
   graspguide device erase --port /dev/ttyACM0 --yes
@@ -37,7 +52,7 @@ examples:
 exit status: 0 done, 1 on a link or disk error or a device without a plan, 2 on a usage
 error (a folder holding another study, erase without --yes, --port sim without --store)."""
 
-ACTIONS = ("log", "info", "erase")
+ACTIONS = ("plan", "run", "log", "info", "erase")
 
 
 def _add_device_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,6 +66,32 @@ def _add_device_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    plan = sub.add_parser("plan", help="store a participant's plan on the device")
+    _add_device_arguments(plan)
+    add_protocol_argument(plan, required=True)
+    plan.add_argument("--participant", required=True, metavar="PID", help="U1, U2, ...")
+    plan.add_argument(
+        "--imu-to-hand",
+        type=quaternion_arg,
+        default=(1.0, 0.0, 0.0, 0.0),
+        metavar="W,X,Y,Z",
+        help="rotation from the IMU's axes to the hand frame, scalar first (README: "
+        "mounting the IMU; default 1,0,0,0: the axes coincide)",
+    )
+    plan.add_argument(
+        "--rest-s",
+        type=rest_s_arg,
+        default=DEFAULT_REST_S,
+        metavar="S",
+        help=f"rest before each trial's ready pattern (default {DEFAULT_REST_S:g})",
+    )
+    plan.add_argument(
+        "--simulated",
+        action="store_true",
+        help="the participant is simulated (default: a person; the records say which)",
+    )
+    run = sub.add_parser("run", help="start the stored plan (HOSTLESS_RUN)")
+    _add_device_arguments(run)
     log = sub.add_parser("log", help="download the results log into OUT/<participant>/")
     _add_device_arguments(log)
     log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
@@ -114,6 +155,16 @@ def _act(args: argparse.Namespace, client: Any) -> int:
     from graspguide.link.messages import CAPABILITY_HOSTLESS
 
     client.require_capability(CAPABILITY_HOSTLESS, "a host-less results log")
+    if args.action == "plan":
+        return _store_plan(args, client)
+    if args.action == "run":
+        client.hostless_run()
+        info = client.log_info()
+        print(
+            f"running the plan of {info.participant}: {info.records} of {info.plan_trials} "
+            "trials already have a record; the wearer goes on with the button"
+        )
+        return EXIT_OK
     if args.action == "log":
         s = download_log(client, args.out, err=sys.stderr)
         kind = "SIMULATED participant" if s.simulated else "participant"
@@ -136,10 +187,32 @@ def _act(args: argparse.Namespace, client: Any) -> int:
     return EXIT_OK
 
 
+def _store_plan(args: argparse.Namespace, client: Any) -> int:
+    from graspguide.hostless.plan_upload import plan_messages, planned_trials
+    from graspguide.study.study_protocol import load_protocol, participant_number
+
+    protocol = load_protocol(args.protocol)
+    participant_number(args.participant)
+    trials = planned_trials(protocol, args.participant)
+    begin, plan_trials = plan_messages(
+        protocol, args.participant, trials, args.simulated, args.rest_s, args.imu_to_hand
+    )
+    client.upload_plan(begin, plan_trials)
+    kind = "SIMULATED participant" if args.simulated else "participant"
+    print(
+        f"stored the plan of {kind} {args.participant}: {len(plan_trials)} trials of "
+        f"{args.protocol}, checked by the device; start it with `graspguide device run` "
+        "or by powering the wearable up"
+    )
+    return EXIT_OK
+
+
 def run(args: argparse.Namespace) -> int:
     from graspguide.hostless.device_log import DeviceLogError
     from graspguide.link.transport import LinkError
+    from graspguide.study.errors import RunnerError
     from graspguide.study.records import RecordWriteError
+    from graspguide.study.study_protocol import ProtocolFileError
 
     command = f"device {args.action}"
     if args.action == "erase" and not args.yes:
@@ -157,6 +230,8 @@ def run(args: argparse.Namespace) -> int:
         return fail(command, e)
     try:
         return _act(args, client)
+    except (ProtocolFileError, RunnerError, ValueError) as e:
+        return fail(command, e, EXIT_USAGE)
     except DeviceLogError as e:
         return fail(command, e, EXIT_USAGE if e.usage else EXIT_FAILURE)
     except (LinkError, RecordWriteError) as e:

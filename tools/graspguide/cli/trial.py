@@ -6,27 +6,13 @@ from __future__ import annotations
 import argparse
 
 from graspguide.cli.common import (
+    DEFAULT_REST_S,
     add_port_arguments,
     add_protocol_argument,
     call_with_options,
+    rest_s_arg,
     signals_interrupt,
 )
-
-# The host-less runner's default (graspguide.hostless.runner.DEFAULT_REST_S; not imported
-# here so `graspguide --help` stays fast).
-_DEFAULT_REST_S = 2.0
-_REST_S_MAX = 600.0
-
-
-def _rest_s(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not (0 <= v <= _REST_S_MAX):
-        raise argparse.ArgumentTypeError(f"must be in [0, {_REST_S_MAX:g}] seconds, got {text}")
-    return v
-
 
 HELP = "run a participant's trials of a study protocol (resumable; NASA-TLX after each session)"
 
@@ -121,11 +107,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--rest-s",
-        type=_rest_s,
+        type=rest_s_arg,
         default=None,
         metavar="S",
         help=f"with --hostless: rest before each trial's ready pattern, seconds "
-        f"(default {_DEFAULT_REST_S:g})",
+        f"(default {DEFAULT_REST_S:g})",
     )
 
 
@@ -135,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         from graspguide.hostless.runner import hostless_trial_command
 
         if args.rest_s is None:
-            args.rest_s = _DEFAULT_REST_S
+            args.rest_s = DEFAULT_REST_S
         return call_with_options(hostless_trial_command, args)
     if args.store is not None or args.rest_s is not None:
         from graspguide.exit_codes import EXIT_USAGE, report
