@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TextIO
@@ -62,6 +63,9 @@ EVENT_MARGIN_S = 5.0
 _U32 = 0xFFFFFFFF
 #: Minimum jerk: peak speed = this x amplitude / duration.
 _MIN_JERK_PEAK = 1.875
+#: Where the world's clock stopped, per device client: a later run on the same device
+#: continues from there (the device's clock follows the samples and must not go back).
+_WORLD_CLOCK_US: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
 
 
 @dataclass
@@ -168,6 +172,7 @@ class HostlessWorld:
         on_trial_result: Callable[[Any], None] | None,
         progress: Progress,
         total: int,
+        on_sample: Callable[[float, np.ndarray, Any, PlannedTrial | None], None] | None = None,
     ):
         self.p = protocol
         self.client = client
@@ -177,6 +182,7 @@ class HostlessWorld:
         self.rest_s = rest_s
         self.reaction_s = reaction_s
         self.on_trial_result = on_trial_result
+        self.on_sample = on_sample
         self.progress = progress
         self.total = total
         self.period_us = 1e6 / protocol.pose_rate_hz
@@ -343,6 +349,8 @@ class HostlessWorld:
                     "the device acknowledged an IMU sample instead of answering it with "
                     "TELEMETRY: its host-less run is not going (stopped, or never started)"
                 )
+            if self.on_sample is not None:
+                self.on_sample(t_s, self.q, tel, self.trial)
             self.pwm = list(tel.pwm)
             self._check_stall(t_s)
         return (self.t_us - self.t0_us) / 1e6
@@ -369,8 +377,9 @@ def run_hostless(
     *,
     source_spec: str = "participant",
     imu_noise: ImuNoise | None = None,
-    clock_start_us: int = 0,
+    clock_start_us: int | None = None,
     on_trial_result: Callable[[Any], None] | None = None,
+    on_sample: Callable[[float, np.ndarray, Any, PlannedTrial | None], None] | None = None,
     progress: Progress | None = None,
     err: TextIO | None = None,
     protocol_file: str | None = None,
@@ -379,7 +388,11 @@ def run_hostless(
     """Run what is left of ``participant``'s plan host-less on ``client`` (a DeviceClient
     of a device with CAPABILITY_HOSTLESS and CAPABILITY_SIM_MESSAGES), then download its log
     into ``out_dir``. ``source_model``: the virtual participant (begin_trial, step).
-    ``on_trial_result`` is called with every TRIAL_RESULT as it arrives. Raises
+    ``clock_start_us``: the world's clock at the start (the device's clock follows it);
+    default: where the last run on this client ended, else 0, so that a run resumed on
+    the same device never turns its clock back.
+    ``on_trial_result`` is called with every TRIAL_RESULT as it arrives, ``on_sample(t_s,
+    hand_quat, telemetry, trial or None)`` after every sample's TELEMETRY. Raises
     RunnerError, LinkError (DeviceError), KeyboardInterrupt; STOP is sent on every way
     out, and the device's store keeps every completed trial."""
     from graspguide.hostless.device_log import download_log
@@ -483,10 +496,11 @@ def run_hostless(
             world,
             float(rest_s),
             float(reaction_s),
-            clock_start_us,
+            _WORLD_CLOCK_US.get(client, 0) if clock_start_us is None else clock_start_us,
             on_trial_result,
             progress,
             n,
+            on_sample,
         )
         outcome = "error"
         device_s = 0.0
@@ -499,6 +513,7 @@ def run_hostless(
             outcome = "interrupted"
             raise
         finally:
+            _WORLD_CLOCK_US[client] = hw.t_us + int(round(hw.period_us))
             try:
                 client.stop()
             except Exception as e:
