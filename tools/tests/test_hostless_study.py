@@ -114,6 +114,12 @@ def test_with_the_default_noise_the_means_are_the_bias_and_gravity():
     assert np.all(accel.std(axis=0) > 0.05)  # the arm's translation and the noise
 
 
+def test_the_cli_states_the_runners_defaults():
+    from graspguide.cli import common
+
+    assert common.DEFAULT_REST_S == hr.DEFAULT_REST_S
+
+
 def test_the_world_refuses_bad_input():
     with pytest.raises(ValueError, match="imu_to_hand_wxyz"):
         ImuWorld(RATE_HZ, seed=0, imu_to_hand_wxyz=(2.0, 0.0, 0.0, 0.0))
@@ -516,6 +522,10 @@ def test_cli_usage_errors(tmp_path):
     base = ["trial", "--protocol", path, "--participant", "U1", "--out", str(tmp_path / "o")]
     r = gg(*base, "--port", "sim", "--source", "participant", "--store", "x.bin")
     assert r.returncode == 2 and "--hostless" in r.stderr
+    r = gg(*base, "--port", "sim", "--source", "participant", "--imu-to-hand", "0,1,0,0")
+    assert r.returncode == 2 and "--hostless" in r.stderr
+    r = gg(*base, "--port", "sim", "--source", "participant", "--hostless", "--imu-to-hand", "1,0")
+    assert r.returncode == 2 and "--imu-to-hand" in r.stderr
     r = gg(*base, "--port", "/dev/null", "--source", "participant", "--hostless")
     assert r.returncode == 2 and "--port sim" in r.stderr
     r = gg(*base, "--port", "sim", "--source", "synthetic", "--hostless")

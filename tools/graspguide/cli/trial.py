@@ -10,6 +10,7 @@ from graspguide.cli.common import (
     add_port_arguments,
     add_protocol_argument,
     call_with_options,
+    quaternion_arg,
     rest_s_arg,
     signals_interrupt,
 )
@@ -113,6 +114,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"with --hostless: rest before each trial's ready pattern, seconds "
         f"(default {DEFAULT_REST_S:g})",
     )
+    p.add_argument(
+        "--imu-to-hand",
+        type=quaternion_arg,
+        default=None,
+        metavar="W,X,Y,Z",
+        help="with --hostless: how the simulated IMU sits on the hand, the rotation from its "
+        "axes to the hand's (default 1,0,0,0); declared in the plan and used by the world",
+    )
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
@@ -123,10 +132,10 @@ def run(args: argparse.Namespace) -> int:
         if args.rest_s is None:
             args.rest_s = DEFAULT_REST_S
         return call_with_options(hostless_trial_command, args)
-    if args.store is not None or args.rest_s is not None:
+    if args.store is not None or args.rest_s is not None or args.imu_to_hand is not None:
         from graspguide.exit_codes import EXIT_USAGE, report
 
-        report("trial", "--store and --rest-s go with --hostless only")
+        report("trial", "--store, --rest-s and --imu-to-hand go with --hostless only")
         return EXIT_USAGE
     from graspguide.study.runner import trial_command
 

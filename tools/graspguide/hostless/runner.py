@@ -569,6 +569,7 @@ def hostless_trial_command(
     out: str,
     store: str | None,
     rest_s: float,
+    imu_to_hand: Sequence[float] | None,
     tlx: str | None,
 ) -> int:
     """`graspguide trial --hostless`: ``participant``'s study run host-less on the
@@ -606,7 +607,12 @@ def hostless_trial_command(
                 "and its questionnaires are recorded as absent",
                 usage=True,
             )
-        check_settings(rest_s, DEFAULT_REACTION_S, (1.0, 0.0, 0.0, 0.0))
+        mount = tuple(float(x) for x in (imu_to_hand or (1.0, 0.0, 0.0, 0.0)))
+        norm = math.sqrt(sum(x * x for x in mount))
+        if not norm > 0:
+            raise RunnerError("--imu-to-hand must not be all zeros", usage=True)
+        mount = tuple(x / norm for x in mount)
+        check_settings(rest_s, DEFAULT_REACTION_S, mount)
         loaded = load_protocol(protocol)
         participant_number(participant)
         src = open_runner_source(source, loaded, participant)
@@ -644,6 +650,7 @@ def hostless_trial_command(
             out,
             src.model,  # type: ignore[attr-defined]
             rest_s=rest_s,
+            imu_to_hand=mount,
             source_spec=source,
             protocol_file=protocol,
             port=port,
