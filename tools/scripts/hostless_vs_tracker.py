@@ -6,7 +6,9 @@ each run both ways on its own simulated device. SIMULATED: virtual participants.
 * tracker-driven: `graspguide trial --port sim --source participant` (the device gets the
   participant's exact hand pose);
 * host-less: `graspguide trial ... --hostless` (the device estimates gravity from a
-  simulated IMU on the hand and runs the trials from its stored plan).
+  simulated IMU on the hand and runs the trials from its stored plan); from its
+  world.jsonl, what the estimate did to success detection: the true error of the exact
+  hand pose during the hold of every success the device declared.
 
     python tools/scripts/hostless_vs_tracker.py [--participants N] [--protocol FILE]
         [--out DIR] [--jobs J] [--json FILE]
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -54,6 +57,38 @@ def _stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _truth(study_dir: str, pids: Sequence[str]) -> dict[str, Any]:
+    """What the IMU estimate did to success detection: from OUT/hostless/PID/world.jsonl,
+    the true error (the exact hand pose) beside the device's at each host-less result."""
+    lines = []
+    for pid in pids:
+        path = os.path.join(study_dir, pid, "world.jsonl")
+        if os.path.exists(path):
+            lines += read_jsonl(path).records
+    ok = [r for r in lines if r["success"] and r["true_max_error_over_hold_deg"] is not None]
+    ends = [
+        abs(r["device_final_error_deg"] - r["true_final_error_deg"])
+        for r in lines
+        if r["true_final_error_deg"] is not None
+    ]
+    return {
+        "results": len(lines),
+        "successes": len(ok),
+        # a success the device declared while the true error left the threshold in the hold
+        "successes_true_error_above_threshold": sum(
+            1 for r in ok if r["true_max_error_over_hold_deg"] >= r["threshold_deg"]
+        ),
+        "max_true_error_over_hold_deg": max(
+            (r["true_max_error_over_hold_deg"] for r in ok), default=None
+        ),
+        "max_true_final_error_of_successes_deg": max(
+            (r["true_final_error_deg"] for r in ok), default=None
+        ),
+        "end_error_diff_rms_deg": math.sqrt(sum(d * d for d in ends) / len(ends)) if ends else None,
+        "end_error_diff_max_deg": max(ends, default=None),
+    }
+
+
 def compare(out: str, pids: Sequence[str]) -> dict[str, Any]:
     by_kind = {kind: _rows(os.path.join(out, kind), pids) for kind in KINDS}
     keys = sorted(set(by_kind["tracker"]) | set(by_kind["hostless"]))
@@ -67,7 +102,13 @@ def compare(out: str, pids: Sequence[str]) -> dict[str, Any]:
             }
         )
     total = {kind: _stats([r for rs in by_kind[kind].values() for r in rs]) for kind in KINDS}
-    return {"simulated": True, "participants": list(pids), "by_condition": table, "all": total}
+    return {
+        "simulated": True,
+        "participants": list(pids),
+        "by_condition": table,
+        "all": total,
+        "hostless_truth": _truth(os.path.join(out, "hostless"), pids),
+    }
 
 
 def _fmt(s: dict[str, Any]) -> str:
@@ -89,6 +130,21 @@ def format_table(res: dict[str, Any]) -> str:
         cond = f"k={row['k']} {row['modality']}"
         lines.append(f"{cond:<14} {_fmt(row['tracker'])}   {_fmt(row['hostless'])}")
     lines.append(f"{'all':<14} {_fmt(res['all']['tracker'])}   {_fmt(res['all']['hostless'])}")
+    t = res["hostless_truth"]
+    if t["results"]:
+        lines.append(
+            f"host-less, true error (exact hand pose) vs the device's IMU estimate, "
+            f"{t['results']} results: |device - true| at the end RMS "
+            f"{t['end_error_diff_rms_deg']:.2f} deg, max {t['end_error_diff_max_deg']:.2f} deg"
+        )
+        if t["successes"]:
+            lines.append(
+                f"  of {t['successes']} successes the device declared, "
+                f"{t['successes_true_error_above_threshold']} had a true error at or above the "
+                f"threshold during the hold (max over holds "
+                f"{t['max_true_error_over_hold_deg']:.2f} deg; true error at the end at most "
+                f"{t['max_true_final_error_of_successes_deg']:.2f} deg)"
+            )
     return "\n".join(lines)
 
 

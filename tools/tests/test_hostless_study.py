@@ -243,6 +243,11 @@ def test_one_participants_hostless_study_finishes_and_analyses(tmp_path):
     tlx = read_lines(out / "U1" / "tlx.jsonl")
     assert len(tlx) == protocol.sessions_per_participant
     assert all(line["scales"] is None for line in tlx)
+    world = read_lines(out / "U1" / "world.jsonl")  # the true error beside the device's
+    assert sorted(w["trial_index"] for w in world) == [t.trial_index for t in planned]
+    for w in world:
+        assert w["simulated"]
+        assert abs(w["device_final_error_deg"] - w["true_final_error_deg"]) <= 3.0
     runs = read_lines(out / "U1" / "runs.jsonl")
     assert runs[0]["event"] == "start" and runs[0]["hostless"] and runs[0]["simulated"]
     assert runs[-1]["event"] == "end" and runs[-1]["outcome"] == "complete"

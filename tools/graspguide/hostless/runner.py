@@ -16,7 +16,10 @@ physical world:
   the runner's folder format, so `graspguide analyze` reads it unchanged.
 
 It also writes what the tracker runner writes around the trials, with that runner's own
-code: OUT/study.json, OUT/PID/plan.json, OUT/PID/runs.jsonl; the download writes
+code: OUT/study.json, OUT/PID/plan.json, OUT/PID/runs.jsonl; OUT/PID/world.jsonl holds,
+per trial result seen, the true error of the hand pose the world sent (the core on the
+exact orientation) at the end and over the hold, beside the device's estimate; the
+download writes
 OUT/PID/trials.jsonl and OUT/PID/tlx.jsonl with null scales (a simulated participant
 answers no questionnaire; none is invented).
 
@@ -28,8 +31,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import sys
 import weakref
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TextIO
@@ -40,7 +45,7 @@ from graspguide.hostless.imu_world import ImuWorld, unit_quaternion
 from graspguide.imu.synthetic import ImuNoise
 from graspguide.study.errors import RunnerError
 from graspguide.study.progress import Progress
-from graspguide.study.runner import RESULT_MARGIN_S, StudyRunner, read_run_jsonl
+from graspguide.study.runner import RESULT_MARGIN_S, StudyRunner, append_line, read_run_jsonl
 from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
 
 #: Rest before each trial's ready pattern [s] (the plan's rest_s; the schema allows 0..600).
@@ -63,6 +68,9 @@ EVENT_MARGIN_S = 5.0
 _U32 = 0xFFFFFFFF
 #: Minimum jerk: peak speed = this x amplitude / duration.
 _MIN_JERK_PEAK = 1.875
+#: OUT/PID/WORLD_FILE: per trial result, the true error of the hand the world moved beside
+#: the device's estimate (TrueError).
+WORLD_FILE = "world.jsonl"
 #: Where the world's clock stopped, per device client: a later run on the same device
 #: continues from there (the device's clock follows the samples and must not go back).
 _WORLD_CLOCK_US: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
@@ -156,6 +164,59 @@ class _Source:
         }
 
 
+class TrueError:
+    """The guidance error of the hand pose the world really sent (the core on the host,
+    the exact orientation), beside what the device estimated from the IMU: how the
+    estimate's error moves success detection. One line per trial result (WORLD_FILE)."""
+
+    def __init__(self, protocol: Protocol):
+        self.p = protocol
+        self.guide: Any = None
+        self.trial: PlannedTrial | None = None
+        self.window: deque[tuple[float, float]] = deque()
+        self.last_deg: float | None = None
+
+    def begin(self, trial: PlannedTrial) -> None:
+        from graspguide.core import _core
+
+        g = _core.Guidance()
+        status = g.set_scene(
+            [list(c) for c in self.p.hands[trial.k]],
+            policy=trial.policy,
+            mode=trial.mode,
+            y_axis=list(self.p.y_axis),
+        )
+        if status != "ok" or g.set_wrench(list(trial.wrench)) != "ok":
+            raise RunnerError(f"trial {trial.trial_index}: the core refuses its scene: {status}")
+        self.guide, self.trial = g, trial
+        self.window.clear()
+        self.last_deg = None
+
+    def sample(self, t_s: float, q: np.ndarray) -> None:
+        res = self.guide.update([float(x) for x in q])
+        self.last_deg = float(res["error_deg"]) if res["status"] == "ok" else None
+        if self.last_deg is not None:
+            self.window.append((t_s, self.last_deg))
+        # the hold before now, and the sample that began it
+        while len(self.window) > 1 and self.window[1][0] <= t_s - self.p.hold_s:
+            self.window.popleft()
+
+    def result(self, r: Any, t_s: float) -> dict[str, Any]:
+        trial = self.trial
+        hold = [e for _, e in self.window]
+        return {
+            "trial_index": trial.trial_index if trial else int(r.trial_id),
+            "simulated": True,
+            "success": bool(r.success),
+            "device_final_error_deg": round(float(r.final_error_deg), 6),
+            "true_final_error_deg": None if self.last_deg is None else round(self.last_deg, 6),
+            "true_max_error_over_hold_deg": round(max(hold), 6) if hold else None,
+            "threshold_deg": self.p.threshold_deg,
+            "hold_s": self.p.hold_s,
+            "device_time_s": round(t_s, 6),
+        }
+
+
 class HostlessWorld:
     """One host-less run: the device's events in, IMU samples and button presses out."""
 
@@ -173,6 +234,7 @@ class HostlessWorld:
         progress: Progress,
         total: int,
         on_sample: Callable[[float, np.ndarray, Any, PlannedTrial | None], None] | None = None,
+        on_truth: Callable[[dict[str, Any]], None] | None = None,
     ):
         self.p = protocol
         self.client = client
@@ -200,6 +262,8 @@ class HostlessWorld:
         self.trial_t0_s = 0.0
         self.pwm: list[int] = [0, 0, 0, 0]
         self.results: list[Any] = []
+        self.truth = TrueError(protocol)
+        self.on_truth = on_truth
 
     def _t_s(self) -> float:
         return self.t_us / 1e6
@@ -249,6 +313,8 @@ class HostlessWorld:
         self.client.trial_results.clear()
         for r in results:
             self.results.append(r)
+            if self.on_truth is not None:
+                self.on_truth(self.truth.result(r, self._t_s()))
             t = self.plan_by_index.get(int(r.trial_id))
             if t is not None:
                 outcome = f"success {float(r.completion_s):.2f} s" if r.success else "timeout"
@@ -282,6 +348,7 @@ class HostlessWorld:
         # The trial's first pose (t = 0) is the sample that started it, whose hand was at
         # rest at start_quat: step there with nothing felt, as the tracker runner does.
         self.model.step(0.0, [0] * trial.k)
+        self.truth.begin(trial)
 
     # ---- the world
     def _hand(self, t_s: float) -> np.ndarray:
@@ -341,6 +408,8 @@ class HostlessWorld:
             self.q = self._hand(t_s)
             s = self.world.sample(t_s, self.q)
             tel = self.client.sim_imu_sample(self.t_us & _U32, s.accel_mps2, s.gyro_radps)
+            if self.trial is not None:  # before its result: the sample that ended it counts
+                self.truth.sample(t_s, self.q)
             self._events()
             if tel is None:
                 if self.state == "done":
@@ -501,6 +570,7 @@ def run_hostless(
             progress,
             n,
             on_sample,
+            lambda line: append_line(os.path.join(runner.pdir, WORLD_FILE), line),
         )
         outcome = "error"
         device_s = 0.0
@@ -576,8 +646,6 @@ def hostless_trial_command(
     simulated device (its store ``store``, default OUT/PID/device-store.bin), the world
     driven by the source ``source``; the log downloaded into ``out``. Returns the exit
     code."""
-    import os
-
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
