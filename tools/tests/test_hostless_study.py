@@ -514,6 +514,11 @@ def test_ctrl_c_stops_the_run_and_the_same_device_resumes_it(tmp_path):
         done = hr.run_hostless(
             protocol, "U1", client, out, model, rest_s=REST_S, progress=quiet, err=io.StringIO()
         )
+        # Another participant's plan is refused while U1's records are on the device.
+        other = open_runner_source("participant", protocol, "U2").model
+        with pytest.raises(hr.RunnerError, match="records of another plan.*U1.*erase"):
+            hr.run_hostless(protocol, "U2", client, out, other, progress=quiet)
+        assert client.log_info().records == done.planned  # nothing of U1's was touched
     assert (done.before, done.ran, done.completed) == (2, done.planned - 2, done.planned)
     final = read_lines(tmp_path / "study" / "U1" / "trials.jsonl")
     assert [r["trial_index"] for r in final] == [t.trial_index for t in pf.plan(protocol, "U1")]
