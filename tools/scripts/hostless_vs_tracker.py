@@ -78,6 +78,9 @@ def _truth(study_dir: str, pids: Sequence[str]) -> dict[str, Any]:
         "successes_true_error_above_threshold": sum(
             1 for r in ok if r["true_max_error_over_hold_deg"] >= r["threshold_deg"]
         ),
+        "successes_true_final_error_above_threshold": sum(
+            1 for r in ok if r["true_final_error_deg"] >= r["threshold_deg"]
+        ),
         "max_true_error_over_hold_deg": max(
             (r["true_max_error_over_hold_deg"] for r in ok), default=None
         ),
@@ -142,7 +145,8 @@ def format_table(res: dict[str, Any]) -> str:
                 f"  of {t['successes']} successes the device declared, "
                 f"{t['successes_true_error_above_threshold']} had a true error at or above the "
                 f"threshold during the hold (max over holds "
-                f"{t['max_true_error_over_hold_deg']:.2f} deg; true error at the end at most "
+                f"{t['max_true_error_over_hold_deg']:.2f} deg), "
+                f"{t['successes_true_final_error_above_threshold']} at the end (max "
                 f"{t['max_true_final_error_of_successes_deg']:.2f} deg)"
             )
     return "\n".join(lines)

@@ -197,8 +197,11 @@ class TrueError:
         self.last_deg = float(res["error_deg"]) if res["status"] == "ok" else None
         if self.last_deg is not None:
             self.window.append((t_s, self.last_deg))
-        # the hold before now, and the sample that began it
-        while len(self.window) > 1 and self.window[1][0] <= t_s - self.p.hold_s:
+        # the hold before now: the device ends a success hold_s after the first sample
+        # below the threshold, so that sample is at t_s - hold_s (half a period of slack
+        # for the float clock), and the one before it is no part of the hold
+        start = t_s - self.p.hold_s - 0.5 / self.p.pose_rate_hz
+        while self.window and self.window[0][0] < start:
             self.window.popleft()
 
     def result(self, r: Any, t_s: float) -> dict[str, Any]:
