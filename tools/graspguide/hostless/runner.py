@@ -300,6 +300,14 @@ class HostlessWorld:
                 self.ret = _HandReturn(self.q, self.start_q, self._t_s())
             elif kind is RunEvent.PLAN_DONE:
                 self.state = "done"
+            elif kind is RunEvent.IMU_FAULT:
+                # The device goes on (motors off until the IMU recovers), but a simulated
+                # world whose samples a device calls faulty is a bug of the world model.
+                raise RunnerError(
+                    f"the device judged the simulated IMU faulty at plan position "
+                    f"{ev.position} (trial {ev.trial_index}; STATUS.last_error says how): "
+                    "the world model sent a stale, frozen or out-of-range stream"
+                )
             else:
                 raise RunnerError(
                     f"the device ended the host-less run: {kind.name.lower()} at plan position "
@@ -308,8 +316,6 @@ class HostlessWorld:
                         RunEvent.LOG_FULL: "download the log (graspguide device log), erase "
                         "it, and run again",
                         RunEvent.STORAGE_FAILED: "check the device's store file",
-                        RunEvent.IMU_FAULT: "the simulated IMU stream was refused (see the "
-                        "device's STATUS.last_error)",
                     }.get(kind, "see the device's STATUS")
                 )
         results = list(self.client.trial_results)
