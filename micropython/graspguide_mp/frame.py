@@ -9,7 +9,6 @@ period of time.ticks_us on 32-bit ports, so every tick stays a small int and cos
 differences go through ticks_diff, as the C++ does with unsigned 32-bit ticks."""
 
 import math
-from array import array
 
 from graspguide_mp import status as st
 
@@ -120,7 +119,7 @@ class PwmPlan:
 
     def __init__(self, levels=None, k=0):
         self.on = 0
-        self.twice_level = array("d", (0.0, 0.0, 0.0, 0.0))
+        self.twice_level = [0.0, 0.0, 0.0, 0.0]
         self.gain_limit = 0.0
         if levels is not None:
             self.set(levels, k)
@@ -313,6 +312,8 @@ class ImuWatchdog:
     ):
         self.accel_fs_mps2 = accel_fs_mps2
         self.gyro_fs_radps = gyro_fs_radps
+        self._neg_accel_fs = -accel_fs_mps2
+        self._neg_gyro_fs = -gyro_fs_radps
         self.stale_ms = stale_ms
         self.stuck_samples = stuck_samples
         self.recovery_samples = recovery_samples
@@ -324,7 +325,7 @@ class ImuWatchdog:
         self.stuck_count = 0
         self.out_of_range_count = 0
         self.samples = 0
-        self._previous = array("d", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        self._previous = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         self.restart(now_ticks)
 
     def restart(self, now_ticks):
@@ -349,14 +350,17 @@ class ImuWatchdog:
         self._stale = False
         afs = self.accel_fs_mps2
         gfs = self.gyro_fs_radps
+        neg_afs = self._neg_accel_fs
+        neg_gfs = self._neg_gyro_fs
         prev = self._previous
         in_range = True
         same = self._have_previous
         for i in range(3):
             a = accel[i]
             g = gyro[i]
-            # NaN fails the comparison too: it is out of range.
-            if not (abs(a) <= afs and abs(g) <= gfs):
+            # NaN fails the comparison too: it is out of range. (No abs(): each call
+            # would box a new float on the heap.)
+            if not (neg_afs <= a <= afs and neg_gfs <= g <= gfs):
                 in_range = False
             # Exact on purpose: the same raw counts convert to the same float.
             if same and not (a == prev[i] and g == prev[3 + i]):
@@ -437,9 +441,10 @@ class GravityEstimator:
         self.kp_per_s = GRAVITY_KP_PER_S
         self.ki_per_s2 = GRAVITY_KI_PER_S2
         self.accel_gate_mps2 = GRAVITY_ACCEL_GATE_MPS2
-        self.gravity = array("d", (0.0, 0.0, -1.0))
-        self.bias_radps = array("d", (0.0, 0.0, 0.0))
-        self._w = array("d", (0.0, 0.0, 0.0))
+        self._neg_gate = -GRAVITY_ACCEL_GATE_MPS2
+        self.gravity = [0.0, 0.0, -1.0]
+        self.bias_radps = [0.0, 0.0, 0.0]
+        self._w = [0.0, 0.0, 0.0]
         self.initialised = False
         self.accel_trusted = False
 
@@ -458,6 +463,7 @@ class GravityEstimator:
             self.kp_per_s = kp_per_s
             self.ki_per_s2 = ki_per_s2
             self.accel_gate_mps2 = accel_gate_mps2
+            self._neg_gate = -accel_gate_mps2
         return s
 
     def update(self, accel, gyro, dt_s):
@@ -498,9 +504,9 @@ class GravityEstimator:
         w[1] = gyro[1] - b[1]
         w[2] = gyro[2] - b[2]
         norm_a = math.sqrt(a2) if has_direction else 0.0
-        self.accel_trusted = (
-            has_direction and abs(norm_a - STANDARD_GRAVITY_MPS2) <= self.accel_gate_mps2
-        )
+        gate = self.accel_gate_mps2
+        off = norm_a - STANDARD_GRAVITY_MPS2
+        self.accel_trusted = has_direction and self._neg_gate <= off <= gate
         if self.accel_trusted:
             # e = m x g with m = -a/|a|: turning g about e moves it towards m.
             inv = -1.0 / norm_a

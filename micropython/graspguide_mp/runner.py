@@ -13,7 +13,6 @@ The runner does not read hardware: main.py (or a test) feeds it samples, button 
 and ticks, and it writes the motors."""
 
 import math
-from array import array
 
 from graspguide_mp import frame
 from graspguide_mp import plan_file as pf
@@ -192,11 +191,11 @@ class HostlessRunner:
         # Per-frame buffers, made once: a sample allocates no list.
         self.duty = bytearray(4)
         self._off = bytearray(4)
-        self.f_hat = array("d", (0.0, 0.0, -1.0))
-        self.g_hand = array("d", (0.0, 0.0, -1.0))
-        self._scratch = array("d", (0.0, 0.0, 0.0))
-        self._align = array("d", (0.0, 0.0))
-        self._rot = array("d", (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0))
+        self.f_hat = [0.0, 0.0, -1.0]
+        self.g_hand = [0.0, 0.0, -1.0]
+        self._scratch = [0.0, 0.0, 0.0]
+        self._align = [0.0, 0.0]
+        self._rot = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
         self.pwm_plan = frame.PwmPlan()
         self.mode = frame.MODE_C
         self.error_deg = 0.0
