@@ -1,8 +1,10 @@
 """The per-frame layer of lib/graspguide_frame in MicroPython: the guidance error and alpha
 from gravity, PWM from motor levels, the trial state machine, the IMU health rule and the
 gravity estimator. Same numbers and statuses as the C++ (alignment.h, pwm.h, trial.h,
-imu_watchdog.h, gravity_estimator.h); no allocation of lists per frame: results go into
-arrays the caller owns.
+imu_watchdog.h, gravity_estimator.h); no list is made per frame: results go into lists
+the caller owns. Lists, not array('d'): reading an array item boxes a new float on the
+heap, reading a list item does not. Every float an operation makes is still a heap object
+on MicroPython's usual builds (bench_frame.py measures how many bytes a frame costs).
 
 Times are ticks of a free-running microsecond clock with period TICKS_PERIOD (2^30, the
 period of time.ticks_us on 32-bit ports, so every tick stays a small int and costs no heap);
