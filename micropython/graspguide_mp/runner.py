@@ -263,7 +263,11 @@ class HostlessRunner:
     def on_sample(self, accel, gyro, t):
         """One IMU sample in the IMU's axes, stamped with the clock's ticks. Returns the
         frame's status; error_deg, alpha and duty hold the frame's output."""
+        was_allowed = self.imu.motors_allowed()
         health = self.imu.on_sample(accel, gyro, t)
+        # Any fault's onset in a trial is news (stale is found by tick(), below).
+        if was_allowed and health != st.OK and self.phase == PH_TRIAL:
+            self._emit(EV_IMU_FAULT)
         if health == st.OK:
             self._estimate(accel, gyro, t)
         self._last_sample = t

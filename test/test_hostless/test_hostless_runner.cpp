@@ -326,6 +326,10 @@ TEST(HostlessRunner, AStuckImuHoldsTheMotorsOff) {
   }
   EXPECT_EQ(on_after_stuck, 0);
   EXPECT_EQ(rig.runner.imu_faults().stuck, 1u);
+  rig.drain();
+  int fault_events = 0;
+  for (const gd::RunEvent& e : rig.events) fault_events += e.code == gd::RunEventCode::kImuFault;
+  EXPECT_EQ(fault_events, 1);
 }
 
 TEST(HostlessRunner, AFaultThatBeganBeforeTheTrialIsInItsRecord) {

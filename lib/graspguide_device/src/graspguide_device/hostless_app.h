@@ -185,7 +185,11 @@ class HostlessRunner {
     HostlessFrame out;
     const Real accel[3] = {Real(s.accel_mps2[0]), Real(s.accel_mps2[1]), Real(s.accel_mps2[2])};
     const Real gyro[3] = {Real(s.gyro_radps[0]), Real(s.gyro_radps[1]), Real(s.gyro_radps[2])};
+    const bool was_allowed = imu_.motors_allowed();
     const Status health = imu_.on_sample(accel, gyro, s.time_us);
+    // Any fault's onset in a trial is news (stale is found by tick(), below).
+    if (was_allowed && health != Status::kOk && phase_ == RunPhase::kTrial)
+      emit(RunEventCode::kImuFault);
     if (health == Status::kOk) estimate(accel, gyro, s.time_us);
     last_sample_us_ = s.time_us;
     have_sample_ = true;
