@@ -31,6 +31,8 @@ COMMANDS = (
     "demo",
     "sweep",
     "device",
+    "plan",
+    "mp",
 )
 
 
