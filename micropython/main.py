@@ -3,14 +3,19 @@ run it with the button, host-less. The defaults are the C++ Feather ESP32 build'
 (src/boards/arduino/board_config.h); a board_config.py beside this file may override any
 key of CONFIG, e.g.  CONFIG = {"motor_pins": (2, 3, 4, 5), "button_pin": 6}.
 
+A plan deployed as PLAN_PATH (`graspguide mp deploy`, made by `graspguide plan`) is
+installed into the store at boot, with the C++ device's rule: refused while the results
+log holds another plan's records (download them first), so no record loses its plan.
+
 Per-posture levels: from LEVELS_PATH when the host put one there (`trial_index status m1
 m2 m3 [m4]` per line, made by the host's C++ core), else the on-board solver. Whatever
 goes wrong, the motors end off."""
 
 from graspguide_mp import hal
 from graspguide_mp import plan_file as pf
+from graspguide_mp import results_file as rf
 from graspguide_mp import runner as rn
-from graspguide_mp.store import STORE_BYTES, FileStore
+from graspguide_mp.store import STORE_BYTES, FileStore, MemoryStore
 
 CONFIG = {
     "motor_pins": (13, 12, 27, 33),
@@ -22,6 +27,7 @@ CONFIG = {
     "store_path": "/graspguide.bin",
     "store_bytes": STORE_BYTES,
     "levels_path": "/graspguide_levels.txt",
+    "plan_path": "/plan.bin",
 }
 
 try:
@@ -38,6 +44,44 @@ def _exists(path):
         return True
     except OSError:
         return False
+
+
+def install_plan(store, path):
+    """Installs the plan file at path into store unless the store holds it already.
+    Returns what happened, one line for the REPL."""
+    if not _exists(path):
+        return "no new plan file"
+    with open(path, "rb") as f:
+        data = f.read()
+    staged = MemoryStore(pf.REGION_BYTES)
+    if len(data) > pf.REGION_BYTES or not staged.write(0, data):
+        return "plan file %s refused: not a plan file (%d bytes)" % (path, len(data))
+    status, new = pf.load_plan(staged)
+    if status != pf.OK:
+        return "plan file %s refused: %s" % (path, pf.STORE_STATUS_NAMES[status])
+    new_id = pf.plan_id(new)
+    status, old = pf.load_plan(store)
+    if status == pf.OK and pf.plan_id(old) == new_id:
+        return "plan of %s already installed" % new.header.participant_name()
+    log = rf.ResultsLog(store)
+    mounted = log.mount()
+    if mounted != pf.OK:
+        return "plan file %s not installed: the log cannot be read (%s)" % (
+            path,
+            pf.STORE_STATUS_NAMES[mounted],
+        )
+    if log.holds_other_plan(new_id):
+        return (
+            "plan file %s not installed: the log holds %d records of another plan; "
+            "download them (graspguide mp) and start a new store first" % (path, log.records)
+        )
+    saved = pf.save_plan(store, new)
+    if saved != pf.OK:
+        return "plan file %s not installed: %s" % (path, pf.STORE_STATUS_NAMES[saved])
+    return "installed the plan of %s (%d trials)" % (
+        new.header.participant_name(),
+        new.header.trial_count,
+    )
 
 
 def _postures(path):
@@ -82,6 +126,7 @@ def main(config=CONFIG):
             config["i2c_id"], config["i2c_scl"], config["i2c_sda"], address=config["imu_address"]
         )
         store = FileStore(config["store_path"], config["store_bytes"])
+        print("graspguide:", install_plan(store, config["plan_path"]))
         runner = rn.HostlessRunner(
             motors,
             clock,

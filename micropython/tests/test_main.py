@@ -59,3 +59,43 @@ def test_main_loop_runs_the_plan():
     assert not r.running() and motors.all_off()
     assert r.log.records == 2
     assert all(r.log.read(i)[1].success for i in range(2))
+
+
+def _plan_file(plan, path):
+    staged = MemoryStore(pf.REGION_BYTES)
+    assert pf.save_plan(staged, plan) == pf.OK
+    with open(path, "wb") as f:
+        f.write(staged.data)
+
+
+def test_a_deployed_plan_file_is_installed_once_and_never_orphans_records():
+    import os
+
+    from graspguide_mp import results_file as rf
+
+    path = "/tmp/graspguide_test_plan_%d.bin" % id(pf)
+    store = MemoryStore()
+    assert main.install_plan(store, path) == "no new plan file"
+    u1 = make_plan(2)
+    _plan_file(u1, path)
+    try:
+        assert main.install_plan(store, path).startswith("installed the plan of U1")
+        status, stored = pf.load_plan(store)
+        assert status == pf.OK and pf.plan_id(stored) == pf.plan_id(u1)
+        assert main.install_plan(store, path) == "plan of U1 already installed"
+        # U1 has a record now: U2's plan must wait until the records are downloaded.
+        log = rf.ResultsLog(store)
+        assert log.mount() == pf.OK
+        assert log.append(rf.LogRecord(u1.trials[0]), pf.plan_id(u1)) == pf.OK
+        _plan_file(make_plan(2, participant=b"U2"), path)
+        said = main.install_plan(store, path)
+        assert "holds 1 records of another plan" in said, said
+        status, stored = pf.load_plan(store)
+        assert pf.plan_id(stored) == pf.plan_id(u1)
+        # Not a plan: refused, the stored one stays.
+        with open(path, "wb") as f:
+            f.write(b"\x00" * 100)
+        assert "refused" in main.install_plan(store, path)
+        assert pf.plan_id(pf.load_plan(store)[1]) == pf.plan_id(u1)
+    finally:
+        os.remove(path)

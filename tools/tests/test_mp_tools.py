@@ -481,3 +481,45 @@ def test_mp_deploy_of_the_real_port_loads_its_plan_and_levels_on_the_interpreter
     )
     _, trials = _decode_region(_cpp_plan_region(tmp_path))
     assert f"LOADED True {len(trials)} {len(trials)}" in res.stdout, res.stdout + res.stderr
+
+
+def test_mp_log_downloads_the_boards_records_as_device_log_does(
+    tmp_path: Path, board: Board, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Records the port wrote on the "board" (the interpreter's file system) come back
+    through mpremote and the C++ store reader into the runner's folder format."""
+    port_dir = ROOT / "micropython"
+    writer = (
+        "import sys\n"
+        f"sys.path[:0] = [{str(port_dir)!r}, {str(port_dir / 'tests')!r}]\n"
+        "from graspguide_mp import plan_file as pf, results_file as rf\n"
+        "from graspguide_mp.store import FileStore\n"
+        "from hostless_helpers import make_plan\n"
+        "plan = make_plan(3, participant=b'U7')\n"
+        "store = FileStore('graspguide.bin')\n"
+        "assert pf.save_plan(store, plan) == pf.OK\n"
+        "log = rf.ResultsLog(store)\n"
+        "assert log.mount() == pf.OK\n"
+        "for i, ok in ((0, True), (1, False)):\n"
+        "    r = rf.LogRecord(plan.trials[i])\n"
+        "    r.success, r.completion_s, r.final_error_deg = ok, 4.5 if ok else 90.0, 1.25\n"
+        "    assert log.append(r, pf.plan_id(plan)) == pf.OK\n"
+        "store.close()\n"
+    )
+    res = subprocess.run(
+        [str(MICROPYTHON), "-c", writer], cwd=board.root, capture_output=True, timeout=60
+    )
+    assert res.returncode == 0, res.stdout + res.stderr
+    out = tmp_path / "study"
+    assert main(["mp", "log", "--port", board.port, "--out", str(out)]) == 0, capfd.readouterr()
+    assert "2 record(s) of 3 planned trials" in capfd.readouterr().out
+    lines = [json.loads(x) for x in (out / "U7" / "trials.jsonl").read_text().splitlines()]
+    assert [(r["trial_index"], r["success"], r["completion_s"]) for r in lines] == [
+        (1, True, 4.5),
+        (2, False, 90.0),
+    ]
+    assert all(r["hostless"] and r["participant"] == "U7" for r in lines)
+    # A store path the board does not have: mpremote fails and the command says so.
+    missing = ["mp", "log", "--port", board.port, "--out", str(out), "--store-path", "nope.bin"]
+    assert main(missing) == 1
+    assert "mpremote exited" in capfd.readouterr().err

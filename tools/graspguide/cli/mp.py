@@ -7,11 +7,12 @@ from __future__ import annotations
 import argparse
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from graspguide.cli.plan import add_plan_arguments, plan_bytes
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail
 
-HELP = "the MicroPython port on a board: build it, deploy it with mpremote, run it"
+HELP = "the MicroPython port on a board: build it, deploy it with mpremote, run it, get its log"
 
 DESCRIPTION = """\
 The host-less mode's MicroPython port (micropython/, README: MicroPython) on a board that
@@ -27,6 +28,9 @@ runs MicroPython (ESP32, RP2040, ...):
           written, every other file left alone (the results store too, unless --new-store)
   run     run main.py on the board now with mpremote, printing its output (Ctrl-C stops
           it); a board also runs it at power-up
+  log     copy the board's results store with mpremote and download its records into
+          --out DIR/<participant>/ exactly as `graspguide device log` does (the store is
+          the C++ device's layout; the simulated device reads the copy)
 
 --arch compiles native code for one board family (xtensawin: ESP32, armv6m: RP2040,
 armv7emsp: RP2350 and Cortex-M4F/M7 boards); without it the .mpy files are portable
@@ -78,6 +82,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--no-follow", action="store_true", help="start it and return without printing its output"
     )
+    _add_log_arguments(sub)
+
+
+def _add_log_arguments(sub: Any) -> None:
+    from graspguide.mp.deploy import STORE_FILE
+
+    log = sub.add_parser("log", help="download the board's results into OUT/<participant>/")
+    log.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
+    log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
+    log.add_argument(
+        "--store-path",
+        default=STORE_FILE,
+        metavar="PATH",
+        help=f"the store file on the board (default {STORE_FILE}, main.py's)",
+    )
 
 
 def _build(args: argparse.Namespace, out: Path) -> None:
@@ -110,6 +129,16 @@ def _act(args: argparse.Namespace) -> int:
     if args.action == "build":
         _build(args, Path(args.out))
         return EXIT_OK
+    if args.action == "log":
+        from graspguide.mp.log import download_board_log
+
+        s = download_board_log(args.port, args.out, args.store_path)
+        kind = "SIMULATED participant" if s.simulated else "participant"
+        print(
+            f"{s.folder}: {s.records} record(s) of {s.plan_trials} planned trials downloaded "
+            f"from {args.port} for {kind} {s.participant}; torn records: {s.torn_records}"
+        )
+        return EXIT_OK
     if args.action == "run":
         entry = find_port_dir(args.src) / "main.py"
         invoke(run_command(args.port, entry, follow=not args.no_follow))
@@ -123,6 +152,8 @@ def _act(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from graspguide.hostless.device_log import DeviceLogError
+    from graspguide.link.transport import LinkError
     from graspguide.mp.deploy import MpToolError
     from graspguide.mp.plan_file import PlanSolveError
     from graspguide.study.study_protocol import ProtocolFileError
@@ -134,6 +165,8 @@ def run(args: argparse.Namespace) -> int:
         return fail(command, e, EXIT_USAGE)
     except MpToolError as e:
         return fail(command, e, EXIT_FAILURE)
+    except (DeviceLogError, LinkError) as e:
+        return fail(command, e, EXIT_USAGE if getattr(e, "usage", False) else EXIT_FAILURE)
     except OSError as e:
         return fail(command, e, EXIT_FAILURE)
 
