@@ -92,6 +92,15 @@ def _postures(path):
     return rn.SolverPostures()
 
 
+def matching_postures(postures, plan_id):
+    """postures, unless they are levels solved for another plan (a plan.bin that was
+    refused, a stale levels file): then the on-board solver."""
+    if getattr(postures, "plan_id", plan_id) == plan_id:
+        return postures
+    print("graspguide: the levels file belongs to another plan: solving on the board")
+    return rn.SolverPostures()
+
+
 def _say(event):
     code, position, trial_index, _ = event
     print("graspguide:", rn.EVENT_NAMES[code], "position", position, "trial", trial_index)
@@ -143,6 +152,7 @@ def main(config=CONFIG):
         if runner.plan is None:
             print("graspguide: no plan stored in", config["store_path"], "- deploy one first")
             return
+        runner.postures = matching_postures(runner.postures, pf.plan_id(runner.plan))
         refused = runner.start()
         if refused is not None:
             print("graspguide: not started:", refused)

@@ -132,8 +132,11 @@ class PrecomputedPostures:
     """Levels the host worked out (the same C++ core), by trial_index, for boards where the
     on-board solve is too slow. table: {trial_index: (status_code, levels or None)}."""
 
-    def __init__(self, table):
+    def __init__(self, table, plan_id=None):
         self.table = table
+        # The plan the levels were solved for (None: unknown); main.py uses them only
+        # under that plan.
+        self.plan_id = plan_id
 
     def levels(self, header, trial):
         entry = self.table.get(trial.trial_index)
@@ -144,9 +147,11 @@ class PrecomputedPostures:
 
     @staticmethod
     def load(path):
-        """A levels file: one line per trial, `trial_index status_name m1 m2 m3 [m4]`
-        ('#' starts a comment). ValueError naming the line on anything else."""
+        """A levels file: `plan_id XXXXXXXX`, then one line per trial, `trial_index
+        status_name m1 m2 m3 [m4]` ('#' starts a comment). ValueError naming the line on
+        anything else."""
         table = {}
+        plan_id = None
         with open(path) as f:
             n = 0
             for line in f:
@@ -155,6 +160,9 @@ class PrecomputedPostures:
                 if not line:
                     continue
                 parts = line.split()
+                if parts[0] == "plan_id" and len(parts) == 2:
+                    plan_id = int(parts[1], 16)
+                    continue
                 try:
                     index = int(parts[0])
                     code = st.code_of(parts[1])
@@ -167,7 +175,7 @@ class PrecomputedPostures:
                         % (path, n, line)
                     )
                 table[index] = (code, levels if code == st.OK else None)
-        return PrecomputedPostures(table)
+        return PrecomputedPostures(table, plan_id)
 
 
 class HostlessRunner:

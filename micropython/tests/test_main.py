@@ -99,3 +99,26 @@ def test_a_deployed_plan_file_is_installed_once_and_never_orphans_records():
         assert pf.plan_id(pf.load_plan(store)[1]) == pf.plan_id(u1)
     finally:
         os.remove(path)
+
+
+def test_levels_of_another_plan_are_not_used():
+    path = "/tmp/graspguide_test_levels_%d.txt" % id(pf)
+    plan = make_plan(2)
+    pid = pf.plan_id(plan)
+    try:
+        with open(path, "w") as f:
+            f.write("# levels\nplan_id %08x\n1 ok 0.5 0.7 0.3\n2 ok 0.5 0.7 0.3 0.2\n" % pid)
+        mine = rn.PrecomputedPostures.load(path)
+        assert mine.plan_id == pid and len(mine.table) == 2
+        assert main.matching_postures(mine, pid) is mine
+        other = main.matching_postures(mine, pid ^ 1)
+        assert isinstance(other, rn.SolverPostures)
+        with open(path, "w") as f:  # a file that says nothing of its plan: not trusted
+            f.write("1 ok 0.5 0.7 0.3\n")
+        unknown = rn.PrecomputedPostures.load(path)
+        assert unknown.plan_id is None
+        assert isinstance(main.matching_postures(unknown, pid), rn.SolverPostures)
+    finally:
+        import os
+
+        os.remove(path)

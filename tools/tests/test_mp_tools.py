@@ -130,7 +130,10 @@ def test_levels_text_holds_each_trials_float32_levels(tmp_path: Path) -> None:
     begin, trials = plan_messages(protocol, "U1", planned_trials(protocol, "U1"), False, 2.0)
     data, levels = encode_plan_file(begin, trials, with_levels=True)
     block = data[16 + 148 + 35 * len(trials) + LEVELS_HEAD.size :]
-    rows = [line.split() for line in levels_text(trials, levels).splitlines()[1:]]
+    plan = zlib.crc32(data[16 : 16 + 148 + 35 * len(trials)])
+    text = levels_text(trials, levels, plan).splitlines()
+    assert text[1] == f"plan_id {plan:08x}"
+    rows = [line.split() for line in text[2:]]
     assert len(rows) == len(trials)
     for i, (row, t) in enumerate(zip(rows, trials)):
         stored = LEVELS_TRIAL.unpack_from(block, 32 * i)[3 : 3 + t.k]

@@ -101,7 +101,7 @@ def _add_log_arguments(sub: Any) -> None:
 
 def _build(args: argparse.Namespace, out: Path) -> None:
     from graspguide.mp.deploy import LEVELS_FILE, PLAN_FILE, STORE_FILE, build
-    from graspguide.mp.plan_file import fresh_store, levels_text
+    from graspguide.mp.plan_file import PLAN_PREAMBLE, fresh_store, levels_text
 
     files: dict[str, bytes] = {}
     what = "no plan"
@@ -109,7 +109,8 @@ def _build(args: argparse.Namespace, out: Path) -> None:
         data, trials, levels = plan_bytes(args, args.plan_protocol)
         files[PLAN_FILE] = data
         if args.levels:
-            files[LEVELS_FILE] = levels_text(trials, levels).encode()
+            plan = PLAN_PREAMBLE.unpack_from(data)[4]  # the preamble's CRC: the plan's id
+            files[LEVELS_FILE] = levels_text(trials, levels, plan).encode()
         if args.new_store:
             files[STORE_FILE] = fresh_store(data)
         what = f"the plan of {args.participant} ({len(trials)} trials"

@@ -225,11 +225,15 @@ def fresh_store(plan_file: bytes) -> bytes:
     return plan_file[: PLAN_PREAMBLE.size + length]
 
 
-def levels_text(trials: Sequence[PlanTrial], levels: Sequence[TrialLevels]) -> str:
+def levels_text(trials: Sequence[PlanTrial], levels: Sequence[TrialLevels], plan: int) -> str:
     """The port's levels file (micropython/graspguide_mp/runner.py PrecomputedPostures):
-    one line per trial, `trial_index status m1 .. mk`, the float32 levels written exactly
-    (repr of the rounded value parses back to the same float32)."""
-    lines = ["# trial_index status levels: precomputed by the C++ core (graspguide plan)"]
+    `plan_id XXXXXXXX` (the plan the levels belong to: the board ignores them under any
+    other), then one line per trial, `trial_index status m1 .. mk`, the float32 levels
+    written exactly (repr of the rounded value parses back to the same float32)."""
+    lines = [
+        "# trial_index status levels: precomputed by the C++ core (graspguide plan)",
+        f"plan_id {plan:08x}",
+    ]
     for t, lv in zip(trials, levels, strict=True):
         values = " ".join(repr(v) for v in lv.levels[: lv.k])
         lines.append(f"{t.trial_index} {lv.status} {values}")
