@@ -361,7 +361,7 @@ TEST(Schema, IdsAreUniqueAndSizesConsistent) {
   EXPECT_STREQ(gl::message_name(0x03), "POSE");
   EXPECT_STREQ(gl::message_name(0x7F), "unknown");
   EXPECT_EQ(gl::kMaxWireFrameSize, 156u);  // docs/protocol.md: PLAN_BEGIN is the largest frame
-  EXPECT_EQ(gl::kProtocolVersion, 2);
+  EXPECT_EQ(gl::kProtocolVersion, 3);
 }
 
 TEST(Schema, ParseEventsNameTheirErrorCodes) {

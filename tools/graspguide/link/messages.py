@@ -16,7 +16,7 @@ from graspguide.link.errors import UnknownIdError
 from graspguide.link.message_base import FieldSpec, Message
 
 # Frames of any other are bad_version.
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 # ErrorCode values below this are graspguide::Status values; from it, link codes.
 LINK_ERROR_BASE = 0x40
 # Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -43,6 +43,8 @@ CAPABILITY_FULL_SOLVE = 0x01
 CAPABILITY_HOSTLESS = 0x02
 # a simulated device: takes SIM_IMU_SAMPLE and SIM_BUTTON (real boards answer sim_only)
 CAPABILITY_SIM_MESSAGES = 0x04
+# takes SET_POSTURE: the host solves each posture (Algorithm 1) and the board does the per-frame work; without full_solve it needs it
+CAPABILITY_PER_FRAME = 0x08
 MAX_PAYLOAD_SIZE = 148
 HOST_TO_DEVICE_IDS = range(0x01, 0x40)
 DEVICE_TO_HOST_IDS = range(0x80, 0xC0)
@@ -87,6 +89,8 @@ class ErrorCode(enum.IntEnum):
     STORAGE_FAILED = 0x4E  # the non-volatile storage refused a write or read (motors off)
     NO_RECORD = 0x4F  # LOG_READ of an index at or past LOG_INFO.records; detail = 0
     SIM_ONLY = 0x50  # a simulation-only message (SIM_*) sent to a real board; detail = the id
+    PER_FRAME_ONLY = 0x51  # the board does only the per-frame work: it takes SET_POSTURE, not SET_SCENE or contacts in POSE; detail = the request's id
+    POSTURE_MISMATCH = 0x52  # START_TRIAL's wrench is not the one SET_POSTURE was solved for; detail = 0
 
 
 class ConstraintModel(enum.IntEnum):
@@ -179,6 +183,8 @@ ERROR_MEANINGS: dict[str, str] = {
     'storage_failed': 'the non-volatile storage refused a write or read (motors off)',
     'no_record': 'LOG_READ of an index at or past LOG_INFO.records; detail = 0',
     'sim_only': 'a simulation-only message (SIM_*) sent to a real board; detail = the id',
+    'per_frame_only': "the board does only the per-frame work: it takes SET_POSTURE, not SET_SCENE or contacts in POSE; detail = the request's id",
+    'posture_mismatch': "START_TRIAL's wrench is not the one SET_POSTURE was solved for; detail = 0",
 }
 
 
@@ -201,6 +207,7 @@ class MsgId(enum.IntEnum):
     LOG_ERASE = 0x0E
     SIM_IMU_SAMPLE = 0x10
     SIM_BUTTON = 0x11
+    SET_POSTURE = 0x12
     ACK = 0x80
     ERROR = 0x81
     HELLO_REPLY = 0x82
@@ -225,7 +232,7 @@ class Hello(Message):
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<B")
 
-    protocol_version: int = 2
+    protocol_version: int = 3
 
 
 @dataclass(frozen=True)
@@ -531,6 +538,36 @@ class SimButton(Message):
 
 
 @dataclass(frozen=True)
+class SetPosture(Message):
+    """SET_POSTURE (0x12, host -> device): For a board that does only the per-frame work (no full_solve capability): the result of Algorithm 1 for one posture and wrench, computed by the host with the same core, and the trial's settings. Replaces SET_SCENE; START_TRIAL must then carry the same wrench. Answer: ACK, or ERROR bad_config (detail = the field's index), not_allowed_in_state while a trial runs."""
+
+    MSG_ID: ClassVar[int] = MsgId.SET_POSTURE
+    NAME: ClassVar[str] = "SET_POSTURE"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 66
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("k", "u8", (), None, 1, "", "contacts in use: 3 or 4 (motors >= k stay off)", "B"),
+        FieldSpec("mode", "enum", (), Mode, 1, "", "constant (C) or error-proportional (V) intensity", "B"),
+        FieldSpec("levels", "f32", (4,), None, 4, "", "motor levels |m_i| in [0, 1] of Algorithm 1 step 6 (slots >= k zero)", "4f"),
+        FieldSpec("force_unit", "f32", (3,), None, 4, "", "f-hat: the unit force direction in the hand frame", "3f"),
+        FieldSpec("wrench", "f32", (6,), None, 4, "", "the wrench this posture was solved for (START_TRIAL must match it)", "6f"),
+        FieldSpec("threshold_deg", "f32", (), None, 4, "deg", "success threshold of the guidance error", "f"),
+        FieldSpec("hold_s", "f32", (), None, 4, "s", "time the error must stay below the threshold", "f"),
+        FieldSpec("timeout_s", "f32", (), None, 4, "s", "trial timeout", "f"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<BB4f3f6ffff")
+
+    k: int = 3
+    mode: Mode = Mode.C
+    levels: tuple[float, ...] = (0.0,) * 4
+    force_unit: tuple[float, ...] = (0.0,) * 3
+    wrench: tuple[float, ...] = (0.0,) * 6
+    threshold_deg: float = 3.0
+    hold_s: float = 0.5
+    timeout_s: float = 90.0
+
+
+@dataclass(frozen=True)
 class Ack(Message):
     """ACK (0x80, device -> host): A request was accepted."""
 
@@ -797,6 +834,7 @@ MESSAGES: dict[int, type[Message]] = {
     MsgId.LOG_ERASE: LogErase,
     MsgId.SIM_IMU_SAMPLE: SimImuSample,
     MsgId.SIM_BUTTON: SimButton,
+    MsgId.SET_POSTURE: SetPosture,
     MsgId.ACK: Ack,
     MsgId.ERROR: Error,
     MsgId.HELLO_REPLY: HelloReply,
@@ -835,10 +873,11 @@ __all__ = [
     "PROTOCOL_VERSION", "LINK_ERROR_BASE", "POSE_WATCHDOG_MS", "MAX_CONTACTS",
     "BOARD_NAME_SIZE", "MAX_PLAN_TRIALS", "PARTICIPANT_ID_SIZE", "CONFIG_HASH_SIZE",
     "LOG_ERASE_KEY", "TELEMETRY_FLAG_GRASP_RECOMPUTED", "TELEMETRY_FLAG_TRIAL_RUNNING",
-    "CAPABILITY_FULL_SOLVE", "CAPABILITY_HOSTLESS", "CAPABILITY_SIM_MESSAGES", "ErrorCode",
-    "ConstraintModel", "Policy", "Mode", "DeviceState", "WrenchClass", "RunEvent", "Hello",
-    "SetScene", "Pose", "StartTrial", "Stop", "SetMotors", "GetStatus", "PlanBegin",
-    "PlanTrial", "PlanCommit", "HostlessRun", "LogInfoGet", "LogRead", "LogErase",
-    "SimImuSample", "SimButton", "Ack", "Error", "HelloReply", "Telemetry", "TrialResult",
-    "Status", "LogInfo", "LogRecord", "HostlessEvent",
+    "CAPABILITY_FULL_SOLVE", "CAPABILITY_HOSTLESS", "CAPABILITY_SIM_MESSAGES",
+    "CAPABILITY_PER_FRAME", "ErrorCode", "ConstraintModel", "Policy", "Mode", "DeviceState",
+    "WrenchClass", "RunEvent", "Hello", "SetScene", "Pose", "StartTrial", "Stop",
+    "SetMotors", "GetStatus", "PlanBegin", "PlanTrial", "PlanCommit", "HostlessRun",
+    "LogInfoGet", "LogRead", "LogErase", "SimImuSample", "SimButton", "SetPosture", "Ack",
+    "Error", "HelloReply", "Telemetry", "TrialResult", "Status", "LogInfo", "LogRecord",
+    "HostlessEvent",
 ]

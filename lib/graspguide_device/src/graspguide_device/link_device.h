@@ -249,6 +249,12 @@ class LinkDevice {
     send(s);
   }
 
+  // This application solves every posture itself (kCapabilityFullSolve); SET_POSTURE is
+  // for boards that do only the per-frame work.
+  void on(const link::SetPosture&) {
+    send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(link::MsgId::kSetPosture));
+  }
+
   // ---- host-less: the plan, the run, the log
   bool hostless_missing(link::MsgId id) {
     if (hostless_) return false;

@@ -14,7 +14,7 @@
 namespace graspguide_link {
 
 // Frames of any other are bad_version.
-inline constexpr uint8_t kProtocolVersion = 2;
+inline constexpr uint8_t kProtocolVersion = 3;
 // ErrorCode values below this are graspguide::Status values; from it, link codes.
 inline constexpr uint8_t kLinkErrorBase = 0x40;
 // Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -41,6 +41,8 @@ inline constexpr uint8_t kCapabilityFullSolve = 0x01;
 inline constexpr uint8_t kCapabilityHostless = 0x02;
 // a simulated device: takes SIM_IMU_SAMPLE and SIM_BUTTON (real boards answer sim_only)
 inline constexpr uint8_t kCapabilitySimMessages = 0x04;
+// takes SET_POSTURE: the host solves each posture (Algorithm 1) and the board does the per-frame work; without full_solve it needs it
+inline constexpr uint8_t kCapabilityPerFrame = 0x08;
 
 // Every schema enum has an EnumInfo: its values in schema order.
 template <class E>
@@ -84,10 +86,12 @@ enum class ErrorCode : uint8_t {
   kStorageFailed = 0x4E,  // the non-volatile storage refused a write or read (motors off)
   kNoRecord = 0x4F,  // LOG_READ of an index at or past LOG_INFO.records; detail = 0
   kSimOnly = 0x50,  // a simulation-only message (SIM_*) sent to a real board; detail = the id
+  kPerFrameOnly = 0x51,  // the board does only the per-frame work: it takes SET_POSTURE, not SET_SCENE or contacts in POSE; detail = the request's id
+  kPostureMismatch = 0x52,  // START_TRIAL's wrench is not the one SET_POSTURE was solved for; detail = 0
 };
 template <>
 struct EnumInfo<ErrorCode> {
-  static constexpr size_t kCount = 36;
+  static constexpr size_t kCount = 38;
   static constexpr ErrorCode kValues[kCount] = {
       ErrorCode::kOk,
       ErrorCode::kNonFiniteInput,
@@ -125,6 +129,8 @@ struct EnumInfo<ErrorCode> {
       ErrorCode::kStorageFailed,
       ErrorCode::kNoRecord,
       ErrorCode::kSimOnly,
+      ErrorCode::kPerFrameOnly,
+      ErrorCode::kPostureMismatch,
   };
 };
 constexpr bool is_valid(ErrorCode v) {
@@ -165,6 +171,8 @@ constexpr bool is_valid(ErrorCode v) {
     case ErrorCode::kStorageFailed:
     case ErrorCode::kNoRecord:
     case ErrorCode::kSimOnly:
+    case ErrorCode::kPerFrameOnly:
+    case ErrorCode::kPostureMismatch:
       return true;
   }
   return false;
@@ -208,6 +216,8 @@ constexpr const char* enum_name(ErrorCode v) {
     case ErrorCode::kStorageFailed: return "storage_failed";
     case ErrorCode::kNoRecord: return "no_record";
     case ErrorCode::kSimOnly: return "sim_only";
+    case ErrorCode::kPerFrameOnly: return "per_frame_only";
+    case ErrorCode::kPostureMismatch: return "posture_mismatch";
   }
   return "unknown";
 }
@@ -453,6 +463,7 @@ enum class MsgId : uint8_t {
   kLogErase = 0x0E,
   kSimImuSample = 0x10,
   kSimButton = 0x11,
+  kSetPosture = 0x12,
   kAck = 0x80,
   kError = 0x81,
   kHelloReply = 0x82,
@@ -463,7 +474,7 @@ enum class MsgId : uint8_t {
   kLogRecord = 0x87,
   kHostlessEvent = 0x88,
 };
-inline constexpr size_t kMessageCount = 25;
+inline constexpr size_t kMessageCount = 26;
 inline constexpr size_t kMaxPayloadSize = 148;
 
 constexpr bool is_host_to_device_id(uint8_t id) {
@@ -492,6 +503,7 @@ constexpr const char* message_name(uint8_t msg_id) {
     case 0x0E: return "LOG_ERASE";
     case 0x10: return "SIM_IMU_SAMPLE";
     case 0x11: return "SIM_BUTTON";
+    case 0x12: return "SET_POSTURE";
     case 0x80: return "ACK";
     case 0x81: return "ERROR";
     case 0x82: return "HELLO_REPLY";
@@ -524,6 +536,7 @@ constexpr bool payload_size_of(uint8_t msg_id, size_t* size) {
     case 0x0E: *size = 4; return true;
     case 0x10: *size = 28; return true;
     case 0x11: *size = 1; return true;
+    case 0x12: *size = 66; return true;
     case 0x80: *size = 2; return true;
     case 0x81: *size = 4; return true;
     case 0x82: *size = 29; return true;
@@ -542,7 +555,7 @@ struct Hello {
   static constexpr MsgId kId = MsgId::kHello;
   static constexpr const char* kName = "HELLO";
   static constexpr size_t kPayloadSize = 1;
-  uint8_t protocol_version = {2u};  // u8: the host's protocol version
+  uint8_t protocol_version = {3u};  // u8: the host's protocol version
 };
 
 // Calls fn("name", member) for every field, in wire order: pack, unpack and ==
@@ -956,6 +969,46 @@ void for_each_field(SimButton& m, Fn&& fn) {
   fn("pressed", m.pressed);
 }
 
+// SET_POSTURE (0x12, host -> device): For a board that does only the per-frame work (no full_solve capability): the result of Algorithm 1 for one posture and wrench, computed by the host with the same core, and the trial's settings. Replaces SET_SCENE; START_TRIAL must then carry the same wrench. Answer: ACK, or ERROR bad_config (detail = the field's index), not_allowed_in_state while a trial runs.
+struct SetPosture {
+  static constexpr MsgId kId = MsgId::kSetPosture;
+  static constexpr const char* kName = "SET_POSTURE";
+  static constexpr size_t kPayloadSize = 66;
+  uint8_t k = {3u};  // u8: contacts in use: 3 or 4 (motors >= k stay off)
+  Mode mode = {};  // Mode: constant (C) or error-proportional (V) intensity
+  float levels[4] = {};  // f32[4]: motor levels |m_i| in [0, 1] of Algorithm 1 step 6 (slots >= k zero)
+  float force_unit[3] = {};  // f32[3]: f-hat: the unit force direction in the hand frame
+  float wrench[6] = {};  // f32[6]: the wrench this posture was solved for (START_TRIAL must match it)
+  float threshold_deg = {3.0f};  // f32 [deg]: success threshold of the guidance error
+  float hold_s = {0.5f};  // f32 [s]: time the error must stay below the threshold
+  float timeout_s = {90.0f};  // f32 [s]: trial timeout
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const SetPosture& m, Fn&& fn) {
+  fn("k", m.k);
+  fn("mode", m.mode);
+  fn("levels", m.levels);
+  fn("force_unit", m.force_unit);
+  fn("wrench", m.wrench);
+  fn("threshold_deg", m.threshold_deg);
+  fn("hold_s", m.hold_s);
+  fn("timeout_s", m.timeout_s);
+}
+template <class Fn>
+void for_each_field(SetPosture& m, Fn&& fn) {
+  fn("k", m.k);
+  fn("mode", m.mode);
+  fn("levels", m.levels);
+  fn("force_unit", m.force_unit);
+  fn("wrench", m.wrench);
+  fn("threshold_deg", m.threshold_deg);
+  fn("hold_s", m.hold_s);
+  fn("timeout_s", m.timeout_s);
+}
+
 // ACK (0x80, device -> host): A request was accepted.
 struct Ack {
   static constexpr MsgId kId = MsgId::kAck;
@@ -1288,7 +1341,7 @@ void for_each_field(HostlessEvent& m, Fn&& fn) {
 
 template <class... Messages>
 struct MessageList {};
-using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, PlanBegin, PlanTrial, PlanCommit, HostlessRun, LogInfoGet, LogRead, LogErase, SimImuSample, SimButton, Ack, Error, HelloReply, Telemetry, TrialResult, Status, LogInfo, LogRecord, HostlessEvent>;
+using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, PlanBegin, PlanTrial, PlanCommit, HostlessRun, LogInfoGet, LogRead, LogErase, SimImuSample, SimButton, SetPosture, Ack, Error, HelloReply, Telemetry, TrialResult, Status, LogInfo, LogRecord, HostlessEvent>;
 
 // Unpacks a payload into the struct its id names and calls visitor(message).
 // kUnknownId, or unpack()'s status, without calling the visitor when it fails.
@@ -1403,6 +1456,13 @@ LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Vi
     }
     case 0x11: {
       SimButton m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x12: {
+      SetPosture m;
       const LinkStatus status = unpack(payload, size, &m, bad_field);
       if (status != LinkStatus::kOk) return status;
       visitor(m);
