@@ -527,6 +527,51 @@ def test_ctrl_c_stops_the_run_and_the_same_device_resumes_it(tmp_path):
         assert _f32(rec["final_error_deg"]) == _f32(res.final_error_deg)
 
 
+def test_an_imu_fault_mid_trial_is_reported_counted_and_the_study_goes_on(tmp_path, monkeypatch):
+    """A frozen IMU for 40 samples in the first trial: the device turns the motors off and
+    sends imu_fault; the host says so, the trial's record counts it, the study finishes."""
+    from graspguide.link.sim import SimulatedDevice
+
+    _, protocol = short_protocol(tmp_path)
+    real_sample = ImuWorld.sample
+    frozen: dict[str, object] = {}
+
+    def sample(self, t_s, quat):
+        s = real_sample(self, t_s, quat)
+        n = frozen.setdefault("n", 0)
+        if "trial" in frozen and n < 40:  # in the trial: the same reading, again and again
+            frozen["n"] = n + 1
+            return frozen.setdefault("s", s)
+        return s
+
+    def on_sample(t_s, q, tel, trial):
+        if trial is not None:
+            frozen["trial"] = True
+
+    monkeypatch.setattr(ImuWorld, "sample", sample)
+    said = io.StringIO()
+    with SimulatedDevice(virtual_clock=True, store=str(tmp_path / "s.bin"), start=True) as dev:
+        client = dv.DeviceClient(dev)
+        model = open_runner_source("participant", protocol, "U1").model
+        done = hr.run_hostless(
+            protocol,
+            "U1",
+            client,
+            str(tmp_path / "study"),
+            model,
+            rest_s=REST_S,
+            progress=Progress(out=said, tty=False),
+            err=io.StringIO(),
+            on_sample=on_sample,
+        )
+    assert frozen["n"] == 40
+    assert done.completed == done.planned
+    assert "reported an IMU fault at plan position 0" in said.getvalue()
+    records = read_lines(tmp_path / "study" / "U1" / "trials.jsonl")
+    assert records[0]["imu_faults"] == 1
+    assert all(r["imu_faults"] == 0 for r in records[1:])
+
+
 def test_cli_usage_errors(tmp_path):
     path, _ = short_protocol(tmp_path)
     base = ["trial", "--protocol", path, "--participant", "U1", "--out", str(tmp_path / "o")]

@@ -265,6 +265,7 @@ class HostlessWorld:
         self.trial_t0_s = 0.0
         self.pwm: list[int] = [0, 0, 0, 0]
         self.results: list[Any] = []
+        self.imu_faults = 0
         self.truth = TrueError(protocol)
         self.on_truth = on_truth
 
@@ -301,12 +302,15 @@ class HostlessWorld:
             elif kind is RunEvent.PLAN_DONE:
                 self.state = "done"
             elif kind is RunEvent.IMU_FAULT:
-                # The device goes on (motors off until the IMU recovers), but a simulated
-                # world whose samples a device calls faulty is a bug of the world model.
-                raise RunnerError(
-                    f"the device judged the simulated IMU faulty at plan position "
-                    f"{ev.position} (trial {ev.trial_index}; STATUS.last_error says how): "
-                    "the world model sent a stale, frozen or out-of-range stream"
+                # The device goes on (motors off until the IMU recovers; the trial's record
+                # counts it). In a simulation it means the host paused longer than the
+                # simulated device's real-time stale rule (a loaded machine), or a world
+                # model bug: said, counted, not fatal.
+                self.imu_faults += 1
+                self.progress.line(
+                    f"warning: the device reported an IMU fault at plan position "
+                    f"{ev.position} (trial {ev.trial_index}); the trial goes on and its record "
+                    "counts it (a host pause longer than the simulator's stale rule does this)"
                 )
             else:
                 raise RunnerError(
