@@ -11,7 +11,7 @@ from collections.abc import Sequence
 if __package__ in (None, ""):  # run as `python3 tools/codegen`: import as the package
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from codegen import emit_cpp, emit_docs, emit_golden, emit_python  # noqa: E402
+from codegen import emit_avr, emit_cpp, emit_docs, emit_golden, emit_python  # noqa: E402
 from codegen.schema import REGEN, Schema, SchemaError, load_schema  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -22,6 +22,7 @@ PY_PATH = os.path.join(ROOT, "tools", "graspguide", "link", "messages.py")
 GOLDEN_JSON_PATH = os.path.join(ROOT, "test", "data", "golden_frames.json")
 GOLDEN_H_PATH = os.path.join(ROOT, "test", "data", "golden_frames.h")
 DOC_PATH = os.path.join(ROOT, "docs", "protocol.md")
+AVR_DIR = os.path.join(ROOT, "lib", "graspguide_frame_device", "src", "graspguide_frame_device")
 
 
 def outputs(schema: Schema) -> dict[str, str]:
@@ -36,6 +37,9 @@ def outputs(schema: Schema) -> dict[str, str]:
     if os.path.exists(DOC_PATH):
         with open(DOC_PATH, encoding="utf-8") as fh:
             out[DOC_PATH] = emit_docs.render(schema, fh.read())
+    # Likewise the per-frame board's library (its manifest says whether the copy has it).
+    if os.path.exists(os.path.join(os.path.dirname(os.path.dirname(AVR_DIR)), "library.json")):
+        out[os.path.join(AVR_DIR, "link_subset.h")] = emit_avr.render(schema)
     return out
 
 
