@@ -8,7 +8,9 @@
 #   4. the Python package in tools/ (if tools/pyproject.toml exists),
 #      re-installed only when its sources (tools/, lib/graspguide/, lib/graspguide_frame/) change;
 #   5. the simulated device (.pio/build/sim/program, `pio run -e sim`) when
-#      platformio.ini has [env:sim]; pio rebuilds only what changed.
+#      platformio.ini has [env:sim]; pio rebuilds only what changed;
+#   6. arduino-cli (pinned version, built from Go sources into .tools/arduino-cli/,
+#      rebuilt only when the version changes) and its offline config for Debian's AVR core.
 # Exports nothing. Set GRASPGUIDE_PYTHON to choose the interpreter for .venv
 # (default: python3 on PATH).
 set -euo pipefail
@@ -22,8 +24,12 @@ die() { printf 'bootstrap: ERROR: %s\n' "$*" >&2; exit 1; }
 # --- 1. Debian packages ------------------------------------------------------
 # gcc-avr, avr-libc, simavr and libsimavr-dev: the per-frame layer built for the ATmega328P
 # and its cycle counts (src/harness/avr_frame/).
+# arduino-core-avr and universal-ctags: the Pro Mini sketch (promini/) built offline by
+# arduino-cli (step 6); golang-go only when no `go` is on PATH, to build arduino-cli (step 6
+# checks that the Go found is recent enough).
 APT_PACKAGES=(libeigen3-dev libgtest-dev cmake ninja-build g++ python3-venv
-    gcc-avr avr-libc simavr libsimavr-dev)
+    gcc-avr avr-libc simavr libsimavr-dev arduino-core-avr universal-ctags)
+command -v go >/dev/null 2>&1 || APT_PACKAGES+=(golang-go)
 # shellcheck source=tools/apt-ensure.sh
 . "$ROOT/tools/apt-ensure.sh"
 apt_ensure "${APT_PACKAGES[@]}"
@@ -113,5 +119,64 @@ if grep -q '^\[env:sim\]' "$ROOT/platformio.ini" 2>/dev/null; then
 else
     say "platformio.ini has no [env:sim]: not building the simulated device"
 fi
+
+# --- 6. arduino-cli, offline, for the Pro Mini sketch ------------------------------------
+# `go install` of arduino-cli is refused (its go.mod has replace directives), so it is
+# built inside a throw-away module, with its version stamped in (`arduino-cli version`).
+# The binary lives under .tools/arduino-cli/<version>/ so a version bump rebuilds it and
+# nothing else does (measured: 78 s the first time, 2 cores, empty Go module cache). Debian's
+# AVR core is linked in as the user's hardware folder: compiling then downloads nothing
+# (arduino-cli still tries for its indexes and says so; harmless offline).
+ARDUINO_CLI_VERSION=1.0.4
+ACLI_HOME="$ROOT/.tools/arduino-cli"
+ACLI_BIN="$ACLI_HOME/$ARDUINO_CLI_VERSION/arduino-cli"
+DEBIAN_AVR_CORE=/usr/share/arduino/hardware/arduino/avr
+mkdir -p "$ACLI_HOME"
+# .tools/ holds only machine-local builds and caches; it ignores itself.
+[[ -f $ROOT/.tools/.gitignore ]] || echo '*' >"$ROOT/.tools/.gitignore"
+if [[ ! -x $ACLI_BIN ]]; then
+    command -v go >/dev/null 2>&1 || die "no \`go\` on PATH to build arduino-cli (apt-get install golang-go)"
+    # arduino-cli 1.0.4's go.mod says go 1.22; Debian 12's golang-go is 1.19.
+    go_minor="$(go env GOVERSION | sed -n 's/^go1\.\([0-9]*\).*/\1/p')"
+    [[ -n $go_minor && $go_minor -ge 22 ]] ||
+        die "arduino-cli $ARDUINO_CLI_VERSION needs Go >= 1.22, found $(go env GOVERSION) at $(command -v go): install a newer Go (/usr/local/go) first on PATH"
+    say "building arduino-cli $ARDUINO_CLI_VERSION with $(go version) (once; about 80 s on 2 cores)"
+    acli_src="$(mktemp -d "$ACLI_HOME/src.XXXXXX")"
+    acli_log="$ACLI_HOME/build-$ARDUINO_CLI_VERSION.log"
+    acli_start=$SECONDS
+    if (cd "$acli_src" && go mod init graspguide.local/arduino-cli-build &&
+        go get "github.com/arduino/arduino-cli@v$ARDUINO_CLI_VERSION" &&
+        go build -ldflags "-X github.com/arduino/arduino-cli/version.versionString=$ARDUINO_CLI_VERSION" \
+            -o "$acli_src/arduino-cli" github.com/arduino/arduino-cli) >"$acli_log" 2>&1; then
+        mkdir -p "$(dirname "$ACLI_BIN")"
+        mv "$acli_src/arduino-cli" "$ACLI_BIN"
+        rm -rf "$acli_src"
+        say "arduino-cli $ARDUINO_CLI_VERSION built in $((SECONDS - acli_start)) s"
+    else
+        rm -rf "$acli_src"
+        tail -n 30 "$acli_log" >&2
+        die "building arduino-cli $ARDUINO_CLI_VERSION failed (full log: $acli_log)"
+    fi
+else
+    say "arduino-cli $ARDUINO_CLI_VERSION present ($ACLI_BIN)"
+fi
+[[ -d $DEBIAN_AVR_CORE ]] || die "$DEBIAN_AVR_CORE missing; apt-get install arduino-core-avr"
+mkdir -p "$ACLI_HOME/user/hardware/arduino" "$ACLI_HOME/data" "$ACLI_HOME/downloads"
+ln -sfn "$DEBIAN_AVR_CORE" "$ACLI_HOME/user/hardware/arduino/avr"
+ln -sfn "$ARDUINO_CLI_VERSION/arduino-cli" "$ACLI_HOME/arduino-cli"
+cat >"$ACLI_HOME/arduino-cli.yaml.new" <<YAML
+# Written by tools/bootstrap.sh: offline, Debian's AVR core as a user hardware folder.
+directories:
+  user: $ACLI_HOME/user
+  data: $ACLI_HOME/data
+  downloads: $ACLI_HOME/downloads
+build_cache:
+  path: $ACLI_HOME/build-cache
+updater:
+  enable_notification: false
+metrics:
+  enabled: false
+YAML
+mv "$ACLI_HOME/arduino-cli.yaml.new" "$ACLI_HOME/arduino-cli.yaml"
 
 say "done"

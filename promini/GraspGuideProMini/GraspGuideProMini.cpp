@@ -1,0 +1,26 @@
+// setup() and loop(): wiring only; everything the board decides is in the device.
+#include <Arduino.h>
+
+#include <graspguide_frame_device.h>
+#include "board_glue.h"
+
+namespace {
+
+graspguide::promini::SerialStream g_stream;
+graspguide::promini::PwmMotors g_motors;
+graspguide::promini::MicrosClock g_clock;
+graspguide_frame_device::FrameDevice* g_device = nullptr;
+
+}  // namespace
+
+void setup() {
+  // Motors off before anything else can fail or wait.
+  g_motors.begin();
+  Serial.begin(graspguide::promini::kBaud);
+  // Built here, not as a global, so its first motor write finds the pins already set up.
+  static graspguide_frame_device::FrameDevice device(g_stream, g_motors, g_clock,
+                                                     graspguide_frame_device::DeviceInfo{});
+  g_device = &device;
+}
+
+void loop() { g_device->poll(); }
