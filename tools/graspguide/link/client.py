@@ -57,6 +57,8 @@ from graspguide.link.codec import (
 )
 from graspguide.link.errors import BadCobsError, BadEnumValueError, ProtocolError
 from graspguide.link.messages import (
+    CAPABILITY_FULL_SOLVE,
+    CAPABILITY_PER_FRAME,
     ERROR_MEANINGS,
     LINK_ERROR_BASE,
     LOG_ERASE_KEY,
@@ -87,6 +89,7 @@ from graspguide.link.messages import (
     Policy,
     Pose,
     SetMotors,
+    SetPosture,
     SetScene,
     SimButton,
     SimImuSample,
@@ -263,6 +266,23 @@ POLICY_NAMES = {name: Policy[name.upper()] for name in POLICIES}
 MODE_NAMES = {name: Mode[name.upper()] for name in MODES}
 CONSTRAINT_NAMES = {name: ConstraintModel[name.upper()] for name in CONSTRAINT_MODELS}
 _F32 = struct.Struct("<f")
+_POLICY_NAME = {v: k for k, v in POLICY_NAMES.items()}
+_MODE_NAME = {v: k for k, v in MODE_NAMES.items()}
+_CONSTRAINT_NAME = {v: k for k, v in CONSTRAINT_NAMES.items()}
+# What a DeviceError raised for the host's own solve of a per-frame-only board's posture
+# says instead of the device's word.
+HOST_SOLVE_SOURCE = "host core"
+# The core statuses of a scene's geometry, and a wrench to have a solve report them.
+_GEOMETRY_STATUSES = frozenset(
+    (
+        "non_finite_input",
+        "bad_contact_count",
+        "bad_axis",
+        "coincident_contacts",
+        "imprecise_contacts",
+    )
+)
+_PROBE_WRENCH = (0.0, 0.0, -1.0, 0.0, 0.0, 0.0)
 
 
 def code_name(code: int | ErrorCode) -> str:
@@ -288,6 +308,11 @@ class ProtocolMismatch(LinkError):
     def __init__(self, message: str, device_version: int | None = None):
         super().__init__(message)
         self.device_version = device_version
+
+
+class PerFrameOnly(LinkError):
+    """A request a per-frame-only board (HELLO_REPLY without full_solve) cannot take, such
+    as a POSE carrying contacts: the host solves the posture once per trial."""
 
 
 class DeviceError(LinkError):
@@ -370,8 +395,9 @@ class DeviceError(LinkError):
         verb = "refused" if self.source == "ERROR" else "could not solve"
         meaning = self.meaning.split("; detail = ")[0]  # the detail is spelled out below
         context = f" ({self.context})" if self.context else ""
+        who = "the host's core" if self.source == HOST_SOLVE_SOURCE else "device"
         return (
-            f"device {verb} {self.request}{seq}{context}: {self.code_name} -- "
+            f"{who} {verb} {self.request}{seq}{context}: {self.code_name} -- "
             f"{meaning}{self._detail_text()}"
         )
 
@@ -541,6 +567,8 @@ class DeviceClient:
         self._fast_telemetry_frames = 0
         self.device_frames_lost = 0
         self._last_device_seq: int | None = None
+        # The scene of a per-frame-only board: kept here, solved at start_trial.
+        self._host_scene: SetScene | None = None
         if send_idle_delimiter:
             self.transport.write(b"\x00")
 
@@ -821,11 +849,17 @@ class DeviceClient:
         hold_s: float = 0.5,
         timeout_s: float = 90.0,
         timeout: float | None = None,
-    ) -> Ack:
+    ) -> Ack | None:
         """SET_SCENE. ``contacts``: 3 or 4 [x, y, z] (another count is sent as is and the
         device answers bad_contact_count); names as in `graspguide solve` ("F"/"Fperp",
         "C"/"V", "paper"/"normal"/"none") or the wire enums. Values go on the wire as
-        float32 (beyond its range: infinite)."""
+        float32 (beyond its range: infinite).
+
+        A per-frame-only board (HELLO_REPLY with per_frame and without full_solve, learnt
+        from :meth:`hello` or from the board's per_frame_only answer) gets nothing now: the
+        scene, checked by the core as the board would, stays on the host and
+        :meth:`start_trial` sends the posture it solves (SET_POSTURE). Then the answer is
+        None; else the device's ACK."""
         k, slots = _contact_slots(contacts)
         msg = SetScene(
             k=k,
@@ -838,12 +872,127 @@ class DeviceClient:
             hold_s=to_f32(hold_s),
             timeout_s=to_f32(timeout_s),
         )
-        return self._request(msg, Ack, timeout)
+        if self.host_solves_posture:
+            self._keep_scene(msg)
+            return None
+        try:
+            ack = self._request(msg, Ack, timeout)
+        except DeviceError as e:
+            if e.code != ErrorCode.PER_FRAME_ONLY:
+                raise
+            try:
+                self.hello(timeout)  # learn what the board does instead
+            except LinkError:
+                raise e from None  # the refusal is the news, not a failing HELLO
+            if not self.host_solves_posture:
+                raise
+            self._keep_scene(msg)
+            return None
+        self._host_scene = None
+        return ack
+
+    @property
+    def host_solves_posture(self) -> bool:
+        """True for a board that does only the per-frame work (its HELLO_REPLY lists
+        per_frame, not full_solve): the host solves each posture with the core."""
+        info = self.device_info
+        return (
+            info is not None
+            and bool(info.capabilities & CAPABILITY_PER_FRAME)
+            and not info.capabilities & CAPABILITY_FULL_SOLVE
+        )
+
+    def _keep_scene(self, msg: SetScene) -> None:
+        """Checks the scene with the core, as a full-solve board's SET_SCENE would, and keeps
+        it for start_trial."""
+        from graspguide.core import solver
+
+        self._host_scene = None
+        if msg.k not in (3, MAX_CONTACTS):
+            status = "bad_contact_count"
+        else:
+            status = solver.Guidance().set_scene(
+                [list(c) for c in msg.contacts[: msg.k]],
+                policy=_POLICY_NAME[msg.policy],
+                mode=_MODE_NAME[msg.mode],
+                constraints=_CONSTRAINT_NAME[msg.constraints],
+                y_axis=list(msg.y_axis),
+            )
+        if status == "ok":
+            # Guidance.set_scene takes any geometry; the board's SET_SCENE also refuses
+            # coincident or imprecise contacts (geometry_status), which the core's solve
+            # reports first, whatever the wrench: a probe's geometry statuses are those.
+            probe = solver.solve(
+                [list(c) for c in msg.contacts[: msg.k]],
+                list(_PROBE_WRENCH),
+                policy=_POLICY_NAME[msg.policy],
+                mode=_MODE_NAME[msg.mode],
+                constraints=_CONSTRAINT_NAME[msg.constraints],
+                y_axis=list(msg.y_axis),
+            )["status"]
+            if probe in _GEOMETRY_STATUSES:
+                status = probe
+        if status != "ok":
+            raise DeviceError(
+                "SET_SCENE",
+                None,
+                ErrorCode[status.upper()],
+                source=HOST_SOLVE_SOURCE,
+                context="kept on the host for a per-frame-only board",
+            )
+        self._host_scene = msg
+
+    def solve_posture(self, wrench: Sequence[float]) -> SetPosture:
+        """The SET_POSTURE for the kept scene and this wrench: Algorithm 1's levels and the
+        force direction from the C++ core, on the float32 values a full-solve board would
+        have received (as graspguide.mp.plan_file.solve_levels does). DeviceError (source
+        "host core") with the core's status when it cannot be solved."""
+        from graspguide.core import solver
+
+        scene = self._host_scene
+        if scene is None:
+            raise LinkError("no scene kept on the host: call set_scene() first")
+        wrench32 = _floats(wrench, 6, "wrench")
+        res = solver.solve(
+            [list(c) for c in scene.contacts[: scene.k]],
+            list(wrench32),
+            policy=_POLICY_NAME[scene.policy],
+            mode=_MODE_NAME[scene.mode],
+            constraints=_CONSTRAINT_NAME[scene.constraints],
+            y_axis=list(scene.y_axis),
+        )
+        if res["status"] != "ok":
+            raise DeviceError(
+                "START_TRIAL",
+                None,
+                ErrorCode[res["status"].upper()],
+                source=HOST_SOLVE_SOURCE,
+                context="the posture of a per-frame-only board, solved on the host",
+            )
+        force = wrench32[:3]
+        norm = math.sqrt(sum(f * f for f in force))  # > 0: the core refuses a zero force
+        # f-hat as grasp_solution.h forms it: the wrench's force over its norm.
+        f_hat = tuple(to_f32(f / norm) for f in force)
+        levels = [to_f32(v) for v in res["levels"]] + [0.0] * (MAX_CONTACTS - scene.k)
+        return SetPosture(
+            k=scene.k,
+            mode=scene.mode,
+            levels=tuple(levels),
+            force_unit=f_hat,
+            wrench=wrench32,
+            threshold_deg=scene.threshold_deg,
+            hold_s=scene.hold_s,
+            timeout_s=scene.timeout_s,
+        )
 
     def start_trial(
         self, trial_id: int, wrench: Sequence[float], timeout: float | None = None
     ) -> Ack:
-        """START_TRIAL with the virtual object's wrench [fx, fy, fz, mx, my, mz]."""
+        """START_TRIAL with the virtual object's wrench [fx, fy, fz, mx, my, mz]. For a
+        per-frame-only board with a scene kept on the host (:meth:`set_scene`), first the
+        posture the host solves for it (:meth:`solve_posture`, SET_POSTURE)."""
+        if self._host_scene is not None and self.host_solves_posture:
+            self._request(self.solve_posture(wrench), Ack, timeout)
         return self._request(
             StartTrial(trial_id=int(trial_id) & 0xFFFF, wrench=_floats(wrench, 6, "wrench")),
             Ack,
@@ -880,6 +1029,13 @@ class DeviceClient:
         :attr:`trial_results` (see :meth:`wait_trial_result`)."""
         if t_us is None:
             t_us = host_time_us()
+        if contacts is not None and self.host_solves_posture:
+            raise PerFrameOnly(
+                f"{getattr(self.transport, 'name', 'the device')} does only the per-frame work "
+                "(HELLO_REPLY without full_solve): a POSE cannot carry contacts, the host "
+                "solves the posture once per trial; for a new posture call set_scene() and "
+                "start_trial() again"
+            )
         if contacts is None:
             tel = self._pose_fast(int(t_us) & 0xFFFFFFFF, quat, timeout)
             if tel is not None:
@@ -1117,6 +1273,7 @@ class DeviceClient:
 __all__ = [
     "DeviceClient",
     "DeviceError",
+    "PerFrameOnly",
     "ProtocolMismatch",
     "LinkError",
     "LinkTimeout",

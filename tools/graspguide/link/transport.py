@@ -9,7 +9,8 @@ device behind it. Two implementations:
 * :class:`graspguide.link.sim.SimulatedDevice` -- the simulated device's process, talked
   to through a SerialTransport (its own module: launching and reaping a process).
 
-:func:`open_port` opens either from a ``--port`` value: ``"sim"`` or a port path.
+:func:`open_port` opens one from a ``--port`` value: ``"sim"``, ``"promini-sim"`` (the Pro
+Mini sketch under simavr, :mod:`graspguide.link.promini_sim`) or a port path.
 
 Every failure is a :class:`LinkError` subclass that says what to do about it:
 :class:`DeviceNotFound` (no such port, simulated device not built), :class:`LinkTimeout`,
@@ -246,16 +247,20 @@ class SerialTransport(Transport):
 def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transport:
     """A started Transport for a ``--port`` value: ``"sim"`` starts the simulated device
     (keyword arguments go to :class:`SimulatedDevice`: virtual_clock, trace, stale_ms,
-    binary, start_timeout, store), anything else opens that serial port (keyword arguments go to
+    binary, start_timeout, store), ``"promini-sim"`` the Pro Mini sketch under simavr
+    (keyword arguments go to :class:`ProMiniSimDevice`: elf, trace, motors, marks, stats,
+    fast), anything else opens that serial port (keyword arguments go to
     :class:`SerialTransport`). Close it (or use ``with``) when done."""
     if not port:
         raise DeviceNotFound(
             "no port given: use --port PATH (see `graspguide ports`) or --port sim"
         )
-    from graspguide.link import sim  # imports this module: loaded on first use
+    from graspguide.link import promini_sim, sim  # import this module: loaded on first use
 
     if port == sim.SIM_PORT:
         return sim.SimulatedDevice(baudrate=baudrate, **kwargs).start()
+    if port == promini_sim.PROMINI_SIM_PORT:
+        return promini_sim.ProMiniSimDevice(baudrate=baudrate, **kwargs).start()
     return SerialTransport(port, baudrate=baudrate, **kwargs)
 
 
