@@ -106,3 +106,28 @@ def test_a_missing_arduino_cli_names_the_fix(tmp_path):
 def test_output_without_the_size_report_is_a_clear_error():
     with pytest.raises(build.SketchBuildFailed, match="Sketch uses N bytes"):
         build.parse_sizes("Compilation finished.\n")
+
+
+def test_pio_run_e_promini_builds_the_same_sketch(sketch):
+    """PlatformIO's offline local AVR dev-platform builds the very files arduino-cli does:
+    the same flash and static RAM, with -Werror."""
+    from graspguide.bench.pio_build import pio_env, pio_executable
+
+    class PioMissing(Exception):
+        pass
+
+    pio = pio_executable(ROOT, PioMissing, " (run tools/bootstrap.sh)")
+    res = subprocess.run(
+        [pio, "run", "-e", "promini"],
+        cwd=ROOT,
+        env=pio_env(ROOT),
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    flash = re.search(r"^Flash: (\d+) bytes", res.stdout, re.MULTILINE)
+    ram = re.search(r"^RAM:\s+(\d+) bytes", res.stdout, re.MULTILINE)
+    assert flash and ram, res.stdout[-2000:]
+    assert (int(flash[1]), int(ram[1])) == (sketch.flash_bytes, sketch.static_ram_bytes)

@@ -39,10 +39,14 @@ constexpr TrialFieldRange trial_field_range(TrialField f) {
                                       : TrialFieldRange{"", 0.0, 0.0, false};
 }
 
-constexpr bool in_trial_range(TrialField f, double v) {
-  const TrialFieldRange r = trial_field_range(f);
-  // NaN fails both comparisons, so it is out of every range.
+// NaN fails both comparisons, so it is out of every range. One return statement: the
+// Arduino IDE compiles C++11, whose constexpr functions allow nothing else.
+constexpr bool in_range_of(const TrialFieldRange& r, double v) {
   return (r.min_exclusive ? v > r.min : v >= r.min) && v <= r.max;
+}
+
+constexpr bool in_trial_range(TrialField f, double v) {
+  return in_range_of(trial_field_range(f), v);
 }
 
 // kOk, or kBadConfig with *bad naming the first offending field. A hold longer than the
