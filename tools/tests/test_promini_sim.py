@@ -1,8 +1,11 @@
 """`--port promini-sim`: the libsimavr runner (src/harness/promini_sim/runner.c) on a tiny
 AVR program of its own (uart_echo.c: echoes UART bytes, shows each as PWM the way
 analogWrite drives a pin), and DeviceClient's per-posture path for a per-frame-only board
-against a scripted fake device. The runner needs avr-gcc and libsimavr-dev: their absence
-is a failure that names tools/bootstrap.sh, never a skip."""
+against a scripted fake device; then the real sketch (promini/GraspGuideProMini, built
+by arduino-cli through graspguide.promini.build) under the runner: the same trial as the
+simulated device within 1 PWM count, per pose and on the pins; its watchdog in simulated
+time; garbage on its UART. avr-gcc, libsimavr-dev, arduino-cli and the simulated device
+come from tools/bootstrap.sh: their absence is a failure, never a skip."""
 
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ from graspguide.core import solver
 from graspguide.link import client as gd
 from graspguide.link import messages as m
 from graspguide.link import promini_sim as pms
+from graspguide.link import sim as gsim
 from graspguide.link import transport as gt
 
 ROOT = Path(REPO_ROOT)
@@ -308,3 +312,111 @@ def test_per_frame_board_refusals_are_raised_on_the_host_before_sending():
     with pytest.raises(gd.PerFrameOnly, match="cannot carry contacts"):
         c.pose(5, (1, 0, 0, 0), contacts=HAND3)
     assert len(c.transport.received) == sent_before, "nothing reached the board"
+
+
+# --------------------------------------------------------------------------------------
+# The real sketch (promini/GraspGuideProMini, built by arduino-cli) under the runner
+# --------------------------------------------------------------------------------------
+STALE_TIMEOUT_MS = 200  # GRASPGUIDE_STALE_TIMEOUT_MS of lib/graspguide_frame_device
+SWEEP_AXIS = (0.6, 0.0, 0.8)
+
+
+@pytest.fixture(scope="module")
+def sketch_elf(tmp_path_factory) -> str:
+    from graspguide.promini import build
+
+    out = tmp_path_factory.mktemp("promini_sketch")
+    return str(build.build_sketch(ROOT, out).elf)
+
+
+def _sweep(n: int, from_deg: float = 60.0, to_deg: float = 20.0) -> list[tuple[float, ...]]:
+    """Orientations turning towards the identity about one axis: the guidance error falls
+    but stays above the success threshold, so the trial keeps running."""
+    out = []
+    for i in range(n):
+        a = math.radians(from_deg + (to_deg - from_deg) * i / (n - 1))
+        s = math.sin(a / 2)
+        out.append((math.cos(a / 2), s * SWEEP_AXIS[0], s * SWEEP_AXIS[1], s * SWEEP_AXIS[2]))
+    return out
+
+
+def _run_trial(transport: gt.Transport, poses, period_us: int = 10_000) -> list[tuple[int, ...]]:
+    c = gd.DeviceClient(transport, timeout=2.0)
+    c.hello(timeout=5.0)
+    c.set_scene(HAND3, mode="V")
+    c.start_trial(3, WRENCH)
+    pwm = []
+    for i, q in enumerate(poses):
+        tel = c.pose(1_000 + i * period_us, q)
+        assert tel.solver_status is m.ErrorCode.OK, tel
+        pwm.append(tuple(tel.pwm))
+    c.stop()
+    return pwm
+
+
+def test_the_sketch_gives_the_simulated_devices_pwm_per_pose_within_one_count(
+    sketch_elf, runner, tmp_path, report_figure
+):
+    poses = _sweep(40)
+    trace = tmp_path / "promini.csv"
+    with gsim.SimulatedDevice(virtual_clock=True) as sim:
+        reference = _run_trial(sim, poses)
+    with pms.ProMiniSimDevice(elf=sketch_elf, runner=runner, trace=str(trace)) as dev:
+        info = gd.DeviceClient(dev).hello(timeout=5.0)
+        assert info.capabilities & m.CAPABILITY_PER_FRAME
+        assert not info.capabilities & m.CAPABILITY_FULL_SOLVE
+        promini = _run_trial(dev, poses)
+    assert len(promini) == len(reference) == len(poses)
+    assert any(any(p) for p in reference), "the sweep drives the motors"
+    worst = max(abs(a - b) for pa, pb in zip(promini, reference) for a, b in zip(pa, pb))
+    report_figure("promini-sim vs sim: PWM per pose", f"max diff {worst} count(s), 40 poses")
+    assert worst <= 1
+    # What the pins carried, read from the timer registers, is what TELEMETRY reported.
+    states = [r[1:] for r in _trace_rows(trace)]
+    reported = [p for i, p in enumerate(promini) if i == 0 or p != promini[i - 1]]
+    assert _is_subsequence(reported, states)
+    assert states[-1] == (0, 0, 0, 0)
+
+
+def test_the_sketchs_watchdog_turns_the_motors_off_in_simulated_time(
+    sketch_elf, runner, tmp_path, report_figure
+):
+    trace = tmp_path / "promini.csv"
+    with pms.ProMiniSimDevice(elf=sketch_elf, runner=runner, trace=str(trace)) as dev:
+        c = gd.DeviceClient(dev, timeout=2.0)
+        c.hello(timeout=5.0)
+        c.set_scene(HAND3, mode="V")
+        c.start_trial(4, WRENCH)
+        for i, q in enumerate(_sweep(10)):
+            last_pwm = tuple(c.pose(1_000 + i * 10_000, q).pwm)
+            assert any(last_pwm)
+        time.sleep((STALE_TIMEOUT_MS + 300) / 1000)
+        rows = _trace_rows(trace)
+    # The last pose took effect when the pins reached its PWM (the glue sets the channels
+    # one after the other); the watchdog has switched them all off at the first all-zero row.
+    last_pose_us = max(r[0] for r in rows if r[1:] == last_pwm)
+    off_us = [r[0] for r in rows if r[0] > last_pose_us and not any(r[1:])]
+    assert off_us, "the motors stayed on without poses"
+    latency_ms = (off_us[0] - last_pose_us) / 1000
+    report_figure("promini-sim watchdog: last pose -> motors off", f"{latency_ms:.3f} ms simulated")
+    # The watchdog is fed when the POSE arrives, ~1 ms (its frame's work) before its PWM
+    # reaches the pins: hence up to 2 ms under the timeout, measured from the pins.
+    assert STALE_TIMEOUT_MS - 2 <= latency_ms <= STALE_TIMEOUT_MS + 5
+
+
+def test_garbage_on_the_uart_neither_crashes_nor_hangs_the_sketch(sketch_elf, runner, tmp_path):
+    stats = tmp_path / "stats.txt"
+    noise = bytes((i * 73 + 41) % 256 for i in range(3000))  # every byte value, no pattern
+    with pms.ProMiniSimDevice(elf=sketch_elf, runner=runner, stats=str(stats)) as dev:
+        dev.write(noise)
+        time.sleep(len(noise) * 100e-6 + 0.2)  # ~99 us a byte in simavr's UART
+        assert dev.alive()
+        c = gd.DeviceClient(dev, timeout=2.0)
+        c.drain(0.2)  # whatever the sketch answered to the noise
+        assert c.hello(timeout=5.0).board
+        pwm = _run_trial(dev, _sweep(5))
+        assert any(any(p) for p in pwm)
+    assert dev.exit_code == 0
+    figures = pms.read_stats(str(stats))
+    assert figures["uart_bytes_dropped"] == 0
+    assert figures["stack_bytes_max"] > 0
