@@ -420,3 +420,27 @@ def test_garbage_on_the_uart_neither_crashes_nor_hangs_the_sketch(sketch_elf, ru
     figures = pms.read_stats(str(stats))
     assert figures["uart_bytes_dropped"] == 0
     assert figures["stack_bytes_max"] > 0
+
+
+def _stream(port_args: list[str], source: Path, log: Path, sketch_elf: str):
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env[pms.PROMINI_ELF_ENV] = sketch_elf
+    cmd = [sys.executable, "-m", "graspguide", "stream", *port_args]
+    cmd += ["--scene", str(ROOT / "tools" / "examples" / "scene_paper_3.toml")]
+    cmd += ["--wrench", "0.3,-1.2,-0.8", "--source", f"replay:{source}", "--log", str(log)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
+    assert done.returncode == 0, done.stderr
+    with open(log / "telemetry.csv") as f:
+        return [tuple(int(r[f"pwm{i}"]) for i in range(4)) for r in csv.DictReader(f)]
+
+
+def test_graspguide_stream_to_promini_sim_gives_the_pwm_rows_of_sim(sketch_elf, tmp_path):
+    poses = _sweep(51)
+    source = tmp_path / "sweep.csv"
+    rows = "".join(f"{i * 0.02},{q[0]},{q[1]},{q[2]},{q[3]}\n" for i, q in enumerate(poses))
+    source.write_text("t_s,qw,qx,qy,qz\n" + rows)
+    promini = _stream(["--port", "promini-sim"], source, tmp_path / "promini", sketch_elf)
+    sim = _stream(["--port", "sim", "--virtual-clock"], source, tmp_path / "sim", sketch_elf)
+    assert len(promini) == len(sim) == len(poses)
+    assert any(any(p) for p in sim)
+    assert max(abs(a - b) for pa, pb in zip(promini, sim) for a, b in zip(pa, pb)) <= 1
