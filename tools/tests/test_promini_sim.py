@@ -444,3 +444,32 @@ def test_graspguide_stream_to_promini_sim_gives_the_pwm_rows_of_sim(sketch_elf, 
     assert len(promini) == len(sim) == len(poses)
     assert any(any(p) for p in sim)
     assert max(abs(a - b) for pa, pb in zip(promini, sim) for a, b in zip(pa, pb)) <= 1
+
+
+CRASHING_PROGRAM = """
+#include <avr/io.h>
+int main(void) {
+  DDRD |= _BV(PD6);
+  PORTD |= _BV(PD6); /* motor 0 (OC0A's pin) fully on */
+  ((void (*)(void))0x3000)(); /* into erased flash */
+  return 0;
+}
+"""
+
+
+def test_a_crashing_avr_ends_the_runner_with_the_motors_off(runner, tmp_path):
+    source, elf, trace = tmp_path / "crash.c", tmp_path / "crash.elf", tmp_path / "t.csv"
+    source.write_text(CRASHING_PROGRAM)
+    subprocess.run(
+        [_need("avr-gcc"), "-mmcu=atmega328p", "-Os", str(source), "-o", str(elf)], check=True
+    )
+    done = subprocess.run(
+        [runner, str(elf), "--trace", str(trace), "--motors", ",".join(ECHO_MOTORS)],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == pms.RUNNER_EXIT_CRASHED, done.stderr
+    assert "crashed" in done.stderr
+    states = [r[1:] for r in _trace_rows(trace)]
+    assert (255, 0, 0, 0) in states and states[-1] == (0, 0, 0, 0)
