@@ -23,4 +23,12 @@ void setup() {
   g_device = &device;
 }
 
-void loop() { g_device->poll(); }
+// GPIOR0 is a spare register no code here uses: 1 before a poll and 2 after one that
+// completed a frame let the simavr runner (--marks) count the cycles of decode + frame +
+// TELEMETRY encode; on a board the two writes cost a cycle each.
+void loop() {
+  const uint32_t frames = g_device->parser().good_frames();
+  GPIOR0 = 1;
+  g_device->poll();
+  if (g_device->parser().good_frames() != frames) GPIOR0 = 2;
+}

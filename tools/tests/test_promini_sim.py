@@ -322,11 +322,15 @@ SWEEP_AXIS = (0.6, 0.0, 0.8)
 
 
 @pytest.fixture(scope="module")
-def sketch_elf(tmp_path_factory) -> str:
+def sketch_build(tmp_path_factory):
     from graspguide.promini import build
 
-    out = tmp_path_factory.mktemp("promini_sketch")
-    return str(build.build_sketch(ROOT, out).elf)
+    return build.build_sketch(ROOT, tmp_path_factory.mktemp("promini_sketch"))
+
+
+@pytest.fixture(scope="module")
+def sketch_elf(sketch_build) -> str:
+    return str(sketch_build.elf)
 
 
 def _sweep(n: int, from_deg: float = 60.0, to_deg: float = 20.0) -> list[tuple[float, ...]]:
@@ -402,6 +406,41 @@ def test_the_sketchs_watchdog_turns_the_motors_off_in_simulated_time(
     # The watchdog is fed when the POSE arrives, ~1 ms (its frame's work) before its PWM
     # reaches the pins: hence up to 2 ms under the timeout, measured from the pins.
     assert STALE_TIMEOUT_MS - 2 <= latency_ms <= STALE_TIMEOUT_MS + 5
+
+
+def test_cycles_per_pose_and_the_stack_of_the_sketch(
+    sketch_build, sketch_elf, runner, tmp_path, report_figure
+):
+    """The sketch marks each poll that completes a frame (GPIOR0 1 and 2): its cycles are a
+    POSE's decode, frame and TELEMETRY encode. The stack is the runner's measured maximum;
+    with the static RAM it must fit the 1.5 KB budget."""
+    import statistics
+
+    from graspguide.promini import build
+
+    marks, stats = tmp_path / "marks.txt", tmp_path / "stats.txt"
+    poses = _sweep(200, from_deg=80.0, to_deg=20.0)
+    with pms.ProMiniSimDevice(
+        elf=sketch_elf, runner=runner, marks=str(marks), stats=str(stats)
+    ) as dev:
+        _run_trial(dev, poses)
+    cycles = [int(x) for x in marks.read_text().split()]
+    # HELLO, SET_POSTURE, START_TRIAL, the POSEs and STOP: one mark per frame.
+    assert len(cycles) == len(poses) + 4, len(cycles)
+    per_pose = sorted(cycles[3:-1])
+    median, worst = statistics.median(per_pose), per_pose[-1]
+    figures = pms.read_stats(str(stats))
+    report_figure(
+        "promini-sim cycles per POSE (decode + frame + TELEMETRY encode)",
+        f"median {median:.0f}, max {worst} cycles "
+        f"({median / 8:.0f} / {worst / 8:.0f} us at 8 MHz), "
+        f"{len(per_pose)} poses; static RAM {sketch_build.static_ram_bytes} B + stack max "
+        f"{figures['stack_bytes_max']} B of {build.RAM_BUDGET_BYTES} B",
+    )
+    # A POSE's work must leave the 8 MHz AVR time for the pose rate the wire carries.
+    assert 0 < median <= worst < 80_000
+    assert figures["uart_bytes_dropped"] == 0
+    assert sketch_build.static_ram_bytes + figures["stack_bytes_max"] <= build.RAM_BUDGET_BYTES
 
 
 def test_garbage_on_the_uart_neither_crashes_nor_hangs_the_sketch(sketch_elf, runner, tmp_path):
