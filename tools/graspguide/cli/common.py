@@ -94,8 +94,9 @@ def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
         metavar="PORT",
         required=required,
         help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
-        "`graspguide ports` lists them), or 'sim' to start the simulated "
-        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM)",
+        "`graspguide ports` lists them), 'sim' to start the simulated "
+        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM), or 'promini-sim' for the "
+        "Pro Mini sketch under simavr (build/promini/, python -m graspguide.promini.build)",
     )
     p.add_argument(
         "--baud",

@@ -1,4 +1,5 @@
-"""`graspguide ports`: the serial ports, and the simulated device 'sim'."""
+"""`graspguide ports`: the serial ports, the simulated device 'sim' and the simulated Pro
+Mini 'promini-sim'."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ from graspguide.exit_codes import EXIT_OK, fail
 from graspguide.link.sim import SIM_PORT
 from graspguide.link.transport import LinkError
 
-HELP = "list serial ports (and the simulated device 'sim')"
+HELP = "list serial ports (and the simulated devices 'sim' and 'promini-sim')"
 DESCRIPTION = (
-    "List the serial ports pyserial finds, plus the pseudo-port 'sim' (the "
-    "simulated device, started on demand by --port sim)."
+    "List the serial ports pyserial finds, plus the pseudo-ports 'sim' (the "
+    "simulated device, started on demand by --port sim) and 'promini-sim' (the Pro Mini "
+    "sketch under simavr, --port promini-sim)."
 )
 RAW_DESCRIPTION = False
 
@@ -38,7 +40,21 @@ def run(args: argparse.Namespace) -> int:
             "description": "simulated device (not available)",
             "hwid": str(e).replace("\n", " "),
         }
-    rows = ports + [sim]
+    from graspguide.link.promini_sim import PROMINI_SIM_PORT, find_promini_elf
+
+    try:
+        promini = {
+            "device": PROMINI_SIM_PORT,
+            "description": "simulated Pro Mini (the sketch under simavr)",
+            "hwid": find_promini_elf(),
+        }
+    except LinkError as e:
+        promini = {
+            "device": PROMINI_SIM_PORT,
+            "description": "simulated Pro Mini (not available)",
+            "hwid": str(e).replace("\n", " "),
+        }
+    rows = ports + [sim, promini]
     if args.json:
         for row in rows:
             print(json.dumps(row))
