@@ -700,7 +700,9 @@ def test_cli_info_and_ports():
     )
     proc = run_cli(["ports", "--json"])
     rows = [json.loads(x) for x in proc.stdout.decode().splitlines()]
-    assert rows[-1]["device"] == "sim" and rows[-1]["hwid"].endswith("program")
+    by_device = {r["device"]: r for r in rows}
+    assert by_device["sim"]["hwid"].endswith("program")
+    assert rows[-1]["device"] == "promini-sim" and "description" in rows[-1]
 
 
 def test_cli_link_failure_mid_stream_keeps_earlier_answers():
