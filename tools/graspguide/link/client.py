@@ -947,33 +947,30 @@ class DeviceClient:
         force direction from the C++ core, on the float32 values a full-solve board would
         have received (as graspguide.mp.plan_file.solve_levels does). DeviceError (source
         "host core") with the core's status when it cannot be solved."""
-        from graspguide.core import solver
+        from graspguide.core.posture import solve_posture
 
         scene = self._host_scene
         if scene is None:
             raise LinkError("no scene kept on the host: call set_scene() first")
         wrench32 = _floats(wrench, 6, "wrench")
-        res = solver.solve(
+        posture = solve_posture(
             [list(c) for c in scene.contacts[: scene.k]],
-            list(wrench32),
+            wrench32,
             policy=_POLICY_NAME[scene.policy],
             mode=_MODE_NAME[scene.mode],
             constraints=_CONSTRAINT_NAME[scene.constraints],
-            y_axis=list(scene.y_axis),
+            y_axis=scene.y_axis,
         )
-        if res["status"] != "ok":
+        if posture.status != "ok":
             raise DeviceError(
                 "START_TRIAL",
                 None,
-                ErrorCode[res["status"].upper()],
+                ErrorCode[posture.status.upper()],
                 source=HOST_SOLVE_SOURCE,
                 context="the posture of a per-frame-only board, solved on the host",
             )
-        force = wrench32[:3]
-        norm = math.sqrt(sum(f * f for f in force))  # > 0: the core refuses a zero force
-        # f-hat as grasp_solution.h forms it: the wrench's force over its norm.
-        f_hat = tuple(to_f32(f / norm) for f in force)
-        levels = [to_f32(v) for v in res["levels"]] + [0.0] * (MAX_CONTACTS - scene.k)
+        f_hat = posture.force_unit
+        levels = posture.levels
         return SetPosture(
             k=scene.k,
             mode=scene.mode,

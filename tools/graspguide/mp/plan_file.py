@@ -31,13 +31,12 @@ float32, as the board stores them."""
 
 from __future__ import annotations
 
-import math
 import struct
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from graspguide.link.client import CONSTRAINT_NAMES, MODE_NAMES, POLICY_NAMES, to_f32
+from graspguide.link.client import CONSTRAINT_NAMES, MODE_NAMES, POLICY_NAMES
 from graspguide.link.messages import PlanBegin, PlanTrial
 
 PLAN_MAGIC = 0x4C504747  # "GGPL"
@@ -112,36 +111,32 @@ def solve_levels(begin: PlanBegin, trials: Sequence[PlanTrial]) -> list[TrialLev
     plan's own float32 posture, wrench and y axis. PlanSolveError names the first trial the
     core cannot solve: the board would refuse that plan (docs/hostless.md)."""
     from graspguide.core import solver
+    from graspguide.core.posture import solve_posture
 
     out = []
     for position, t in enumerate(trials):
         contacts = [list(c) for c in (begin.hand_k3 if t.k == 3 else begin.hand_k4)]
-        res = solver.solve(
-            contacts,
+        posture = solve_posture(
+            contacts[: t.k],
             list(t.wrench),
             policy=_POLICY[t.policy],
             mode=_MODE[t.mode],
             constraints=_CONSTRAINTS[begin.constraints],
-            y_axis=list(begin.y_axis),
+            y_axis=begin.y_axis,
         )
-        if res["status"] != "ok":
+        if posture.status != "ok":
             raise PlanSolveError(
                 f"trial at position {position} (trial_index {t.trial_index}, k={t.k}): the "
-                f"core answers {res['status']}: {solver.status_message(res['status'])}; "
+                f"core answers {posture.status}: {solver.status_message(posture.status)}; "
                 "the board would refuse this plan too: change its wrench or posture"
             )
-        force = t.wrench[:3]
-        norm = math.sqrt(sum(f * f for f in force))
-        # f_hat as grasp_solution.h forms it: the wrench's force over its norm.
-        f_hat = [to_f32(f / norm) for f in force]
-        levels = [to_f32(v) for v in res["levels"]] + [0.0] * (MAX_MOTORS - t.k)
         out.append(
             TrialLevels(
-                status=res["status"],
-                status_code=_status_code(res["status"]),
+                status=posture.status,
+                status_code=_status_code(posture.status),
                 k=t.k,
-                levels=tuple(levels),
-                force_unit=(f_hat[0], f_hat[1], f_hat[2]),
+                levels=posture.levels,
+                force_unit=posture.force_unit,
             )
         )
     return out
