@@ -88,7 +88,15 @@ def test_it_uses_the_repositorys_libraries_as_arduino_libraries(sketch, lib):
 
 
 def test_the_build_has_no_warnings(sketch):
-    assert "warning:" not in sketch.output, sketch.output[-2000:]
+    # Ours: the sketch and lib/. Debian's Arduino core warns about its own files (new.cpp's
+    # unused parameters) on a cold build cache; those are not ours to fix.
+    ours = [
+        line
+        for line in sketch.output.splitlines()
+        if "warning:" in line and "/hardware/arduino/avr/" not in line
+    ]
+    assert not ours, "\n".join(ours[:20])
+    assert "error:" not in sketch.output
 
 
 def test_the_ino_holds_no_code():

@@ -41,7 +41,7 @@ constexpr TrialFieldRange trial_field_range(TrialField f) {
 
 // NaN fails both comparisons, so it is out of every range. One return statement: the
 // Arduino IDE compiles C++11, whose constexpr functions allow nothing else.
-constexpr bool in_range_of(const TrialFieldRange& r, double v) {
+constexpr bool in_range_of(TrialFieldRange r, double v) {
   return (r.min_exclusive ? v > r.min : v >= r.min) && v <= r.max;
 }
 
