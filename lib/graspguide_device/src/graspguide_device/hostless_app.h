@@ -176,7 +176,7 @@ class HostlessRunner {
     // A fault already holding the motors off counts for this trial too: its record must
     // not read as a clean one.
     faults_at_start_ = fault_total() - (imu_.motors_allowed() ? 0u : 1u);
-    trial_.start(scene_.trial, 0);
+    trial_.start(guidance_.scene().trial, 0);
     emit(RunEventCode::kTrialStarted);
   }
 
@@ -235,9 +235,8 @@ class HostlessRunner {
       case RunPhase::kTrial:
         // The trial's time is the device's, whether or not samples arrive: a dead IMU
         // still ends the trial at its timeout (as a failure, motors already off).
-        trial_elapsed_us_ += now_us - trial_started_us_;
-        trial_started_us_ = now_us;
-        if (trial_elapsed_us_ >= uint64_t(scene_.trial.timeout_s * 1e6)) {
+        advance_trial_clock(now_us);
+        if (trial_elapsed_us_ >= uint64_t(guidance_.scene().trial.timeout_s * 1e6)) {
           trial_.expire();
           finish_trial(now_us);
         }
@@ -327,7 +326,6 @@ class HostlessRunner {
     const Real down[3] = {0, 0, -1};
     FrameResult<Real> probe;
     s = guidance_.update_gravity(down, probe);
-    scene_ = scene;
     return s;
   }
 
@@ -362,9 +360,14 @@ class HostlessRunner {
     estimator_.update(accel, gyro, dt_s);
   }
 
-  void guide(uint32_t now_us, Status health, HostlessFrame& out) {
+  // The trial's time is the device's clock since the press, across its 32-bit wrap.
+  void advance_trial_clock(uint32_t now_us) {
     trial_elapsed_us_ += now_us - trial_started_us_;
     trial_started_us_ = now_us;
+  }
+
+  void guide(uint32_t now_us, Status health, HostlessFrame& out) {
+    advance_trial_clock(now_us);
     if (health != Status::kOk || !estimator_.initialised()) {
       motors_off();
       out.status = health != Status::kOk ? health : Status::kImuStale;
@@ -502,7 +505,6 @@ class HostlessRunner {
   ImuWatchdog<Real> imu_;
   GravityEstimator<Real> estimator_;
   Guidance<Real> guidance_;
-  Scene<Real> scene_;
   Trial trial_;
   PatternPlayer patterns_;
   StudyPlan plan_;
