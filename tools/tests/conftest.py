@@ -47,6 +47,55 @@ def core():
     return module
 
 
+def small_protocol_toml(
+    name: str,
+    seed: int,
+    participants: int = 2,
+    timeout_s: float = 60.0,
+    modalities: tuple[str, ...] = ("F+C", "Fperp+C", "F+V", "Fperp+V"),
+    wrenches: int = 2,
+    single_motor: int = 1,
+    familiarization_trials: int = 0,
+) -> str:
+    """A study protocol file (docs/study.md) with the paper's three-finger hand, small
+    enough for a test: its sessions, wrenches and timeout as given."""
+    mods = ", ".join(f'"{m}"' for m in modalities)
+    return f"""
+[study]
+name = "{name}"
+seed = {seed}
+participants = {participants}
+pose_rate_hz = 100.0
+
+[trial]
+threshold_deg = 3.0
+hold_s = 0.5
+timeout_s = {timeout_s!r}
+constraints = "paper"
+start_quat = [1.0, 0.0, 0.0, 0.0]
+
+[hand]
+units = "m"
+y_axis = [0.0, 1.0, 0.0]
+
+[hand.k3]
+thumb  = [0.045, 0.045, 0.035]
+index  = [0.015, 0.095, 0.040]
+middle = [-0.010, 0.100, 0.040]
+
+[conditions]
+modalities = [{mods}]
+contact_counts = [3]
+
+[wrenches]
+count = {wrenches}
+single_motor = {single_motor}
+
+[familiarization]
+trials = {familiarization_trials}
+"""
+
+
 def subprocess_env() -> dict:
     """Environment for CLI subprocesses: no PYTHONPATH (it could put tools/, without the
     compiled extension, in front of the installed package)."""

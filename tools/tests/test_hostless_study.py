@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import subprocess_env
+from conftest import small_protocol_toml, subprocess_env
 
 from graspguide.hostless import runner as hr
 from graspguide.hostless.imu_world import IDEAL_IMU, ImuWorld
@@ -154,40 +154,7 @@ def test_the_hand_returns_to_the_start_within_the_gyro_range():
 # A short protocol: one contact count, the four modalities, two wrenches each (8 trials),
 # a 60 s timeout (V trials succeed in it), and one familiarization trial (session 0 goes
 # through the log too).
-SHORT = """
-[study]
-name = "hostless-short"
-seed = 11
-participants = 2
-pose_rate_hz = 100.0
-
-[trial]
-threshold_deg = 3.0
-hold_s = 0.5
-timeout_s = 60.0
-constraints = "paper"
-start_quat = [1.0, 0.0, 0.0, 0.0]
-
-[hand]
-units = "m"
-y_axis = [0.0, 1.0, 0.0]
-
-[hand.k3]
-thumb  = [0.045, 0.045, 0.035]
-index  = [0.015, 0.095, 0.040]
-middle = [-0.010, 0.100, 0.040]
-
-[conditions]
-modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]
-contact_counts = [3]
-
-[wrenches]
-count = 2
-single_motor = 1
-
-[familiarization]
-trials = 1
-"""
+SHORT = small_protocol_toml("hostless-short", seed=11, familiarization_trials=1)
 REST_S = 0.3
 
 
@@ -380,13 +347,13 @@ def test_a_sigkill_mid_study_loses_no_completed_trial_record(tmp_path, report_fi
 
 
 # One V and one C trial, no familiarization: a short run to watch the device's error.
-ONE_EACH = (
-    SHORT.replace(
-        'modalities = ["F+C", "Fperp+C", "F+V", "Fperp+V"]', 'modalities = ["F+V", "Fperp+C"]'
-    )
-    .replace("count = 2\nsingle_motor = 1", "count = 1\nsingle_motor = 0")
-    .replace("trials = 1", "trials = 0")
-    .replace("timeout_s = 60.0", "timeout_s = 30.0")
+ONE_EACH = small_protocol_toml(
+    "hostless-short",
+    seed=11,
+    timeout_s=30.0,
+    modalities=("F+V", "Fperp+C"),
+    wrenches=1,
+    single_motor=0,
 )
 
 

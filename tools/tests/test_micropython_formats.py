@@ -15,46 +15,15 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import subprocess_env
+from conftest import small_protocol_toml, subprocess_env
 
 ROOT = Path(__file__).resolve().parents[2]
 PORT = ROOT / "micropython"
 REGION_BYTES = 8192  # plan_store.h kPlanRegionBytes; the port's plan_file.REGION_BYTES
 
-PROTOCOL = """
-[study]
-name = "mp-formats"
-seed = 5
-participants = 1
-pose_rate_hz = 100.0
-
-[trial]
-threshold_deg = 3.0
-hold_s = 0.5
-timeout_s = 60.0
-constraints = "paper"
-start_quat = [1.0, 0.0, 0.0, 0.0]
-
-[hand]
-units = "m"
-y_axis = [0.0, 1.0, 0.0]
-
-[hand.k3]
-thumb  = [0.045, 0.045, 0.035]
-index  = [0.015, 0.095, 0.040]
-middle = [-0.010, 0.100, 0.040]
-
-[conditions]
-modalities = ["F+V", "Fperp+C"]
-contact_counts = [3]
-
-[wrenches]
-count = 1
-single_motor = 0
-
-[familiarization]
-trials = 0
-"""
+PROTOCOL = small_protocol_toml(
+    "mp-formats", seed=5, participants=1, modalities=("F+V", "Fperp+C"), wrenches=1, single_motor=0
+)
 
 # Runs inside MicroPython: the store at argv[1] read with the port, as JSON on stdout.
 READ_STORE = """
