@@ -360,8 +360,8 @@ TEST(Schema, IdsAreUniqueAndSizesConsistent) {
   EXPECT_FALSE(gl::payload_size_of(0x3F, &size));
   EXPECT_STREQ(gl::message_name(0x03), "POSE");
   EXPECT_STREQ(gl::message_name(0x7F), "unknown");
-  EXPECT_EQ(gl::kMaxWireFrameSize, 156u);  // docs/protocol.md: PLAN_BEGIN is the largest frame
-  EXPECT_EQ(gl::kProtocolVersion, 3);
+  EXPECT_EQ(gl::kMaxWireFrameSize, 176u);  // docs/protocol.md: PLAN_BEGIN is the largest frame
+  EXPECT_EQ(gl::kProtocolVersion, 4);
 }
 
 TEST(Schema, ParseEventsNameTheirErrorCodes) {

@@ -23,7 +23,16 @@ from codegen.schema import (
 
 # What the board takes and what it sends; every other host -> device id is answered
 # (per_frame_only or unknown_id) from its header alone, so its struct is not needed here.
-ACCEPTED = ("HELLO", "SET_POSTURE", "START_TRIAL", "POSE", "STOP", "SET_MOTORS", "GET_STATUS")
+ACCEPTED = (
+    "HELLO",
+    "SET_POSTURE",
+    "SET_CALIBRATION",
+    "START_TRIAL",
+    "POSE",
+    "STOP",
+    "SET_MOTORS",
+    "GET_STATUS",
+)
 SENT = ("ACK", "ERROR", "HELLO_REPLY", "TELEMETRY", "TRIAL_RESULT", "STATUS")
 # Ids answered per_frame_only rather than unknown_id: what a full-solve device does instead.
 PER_FRAME_ONLY = ("SET_SCENE",)

@@ -30,6 +30,7 @@ Not thread-safe: one thread talks to one client.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import time
@@ -38,6 +39,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
+from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
 from graspguide.link.codec import (
     COBS_MAX_BLOCK_DATA,
@@ -88,6 +90,7 @@ from graspguide.link.messages import (
     PlanTrial,
     Policy,
     Pose,
+    SetCalibration,
     SetMotors,
     SetPosture,
     SetScene,
@@ -371,6 +374,8 @@ class DeviceError(LinkError):
             if cls is not None and d < len(cls.FIELDS):
                 return f"; field {cls.FIELDS[d].name!r} (index {d})"
             return f"; field index {d}"
+        if name == "bad_config" and self.request == SetCalibration.NAME:
+            return _calibration_field_text(d)
         if name == "bad_config" and self.request == SetScene.NAME:
             text = _trial_field_text(d)
             if text:
@@ -400,6 +405,20 @@ class DeviceError(LinkError):
             f"{who} {verb} {self.request}{seq}{context}: {self.code_name} -- "
             f"{meaning}{self._detail_text()}"
         )
+
+
+def _calibration_field_text(index: int) -> str:
+    """'; field 'gain' (index 1) ...' for SET_CALIBRATION's bad_config, with the range the
+    device holds it to."""
+    fields = SetCalibration.FIELDS
+    if not 0 <= index < len(fields):
+        return f"; detail {index}"
+    name = fields[index].name
+    rule = {
+        "pwm_floor": "every floor must be 0..254 PWM counts",
+        "gain": "every gain must be finite and in 0.25..4 (1 = the paper's mapping)",
+    }.get(name, fields[index].doc)
+    return f"; field {name!r} (index {index}): {rule}"
 
 
 def _plan_detail_text(request: str, index: int) -> str:
@@ -495,6 +514,19 @@ def _floats(values: Sequence[float], n: int, what: str) -> tuple:
     if len(values) != n:
         raise ValueError(f"{what} must have {n} numbers, got {len(values)}")
     return tuple(to_f32(v) for v in values)
+
+
+def calibration_message(cal: MotorCalibration) -> SetCalibration:
+    """SET_CALIBRATION of ``cal``, its gains rounded to float32 as the wire carries them."""
+    if not isinstance(cal, MotorCalibration):
+        raise TypeError(
+            f"calibration must be a MotorCalibration (graspguide.core.motor_calibration), got "
+            f"{type(cal).__name__}"
+        )
+    return SetCalibration(
+        pwm_floor=tuple(int(f) for f in cal.pwm_floor),
+        gain=tuple(to_f32(g) for g in cal.gain),
+    )
 
 
 def host_time_us() -> int:
@@ -1138,6 +1170,13 @@ class DeviceClient:
         pwm += [0] * (MAX_CONTACTS - len(pwm))
         return self._request(SetMotors(pwm=tuple(pwm)), Ack, timeout)
 
+    def set_calibration(self, cal: MotorCalibration, timeout: float | None = None) -> Ack:
+        """SET_CALIBRATION: the participant's per-motor PWM floor and gain, applied to the
+        TELEMETRY PWM of every following POSE (SET_MOTORS stays raw). The device refuses it
+        during a trial or a host-less run (DeviceError not_allowed_in_state) and names the
+        field of a value it will not take (bad_config)."""
+        return self._request(calibration_message(cal), Ack, timeout)
+
     def status(self, timeout: float | None = None) -> Status:
         """GET_STATUS -> STATUS (state, frames_received, bad_frames, stale_events,
         last_error as counted by the device)."""
@@ -1168,12 +1207,19 @@ class DeviceClient:
             )
 
     def upload_plan(
-        self, begin: PlanBegin, trials: Sequence[PlanTrial], timeout: float | None = None
+        self,
+        begin: PlanBegin,
+        trials: Sequence[PlanTrial],
+        timeout: float | None = None,
+        calibration: MotorCalibration | None = None,
     ) -> None:
         """PLAN_BEGIN, every PLAN_TRIAL (``position`` 0..n-1 in order), then PLAN_COMMIT
         (the device solves each trial once and stores the plan). Each is ACKed; an ERROR
         raises DeviceError naming the refused field or trial. ``begin.trial_count`` must
-        be ``len(trials)``."""
+        be ``len(trials)``. ``calibration`` (the identity when None) replaces
+        PLAN_BEGIN's pwm_floor and gain: the plan's trials are rendered with it."""
+        cal = calibration_message(calibration or MotorCalibration.identity())
+        begin = dataclasses.replace(begin, pwm_floor=cal.pwm_floor, gain=cal.gain)
         trials = list(trials)
         if begin.trial_count != len(trials):
             raise ValueError(

@@ -16,7 +16,7 @@ from graspguide.link.errors import UnknownIdError
 from graspguide.link.message_base import FieldSpec, Message
 
 # Frames of any other are bad_version.
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 # ErrorCode values below this are graspguide::Status values; from it, link codes.
 LINK_ERROR_BASE = 0x40
 # Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -45,7 +45,7 @@ CAPABILITY_HOSTLESS = 0x02
 CAPABILITY_SIM_MESSAGES = 0x04
 # takes SET_POSTURE: the host solves each posture (Algorithm 1) and the board does the per-frame work; without full_solve it needs it
 CAPABILITY_PER_FRAME = 0x08
-MAX_PAYLOAD_SIZE = 148
+MAX_PAYLOAD_SIZE = 168
 HOST_TO_DEVICE_IDS = range(0x01, 0x40)
 DEVICE_TO_HOST_IDS = range(0x80, 0xC0)
 
@@ -208,6 +208,7 @@ class MsgId(enum.IntEnum):
     SIM_IMU_SAMPLE = 0x10
     SIM_BUTTON = 0x11
     SET_POSTURE = 0x12
+    SET_CALIBRATION = 0x13
     ACK = 0x80
     ERROR = 0x81
     HELLO_REPLY = 0x82
@@ -232,7 +233,7 @@ class Hello(Message):
     )
     STRUCT: ClassVar[struct.Struct] = struct.Struct("<B")
 
-    protocol_version: int = 3
+    protocol_version: int = 4
 
 
 @dataclass(frozen=True)
@@ -356,7 +357,7 @@ class PlanBegin(Message):
     MSG_ID: ClassVar[int] = MsgId.PLAN_BEGIN
     NAME: ClassVar[str] = "PLAN_BEGIN"
     DIRECTION: ClassVar[str] = "host_to_device"
-    PAYLOAD_SIZE: ClassVar[int] = 148
+    PAYLOAD_SIZE: ClassVar[int] = 168
     FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
         FieldSpec("participant", "ascii", (), None, 8, "", "participant id (U1, ...), NUL-padded", "8s"),
         FieldSpec("simulated", "bool", (), None, 1, "", "1: the participant is simulated (the record says so)", "B"),
@@ -371,8 +372,10 @@ class PlanBegin(Message):
         FieldSpec("hand_k3", "f32", (3, 3), None, 4, "m", "fixed posture of 3-contact trials: thumb, index, middle, hand frame", "9f"),
         FieldSpec("hand_k4", "f32", (4, 3), None, 4, "m", "fixed posture of 4-contact trials: thumb, index, middle, palm", "12f"),
         FieldSpec("imu_to_hand_wxyz", "f32", (4,), None, 4, "", "how the IMU sits on the hand: rotation from IMU axes to hand axes, scalar first", "4f"),
+        FieldSpec("pwm_floor", "u8", (4,), None, 1, "counts", "the participant's calibration, as SET_CALIBRATION.pwm_floor, applied to every trial of the plan", "4B"),
+        FieldSpec("gain", "f32", (4,), None, 4, "", "the participant's calibration, as SET_CALIBRATION.gain", "4f"),
     )
-    STRUCT: ClassVar[struct.Struct] = struct.Struct("<8sB8BHB3fffff9f12f4f")
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<8sB8BHB3fffff9f12f4f4B4f")
 
     participant: str = ""
     simulated: bool = False
@@ -387,6 +390,8 @@ class PlanBegin(Message):
     hand_k3: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
     hand_k4: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 4
     imu_to_hand_wxyz: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0,)
+    pwm_floor: tuple[int, ...] = (70, 70, 70, 70,)
+    gain: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0,)
 
 
 @dataclass(frozen=True)
@@ -565,6 +570,24 @@ class SetPosture(Message):
     threshold_deg: float = 3.0
     hold_s: float = 0.5
     timeout_s: float = 90.0
+
+
+@dataclass(frozen=True)
+class SetCalibration(Message):
+    """SET_CALIBRATION (0x13, host -> device): A participant's per-motor calibration (docs/calibration.md): duty_i = round(pwm_floor_i + gain_i * G * |m_i|), clamped to 0..255, G = 185 in mode C and alpha in mode V. Applies to TELEMETRY's PWM from the next POSE on; SET_MOTORS stays raw. The identity (floor 70, gain 1) is the paper's mapping and the state at boot. Answer: ACK, or ERROR bad_config (detail = the field's index: 0 pwm_floor above 254, 1 gain not finite or outside 0.25..4), not_allowed_in_state while a trial or a host-less run goes on."""
+
+    MSG_ID: ClassVar[int] = MsgId.SET_CALIBRATION
+    NAME: ClassVar[str] = "SET_CALIBRATION"
+    DIRECTION: ClassVar[str] = "host_to_device"
+    PAYLOAD_SIZE: ClassVar[int] = 20
+    FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
+        FieldSpec("pwm_floor", "u8", (4,), None, 1, "counts", "duty of motors 1..4 (thumb, index, middle, palm) at the smallest level above off, 0..254", "4B"),
+        FieldSpec("gain", "f32", (4,), None, 4, "", "scale of each motor's span above its floor, 0.25..4 (1: the paper's)", "4f"),
+    )
+    STRUCT: ClassVar[struct.Struct] = struct.Struct("<4B4f")
+
+    pwm_floor: tuple[int, ...] = (70, 70, 70, 70,)
+    gain: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0,)
 
 
 @dataclass(frozen=True)
@@ -835,6 +858,7 @@ MESSAGES: dict[int, type[Message]] = {
     MsgId.SIM_IMU_SAMPLE: SimImuSample,
     MsgId.SIM_BUTTON: SimButton,
     MsgId.SET_POSTURE: SetPosture,
+    MsgId.SET_CALIBRATION: SetCalibration,
     MsgId.ACK: Ack,
     MsgId.ERROR: Error,
     MsgId.HELLO_REPLY: HelloReply,
@@ -877,7 +901,7 @@ __all__ = [
     "CAPABILITY_PER_FRAME", "ErrorCode", "ConstraintModel", "Policy", "Mode", "DeviceState",
     "WrenchClass", "RunEvent", "Hello", "SetScene", "Pose", "StartTrial", "Stop",
     "SetMotors", "GetStatus", "PlanBegin", "PlanTrial", "PlanCommit", "HostlessRun",
-    "LogInfoGet", "LogRead", "LogErase", "SimImuSample", "SimButton", "SetPosture", "Ack",
-    "Error", "HelloReply", "Telemetry", "TrialResult", "Status", "LogInfo", "LogRecord",
-    "HostlessEvent",
+    "LogInfoGet", "LogRead", "LogErase", "SimImuSample", "SimButton", "SetPosture",
+    "SetCalibration", "Ack", "Error", "HelloReply", "Telemetry", "TrialResult", "Status",
+    "LogInfo", "LogRecord", "HostlessEvent",
 ]

@@ -255,6 +255,11 @@ class LinkDevice {
     send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(link::MsgId::kSetPosture));
   }
 
+  // Until the application applies a calibration, it answers as a protocol-3 device would.
+  void on(const link::SetCalibration&) {
+    send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(link::MsgId::kSetCalibration));
+  }
+
   // ---- host-less: the plan, the run, the log
   bool hostless_missing(link::MsgId id) {
     if (hostless_) return false;

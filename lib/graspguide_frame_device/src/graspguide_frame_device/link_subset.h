@@ -15,7 +15,7 @@
 namespace graspguide_frame_device {
 namespace link {
 
-constexpr uint8_t kProtocolVersion = 3;
+constexpr uint8_t kProtocolVersion = 4;
 constexpr uint32_t kPoseWatchdogMs = 200;
 constexpr uint8_t kMaxContacts = 4;
 constexpr uint8_t kBoardNameSize = 16;
@@ -29,7 +29,7 @@ constexpr uint8_t kCapabilityPerFrame = 0x08;
 constexpr size_t kHeaderSize = 4;
 constexpr size_t kCrcSize = 2;
 // The schema's largest payload: a longer frame is too_long, as on every device.
-constexpr size_t kSchemaMaxPayloadSize = 148;
+constexpr size_t kSchemaMaxPayloadSize = 168;
 // The largest payload this board decodes; larger frames are checked (CRC, length)
 // without being stored.
 constexpr size_t kMaxAcceptedPayloadSize = 69;
@@ -187,6 +187,7 @@ enum class MsgId : uint8_t {
   kSimImuSample = 0x10,
   kSimButton = 0x11,
   kSetPosture = 0x12,
+  kSetCalibration = 0x13,
   kAck = 0x80,
   kError = 0x81,
   kHelloReply = 0x82,
@@ -220,7 +221,7 @@ constexpr bool host_payload_size(uint8_t msg_id, size_t* size) {
       *size = 0;
       return true;
     case 0x08:
-      *size = 148;
+      *size = 168;
       return true;
     case 0x09:
       *size = 37;
@@ -249,6 +250,9 @@ constexpr bool host_payload_size(uint8_t msg_id, size_t* size) {
     case 0x12:
       *size = 66;
       return true;
+    case 0x13:
+      *size = 20;
+      return true;
   }
   return false;
 }
@@ -271,7 +275,7 @@ struct Hello {
   static constexpr uint8_t kId = 0x01;
   static constexpr size_t kPayloadSize = 1;
   static constexpr uint8_t kFieldProtocolVersion = 0;
-  uint8_t protocol_version = {3u};
+  uint8_t protocol_version = {4u};
 };
 // false, *bad_field = the first invalid field's index, for an enum or bool outside
 // its set (*out untouched then).
@@ -335,6 +339,33 @@ inline bool unpack(const uint8_t* in, SetPosture* out, uint8_t* bad_field) {
   get_f32(at, &m.threshold_deg);
   get_f32(at, &m.hold_s);
   get_f32(at, &m.timeout_s);
+  *out = m;
+  return true;
+}
+
+// SET_CALIBRATION (0x13, host -> device).
+struct SetCalibration {
+  static constexpr uint8_t kId = 0x13;
+  static constexpr size_t kPayloadSize = 20;
+  static constexpr uint8_t kFieldPwmFloor = 0;
+  static constexpr uint8_t kFieldGain = 1;
+  uint8_t pwm_floor[4] = {70u, 70u, 70u, 70u};
+  float gain[4] = {1.0f, 1.0f, 1.0f, 1.0f};
+};
+// false, *bad_field = the first invalid field's index, for an enum or bool outside
+// its set (*out untouched then).
+inline bool unpack(const uint8_t* in, SetCalibration* out, uint8_t* bad_field) {
+  SetCalibration m;
+  const uint8_t* at = in;
+  (void)bad_field;  // every value of these fields is valid
+  get_u8(at, &m.pwm_floor[0]);
+  get_u8(at, &m.pwm_floor[1]);
+  get_u8(at, &m.pwm_floor[2]);
+  get_u8(at, &m.pwm_floor[3]);
+  get_f32(at, &m.gain[0]);
+  get_f32(at, &m.gain[1]);
+  get_f32(at, &m.gain[2]);
+  get_f32(at, &m.gain[3]);
   *out = m;
   return true;
 }

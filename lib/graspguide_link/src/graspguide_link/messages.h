@@ -14,7 +14,7 @@
 namespace graspguide_link {
 
 // Frames of any other are bad_version.
-inline constexpr uint8_t kProtocolVersion = 3;
+inline constexpr uint8_t kProtocolVersion = 4;
 // ErrorCode values below this are graspguide::Status values; from it, link codes.
 inline constexpr uint8_t kLinkErrorBase = 0x40;
 // Default POSE watchdog: motors go off when no valid POSE arrived for this long
@@ -464,6 +464,7 @@ enum class MsgId : uint8_t {
   kSimImuSample = 0x10,
   kSimButton = 0x11,
   kSetPosture = 0x12,
+  kSetCalibration = 0x13,
   kAck = 0x80,
   kError = 0x81,
   kHelloReply = 0x82,
@@ -474,8 +475,8 @@ enum class MsgId : uint8_t {
   kLogRecord = 0x87,
   kHostlessEvent = 0x88,
 };
-inline constexpr size_t kMessageCount = 26;
-inline constexpr size_t kMaxPayloadSize = 148;
+inline constexpr size_t kMessageCount = 27;
+inline constexpr size_t kMaxPayloadSize = 168;
 
 constexpr bool is_host_to_device_id(uint8_t id) {
   return id >= 0x01 && id <= 0x3F;
@@ -504,6 +505,7 @@ constexpr const char* message_name(uint8_t msg_id) {
     case 0x10: return "SIM_IMU_SAMPLE";
     case 0x11: return "SIM_BUTTON";
     case 0x12: return "SET_POSTURE";
+    case 0x13: return "SET_CALIBRATION";
     case 0x80: return "ACK";
     case 0x81: return "ERROR";
     case 0x82: return "HELLO_REPLY";
@@ -527,7 +529,7 @@ constexpr bool payload_size_of(uint8_t msg_id, size_t* size) {
     case 0x05: *size = 0; return true;
     case 0x06: *size = 4; return true;
     case 0x07: *size = 0; return true;
-    case 0x08: *size = 148; return true;
+    case 0x08: *size = 168; return true;
     case 0x09: *size = 37; return true;
     case 0x0A: *size = 2; return true;
     case 0x0B: *size = 0; return true;
@@ -537,6 +539,7 @@ constexpr bool payload_size_of(uint8_t msg_id, size_t* size) {
     case 0x10: *size = 28; return true;
     case 0x11: *size = 1; return true;
     case 0x12: *size = 66; return true;
+    case 0x13: *size = 20; return true;
     case 0x80: *size = 2; return true;
     case 0x81: *size = 4; return true;
     case 0x82: *size = 29; return true;
@@ -555,7 +558,7 @@ struct Hello {
   static constexpr MsgId kId = MsgId::kHello;
   static constexpr const char* kName = "HELLO";
   static constexpr size_t kPayloadSize = 1;
-  uint8_t protocol_version = {3u};  // u8: the host's protocol version
+  uint8_t protocol_version = {4u};  // u8: the host's protocol version
 };
 
 // Calls fn("name", member) for every field, in wire order: pack, unpack and ==
@@ -725,7 +728,7 @@ void for_each_field(GetStatus& m, Fn&& fn) {
 struct PlanBegin {
   static constexpr MsgId kId = MsgId::kPlanBegin;
   static constexpr const char* kName = "PLAN_BEGIN";
-  static constexpr size_t kPayloadSize = 148;
+  static constexpr size_t kPayloadSize = 168;
   char participant[8] = {};  // ascii[8]: participant id (U1, ...), NUL-padded
   bool simulated = {};  // bool: 1: the participant is simulated (the record says so)
   uint8_t config_hash[8] = {};  // u8[8]: first 8 bytes of the protocol's sha256 (study.json config_hash)
@@ -739,6 +742,8 @@ struct PlanBegin {
   float hand_k3[3][3] = {};  // f32[3][3] [m]: fixed posture of 3-contact trials: thumb, index, middle, hand frame
   float hand_k4[4][3] = {};  // f32[4][3] [m]: fixed posture of 4-contact trials: thumb, index, middle, palm
   float imu_to_hand_wxyz[4] = {1.0f, 0.0f, 0.0f, 0.0f};  // f32[4]: how the IMU sits on the hand: rotation from IMU axes to hand axes, scalar first
+  uint8_t pwm_floor[4] = {70u, 70u, 70u, 70u};  // u8[4] [counts]: the participant's calibration, as SET_CALIBRATION.pwm_floor, applied to every trial of the plan
+  float gain[4] = {1.0f, 1.0f, 1.0f, 1.0f};  // f32[4]: the participant's calibration, as SET_CALIBRATION.gain
 };
 
 // Calls fn("name", member) for every field, in wire order: pack, unpack and ==
@@ -758,6 +763,8 @@ void for_each_field(const PlanBegin& m, Fn&& fn) {
   fn("hand_k3", m.hand_k3);
   fn("hand_k4", m.hand_k4);
   fn("imu_to_hand_wxyz", m.imu_to_hand_wxyz);
+  fn("pwm_floor", m.pwm_floor);
+  fn("gain", m.gain);
 }
 template <class Fn>
 void for_each_field(PlanBegin& m, Fn&& fn) {
@@ -774,6 +781,8 @@ void for_each_field(PlanBegin& m, Fn&& fn) {
   fn("hand_k3", m.hand_k3);
   fn("hand_k4", m.hand_k4);
   fn("imu_to_hand_wxyz", m.imu_to_hand_wxyz);
+  fn("pwm_floor", m.pwm_floor);
+  fn("gain", m.gain);
 }
 
 // PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan.
@@ -1007,6 +1016,28 @@ void for_each_field(SetPosture& m, Fn&& fn) {
   fn("threshold_deg", m.threshold_deg);
   fn("hold_s", m.hold_s);
   fn("timeout_s", m.timeout_s);
+}
+
+// SET_CALIBRATION (0x13, host -> device): A participant's per-motor calibration (docs/calibration.md): duty_i = round(pwm_floor_i + gain_i * G * |m_i|), clamped to 0..255, G = 185 in mode C and alpha in mode V. Applies to TELEMETRY's PWM from the next POSE on; SET_MOTORS stays raw. The identity (floor 70, gain 1) is the paper's mapping and the state at boot. Answer: ACK, or ERROR bad_config (detail = the field's index: 0 pwm_floor above 254, 1 gain not finite or outside 0.25..4), not_allowed_in_state while a trial or a host-less run goes on.
+struct SetCalibration {
+  static constexpr MsgId kId = MsgId::kSetCalibration;
+  static constexpr const char* kName = "SET_CALIBRATION";
+  static constexpr size_t kPayloadSize = 20;
+  uint8_t pwm_floor[4] = {70u, 70u, 70u, 70u};  // u8[4] [counts]: duty of motors 1..4 (thumb, index, middle, palm) at the smallest level above off, 0..254
+  float gain[4] = {1.0f, 1.0f, 1.0f, 1.0f};  // f32[4]: scale of each motor's span above its floor, 0.25..4 (1: the paper's)
+};
+
+// Calls fn("name", member) for every field, in wire order: pack, unpack and ==
+// (message_io.h) are written once over it.
+template <class Fn>
+void for_each_field(const SetCalibration& m, Fn&& fn) {
+  fn("pwm_floor", m.pwm_floor);
+  fn("gain", m.gain);
+}
+template <class Fn>
+void for_each_field(SetCalibration& m, Fn&& fn) {
+  fn("pwm_floor", m.pwm_floor);
+  fn("gain", m.gain);
 }
 
 // ACK (0x80, device -> host): A request was accepted.
@@ -1341,7 +1372,7 @@ void for_each_field(HostlessEvent& m, Fn&& fn) {
 
 template <class... Messages>
 struct MessageList {};
-using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, PlanBegin, PlanTrial, PlanCommit, HostlessRun, LogInfoGet, LogRead, LogErase, SimImuSample, SimButton, SetPosture, Ack, Error, HelloReply, Telemetry, TrialResult, Status, LogInfo, LogRecord, HostlessEvent>;
+using AllMessages = MessageList<Hello, SetScene, Pose, StartTrial, Stop, SetMotors, GetStatus, PlanBegin, PlanTrial, PlanCommit, HostlessRun, LogInfoGet, LogRead, LogErase, SimImuSample, SimButton, SetPosture, SetCalibration, Ack, Error, HelloReply, Telemetry, TrialResult, Status, LogInfo, LogRecord, HostlessEvent>;
 
 // Unpacks a payload into the struct its id names and calls visitor(message).
 // kUnknownId, or unpack()'s status, without calling the visitor when it fails.
@@ -1463,6 +1494,13 @@ LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Vi
     }
     case 0x12: {
       SetPosture m;
+      const LinkStatus status = unpack(payload, size, &m, bad_field);
+      if (status != LinkStatus::kOk) return status;
+      visitor(m);
+      return LinkStatus::kOk;
+    }
+    case 0x13: {
+      SetCalibration m;
       const LinkStatus status = unpack(payload, size, &m, bad_field);
       if (status != LinkStatus::kOk) return status;
       visitor(m);
