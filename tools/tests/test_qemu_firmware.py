@@ -22,14 +22,10 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import shutil
-import socket
 import statistics
-import struct
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -40,6 +36,7 @@ from graspguide.core import _core, solver
 from graspguide.core import scene_generators as scenes
 from graspguide.link import client as gd
 from graspguide.link import messages as m
+from graspguide.link import qemu_firmware
 from graspguide.link import transport as gt
 
 _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -94,160 +91,10 @@ LONGEST_TRIAL_S = _core.TRIAL_LIMITS["timeout_s"]["max"]
 # --------------------------------------------------------------------------------------
 # QEMU
 # --------------------------------------------------------------------------------------
-def _firmware_symbol(name: str) -> int:
-    """Address of a global of the ELF (the motor registers' stand-in)."""
-    from elftools.elf.elffile import ELFFile
-
-    with open(ELF, "rb") as f:
-        symtab = ELFFile(f).get_section_by_name(".symtab")
-        assert symtab is not None, f"{ELF} has no symbol table"
-        syms = symtab.get_symbol_by_name(name)
-        assert syms, f"{ELF} has no symbol {name}: not the m4f_firmware image?"
-        return syms[0]["st_value"]
-
-
-class Qmp:
-    """The least of QEMU's machine protocol this test needs: read guest memory while the
-    firmware runs."""
-
-    def __init__(self, path: str, timeout: float):
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-                self.sock.connect(path)
-                break
-            except OSError:
-                self.sock.close()
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.02)
-        self.sock.settimeout(timeout)
-        self.file = self.sock.makefile("rwb")
-        self._next()  # greeting
-        self.execute("qmp_capabilities")
-
-    def _next(self) -> dict:
-        while True:
-            line = self.file.readline()
-            if not line:
-                raise ConnectionError("QEMU closed its QMP socket")
-            msg = json.loads(line)
-            if "event" not in msg:
-                return msg
-
-    def execute(self, command: str, **arguments):
-        req = {"execute": command}
-        if arguments:
-            req["arguments"] = arguments
-        self.file.write(json.dumps(req).encode() + b"\n")
-        self.file.flush()
-        reply = self._next()
-        if "error" in reply:
-            raise RuntimeError(f"QMP {command}: {reply['error']}")
-        return reply["return"]
-
-    def close(self) -> None:
-        self.file.close()
-        self.sock.close()
-
-
-class QemuBoard:
-    """qemu-system-arm running the firmware; `pty_path` is its UART0. Closing kills it."""
-
-    def __init__(self, workdir: str):
-        self.qmp_path = os.path.join(workdir, "qmp.sock")
-        self.stderr = tempfile.TemporaryFile()
-        self.command = [
-            QEMU,
-            "-M",
-            "mps2-an386",
-            "-nographic",
-            "-monitor",
-            "none",
-            "-serial",
-            "pty",
-            "-qmp",
-            f"unix:{self.qmp_path},server=on,wait=off",
-            "-kernel",
-            ELF,
-        ]
-        self.process = subprocess.Popen(
-            self.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self.stderr
-        )
-        self.qmp = None
-        try:
-            self.pty_path = self._pty_line()
-            self.qmp = Qmp(self.qmp_path, START_TIMEOUT)
-            self.symbols = {
-                name: _firmware_symbol(name)
-                for name in (
-                    "m4f_pwm_ccr",
-                    "m4f_uart_rx_dropped",
-                    "m4f_uart_tx_frames_dropped",
-                    "m4f_stack_peak",
-                )
-            }
-        except BaseException:
-            self.close()
-            raise
-
-    def _pty_line(self) -> str:
-        prefix = b"char device redirected to "
-        fd = self.process.stdout.fileno()
-        buf = b""
-        deadline = time.monotonic() + START_TIMEOUT
-        while True:
-            for line in buf.split(b"\n")[:-1]:
-                if line.startswith(prefix):
-                    return line[len(prefix) :].split(b" ")[0].decode()
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TimeoutError(
-                    f"no pty line from {' '.join(self.command)} in "
-                    f"{START_TIMEOUT} s; stdout {buf!r}; {self._stderr()}"
-                )
-            ready, _, _ = select.select([fd], [], [], left)
-            if ready:
-                chunk = os.read(fd, 4096)
-                if not chunk:
-                    raise RuntimeError(f"qemu exited with {self.process.wait()}: {self._stderr()}")
-                buf += chunk
-
-    def _stderr(self) -> str:
-        self.stderr.seek(0)
-        return "stderr: " + (self.stderr.read().decode(errors="replace").strip() or "(empty)")
-
-    def words(self, symbol: str, count: int = 1) -> tuple:
-        """`count` u32 of the firmware's global `symbol`, read while it runs."""
-        fd, path = tempfile.mkstemp(suffix=".bin")
-        os.close(fd)
-        try:
-            self.qmp.execute("pmemsave", val=self.symbols[symbol], size=4 * count, filename=path)
-            with open(path, "rb") as f:
-                return struct.unpack(f"<{count}I", f.read())
-        finally:
-            os.unlink(path)
-
-    def motor_registers(self) -> tuple:
-        """m4f_pwm_ccr[0..3], the duties the firmware last wrote to its motors."""
-        return self.words("m4f_pwm_ccr", 4)
-
-    def uart_losses(self) -> tuple:
-        """(bytes the RX ring dropped, frames the TX ring dropped)."""
-        return self.words("m4f_uart_rx_dropped") + self.words("m4f_uart_tx_frames_dropped")
-
-    def close(self) -> None:
-        if self.qmp is not None:
-            try:
-                self.qmp.close()
-            except OSError:
-                pass
-        if self.process.poll() is None:
-            self.process.kill()
-        self.process.wait(timeout=10)
-        self.process.stdout.close()
-        self.stderr.close()
+def QemuBoard(workdir: str) -> qemu_firmware.QemuFirmware:
+    """qemu-system-arm running the firmware; `pty_path` is its UART0 (not opened here: the
+    tests time the first answer themselves). Closing kills it."""
+    return qemu_firmware.QemuFirmware(ELF, START_TIMEOUT, workdir)
 
 
 @pytest.fixture(scope="module")

@@ -95,8 +95,10 @@ def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
         required=required,
         help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
         "`graspguide ports` lists them), 'sim' to start the simulated "
-        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM), or 'promini-sim' for the "
-        "Pro Mini sketch under simavr (build/promini/, python -m graspguide.promini.build)",
+        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM), 'promini-sim' for the "
+        "Pro Mini sketch under simavr (build/promini/, python -m graspguide.promini.build), "
+        "or 'qemu' for the firmware on QEMU's mps2-an386 (pio run -e m4f_firmware, or "
+        "$GRASPGUIDE_M4F_FIRMWARE)",
     )
     p.add_argument(
         "--baud",

@@ -10,7 +10,8 @@ device behind it. Two implementations:
   to through a SerialTransport (its own module: launching and reaping a process).
 
 :func:`open_port` opens one from a ``--port`` value: ``"sim"``, ``"promini-sim"`` (the Pro
-Mini sketch under simavr, :mod:`graspguide.link.promini_sim`) or a port path.
+Mini sketch under simavr, :mod:`graspguide.link.promini_sim`), ``"qemu"`` (the firmware on
+QEMU, :mod:`graspguide.link.qemu_firmware`) or a port path.
 
 Every failure is a :class:`LinkError` subclass that says what to do about it:
 :class:`DeviceNotFound` (no such port, simulated device not built), :class:`LinkTimeout`,
@@ -249,18 +250,22 @@ def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transpor
     (keyword arguments go to :class:`SimulatedDevice`: virtual_clock, trace, stale_ms,
     binary, start_timeout, store), ``"promini-sim"`` the Pro Mini sketch under simavr
     (keyword arguments go to :class:`ProMiniSimDevice`: elf, trace, motors, marks, stats,
-    fast), anything else opens that serial port (keyword arguments go to
-    :class:`SerialTransport`). Close it (or use ``with``) when done."""
+    fast), ``"qemu"`` the m4f firmware on QEMU (keyword arguments go to
+    :class:`QemuFirmwareDevice`: elf, start_timeout), anything else opens that serial port
+    (keyword arguments go to :class:`SerialTransport`). Close it (or use ``with``) when
+    done."""
     if not port:
         raise DeviceNotFound(
             "no port given: use --port PATH (see `graspguide ports`) or --port sim"
         )
-    from graspguide.link import promini_sim, sim  # import this module: loaded on first use
+    from graspguide.link import promini_sim, qemu_firmware, sim  # they import this module
 
     if port == sim.SIM_PORT:
         return sim.SimulatedDevice(baudrate=baudrate, **kwargs).start()
     if port == promini_sim.PROMINI_SIM_PORT:
         return promini_sim.ProMiniSimDevice(baudrate=baudrate, **kwargs).start()
+    if port == qemu_firmware.QEMU_PORT:
+        return qemu_firmware.QemuFirmwareDevice(baudrate=baudrate, **kwargs).start()
     return SerialTransport(port, baudrate=baudrate, **kwargs)
 
 
