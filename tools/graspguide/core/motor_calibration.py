@@ -31,8 +31,8 @@ FLOOR_RANGE = (0, 254)
 class MotorCalibration:
     """Per-motor PWM floor (counts) and gain (dimensionless), motors 1..4."""
 
-    pwm_floor: tuple[int, int, int, int] = (PWM_BASE,) * MOTORS
-    gain: tuple[float, float, float, float] = (1.0,) * MOTORS
+    pwm_floor: tuple[int, ...] = (PWM_BASE,) * MOTORS  # checked: MOTORS values
+    gain: tuple[float, ...] = (1.0,) * MOTORS
 
     def __post_init__(self) -> None:
         check_calibration(self.pwm_floor, self.gain)
@@ -61,7 +61,7 @@ class MotorCalibration:
                 f"{GAIN_RANGE[0]:g}..{GAIN_RANGE[1]:g})"
             )
         try:
-            return cls(tuple(obj["pwm_floor"]), tuple(obj["gain"]))  # type: ignore[arg-type]
+            return cls(tuple(obj["pwm_floor"]), tuple(obj["gain"]))
         except (TypeError, ValueError) as e:
             raise ValueError(f"{where}: {e}") from None
 
