@@ -15,6 +15,10 @@ from graspguide.cli.common import (
     signals_interrupt,
 )
 
+# Not imported from graspguide.study.runner, so `graspguide --help` stays fast; the
+# runner's PERSON_REST_S (tools/tests/test_operator_runner.py checks they agree).
+PERSON_REST_S = 5.0
+
 HELP = "run a participant's trials of a study protocol (resumable; NASA-TLX after each session)"
 
 DESCRIPTION = """\
@@ -47,6 +51,15 @@ participant moves; the device's log is then downloaded into OUT (docs/hostless.m
 SIMULATED, like every simulated source. Run again to resume: the device skips the trials
 it has records of.
 
+With a person (a source that is not SIMULATED, e.g. a tracker plugin, or --operator) and
+a terminal: a ready prompt before each trial (Enter starts it), a rest between trials
+(--rest-s, default 5 s; 0 for a simulated source), the estimated time left, and the
+operator's keys: p pause (STOP; Enter restarts the trial from scratch), r redo and s skip
+(each with a typed reason), n a note -- all logged in OUT/PID/events.jsonl. A skipped
+trial is not run again on resume and is not a failure for the analysis.
+--dry-run walks the plan without a device (no --port, no --source): each session and
+trial, the NASA-TLX with its anchors, the best and worst total time. Writes nothing.
+
 --tlx FILE: JSON Lines, one object per session, e.g.
   {"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}
   (optional "participant", "modality", "k" are checked against the plan)."""
@@ -59,6 +72,7 @@ examples:
       --source participant --hostless --out runs/hostless
   graspguide trial --protocol protocols/paper.toml --participant U3 --port /dev/ttyACM0 \\
       --source plugin:my_lab.vicon:ViconHand --out runs/study --tlx u3_tlx.jsonl
+  graspguide trial --protocol protocols/paper.toml --participant U3 --dry-run --rest-s 10
 
 exit status: 0 when every trial and questionnaire is done, 1 on a link or run error, 2 on
 a usage error (bad protocol, participant, source or TLX file), 130 on Ctrl-C (run the
@@ -73,12 +87,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PID",
         help="participant id ending in a number (U1, U2, ...): picks the counterbalanced order",
     )
-    add_port_arguments(p, required=True)
+    add_port_arguments(p, required=False)
     p.add_argument(
         "--source",
-        required=True,
         metavar="SOURCE",
-        help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or plugin:MODULE:CLASS[:ARG]",
+        help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or plugin:MODULE:CLASS[:ARG] "
+        "(required unless --dry-run)",
+    )
+    p.add_argument(
+        "--operator",
+        action="store_true",
+        help="the ready prompt, rest and operator keys even for a simulated source "
+        "(needs a terminal)",
+    )
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="print the plan, the NASA-TLX points and the time estimate; no device, "
+        "nothing written",
     )
     p.add_argument(
         "--out",
@@ -111,8 +137,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=rest_s_arg,
         default=None,
         metavar="S",
-        help=f"with --hostless: rest before each trial's ready pattern, seconds "
-        f"(default {DEFAULT_REST_S:g})",
+        help=f"rest between trials, seconds (default: {DEFAULT_REST_S:g} with --hostless, "
+        f"{PERSON_REST_S:g} with a person, 0 for a simulated source)",
     )
     p.add_argument(
         "--imu-to-hand",
@@ -126,17 +152,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def run(args: argparse.Namespace) -> int:
+    from graspguide.exit_codes import EXIT_USAGE, report
+
+    if args.dry_run:
+        if args.hostless or args.operator:
+            report("trial", "--dry-run goes without --hostless and --operator")
+            return EXIT_USAGE
+        from graspguide.study.dry_run import dry_run_command
+
+        return call_with_options(dry_run_command, args)
+    missing = [o for o, v in (("--port", args.port), ("--source", args.source)) if v is None]
+    if missing:
+        report("trial", f"{' and '.join(missing)} required (or --dry-run to walk the plan)")
+        return EXIT_USAGE
+    if args.hostless and args.operator:
+        report("trial", "--operator goes without --hostless (the device runs those trials)")
+        return EXIT_USAGE
     if args.hostless:
         from graspguide.hostless.runner import hostless_trial_command
 
         if args.rest_s is None:
             args.rest_s = DEFAULT_REST_S
         return call_with_options(hostless_trial_command, args)
-    if args.store is not None or args.rest_s is not None or args.imu_to_hand is not None:
-        from graspguide.exit_codes import EXIT_USAGE, report
-
-        report("trial", "--store, --rest-s and --imu-to-hand go with --hostless only")
+    if args.store is not None or args.imu_to_hand is not None:
+        report("trial", "--store and --imu-to-hand go with --hostless only")
         return EXIT_USAGE
     from graspguide.study.runner import trial_command
 
+    args.observers = ()  # TrialObservers of the run (lab streams) built from the options
     return call_with_options(trial_command, args)

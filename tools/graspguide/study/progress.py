@@ -28,11 +28,15 @@ class Progress:
             self.out.write("\r\x1b[K")
         print(text, file=self.out, flush=True)
 
-    def trial_start(self, trial: PlannedTrial, total: int, sessions: int) -> None:
+    def trial_start(
+        self, trial: PlannedTrial, total: int, sessions: int, left_s: float | None = None
+    ) -> None:
         sess = "familiarization" if trial.familiarization else f"session {trial.session}/{sessions}"
         self._head = (
             f"[{trial.trial_index}/{total}] {sess} {trial.modality} k={trial.k} {trial.wrench_id}"
         )
+        if left_s is not None:
+            self._head += f" ({format_duration(left_s)} left)"
         self._next_t = self.period_s
         if self.tty:
             self.out.write(f"\r\x1b[K{self._head} ...")
@@ -62,4 +66,25 @@ class Progress:
         self.line(f"{self._head} {outcome}, final error {record['final_error_deg']:.2f} deg")
 
 
-__all__ = ["Progress"]
+def format_duration(s: float) -> str:
+    """``~1 h 05 min``, ``~12 min``, ``~40 s``: an estimate, rounded as one."""
+    s = max(0.0, float(s))
+    if s < 60:
+        return f"~{s:.0f} s"
+    minutes = int(round(s / 60))
+    if minutes < 60:
+        return f"~{minutes} min"
+    return f"~{minutes // 60} h {minutes % 60:02d} min"
+
+
+def time_left_s(
+    remaining: int, durations_s: Sequence[float], rest_s: float, timeout_s: float
+) -> float:
+    """The time the ``remaining`` trials (the one starting now included) should take: the
+    mean duration of the trials done so far (the protocol's timeout while there is none)
+    each, and a rest between two of them."""
+    per = sum(durations_s) / len(durations_s) if durations_s else float(timeout_s)
+    return remaining * per + max(0, remaining - 1) * rest_s
+
+
+__all__ = ["Progress", "format_duration", "time_left_s"]

@@ -14,7 +14,21 @@ Output (``OUT`` = ``--out``; the analysis reads exactly this, docs/study.md desc
 * ``OUT/<PID>/frames/trial-NNNN.csv`` -- every POSE and its TELEMETRY (:data:`FRAME_COLUMNS`),
   written to ``.tmp`` and renamed before the trial's line is appended;
 * ``OUT/<PID>/plan.json`` (the participant's plan), ``OUT/<PID>/runs.jsonl`` (one line per
-  run start and end: device, source, resumed trials, damaged lines found, exit).
+  run start and end: device, source, resumed trials, damaged lines found, exit);
+* ``OUT/<PID>/events.jsonl`` -- the operator's pauses, resumes, redos, skips and notes,
+  one fsync'ed line each (``time``, ``participant``, ``trial_index``, ``kind``,
+  ``reason`` or ``text``); a skipped trial is recorded only here (never in trials.jsonl,
+  so the analysis cannot count it as a failure), and a resumed run does not run it;
+* ``OUT/<PID>/frames/aside/trial-NNNN-attempt-A.csv`` -- the frames of an attempt the
+  operator ended with a redo or a skip (a paused attempt's frames are discarded).
+
+With a person (:class:`OperatorConsole` given): a rest of ``rest_s`` between trials, a
+ready prompt before each, and the operator's keys during a trial (p pause: STOP, the
+trial restarts from scratch on Enter; r redo and s skip with a typed reason; n a note);
+the closed loop then always runs in lockstep. Without a console nothing of this runs and
+the fast path is the one described below (``rest_s``, 0 by default, still sleeps between
+trials). :class:`graspguide.study.trial_events.TrialObserver` objects get the run's events
+and every TELEMETRY.
 
 Resume: completed ``trial_index`` values in trials.jsonl are skipped. A last line without
 its newline or not valid JSON (a write cut by a power loss) is reported, moved to
@@ -71,7 +85,7 @@ from graspguide.study.pose_loop import (
     TrialOverrun,
     pipeline_window,
 )
-from graspguide.study.progress import Progress
+from graspguide.study.progress import Progress, format_duration, time_left_s
 from graspguide.study.records import (
     GUIDANCE_COLUMNS,
     JsonlDamaged,
@@ -91,6 +105,18 @@ from graspguide.study.study_protocol import (
     session_order,
 )
 from graspguide.study.tlx import TLX_SCALES, ask_tlx
+from graspguide.study.trial_events import (
+    NOTE,
+    PAUSE,
+    REDO,
+    RESUME,
+    SESSION_START,
+    SKIP,
+    STUDY_END,
+    TRIAL_END,
+    TRIAL_START,
+    TrialObserver,
+)
 from graspguide.study.trial_sources import RunnerSource
 
 FRAME_COLUMNS = [
@@ -133,10 +159,35 @@ STUDY_FORMAT = "graspguide-study/1"
 # A trial whose device clock passed timeout_s by this much without a TRIAL_RESULT is an
 # error (the device should have ended it).
 RESULT_MARGIN_S = 2.0
+# The rest between two trials of a person when --rest-s is not given (seconds).
+PERSON_REST_S = 5.0
 
 
 def _now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+
+
+class _OperatorStop(Exception):
+    """The operator pressed p, r or s during a trial (raised between two poses)."""
+
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key = key
+
+
+class _Keyed:
+    """A trial's poses with the operator's keys read before each one (never waiting)."""
+
+    window = 1
+
+    def __init__(self, poses: Any, poll: Callable[[], None]):
+        self._poses = poses
+        self._poll = poll
+        self.feel = poses.feel
+
+    def next_batch(self, index: int) -> Any:
+        self._poll()
+        return self._poses.next_batch(index)
 
 
 # Said after a disk fault (RecordWriteError): every completed trial is kept.
@@ -236,6 +287,9 @@ class StudyRunner:
     err: TextIO | None = None
     port: str = ""
     pipeline: int | None = None
+    operator: Any = None  # an entered operator_console.OperatorConsole: a person's run
+    rest_s: float = 0.0
+    observers: Sequence[TrialObserver] = ()
 
     def __post_init__(self) -> None:
         self.pipeline_fallbacks = 0
@@ -250,6 +304,9 @@ class StudyRunner:
         self.tlx_path = os.path.join(self.pdir, "tlx.jsonl")
         self.frames_dir = os.path.join(self.pdir, "frames")
         self.runs_path = os.path.join(self.pdir, "runs.jsonl")
+        self.events_path = os.path.join(self.pdir, "events.jsonl")
+        self.aside_dir = os.path.join(self.frames_dir, "aside")
+        self.durations_s: list[float] = []  # wall time of each recorded trial
         self.wrenches = draw_wrenches(self.protocol)
         self.fam_wrenches = draw_familiarization_wrenches(self.protocol)
         self.sessions = session_order(self.protocol, self.participant)
@@ -260,6 +317,7 @@ class StudyRunner:
         self._lock_fd: int | None = None
         self.ran = 0
         self.skipped = 0
+        self.skipped_by_operator: set = set()
         self.damaged: list[str] = []
 
     # ---- files
@@ -319,6 +377,7 @@ class StudyRunner:
         )
         done = self._completed_trials()
         tlx_done = self._tlx_sessions()
+        self.skipped_by_operator = self._skipped_trials()
         return done, tlx_done
 
     def _lock(self) -> None:
@@ -391,7 +450,38 @@ class StudyRunner:
                     usage=True,
                 )
             done.add(idx)
+            if isinstance(rec.get("wall_s"), (int, float)):
+                self.durations_s.append(float(rec["wall_s"]))
         return done
+
+    def _skipped_trials(self) -> set:
+        """The trials the operator skipped (events.jsonl), which a resumed run honours."""
+        if not os.path.exists(self.events_path):
+            return set()
+        return {
+            rec.get("trial_index")
+            for rec in self._read_checked(self.events_path)
+            if rec.get("kind") == SKIP
+        }
+
+    # ---- events (operator's log, observers)
+    def _notify(self, name: str, **fields: Any) -> None:
+        for obs in self.observers:
+            obs.on_event(name, **fields)
+
+    def _event(self, kind: str, trial_index: int | None, **fields: Any) -> None:
+        """One operator event: a line in events.jsonl (fsync'ed), then the observers."""
+        append_line(
+            self.events_path,
+            {
+                "time": _now_iso(),
+                "participant": self.participant,
+                "trial_index": trial_index,
+                "kind": kind,
+                **fields,
+            },
+        )
+        self._notify(kind, trial_index=trial_index, **fields)
 
     def _tlx_sessions(self) -> set:
         return {rec.get("session") for rec in self._read_checked(self.tlx_path)}
@@ -504,6 +594,8 @@ class StudyRunner:
         k = trial.k
         real_time = not self.virtual_clock
         progress_frame = self.progress.frame
+        observers = self.observers
+        console = self.operator
 
         def on_frames(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
             # One write per batch; the live line shows the batch's last frame (a batch
@@ -512,8 +604,23 @@ class StudyRunner:
             tel = tels[-1]
             progress_frame(stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time)
 
+        def on_frames_observed(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
+            f.write(_frame_rows(stamped, tels))
+            for (t_s, _, _, _), tel in zip(stamped, tels):
+                err, alpha, pwm, status = (
+                    float(tel.error_deg),
+                    float(tel.alpha),
+                    list(tel.pwm),
+                    int(tel.solver_status),
+                )
+                for obs in observers:
+                    obs.on_telemetry(t_s, err, alpha, pwm, status)
+            tel = tels[-1]
+            if console is None or not console.typing:  # a note being typed stays visible
+                progress_frame(stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time)
+
         wall0 = time.monotonic()
-        window = self._window(model is not None)
+        window = 1 if console is not None else self._window(model is not None)
         try:
             while True:
                 loop = PoseLoop(
@@ -522,10 +629,15 @@ class StudyRunner:
                     base_us=self._vt_base_us,
                     limit_s=p.timeout_s + RESULT_MARGIN_S,
                     wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
-                    on_frames=on_frames,
+                    on_frames=on_frames
+                    if console is None and not observers
+                    else on_frames_observed,
                 )
+                poses = self._trial_poses(trial, model, window)
+                if console is not None:
+                    poses = _Keyed(poses, lambda: self._poll_keys(trial))
                 try:
-                    done = loop.run(self._trial_poses(trial, model, window))
+                    done = loop.run(poses)
                     break
                 except Diverged as e:
                     # Never expected (see pose_loop.PipelinedPoses); the poses the device
@@ -586,6 +698,149 @@ class StudyRunner:
             "recorded_at": _now_iso(),
         }
         return record
+
+    # ---- a person's run: rest, ready prompt, the operator's keys
+    def _left_s(self, done: set) -> float | None:
+        """The estimated time left (real time only: on the virtual clock it is moot)."""
+        if self.virtual_clock:
+            return None
+        gone = done | self.skipped_by_operator
+        remaining = sum(1 for t in self.plan if t.trial_index not in gone)
+        return time_left_s(remaining, self.durations_s, self.rest_s, self.protocol.timeout_s)
+
+    def _begin(self, trial: PlannedTrial, done: set, attempt: int) -> None:
+        self.progress.trial_start(trial, len(self.plan), len(self.sessions), self._left_s(done))
+        self._notify(
+            TRIAL_START,
+            trial_index=trial.trial_index,
+            session=trial.session,
+            k=trial.k,
+            modality=trial.modality,
+            wrench_id=trial.wrench_id,
+            familiarization=trial.familiarization,
+            attempt=attempt,
+        )
+
+    def _poll_keys(self, trial: PlannedTrial) -> None:
+        for kind, value in self.operator.poll():
+            if kind == "note":
+                self._event(NOTE, trial.trial_index, text=value)
+            else:
+                raise _OperatorStop(value)
+
+    def _note_key(self, trial: PlannedTrial) -> None:
+        text = self.operator.read_line("note: ").strip()
+        if text:
+            self._event(NOTE, trial.trial_index, text=text)
+
+    def _rest(self, trial: PlannedTrial) -> None:
+        """The rest before ``trial`` (not before a run's first): a sleep, or with a person
+        a countdown during which notes can be typed."""
+        if self.rest_s <= 0:
+            return
+        if self.operator is None:
+            time.sleep(self.rest_s)
+            return
+        self.progress.line(f"rest {self.rest_s:g} s (n: note)")
+        deadline = time.monotonic() + self.rest_s
+        while (left := deadline - time.monotonic()) > 0:
+            for kind, value in self.operator.poll():
+                if kind == "note":
+                    self._event(NOTE, trial.trial_index, text=value)
+            time.sleep(min(0.05, left))
+
+    def _ready(self, trial: PlannedTrial, done: set) -> bool:
+        """The ready prompt: True on Enter, False when the operator skipped the trial."""
+        left = self._left_s(done)
+        sess = "familiarization" if trial.familiarization else f"session {trial.session}"
+        head = (
+            f"Trial {trial.trial_index}/{len(self.plan)}, {sess}, k={trial.k} "
+            f"{trial.modality} {trial.wrench_id}"
+            + ("" if left is None else f" ({format_duration(left)} left)")
+        )
+        while True:
+            self.progress.line(
+                f"{head}: press Enter when the participant is ready (s skip, n note)"
+            )
+            key = (self.operator.wait_key() or "").lower()
+            if key == "\n":
+                return True
+            if key == "s":
+                reason = self.operator.read_reason("skip")
+                self._event(SKIP, trial.trial_index, reason=reason, attempt=0)
+                return False
+            if key == "n":
+                self._note_key(trial)
+
+    def _frames_tmp(self, trial: PlannedTrial) -> str:
+        return os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
+
+    def _set_aside(self, trial: PlannedTrial) -> str | None:
+        """An ended attempt's frames moved to frames/aside/ (path relative to OUT/PID)."""
+        tmp = self._frames_tmp(trial)
+        if not os.path.exists(tmp):
+            return None
+        try:
+            os.makedirs(self.aside_dir, exist_ok=True)
+            attempt = 1
+            while True:
+                name = f"trial-{trial.trial_index:04d}-attempt-{attempt}.csv"
+                path = os.path.join(self.aside_dir, name)
+                if not os.path.exists(path):
+                    break
+                attempt += 1
+            os.replace(tmp, path)
+        except OSError as e:
+            raise RecordWriteError(e.filename or tmp, e, _RESUME_HINT) from e
+        return os.path.relpath(path, self.pdir)
+
+    def _motors_off(self) -> None:
+        """STOP now (the operator ended the attempt), then the device ready for a new
+        START_TRIAL: no stale TRIAL_RESULT, the scene set again, a fresh virtual time."""
+        self.client.stop()
+        self.client.drain(0.05)
+        self.client.trial_results.clear()
+        self.client.unmatched.clear()
+        self._scene_key = None
+        self._vt_base_us += int(round((self.protocol.timeout_s + 2 * RESULT_MARGIN_S) * 1e6))
+
+    def _person_trial(self, trial: PlannedTrial, done: set) -> dict[str, Any] | None:
+        """The trial with the operator's keys: its record, or None when skipped."""
+        idx = trial.trial_index
+        attempt = 1
+        while True:
+            self._begin(trial, done, attempt)
+            try:
+                return self.run_trial(trial)
+            except _OperatorStop as stop:
+                self._motors_off()
+                self.progress.line(f"trial {idx}: stopped, motors off")
+                if stop.key == "p":
+                    try:
+                        os.unlink(self._frames_tmp(trial))
+                    except FileNotFoundError:
+                        pass
+                    self._event(PAUSE, idx, attempt=attempt)
+                    while True:
+                        self.progress.line(
+                            "paused: press Enter to resume (the trial starts again from "
+                            "scratch), n: note"
+                        )
+                        key = (self.operator.wait_key() or "").lower()
+                        if key == "\n":
+                            break
+                        if key == "n":
+                            self._note_key(trial)
+                    self._event(RESUME, idx, attempt=attempt + 1)
+                else:
+                    frames = self._set_aside(trial)
+                    what = "redo" if stop.key == "r" else "skip"
+                    reason = self.operator.read_reason(what)
+                    kind = REDO if stop.key == "r" else SKIP
+                    self._event(kind, idx, reason=reason, attempt=attempt, frames=frames)
+                    if kind == SKIP:
+                        return None
+                attempt += 1
 
     # ---- TLX
     def _tlx(self, session: Session) -> None:
@@ -661,23 +916,51 @@ class StudyRunner:
                 "trials already completed are skipped"
             )
         total = len(self.plan)
-        n_sessions = len(self.sessions)
         outcome = "error"
         cause: BaseException | None = None
         try:
             by_session: dict[int, list[PlannedTrial]] = {}
             for t in self.plan:
                 by_session.setdefault(t.session, []).append(t)
+            first = True
             for sess_no in sorted(by_session):
+                started = False
                 for trial in by_session[sess_no]:
-                    if trial.trial_index in done:
+                    if trial.trial_index in done or trial.trial_index in self.skipped_by_operator:
                         continue
-                    self.progress.trial_start(trial, total, n_sessions)
-                    record = self.run_trial(trial)
+                    if not started:
+                        started = True
+                        self._notify(
+                            SESSION_START,
+                            session=sess_no,
+                            k=trial.k,
+                            modality=trial.modality,
+                            familiarization=trial.familiarization,
+                        )
+                    if not first:
+                        self._rest(trial)
+                    first = False
+                    if self.operator is None:
+                        self._begin(trial, done, 1)
+                        record: dict[str, Any] | None = self.run_trial(trial)
+                    elif self._ready(trial, done):
+                        record = self._person_trial(trial, done)
+                    else:
+                        record = None
+                    if record is None:  # skipped by the operator (events.jsonl)
+                        self.skipped_by_operator.add(trial.trial_index)
+                        continue
                     append_line(self.trials_path, record)
                     done.add(trial.trial_index)
                     self.ran += 1
+                    self.durations_s.append(record["wall_s"])
                     self.progress.trial_end(record)
+                    self._notify(
+                        TRIAL_END,
+                        trial_index=trial.trial_index,
+                        success=record["success"],
+                        completion_s=record["completion_s"],
+                    )
                 if sess_no >= 1 and sess_no not in tlx_done:
                     self._tlx(self.sessions[sess_no - 1])
                     tlx_done.add(sess_no)
@@ -690,6 +973,10 @@ class StudyRunner:
             raise
         finally:
             try:
+                self._notify(STUDY_END, outcome=outcome, ran=self.ran, completed=len(done))
+            except Exception as e:  # an observer's fault must not keep the motors on
+                print(f"graspguide trial: study_end observer failed: {e}", file=self.err)
+            try:
                 self.client.stop()
             except Exception as e:
                 if outcome == "complete":
@@ -699,7 +986,12 @@ class StudyRunner:
             finally:
                 try:
                     self._log_run(
-                        "end", outcome=outcome, ran=self.ran, completed=len(done), planned=total
+                        "end",
+                        outcome=outcome,
+                        ran=self.ran,
+                        completed=len(done),
+                        planned=total,
+                        skipped_by_operator=sorted(self.skipped_by_operator),
                     )
                 except RecordWriteError as e:
                     if outcome == "complete":
@@ -779,11 +1071,17 @@ def trial_command(
     timeout: float,
     out: str,
     tlx: str | None,
+    rest_s: float | None = None,
+    operator: bool = False,
+    observers: Sequence[TrialObserver] = (),
 ) -> int:
     """`graspguide trial`: ``participant``'s trials of the protocol file ``protocol`` on
     the device at ``port`` into ``out``, poses from the source spec ``source``, the
     NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
-    stopped; STOP on every way out. Returns the exit code."""
+    stopped; STOP on every way out. With a person (a source not SIMULATED, or
+    ``operator``) and a terminal on stdin: the ready prompt, the rest (``rest_s``, default
+    PERSON_REST_S; 0 for a simulated source) and the operator's keys. Returns the exit
+    code."""
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -814,6 +1112,24 @@ def trial_command(
     except (ProtocolFileError, RunnerError) as e:
         report("trial", e)
         return EXIT_USAGE
+    from graspguide.study.operator_console import KEYS_HELP, ConsoleClosed, OperatorConsole
+
+    person = operator or not poses.simulated
+    console: OperatorConsole | None = None
+    if person and OperatorConsole.available():
+        console = OperatorConsole()
+    elif operator:
+        report("trial", "--operator needs a terminal on stdin (the operator's keys)")
+        return EXIT_USAGE
+    elif person:
+        print(
+            "graspguide trial: warning: stdin is not a terminal: no ready prompt and no "
+            "operator keys; trials follow each other after the rest (--rest-s)",
+            file=sys.stderr,
+            flush=True,
+        )
+    if rest_s is None:
+        rest_s = PERSON_REST_S if person else 0.0
     virtual_clock = port == SIM_PORT and poses.simulated and not poses.live
     try:
         device = DeviceSession("trial", port, baud, timeout, virtual_clock)
@@ -822,6 +1138,13 @@ def trial_command(
     code = EXIT_OK
     runner = None
     try:
+        if console is not None:
+            console.__enter__()
+            print(
+                f"{participant}: a run with a person; {KEYS_HELP} (during a trial), "
+                "Ctrl-C ends the run (resume by running the same command again)",
+                flush=True,
+            )
         runner = StudyRunner(
             loaded,
             participant,
@@ -833,12 +1156,18 @@ def trial_command(
             progress=Progress(),
             protocol_file=protocol_file,
             port=port,
+            ask=console.read_line if console is not None else input,
+            operator=console,
+            rest_s=rest_s,
+            observers=observers,
         )
         result = runner.run()
+        skipped = len(runner.skipped_by_operator)
         print(
             f"{participant}: all {result['planned']} trials done ({result['ran']} "
-            f"run now, {result['skipped']} from earlier runs); "
-            f"{os.path.join(out, participant)}"
+            f"run now, {result['skipped']} from earlier runs"
+            + (f", {skipped} skipped by the operator" if skipped else "")
+            + f"); {os.path.join(out, participant)}"
         )
         for line in summary_lines(out, participant):
             print(line)
@@ -850,6 +1179,9 @@ def trial_command(
         code = EXIT_USAGE if e.usage else EXIT_FAILURE
     except LinkError as e:
         code = fail("trial", e)
+    except (ConsoleClosed, EOFError):
+        report("trial", "the terminal's input ended; run the same command again to resume")
+        code = EXIT_FAILURE
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
         done = "" if runner is None else f" after {runner.ran} trials"
@@ -859,6 +1191,8 @@ def trial_command(
             file=sys.stderr,
         )
     finally:
+        if console is not None:
+            console.restore()
         if not device.close():
             code = code or EXIT_FAILURE
     return code

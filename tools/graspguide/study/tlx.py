@@ -20,6 +20,27 @@ TLX_NAMES = {
     "FR": "Frustration",
 }
 TLX_MIN, TLX_MAX = 1, 21
+# Each scale's question and the words at its two ends (NASA Task Load Index manual; Hart
+# & Staveland 1988): Performance runs the other way, 1 = perfect .. 21 = failure.
+TLX_QUESTIONS = {
+    "MD": "How mentally demanding was the task?",
+    "TD": "How hurried or rushed was the pace of the task?",
+    "PD": "How physically demanding was the task?",
+    "PE": "How successful were you in accomplishing what you were asked to do?",
+    "EF": "How hard did you have to work to accomplish your level of performance?",
+    "FR": "How insecure, discouraged, irritated, stressed, and annoyed were you?",
+}
+TLX_ANCHORS = {sc: ("very low", "very high") for sc in TLX_SCALES}
+TLX_ANCHORS["PE"] = ("perfect", "failure")
+
+
+def tlx_scale_text(scale: str) -> str:
+    """One scale as the participant sees it: name, question, the two anchors."""
+    low, high = TLX_ANCHORS[scale]
+    return (
+        f"{scale} ({TLX_NAMES[scale]}): {TLX_QUESTIONS[scale]}  "
+        f"{TLX_MIN} = {low} .. {TLX_MAX} = {high}"
+    )
 
 
 def check_tlx_value(scale: str, value: Any) -> int:
@@ -127,12 +148,13 @@ def ask_tlx(
     (at most ``attempts`` times); EOF raises RunnerError."""
     print(
         f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
-        f"answer each scale with an integer {TLX_MIN} (very low) .. {TLX_MAX} (very high)",
+        f"answer each scale with an integer {TLX_MIN}..{TLX_MAX}",
         file=out,
         flush=True,
     )
     scales: dict[str, int] = {}
     for sc in TLX_SCALES:
+        print(f"  {tlx_scale_text(sc)}", file=out, flush=True)
         for _ in range(attempts):
             try:
                 text = ask(f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
@@ -162,6 +184,9 @@ __all__ = [
     "TLX_NAMES",
     "TLX_MIN",
     "TLX_MAX",
+    "TLX_ANCHORS",
+    "TLX_QUESTIONS",
+    "tlx_scale_text",
     "check_tlx_value",
     "load_tlx_file",
     "ask_tlx",
