@@ -12,6 +12,10 @@
  *   channels named by --motors, device time being the simulated time; each channel's duty
  *   comes from its timer's COM bits and OCR register, or from its pin's PORT bit when the
  *   COM bits disconnect the pin (what Arduino's analogWrite does for 0 and 255).
+ * --events: appends, in CPU cycles, "rx_end CYCLE" when the UART receive interrupt starts
+ *   for a frame's closing 0x00 (a 0x00 after another byte: the byte a POSE is complete
+ *   with), and "pwm CYCLE D0 D1 D2 D3" on every change of the motor channels (the
+ *   --trace rows, cycle-exact): device-side POSE -> PWM latencies (graspguide latency).
  * --marks: a write of 1 to GPIOR0 starts a cycle count, 2 appends the cycles since to FILE
  *   (one number a line): a sketch's own probe, e.g. around the handling of one POSE.
  * --stats: written at exit, "key value" lines: cycles, simulated_us, stack_bytes_max (RAMEND
@@ -47,6 +51,7 @@
 #include <simavr/avr_uart.h>
 #include <simavr/sim_avr.h>
 #include <simavr/sim_elf.h>
+#include <simavr/sim_interrupts.h>
 #include <simavr/sim_io.h>
 #include <simavr/sim_irq.h>
 
@@ -82,6 +87,13 @@ static unsigned g_last_pwm[kMotors];
 static int g_pwm_written;
 static FILE* g_trace;
 static FILE* g_marks;
+static FILE* g_events;
+/* The bytes fed to the UART, in order, until its receive interrupt takes them (one per
+ * interrupt, as the sketch's serial driver reads them): which byte an interrupt is for. */
+static uint8_t g_fed[4096];
+static size_t g_fed_begin, g_fed_end;
+static uint8_t g_last_rx = 0;
+enum { kUsartRxVector = 18 }; /* ATmega328P USART_RX */
 static avr_cycle_count_t g_mark_start;
 static int g_mark_started;
 /* UART0 -> host bytes, drained to the pty after every service interval. */
@@ -130,6 +142,13 @@ static void write_trace_row(avr_cycle_count_t cycle, const unsigned* pwm) {
   fflush(g_trace); /* nothing lost if the runner is killed */
 }
 
+static void write_event_pwm(avr_cycle_count_t cycle, const unsigned* pwm) {
+  if (!g_events) return;
+  fprintf(g_events, "pwm %llu %u %u %u %u\n", (unsigned long long)cycle, pwm[0], pwm[1], pwm[2],
+          pwm[3]);
+  fflush(g_events);
+}
+
 static void sample_motors(const avr_t* avr) {
   unsigned pwm[kMotors];
   int changed = !g_pwm_written;
@@ -141,6 +160,7 @@ static void sample_motors(const avr_t* avr) {
   memcpy(g_last_pwm, pwm, sizeof pwm);
   g_pwm_written = 1;
   write_trace_row(avr->cycle, pwm);
+  write_event_pwm(avr->cycle, pwm);
 }
 
 static void motors_off(const avr_t* avr) {
@@ -174,6 +194,18 @@ static void on_uart_xoff(struct avr_irq_t* irq, uint32_t value, void* param) {
   g_rx_full = value != 0; /* simavr raises XOFF 0 when its FIFO empties */
 }
 
+static void on_rx_interrupt(struct avr_irq_t* irq, uint32_t value, void* param) {
+  (void)irq;
+  const avr_t* avr = param;
+  if (!value || g_fed_begin == g_fed_end) return; /* the ISR's end, or not a fed byte */
+  const uint8_t byte = g_fed[g_fed_begin++ % sizeof g_fed];
+  if (byte == 0 && g_last_rx != 0 && g_events) {
+    fprintf(g_events, "rx_end %llu\n", (unsigned long long)avr->cycle);
+    fflush(g_events);
+  }
+  g_last_rx = byte;
+}
+
 static void on_mark(avr_t* avr, avr_io_addr_t addr, uint8_t v, void* param) {
   (void)addr;
   (void)param;
@@ -193,7 +225,11 @@ static void on_mark(avr_t* avr, avr_io_addr_t addr, uint8_t v, void* param) {
  * model delivers them to the AVR at that rate. */
 static void feed_uart(const avr_t* avr, avr_irq_t* uart_in) {
   if (!((avr->data[kUcsr0b] >> kRxen0Bit) & 1)) return;
-  while (g_in_begin < g_in_end && !g_rx_full) avr_raise_irq(uart_in, g_in[g_in_begin++]);
+  while (g_in_begin < g_in_end && !g_rx_full) {
+    if (g_events && g_fed_end - g_fed_begin < sizeof g_fed)
+      g_fed[g_fed_end++ % sizeof g_fed] = g_in[g_in_begin];
+    avr_raise_irq(uart_in, g_in[g_in_begin++]);
+  }
 }
 
 static int open_pty(int* slave_keepalive, char* path, size_t path_size) {
@@ -238,7 +274,7 @@ static double now_us(void) {
 static void usage(const char* argv0) {
   fprintf(stderr,
           "usage: %s FIRMWARE.elf [--trace FILE.csv] [--motors OC2B,OC1A,OC1B,OC2A] "
-          "[--marks FILE] [--stats FILE] [--fast] [--max-cycles N]\n"
+          "[--events FILE] [--marks FILE] [--stats FILE] [--fast] [--max-cycles N]\n"
           "  --motors: the four timer channels that drive motors 0..3, each one of "
           "OC0A OC0B OC1A OC1B OC2A OC2B\n",
           argv0);
@@ -249,6 +285,7 @@ int main(int argc, char** argv) {
   const char* elf_path = NULL;
   const char* trace_path = NULL;
   const char* marks_path = NULL;
+  const char* events_path = NULL;
   const char* stats_path = NULL;
   const char* motors = "OC2B,OC1A,OC1B,OC2A";
   int fast = 0;
@@ -256,6 +293,8 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
       trace_path = argv[++i];
+    } else if (strcmp(argv[i], "--events") == 0 && i + 1 < argc) {
+      events_path = argv[++i];
     } else if (strcmp(argv[i], "--marks") == 0 && i + 1 < argc) {
       marks_path = argv[++i];
     } else if (strcmp(argv[i], "--stats") == 0 && i + 1 < argc) {
@@ -290,6 +329,10 @@ int main(int argc, char** argv) {
     fprintf(stderr, "promini_sim_runner: cannot open marks file '%s'\n", marks_path);
     return 2;
   }
+  if (events_path && !(g_events = fopen(events_path, "a"))) {
+    fprintf(stderr, "promini_sim_runner: cannot open events file '%s'\n", events_path);
+    return 2;
+  }
   if (g_trace) fprintf(g_trace, "device_time_us,pwm0,pwm1,pwm2,pwm3\n");
 
   avr_global_logger_set(log_to_stderr);
@@ -310,6 +353,14 @@ int main(int argc, char** argv) {
    * the pty goes unserviced). */
   avr->sleep = no_sleep;
   avr_register_io_write(avr, kMarkReg, on_mark, NULL);
+  if (g_events) {
+    avr_irq_t* rx_vector = avr_get_interrupt_irq(avr, kUsartRxVector);
+    if (!rx_vector) {
+      fprintf(stderr, "promini_sim_runner: no USART_RX interrupt vector to watch\n");
+      return 2;
+    }
+    avr_irq_register_notify(rx_vector + AVR_INT_IRQ_RUNNING, on_rx_interrupt, avr);
+  }
   avr_irq_t* uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                           on_uart_out, NULL);
@@ -421,6 +472,7 @@ int main(int argc, char** argv) {
   }
   if (g_trace) fclose(g_trace);
   if (g_marks) fclose(g_marks);
+  if (g_events) fclose(g_events);
   close(slave_keepalive);
   close(master);
   return status;

@@ -124,6 +124,7 @@ def runner_options(
     stats: str | None = None,
     fast: bool = False,
     max_cycles: int | None = None,
+    events: str | None = None,
 ) -> list[str]:
     """The runner's command-line options for these settings (see :class:`ProMiniSimDevice`)."""
     options: list[str] = []
@@ -140,6 +141,8 @@ def runner_options(
         options += ["--motors", ",".join(motors)]
     if marks:
         options += ["--marks", os.fspath(marks)]
+    if events:
+        options += ["--events", os.fspath(events)]
     if stats:
         options += ["--stats", os.fspath(stats)]
     if fast:
@@ -163,6 +166,21 @@ def read_stats(path: str) -> dict[str, int]:
     return out
 
 
+def read_events(path: str) -> tuple[list[int], list[tuple[int, tuple[int, ...]]]]:
+    """The runner's ``--events`` file: (cycles of the frames' closing bytes as the UART
+    received them, [(cycle, four duties)] of every motor change), in order."""
+    frame_ends: list[int] = []
+    pwm: list[tuple[int, tuple[int, ...]]] = []
+    with open(path) as f:
+        for line in f:
+            words = line.split()
+            if words and words[0] == "rx_end":
+                frame_ends.append(int(words[1]))
+            elif words and words[0] == "pwm":
+                pwm.append((int(words[1]), tuple(int(w) for w in words[2:6])))
+    return frame_ends, pwm
+
+
 class ProMiniSimDevice(SimulatedDevice):
     """The Pro Mini sketch running cycle-exact under simavr, on a pseudo-terminal.
 
@@ -176,7 +194,8 @@ class ProMiniSimDevice(SimulatedDevice):
     file of the cycle counts the sketch brackets with GPIOR0 writes; ``stats``: file of the
     run's figures at exit (:func:`read_stats`); ``fast``: simulated time not held back to
     real time (only for sketches whose behaviour does not depend on time: the watchdog
-    would fire early).
+    would fire early); ``events``: file of cycle-exact events (the UART's receipt of each
+    frame's closing byte, every motor change: :func:`read_events`).
     A board's clock is its own: there is no virtual clock.
     """
 
@@ -189,6 +208,7 @@ class ProMiniSimDevice(SimulatedDevice):
         stats: str | None = None,
         fast: bool = False,
         max_cycles: int | None = None,
+        events: str | None = None,
         runner: str | None = None,
         virtual_clock: bool = False,
         start_timeout: float = DEFAULT_SIM_START_TIMEOUT,
@@ -203,7 +223,7 @@ class ProMiniSimDevice(SimulatedDevice):
             )
         self.elf = find_promini_elf(elf)
         runner = runner or build_runner()
-        options = runner_options(trace, motors, marks, stats, fast, max_cycles)
+        options = runner_options(trace, motors, marks, stats, fast, max_cycles, events)
         super().__init__(
             binary=runner,
             start_timeout=start_timeout,
@@ -229,6 +249,7 @@ __all__ = [
     "build_runner",
     "find_promini_elf",
     "read_stats",
+    "read_events",
     "runner_options",
     "PROMINI_SIM_PORT",
     "PROMINI_ELF_ENV",
