@@ -13,6 +13,7 @@ import os
 import re
 import sys
 import termios
+import time
 import tomllib
 
 import pexpect
@@ -22,6 +23,7 @@ from conftest import small_protocol_toml, subprocess_env
 from graspguide import cli
 from graspguide.study import runner as rn
 from graspguide.study import study_protocol as pf
+from graspguide.study.operator_console import OperatorConsole
 from graspguide.study.participant import VirtualParticipant
 from graspguide.study.progress import Progress, time_left_s
 from graspguide.study.tlx import TLX_NAMES, TLX_SCALES
@@ -353,3 +355,92 @@ def test_operator_needs_a_terminal(tmp_path, capsys, flag):
     )
     assert code == 2
     assert "--operator needs a terminal on stdin" in capsys.readouterr().err
+
+
+def test_console_keeps_keys_typed_ahead_and_edits_notes():
+    """Keys typed quickly after p, r or s (a pause's Enter, a reason) are not lost; a note
+    is edited with Backspace; the terminal is back in line mode afterwards."""
+    master, slave = os.openpty()
+    try:
+        echo = io.StringIO()
+        with OperatorConsole(fd=slave, out=echo) as con:
+            assert not termios.tcgetattr(slave)[3] & termios.ICANON
+            os.write(master, b"p\r")
+            assert _poll_until(con) == [("key", "p")]
+            assert con.wait_key(1.0) == "\n"
+            os.write(master, b"nabc\x7fd\r")
+            assert _poll_until(con) == [("note", "abd")]
+            os.write(master, b"rlooked away\r")
+            assert _poll_until(con) == [("key", "r")]
+            assert con.read_line("reason: ") == "looked away"
+            assert con.wait_key(0.05) is None
+        assert termios.tcgetattr(slave)[3] & termios.ICANON
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def _poll_until(con, limit_s=2.0):
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        got = con.poll()
+        if got:
+            return got
+        time.sleep(0.01)
+    return []
+
+
+def test_observers_get_the_operators_events_between_the_trials_own(tmp_path):
+    """One trial with keys typed ahead on a real pty: Enter, p (pause), Enter (resume), r
+    and a reason (redo), n and a note: the observer sees them between the attempts'
+    trial_start events, in order, and events.jsonl holds the same."""
+    from test_runner import AligningHand
+
+    from graspguide.link.client import DeviceClient
+    from graspguide.link.sim import SimulatedDevice
+
+    path = protocol_file(tmp_path, modalities=("F+V",), wrenches=1)
+    protocol = pf.load_protocol(path)
+    rec = Recorder()
+    out = tmp_path / "out"
+    master, slave = os.openpty()
+    try:
+        os.write(master, b"\rp\rrwhy\rnfine now\r")
+        with (
+            SimulatedDevice(virtual_clock=True, start=True) as dev,
+            OperatorConsole(fd=slave, out=io.StringIO()) as con,
+        ):
+            rn.StudyRunner(
+                protocol,
+                "U1",
+                str(out),
+                ClosedLoopSource(AligningHand(), "test"),
+                DeviceClient(dev),
+                virtual_clock=True,
+                progress=Progress(out=io.StringIO(), tty=False),
+                operator=con,
+                observers=[rec],
+            ).run()
+    finally:
+        os.close(master)
+        os.close(slave)
+    got = [(n, f.get("attempt")) for n, f in rec.events if n != "session_start"]
+    assert got == [
+        ("trial_start", 1),
+        ("pause", 1),
+        ("resume", 2),
+        ("trial_start", 2),
+        ("redo", 2),
+        ("trial_start", 3),
+        ("note", None),
+        ("trial_end", None),
+        ("study_end", None),
+    ]
+    logged = [(e["kind"], e["trial_index"], e.get("reason") or e.get("text")) for e in events(out)]
+    assert logged == [
+        ("pause", 1, None),
+        ("resume", 1, None),
+        ("redo", 1, "why"),
+        ("note", 1, "fine now"),
+    ]
+    assert trial_indices(out) == [1]

@@ -38,6 +38,9 @@ class OperatorConsole:
         self.out = out or sys.stdout
         self._saved: list[Any] | None = None
         self._note: list[str] | None = None  # a note being typed, else None
+        # Keys read after the one that stopped a poll (typed quickly, e.g. p then
+        # Enter): the next wait_key or read_line gets them, none is lost.
+        self._pending = ""
 
     @staticmethod
     def available(fd: int | None = None) -> bool:
@@ -75,12 +78,17 @@ class OperatorConsole:
         return data.decode("utf-8", "replace")
 
     def poll(self) -> list[tuple[str, str]]:
-        """The operator's actions since the last call, at once (no wait)."""
+        """The operator's actions since the last call, at once (no wait). The keys after
+        a p, r or s are kept for what the runner asks next (the pause's Enter, a reason)."""
+        text, self._pending = self._pending + self._read_ready(0.0), ""
         actions: list[tuple[str, str]] = []
-        for ch in self._read_ready(0.0):
+        for i, ch in enumerate(text):
             action = self._feed(ch)
             if action is not None:
                 actions.append(action)
+                if action[0] == "key":
+                    self._pending = text[i + 1 :]
+                    break
         return actions
 
     def _feed(self, ch: str) -> tuple[str, str] | None:
@@ -122,24 +130,33 @@ class OperatorConsole:
     # ---- blocking
     def wait_key(self, timeout_s: float | None = None) -> str | None:
         """One key (Enter is ``"\\n"``), or None after ``timeout_s``."""
-        ready, _, _ = select.select([self.fd], [], [], timeout_s)
-        if not ready:
-            return None
-        data = os.read(self.fd, 1)
-        if not data:
-            raise ConsoleClosed("the terminal's input ended")
-        ch = data.decode("utf-8", "replace")
+        if self._pending:
+            ch, self._pending = self._pending[0], self._pending[1:]
+        else:
+            ready, _, _ = select.select([self.fd], [], [], timeout_s)
+            if not ready:
+                return None
+            data = os.read(self.fd, 1)
+            if not data:
+                raise ConsoleClosed("the terminal's input ended")
+            ch = data.decode("utf-8", "replace")
         return "\n" if ch in _ENTER else ch
 
     def read_line(self, prompt: str) -> str:
         """A line typed in the terminal's line mode (echo, editing), then cbreak again.
         EOFError when the input ends (as input() does)."""
+        head, sep, rest = self._pending.replace("\r", "\n").partition("\n")
+        if sep:  # typed ahead, Enter included
+            self._pending = rest
+            self._echo(prompt + head + "\n")
+            return head
+        self._pending = ""
         saved = self._saved
         if saved is not None:
             termios.tcsetattr(self.fd, termios.TCSADRAIN, saved)
         try:
-            self._echo(prompt)
-            chunks: list[bytes] = []
+            self._echo(prompt + head)
+            chunks: list[bytes] = [head.encode("utf-8")]
             while True:
                 data = os.read(self.fd, 1024)
                 if not data:
