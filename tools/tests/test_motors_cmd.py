@@ -361,3 +361,25 @@ def test_port_qemu_starts_the_firmware_and_drives_it():
     rows = [tuple(int(x) for x in m_.groups()[1:]) for m_ in TRACE_LINE.finditer(out)]
     assert rows[0] == (200, 200, 200, 200), out
     assert out.rstrip().endswith(b"motors off")
+
+
+def test_sigterm_leaves_the_motors_off(sim_with_trace):
+    sim, trace = sim_with_trace
+    argv = CLI + ["motors", "--port", sim.pty_path, "--pwm", "90", "--duration-s", "60"]
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=subprocess_env()
+    )
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert b"thumb  90" in first, first
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert out.rstrip().endswith(b"motors off"), out
+    rows = _trace_rows(trace)
+    assert (90, 90, 90, 90) in rows and rows[-1] == MOTORS_OFF
