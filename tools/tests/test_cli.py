@@ -516,6 +516,10 @@ _REQUIRED = {
     "trial": ["--protocol", "p.toml", "--participant", "U1", "--port", "sim", "--source", "x"],
     "analyze": ["study"],
     "info": ["--port", "sim"],
+    "plot": ["run"],
+    "motors": ["--port", "sim", "--pwm", "1"],
+    "latency": ["--port", "sim"],
+    "calibrate": ["--port", "sim", "--participant", "U1"],
 }
 
 

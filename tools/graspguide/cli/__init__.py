@@ -33,6 +33,10 @@ COMMANDS = (
     "device",
     "plan",
     "mp",
+    "motors",
+    "calibrate",
+    "plot",
+    "latency",
 )
 
 
