@@ -73,6 +73,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TextIO
 
+from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.study.errors import RunnerError
 from graspguide.study.pose_loop import (
     Diverged,
@@ -290,6 +291,10 @@ class StudyRunner:
     operator: Any = None  # an entered operator_console.OperatorConsole: a person's run
     rest_s: float = 0.0
     observers: Sequence[TrialObserver] = ()
+    # The participant's per-motor calibration (graspguide calibrate); None: the paper's
+    # mapping. Sent on every run, the identity too, so a device that kept an earlier
+    # participant's calibration never renders this one's trials with it.
+    calibration: MotorCalibration | None = None
 
     def __post_init__(self) -> None:
         self.pipeline_fallbacks = 0
@@ -895,6 +900,8 @@ class StudyRunner:
         done, tlx_done = self.prepare()
         info = self.client.hello()
         self.client.stop()  # a trial left running by an earlier run would refuse SET_SCENE
+        calibration = self.calibration or MotorCalibration.identity()
+        self.client.set_calibration(calibration)
         self.skipped = len(done)
         self._log_run(
             "start",
@@ -909,6 +916,7 @@ class StudyRunner:
             },
             completed_before=len(done),
             damaged=self.damaged,
+            calibration=None if self.calibration is None else calibration.to_json(),
         )
         if done:
             self.progress.line(
@@ -1082,6 +1090,10 @@ def trial_command(
     ``operator``) and a terminal on stdin: the ready prompt, the rest (``rest_s``, default
     PERSON_REST_S; 0 for a simulated source) and the operator's keys. Returns the exit
     code."""
+    from graspguide.calibration.calibration_file import (
+        CalibrationFileError,
+        load_participant_calibration,
+    )
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -1105,13 +1117,21 @@ def trial_command(
     try:
         loaded = load_protocol(protocol_file)
         participant_number(participant)
+        calibration = load_participant_calibration(out, participant)
         poses = open_runner_source(source_spec, loaded, participant)
         runner_tlx = None
         if tlx_file is not None:
             runner_tlx = load_tlx_file(tlx_file, participant, session_order(loaded, participant))
-    except (ProtocolFileError, RunnerError) as e:
+    except (ProtocolFileError, RunnerError, CalibrationFileError) as e:
         report("trial", e)
         return EXIT_USAGE
+    if calibration is not None:
+        print(
+            f"{participant}: per-finger calibration from "
+            f"{os.path.join(out, participant, 'calibration.json')}: PWM floor "
+            f"{list(calibration.pwm_floor)}, gain {[round(g, 3) for g in calibration.gain]}",
+            flush=True,
+        )
     from graspguide.study.operator_console import KEYS_HELP, ConsoleClosed, OperatorConsole
 
     person = operator or not poses.simulated
@@ -1160,6 +1180,7 @@ def trial_command(
             operator=console,
             rest_s=rest_s,
             observers=observers,
+            calibration=calibration,
         )
         result = runner.run()
         skipped = len(runner.skipped_by_operator)
