@@ -392,15 +392,26 @@ def round_half_away(x: float) -> int:
     return int(math.copysign(math.floor(abs(x) + 0.5), x))
 
 
-def pwm_from_levels(levels: np.ndarray, mode: str, alpha: float) -> list[int]:
+def pwm_from_levels(
+    levels: np.ndarray, mode: str, alpha: float, calibration: Any = None
+) -> list[int]:
+    """duty_i = round(floor_i + G * (gain_i * |m_i|)), clamped to 0..255 (G = PWM_RANGE in
+    mode C, alpha in V). ``calibration`` (a core.motor_calibration.MotorCalibration, or
+    None for the identity) gives floor_i and gain_i; its gains are rounded to float32, as
+    SET_CALIBRATION and PLAN_BEGIN carry them."""
     out = []
-    for mi in levels:
+    for i, mi in enumerate(levels):
         a = abs(float(mi))
         if a <= kMotorOffLevel:
             out.append(0)
             continue
         gain = PWM_RANGE if mode == "C" else alpha
-        out.append(min(255, max(0, round_half_away(PWM_BASE + a * gain))))
+        if calibration is None:
+            out.append(min(255, max(0, round_half_away(PWM_BASE + a * gain))))
+            continue
+        floor_i = float(calibration.pwm_floor[i])
+        gain_i = float(np.float32(calibration.gain[i]))
+        out.append(min(255, max(0, round_half_away(floor_i + gain * (gain_i * a)))))
     return out
 
 

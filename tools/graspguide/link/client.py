@@ -516,8 +516,12 @@ def _floats(values: Sequence[float], n: int, what: str) -> tuple:
     return tuple(to_f32(v) for v in values)
 
 
-def calibration_message(cal: MotorCalibration) -> SetCalibration:
-    """SET_CALIBRATION of ``cal``, its gains rounded to float32 as the wire carries them."""
+def calibration_message(cal: MotorCalibration | SetCalibration) -> SetCalibration:
+    """SET_CALIBRATION of ``cal``, its gains rounded to float32 as the wire carries them. A
+    SetCalibration goes as it is, unchecked: the device's own checks are then what answers
+    (its tests send values a MotorCalibration refuses)."""
+    if isinstance(cal, SetCalibration):
+        return cal
     if not isinstance(cal, MotorCalibration):
         raise TypeError(
             f"calibration must be a MotorCalibration (graspguide.core.motor_calibration), got "
@@ -1170,7 +1174,9 @@ class DeviceClient:
         pwm += [0] * (MAX_CONTACTS - len(pwm))
         return self._request(SetMotors(pwm=tuple(pwm)), Ack, timeout)
 
-    def set_calibration(self, cal: MotorCalibration, timeout: float | None = None) -> Ack:
+    def set_calibration(
+        self, cal: MotorCalibration | SetCalibration, timeout: float | None = None
+    ) -> Ack:
         """SET_CALIBRATION: the participant's per-motor PWM floor and gain, applied to the
         TELEMETRY PWM of every following POSE (SET_MOTORS stays raw). The device refuses it
         during a trial or a host-less run (DeviceError not_allowed_in_state) and names the

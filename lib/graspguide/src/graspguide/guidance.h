@@ -115,6 +115,14 @@ class Guidance {
     return out.status;
   }
 
+  // The participant's per-motor PWM floor and gain, from the next frame on (the device
+  // checks it with check_calibration first). Kept across scenes and wrenches.
+  void set_calibration(const MotorCalibration& calibration) {
+    calibration_ = calibration;
+    if (!dirty_) pwm_plan_ = plan_pwm<T>(grasp_.levels.data(), kMaxContacts, calibration_);
+  }
+
+  const MotorCalibration& calibration() const { return calibration_; }
   const GraspSolution<T>& grasp() const { return grasp_; }
   const Scene<T>& scene() const { return scene_; }
 
@@ -125,7 +133,7 @@ class Guidance {
     if (!has_wrench_) return Status::kZeroWrench;
     if (dirty_) {
       grasp_status_ = scene_.k == 3 ? solve_k<3>() : solve_k<4>();
-      pwm_plan_ = plan_pwm<T>(grasp_.levels.data(), kMaxContacts);
+      pwm_plan_ = plan_pwm<T>(grasp_.levels.data(), kMaxContacts, calibration_);
       dirty_ = false;
       out.recomputed = true;
     }
@@ -154,7 +162,8 @@ class Guidance {
   bool dirty_ = true;
   Status grasp_status_ = Status::kOk;
   GraspSolution<T> grasp_;
-  PwmPlan<T> pwm_plan_;  // the posture's part of the PWM
+  MotorCalibration calibration_;  // the identity until set
+  PwmPlan<T> pwm_plan_;           // the posture's part of the PWM
 };
 
 }  // namespace graspguide

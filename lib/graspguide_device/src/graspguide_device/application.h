@@ -176,6 +176,24 @@ class Application {
     return Reply{};
   }
 
+  // The participant's per-motor PWM floor and gain, for every following POSE (SET_MOTORS
+  // stays raw: calibration measures with it). Refused while a trial runs, so a trial is
+  // rendered with one mapping; an invalid one is refused and the previous one stays.
+  // *bad_field, when given, names the field behind a kBadConfig.
+  Reply set_calibration(const MotorCalibration& calibration,
+                        CalibrationField* bad_field = nullptr) {
+    if (state_ == DeviceState::kTrialRunning) return refuse(Refusal::kNotAllowedInState);
+    const CalibrationCheck c = check_calibration(calibration);
+    if (c != CalibrationCheck::kOk) {
+      if (bad_field) *bad_field = calibration_field(c);
+      return fail(Status::kBadConfig);
+    }
+    guidance_.set_calibration(calibration);
+    return Reply{};
+  }
+
+  const MotorCalibration& calibration() const { return guidance_.calibration(); }
+
   // Acts at once, whatever the state.
   void stop() {
     motors_off();

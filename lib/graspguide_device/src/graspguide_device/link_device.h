@@ -37,6 +37,17 @@ inline uint8_t set_scene_field_index(TrialField f) {
   return found;
 }
 
+// A message's field index by name (ERROR.detail of bad_config), from the schema's list.
+template <class Msg>
+uint8_t link_field_index(const Msg& m, const char* key) {
+  uint8_t i = 0, found = 0;
+  link::for_each_field(m, [&](const char* name, const auto&) {
+    if (std::strcmp(name, key) == 0) found = i;
+    ++i;
+  });
+  return found;
+}
+
 static_assert(uint8_t(link::DeviceState::kTrialRunning) == uint8_t(DeviceState::kTrialRunning) &&
                   uint8_t(link::DeviceState::kStopped) == uint8_t(DeviceState::kStopped),
               "device states must match the protocol schema");
@@ -255,9 +266,22 @@ class LinkDevice {
     send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(link::MsgId::kSetPosture));
   }
 
-  // Until the application applies a calibration, it answers as a protocol-3 device would.
-  void on(const link::SetCalibration&) {
-    send_error(request_seq_, link::ErrorCode::kUnknownId, uint8_t(link::MsgId::kSetCalibration));
+  void on(const link::SetCalibration& m) {
+    if (hostless_busy()) return;
+    MotorCalibration c;
+    std::memcpy(c.pwm_floor, m.pwm_floor, sizeof c.pwm_floor);
+    std::memcpy(c.gain, m.gain, sizeof c.gain);
+    CalibrationField bad = CalibrationField::kNone;
+    const Reply reply = app_.set_calibration(c, &bad);
+    if (reply.status == Status::kBadConfig)
+      send_error(request_seq_, link::ErrorCode::kBadConfig, calibration_field_index(bad));
+    else
+      answer(reply, link::MsgId::kSetCalibration);
+  }
+
+  static uint8_t calibration_field_index(CalibrationField f) {
+    return link_field_index(link::SetCalibration{},
+                            f == CalibrationField::kGain ? "gain" : "pwm_floor");
   }
 
   // ---- host-less: the plan, the run, the log

@@ -108,6 +108,11 @@ class FrameDevice {
         if ((ok = link::unpack(p, &m, &bad_field))) on_set_posture(m);
         break;
       }
+      case link::SetCalibration::kId: {
+        link::SetCalibration m;
+        if ((ok = link::unpack(p, &m, &bad_field))) on_set_calibration(m);
+        break;
+      }
       case link::StartTrial::kId: {
         link::StartTrial m;
         if ((ok = link::unpack(p, &m, &bad_field))) on_start_trial(m);
@@ -200,7 +205,9 @@ class FrameDevice {
     if (state_ == State::kTrialRunning) return refuse_in_state();
     const uint8_t bad = bad_posture_field(m);
     if (bad != 0xFF) return send_error(request_seq_, link::ErrorCode::kBadConfig, bad);
-    plan_ = graspguide::plan_pwm(m.levels, m.k);
+    memcpy(levels_, m.levels, sizeof levels_);
+    k_ = m.k;
+    plan_ = graspguide::plan_pwm(levels_, k_, calibration_);
     mode_ = graspguide::Mode(m.mode);
     memcpy(force_unit_, m.force_unit, sizeof force_unit_);
     memcpy(wrench_, m.wrench, sizeof wrench_);
@@ -208,6 +215,26 @@ class FrameDevice {
     trial_config_.hold_s = m.hold_s;
     trial_config_.timeout_s = m.timeout_s;
     state_ = State::kSceneSet;
+    ack();
+  }
+
+  // The participant's per-motor PWM floor and gain, for the posture set and every later
+  // one (SET_MOTORS stays raw). Refused while a trial runs; an invalid one is refused with
+  // the field's index and the previous one stays.
+  void on_set_calibration(const link::SetCalibration& m) {
+    if (state_ == State::kTrialRunning) return refuse_in_state();
+    graspguide::MotorCalibration c;
+    memcpy(c.pwm_floor, m.pwm_floor, sizeof c.pwm_floor);
+    memcpy(c.gain, m.gain, sizeof c.gain);
+    const graspguide::CalibrationCheck check = graspguide::check_calibration(c);
+    if (check != graspguide::CalibrationCheck::kOk) {
+      const bool gain = graspguide::calibration_field(check) == graspguide::CalibrationField::kGain;
+      return send_error(
+          request_seq_, link::ErrorCode::kBadConfig,
+          gain ? link::SetCalibration::kFieldGain : link::SetCalibration::kFieldPwmFloor);
+    }
+    calibration_ = c;
+    plan_ = graspguide::plan_pwm(levels_, k_, calibration_);
     ack();
   }
 
@@ -397,7 +424,10 @@ class FrameDevice {
   Clock& clock_;
   DeviceInfo info_;
   FrameParser parser_;
-  // The posture, as the host solved it.
+  // The posture, as the host solved it, and the participant's calibration.
+  float levels_[graspguide::kMaxContacts] = {0.0f, 0.0f, 0.0f, 0.0f};
+  uint8_t k_ = 0;
+  graspguide::MotorCalibration calibration_;
   graspguide::PwmPlan<float> plan_;
   float force_unit_[3] = {0.0f, 0.0f, 0.0f};
   float wrench_[6] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
