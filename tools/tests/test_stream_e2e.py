@@ -283,6 +283,30 @@ def test_run_stream_then_stop_leaves_device_idle():
             2,
             "looks like N mm",
         ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]
+            + ["--source", "participant:reaction_time=0.3"],
+            2,
+            "unknown participant parameter 'reaction_time'",
+        ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]
+            + ["--source", "participant:seed=x"],
+            2,
+            "seed must be an integer",
+        ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]
+            + ["--source", "synthetic", "--lsl-wait", "5"],
+            2,
+            "--lsl-wait is for --lsl",
+        ),
+        (
+            ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]
+            + ["--source", "synthetic", "--lsl", "a/b"],
+            2,
+            "--lsl name 'a/b'",
+        ),
     ],
 )
 def test_errors_and_exit_codes(args, code, words):
@@ -423,3 +447,34 @@ def test_sigterm_stop_reaches_the_device(tmp_path):
     pwm = [[int(r[f"pwm{i}"]) for i in range(4)] for r in rows]
     assert any(any(row) for row in pwm), "the motors never ran: nothing was tested"
     assert pwm[-1] == [0, 0, 0, 0]
+
+
+def test_participant_source_reaches_a_trial_result(tmp_path):
+    """`--source participant` (closed loop, SIMULATED) on the virtual clock: the device's
+    TRIAL_RESULT, the run labelled simulated in output, config and log, and the poses the
+    participant's (pipelined) ones: every POSE answered, in order."""
+    scene_v = tmp_path / "scene_v.toml"
+    # mode V: the virtual participant succeeds there (mode C is the paper's harder one)
+    scene_v.write_text(open(SCENE3).read().replace('mode = "C"', 'mode = "V"'))
+    folder = tmp_path / "run"
+    args = ["--port", "sim", "--virtual-clock", "--scene", str(scene_v), "--wrench", WRENCH]
+    p = run(args + ["--source", "participant:seed=2", "--log", str(folder), "--trial-id", "5"])
+    assert p.returncode == 0, p.stderr
+    assert "SIMULATED trial 5: success" in p.stdout, p.stdout
+    assert "SIMULATED" in p.stderr and "virtual participant" in p.stderr
+    config = json.load(open(folder / "config.json"))
+    assert config["simulated"] is True and config["source"]["simulated"] is True
+    assert config["source"]["kind"] == "closed_loop"
+    poses = list(csv.DictReader(open(folder / "poses.csv")))
+    tel = list(csv.DictReader(open(folder / "telemetry.csv")))
+    trial, end = [json.loads(line) for line in open(folder / "results.jsonl")]
+    assert trial["trial_id"] == 5 and trial["success"] is True
+    # pipelined: the POSEs already written when the trial ended are refused (no TELEMETRY)
+    from graspguide.study.pose_loop import MAX_PIPELINE
+
+    assert 0 <= len(poses) - len(tel) < MAX_PIPELINE
+    assert [r["host_time_us"] for r in poses[: len(tel)]] == [r["host_time_us"] for r in tel]
+    assert end["sent"] == len(poses) and end["received"] == len(tel) and end["exit_code"] == 0
+    # the same seed gives the same trial (the participant is seeded, the device exact)
+    again = run(args + ["--source", "participant:seed=2", "--trial-id", "5"])
+    assert again.stdout.splitlines()[-1] == p.stdout.splitlines()[-1]

@@ -24,7 +24,20 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
          scene's force with gravity),
          plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.study.sources.TrackerAdapter
-         subclass that reads the lab's tracker SDK)."""
+         subclass that reads the lab's tracker SDK),
+         participant[:seed=N,PARAMS] (the virtual participant as a closed loop: it feels
+         the motors and turns the hand, as in `graspguide trial`; SIMULATED, and labelled
+         so in the output, the log and the LSL streams).
+
+The panel names the motors after the fingers (thumb, index, middle, palm) and shows the
+trial's state (waiting, running, holding, success, timeout, stopped) and the hold
+progress against the scene's threshold ("below 3.0 deg for 0.31/0.50 s"); plain lines
+when the output is not a terminal.
+
+--lsl publishes two Lab Streaming Layer streams, NAME-Telemetry (error_deg, alpha,
+pwm_thumb..pwm_palm, status, trial_time_s per TELEMETRY) and NAME-Markers (JSON strings:
+session_start, trial_start, trial_end, study_end), for LabRecorder; docs/lab-streams.md
+describes them and lsl_api.cfg."""
 
 EPILOG = """\
 examples:
@@ -32,9 +45,12 @@ examples:
       --wrench 0.3,-1.2,-0.8 --source synthetic --log runs/s1
   graspguide stream --port /dev/ttyACM0 --scene my_scene.toml --wrench -1,0,-2 \\
       --source replay:poses.csv --trial-id 3
+  graspguide stream --port sim --scene tools/examples/scene_paper_3.toml \
+      --wrench 0.3,-1.2,-0.8 --source participant:seed=2 --lsl GraspGuide --lsl-wait 30
 
 exit status: 0 when the trial ended (success or failure) or the source ended, 1 on a link
-error, 2 on a usage error (bad scene, wrench or source), 130 on Ctrl-C, SIGTERM or SIGHUP
+error or when LSL cannot be used (liblsl missing, no network interface), 2 on a usage
+error (bad scene, wrench, source or --lsl name), 130 on Ctrl-C, SIGTERM or SIGHUP
 (STOP is sent and the log's end record written first)."""
 
 
@@ -50,6 +66,16 @@ def wrench_arg(text: str) -> list[float]:
             f"--wrench must be 3 or 6 finite numbers (fx,fy,fz[,mx,my,mz]), got {text!r}"
         )
     return values + [0.0] * (6 - len(values))
+
+
+def non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0, got {text!r}")
+    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -74,8 +100,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--source",
         required=True,
         metavar="SOURCE",
-        help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0] or "
-        "plugin:MODULE:CLASS[:ARG]",
+        help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0], "
+        "plugin:MODULE:CLASS[:ARG] or participant[:seed=N,PARAMS] (SIMULATED)",
     )
     p.add_argument(
         "--tracker",
@@ -105,6 +131,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="with --port sim: the device's clock follows the poses' times, so "
         "the trial runs as fast as possible",
     )
+    p.add_argument(
+        "--lsl",
+        nargs="?",
+        const="GraspGuide",
+        default=None,
+        metavar="NAME",
+        help="publish the telemetry and the trial markers as LSL streams NAME-Telemetry "
+        "and NAME-Markers (default NAME: GraspGuide)",
+    )
+    p.add_argument(
+        "--lsl-wait",
+        type=non_negative_float,
+        default=0.0,
+        metavar="S",
+        help="with --lsl: wait up to S seconds for a recorder (LabRecorder) to connect "
+        "to both streams before the trial starts (default 0: do not wait)",
+    )
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
@@ -114,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
     parser = args.command_parser
     if args.virtual_clock and args.port != SIM_PORT:
         parser.error("--virtual-clock is for --port sim (a board's clock is its own)")
+    if args.lsl_wait and args.lsl is None:
+        parser.error("--lsl-wait is for --lsl (add --lsl [NAME])")
     if not 0 <= args.trial_id <= 0xFFFF:
         parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
     return call_with_options(stream_command, args)

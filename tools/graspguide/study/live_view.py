@@ -1,62 +1,157 @@
-"""The live status of `graspguide stream`: a rich panel on a terminal, plain periodic lines
-otherwise."""
+"""The live status of `graspguide stream`: the trial's state and hold progress as the device
+judges them (:class:`TrialProgress`), shown as a rich panel on a terminal and as plain
+periodic lines otherwise (:class:`StatusView`)."""
 
 from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from collections.abc import Sequence
+from typing import Any, TextIO
+
+from graspguide.core.vocabulary import FINGERS
+
+WAITING = "waiting"  # no TELEMETRY yet
+RUNNING = "running"  # the error is above the threshold
+HOLDING = "holding"  # below the threshold, the hold time not reached yet
+SUCCESS = "success"  # TRIAL_RESULT: success
+TIMEOUT = "timeout"  # TRIAL_RESULT: failure (the device's timeout)
+STOPPED = "stopped"  # ended without a TRIAL_RESULT (source ended, Ctrl-C, an error)
+STATES = (WAITING, RUNNING, HOLDING, SUCCESS, TIMEOUT, STOPPED)
+FINAL_STATES = (SUCCESS, TIMEOUT, STOPPED)
+
+
+class TrialProgress:
+    """The trial's state from its TELEMETRY, by the device's rule
+    (lib/graspguide_frame/src/graspguide_frame/trial.h): holding while error_deg <=
+    threshold_deg, the hold counted from the first frame of the current stretch; success
+    once it lasted hold_s. Display only: the TRIAL_RESULT decides."""
+
+    def __init__(self, threshold_deg: float, hold_s: float, timeout_s: float):
+        self.threshold_deg = float(threshold_deg)
+        self.hold_s = float(hold_s)
+        self.timeout_s = float(timeout_s)
+        self.state = WAITING
+        self.entry_t_s: float | None = None
+        self.held_s = 0.0
+        self.t_s = 0.0
+
+    def frame(self, t_s: float, error_deg: float, solver_ok: bool) -> None:
+        if self.state in FINAL_STATES:
+            return
+        self.t_s = float(t_s)
+        # a failed solve reports error 0 and motors off: no progress towards the hold
+        if solver_ok and error_deg <= self.threshold_deg:
+            if self.entry_t_s is None:
+                self.entry_t_s = self.t_s
+            self.held_s = self.t_s - self.entry_t_s
+            self.state = HOLDING
+        else:
+            self.entry_t_s = None
+            self.held_s = 0.0
+            self.state = RUNNING
+
+    def result(self, success: bool) -> None:
+        self.state = SUCCESS if success else TIMEOUT
+
+    def stop(self) -> None:
+        if self.state not in FINAL_STATES:
+            self.state = STOPPED
+
+    def hold_text(self) -> str:
+        """``below 3.0 deg for 0.31/0.50 s`` while holding, else what is missing."""
+        held = min(self.held_s, self.hold_s)
+        if self.state == HOLDING or (self.state == SUCCESS and self.entry_t_s is not None):
+            return f"below {self.threshold_deg:.1f} deg for {held:.2f}/{self.hold_s:.2f} s"
+        return f"not below {self.threshold_deg:.1f} deg (hold 0.00/{self.hold_s:.2f} s)"
 
 
 class StatusView:
-    """Live status: a rich panel on a terminal, plain periodic lines otherwise."""
+    """Live status: a rich panel on a terminal, plain periodic lines otherwise (and a line
+    at once when the trial ends). ``k`` motors named after FINGERS; ``simulated`` labels
+    a run of the virtual participant."""
 
-    def __init__(self, k: int, out: TextIO | None = None, period_s: float = 1.0):
+    def __init__(
+        self,
+        k: int,
+        progress: TrialProgress,
+        out: TextIO | None = None,
+        period_s: float = 1.0,
+        simulated: bool = False,
+        fingers: Sequence[str] = FINGERS,
+    ):
         self.out = out or sys.stdout
         self.k = k
+        self.progress = progress
+        self.fingers = list(fingers[:k])
+        self.simulated = simulated
         self.period_s = period_s
         self.next_t = 0.0
-        self.live = None
+        self.live: Any = None
         self.last_draw = 0.0
+        self.last_state = progress.state
         if self.out.isatty():
             try:
+                from rich.console import Console
                 from rich.live import Live
 
-                self.live = Live(self._render({}), refresh_per_second=10, transient=False)
+                self.live = Live(
+                    self._render({}),
+                    console=Console(file=self.out),
+                    refresh_per_second=10,
+                    transient=False,
+                )
                 self.live.start()
             except ImportError:  # pragma: no cover - rich is a dependency
                 self.live = None
 
-    def _render(self, s):
+    def _title(self) -> str:
+        return "graspguide stream" + (" (SIMULATED participant)" if self.simulated else "")
+
+    def _render(self, s: dict[str, Any]) -> Any:
         from rich.table import Table
 
-        table = Table(title="graspguide stream", show_header=False, expand=False)
-        table.add_row("time", f"{s.get('t_s', 0.0):7.2f} s")
-        table.add_row("error", f"{s.get('error_deg', float('nan')):7.2f} deg")
-        for i, pwm in enumerate(s.get("pwm", [0] * self.k)[: self.k]):
+        p = self.progress
+        table = Table(title=self._title(), show_header=False, expand=False)
+        table.add_row("state", f"[bold]{p.state}[/bold]")
+        table.add_row("time", f"{s.get('t_s', 0.0):7.2f} / {p.timeout_s:g} s")
+        table.add_row(
+            "error",
+            f"{s.get('error_deg', float('nan')):7.2f} deg (threshold {p.threshold_deg:.1f})",
+        )
+        table.add_row("hold", p.hold_text())
+        for finger, pwm in zip(self.fingers, s.get("pwm", [0] * self.k)):
             bar = "#" * (pwm * 30 // 255)
-            table.add_row(f"motor {i + 1}", f"{pwm:3d} [green]{bar:<30}[/green]")
+            table.add_row(finger, f"{pwm:3d} [green]{bar:<30}[/green]")
         table.add_row("rate", f"{s.get('rate_hz', 0.0):7.1f} poses/s")
         table.add_row("sent / telemetry", f"{s.get('sent', 0)} / {s.get('received', 0)}")
         table.add_row("dropped", str(s.get("dropped", 0)))
         return table
 
-    def update(self, s, force: bool = False) -> None:
+    def line(self, s: dict[str, Any]) -> str:
+        """The plain status line of ``s`` (not a terminal)."""
+        p = self.progress
+        pwm = " ".join(f"{f}={x:3d}" for f, x in zip(self.fingers, s["pwm"]))
+        tag = "SIMULATED " if self.simulated else ""
+        return (
+            f"{tag}t={s['t_s']:7.2f}s state={p.state} error={s['error_deg']:7.2f}deg "
+            f"[{p.hold_text()}] pwm {pwm} rate={s['rate_hz']:.1f}/s sent={s['sent']} "
+            f"dropped={s['dropped']}"
+        )
+
+    def update(self, s: dict[str, Any], force: bool = False) -> None:
         if self.live is not None:
             now = time.monotonic()
             if force or now - self.last_draw >= 0.1:
                 self.live.update(self._render(s))
                 self.last_draw = now
             return
-        if force or s["t_s"] >= self.next_t:
+        state = self.progress.state
+        ended = state != self.last_state and state in FINAL_STATES
+        self.last_state = state
+        if force or ended or s["t_s"] >= self.next_t:
             self.next_t = s["t_s"] + self.period_s
-            pwm = " ".join(f"{p:3d}" for p in s["pwm"][: self.k])
-            print(
-                f"t={s['t_s']:7.2f}s error={s['error_deg']:7.2f}deg pwm=[{pwm}] "
-                f"rate={s['rate_hz']:.1f}/s sent={s['sent']} dropped={s['dropped']}",
-                file=self.out,
-                flush=True,
-            )
+            print(self.line(s), file=self.out, flush=True)
 
     def close(self) -> None:
         if self.live is not None:
@@ -64,4 +159,4 @@ class StatusView:
             self.live = None
 
 
-__all__ = ["StatusView"]
+__all__ = ["StatusView", "TrialProgress", "STATES", "FINAL_STATES"]

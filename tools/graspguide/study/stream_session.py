@@ -1,18 +1,70 @@
 """One `graspguide stream` trial: SET_SCENE, START_TRIAL, the source's poses through the
-pose loop (:mod:`graspguide.study.pose_loop`) into the session log and the live view,
-until the TRIAL_RESULT or the end of the source; :func:`stream_command` is the whole
-command (scene, source, device, log, STOP on every way out, the result line)."""
+pose loop (:mod:`graspguide.study.pose_loop`) into the session log, the live view and the
+observers (:mod:`graspguide.study.trial_events`: the LSL streams), until the TRIAL_RESULT
+or the end of the source; :func:`stream_command` is the whole command (scene, source,
+device, log, LSL, STOP on every way out, the result line).
+
+The source is open loop (replay, synthetic, a tracker: the hand moves whatever the motors
+do) or the virtual participant (``participant[:seed=N,PARAMS]``, SIMULATED), a closed loop
+run as `graspguide trial` runs it: lockstep, or pipelined on the virtual clock
+(:class:`graspguide.study.pose_loop.PipelinedPoses`)."""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail, report
+from graspguide.link.messages import ErrorCode
 from graspguide.link.transport import LinkError
+from graspguide.study import trial_events as ev
 from graspguide.study.device_session import DeviceSession
-from graspguide.study.pose_loop import Frame, OpenLoopPoses, PoseLoop
+from graspguide.study.pose_loop import (
+    Frame,
+    LockstepPoses,
+    OpenLoopPoses,
+    PipelinedPoses,
+    PoseLoop,
+    PoseLoopError,
+    pipeline_window,
+)
+
+# The virtual participant starts each trial here (a protocol's default [trial] start_quat).
+START_QUAT = [1.0, 0.0, 0.0, 0.0]
+# A closed-loop trial without a TRIAL_RESULT this long after the scene's timeout is an
+# error (the device should have ended it), as in `graspguide trial`.
+RESULT_MARGIN_S = 2.0
+
+
+def open_participant(spec: str) -> Any:
+    """The virtual participant of ``participant[:seed=N,key=val,...]`` as a closed-loop
+    source (:class:`graspguide.study.trial_sources.ClosedLoopSource`); ``seed`` (default
+    0) seeds it, the other keys are its parameters. Raises SourceError."""
+    from graspguide.study.errors import RunnerError
+    from graspguide.study.participant import VirtualParticipant
+    from graspguide.study.sources import SourceError
+    from graspguide.study.trial_sources import ClosedLoopSource
+
+    _, _, rest = spec.partition(":")
+    seed = 0
+    params = []
+    for item in filter(None, (x.strip() for x in rest.split(","))):
+        key, _, value = item.partition("=")
+        if key.strip() == "seed":
+            try:
+                seed = int(value)
+            except ValueError:
+                raise SourceError(
+                    f"--source {spec}: seed must be an integer (seed=3), got {value.strip()!r}"
+                ) from None
+        else:
+            params.append(item)
+    try:
+        return ClosedLoopSource(VirtualParticipant.from_spec(",".join(params), seed), spec)
+    except (ValueError, TypeError, RunnerError) as e:
+        raise SourceError(f"--source {spec}: {e}") from None
 
 
 def run_stream(
@@ -24,14 +76,23 @@ def run_stream(
     virtual_clock: bool = False,
     log=None,
     view=None,
+    *,
+    observers: Sequence[ev.TrialObserver] = (),
+    progress=None,
 ) -> dict[str, Any]:
     """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
-    (paced in real time unless ``virtual_clock``; a pose more than two periods late is
-    skipped), until TRIAL_RESULT or the end of the source. Returns a summary dict; raises
-    LinkError. STOP is the caller's job."""
+    (paced in real time unless ``virtual_clock``; an open-loop pose more than two periods
+    late is skipped), until TRIAL_RESULT or the end of the source. ``source`` is an
+    open-loop source or a ClosedLoopSource (:func:`open_participant`). Each TELEMETRY
+    goes to the log, ``progress`` (a live_view.TrialProgress), the view and the
+    ``observers`` (trial_start and trial_end events too). Returns a summary dict; raises
+    LinkError, PoseLoopError. STOP is the caller's job."""
+    closed = bool(getattr(source, "closed_loop", False))
     client.set_scene(**scene.set_scene_kwargs())
     client.start_trial(trial_id, wrench)
     client.trial_results.clear()
+    for o in observers:
+        o.on_event(ev.TRIAL_START, trial_index=trial_id)
     status: dict[str, Any] = {
         "t_s": 0.0,
         "error_deg": float("nan"),
@@ -46,6 +107,10 @@ def run_stream(
         tel = frame.tel
         if log is not None:
             log.telemetry(tel)
+        for o in observers:
+            o.on_telemetry(frame.t_s, tel.error_deg, tel.alpha, tel.pwm, int(tel.solver_status))
+        if progress is not None:
+            progress.frame(frame.t_s, tel.error_deg, tel.solver_status == ErrorCode.OK)
         elapsed = max(time.monotonic() - loop.wall0, 1e-9)
         status.update(
             t_s=frame.t_s,
@@ -59,23 +124,67 @@ def run_stream(
         if view is not None:
             view.update(status)
 
-    loop = PoseLoop(
-        client,
-        virtual_clock,
-        skip_late=True,
-        period_s=1.0 / source.rate_hz if source.rate_hz else 0.0,
-        on_send=None
-        if log is None
-        else lambda t_us, t_s, q, c: log.pose(t_us, t_s, q, c is not None),
-        on_frame=on_frame,
-    )
-    done = loop.run(OpenLoopPoses(source))
-    if done.trial_result is not None and log is not None:
-        log.result(done.trial_result)
+    on_send = None if log is None else lambda t_us, t_s, q, c: log.pose(t_us, t_s, q, c is not None)
+    if closed:
+        model = source.model
+        model.begin_trial(
+            contacts=[list(c) for c in scene.contacts],
+            y_axis=list(scene.y_axis),
+            wrench=list(wrench),
+            policy=scene.policy,
+            mode=scene.mode,
+            start_quat=list(START_QUAT),
+        )
+        window = pipeline_window(model, source.rate_hz) if virtual_clock else 1
+        poses: Any = (
+            PipelinedPoses(model, source.rate_hz, scene.k, window, _feel_lag_error())
+            if window > 1
+            else LockstepPoses(model.step, source.rate_hz, scene.k)
+        )
+        # the device ends the trial at its timeout: past that, something is wrong
+        loop = PoseLoop(
+            client,
+            virtual_clock,
+            limit_s=scene.timeout_s + RESULT_MARGIN_S,
+            wall_limit_s=scene.timeout_s + 10 * RESULT_MARGIN_S,
+            on_send=on_send,
+            on_frame=on_frame,
+        )
+    else:
+        poses = OpenLoopPoses(source)
+        loop = PoseLoop(
+            client,
+            virtual_clock,
+            skip_late=True,
+            period_s=1.0 / source.rate_hz if source.rate_hz else 0.0,
+            on_send=on_send,
+            on_frame=on_frame,
+        )
+    done = loop.run(poses)
+    result = done.trial_result
+    if result is not None and log is not None:
+        log.result(result)
+    if progress is not None:
+        if result is not None:
+            progress.result(bool(result.success))
+        else:
+            progress.stop()
+    for o in observers:
+        if result is not None:
+            o.on_event(
+                ev.TRIAL_END,
+                trial_index=trial_id,
+                success=bool(result.success),
+                completion_s=float(result.completion_s),
+                first_entry_s=float(result.first_entry_s),
+                final_error_deg=float(result.final_error_deg),
+            )
+        else:
+            o.on_event(ev.TRIAL_END, trial_index=trial_id, success=None, reason="source ended")
     if view is not None:
         view.update(status, force=True)
     return {
-        "trial_result": done.trial_result,
+        "trial_result": result,
         "sent": done.sent,
         "received": done.frames,
         "dropped": status["dropped"] if done.sent else done.late_skipped,
@@ -83,6 +192,36 @@ def run_stream(
         "elapsed_s": time.monotonic() - loop.wall0,
         "last_error_deg": None if done.last_tel is None else done.last_tel.error_deg,
     }
+
+
+def _feel_lag_error() -> Any:
+    from graspguide.study.participant import FeelLagError
+
+    return FeelLagError
+
+
+def _open_lab_streams(lsl: str, lsl_wait: float, nominal_rate_hz: float, simulated: bool, extra):
+    """The LSL outlets of ``--lsl NAME``, after waiting up to ``lsl_wait`` s for a
+    recorder; raises LabStreamsError."""
+    from graspguide.study.lab_streams import LabStreams
+
+    streams = LabStreams(
+        lsl, session="stream", nominal_rate_hz=nominal_rate_hz, simulated=simulated, extra=extra
+    ).open()
+    print(
+        f"graspguide stream: LSL: publishing {streams.telemetry_name} and {streams.marker_name}"
+        + (" (SIMULATED participant)" if simulated else ""),
+        file=sys.stderr,
+        flush=True,
+    )
+    if lsl_wait > 0 and not streams.wait_for_consumers(lsl_wait):
+        print(
+            f"graspguide stream: warning: no LSL recorder connected within {lsl_wait:g} s; "
+            "streaming anyway (what is sent before one connects is not recorded)",
+            file=sys.stderr,
+            flush=True,
+        )
+    return streams
 
 
 def stream_command(
@@ -97,13 +236,17 @@ def stream_command(
     log: str | None,
     trial_id: int,
     virtual_clock: bool,
+    lsl: str | None = None,
+    lsl_wait: float = 0.0,
 ) -> int:
     """`graspguide stream`: one trial of the scene file ``scene`` with ``wrench`` on the
     device at ``port``, poses from the source spec ``source``; the session folder ``log``
-    when given. STOP is sent and the log's end record written on every way out; returns
+    when given; LSL outlets named ``lsl`` when given (waiting up to ``lsl_wait`` s for a
+    recorder). STOP is sent and the log's end record written on every way out; returns
     the exit code."""
     from graspguide.core.units import moment_unit_problem
-    from graspguide.study.live_view import StatusView
+    from graspguide.study.lab_streams import LabStreamsError, LabStreamsUsageError
+    from graspguide.study.live_view import StatusView, TrialProgress
     from graspguide.study.records import SessionLog
     from graspguide.study.scene_file import SceneError, config_hash, load_scene
     from graspguide.study.sources import SourceError, SyntheticSource, open_source
@@ -114,7 +257,12 @@ def stream_command(
         problem = moment_unit_problem(trial_scene.contacts, wrench)
         if problem:
             raise SceneError(f"--wrench with {scene_file}: {problem}")
-        poses = open_source(source_spec, tracker=tracker)
+        if source_spec.partition(":")[0] == "participant":
+            if tracker is not None:
+                raise SourceError("--tracker only applies to replay sources, not the participant")
+            poses = open_participant(source_spec)
+        else:
+            poses = open_source(source_spec, tracker=tracker)
         if isinstance(poses, SyntheticSource):
             poses.aim(
                 trial_scene.contacts,
@@ -126,15 +274,41 @@ def stream_command(
     except (SceneError, SourceError) as e:
         report("stream", e)
         return EXIT_USAGE
+    closed = bool(getattr(poses, "closed_loop", False))
+    simulated = closed and bool(poses.simulated)
+    if simulated:
+        print(
+            f"graspguide stream: source {source_spec}: SIMULATED (the virtual participant, "
+            "not a person)",
+            file=sys.stderr,
+            flush=True,
+        )
+    streams = None
+    if lsl:
+        try:
+            streams = _open_lab_streams(
+                lsl,
+                lsl_wait,
+                0.0 if virtual_clock else float(poses.rate_hz or 0.0),
+                simulated,
+                {"scene_config_hash": trial_scene.config_hash(), "source": source_spec},
+            )
+        except LabStreamsError as e:
+            report("stream", e)
+            return EXIT_USAGE if isinstance(e, LabStreamsUsageError) else EXIT_FAILURE
+    observers: list[ev.TrialObserver] = [streams] if streams is not None else []
     try:
         device = DeviceSession("stream", port, baud, timeout, virtual_clock)
     except LinkError as e:
+        if streams is not None:
+            streams.close()
         return fail("stream", e)
     client = device.client
     session_log = view = None
     code = EXIT_OK
     summary = None
     log_failed = False
+    progress = TrialProgress(trial_scene.threshold_deg, trial_scene.hold_s, trial_scene.timeout_s)
     try:
         hello = client.hello()
         config: dict[str, Any] = {"scene": trial_scene.to_dict(), "wrench": wrench}
@@ -146,17 +320,39 @@ def stream_command(
             trial_id=trial_id,
             virtual_clock=virtual_clock,
             scene_file=scene_file,
+            simulated=simulated,
+            lsl=lsl,
         )
         if log_dir:
             session_log = SessionLog(log_dir)
             session_log.scene(trial_scene.to_dict())
             session_log.device(hello)
             session_log.config(config)
-        view = StatusView(trial_scene.k)
+        for o in observers:
+            o.on_event(
+                ev.SESSION_START,
+                config_hash=config["config_hash"],
+                source=source_spec,
+                simulated=simulated,
+                port=port,
+                threshold_deg=trial_scene.threshold_deg,
+                hold_s=trial_scene.hold_s,
+                timeout_s=trial_scene.timeout_s,
+            )
+        view = StatusView(trial_scene.k, progress, simulated=simulated)
         summary = run_stream(
-            client, trial_scene, wrench, poses, trial_id, virtual_clock, session_log, view
+            client,
+            trial_scene,
+            wrench,
+            poses,
+            trial_id,
+            virtual_clock,
+            session_log,
+            view,
+            observers=observers,
+            progress=progress,
         )
-    except (LinkError, OSError) as e:  # OSError: the session log's disk (RecordWriteError)
+    except (LinkError, OSError, PoseLoopError) as e:  # OSError: the log's disk (RecordWriteError)
         code = EXIT_FAILURE
         report("stream", e)
         log_failed = isinstance(e, OSError) and not isinstance(e, LinkError)
@@ -164,6 +360,7 @@ def stream_command(
         code = EXIT_INTERRUPTED
         print("graspguide stream: interrupted", file=sys.stderr)
     finally:
+        progress.stop()
         if view is not None:
             view.close()
         if not device.close():
@@ -183,19 +380,25 @@ def stream_command(
                 if not log_failed:
                     report("stream", e)
                 code = code or EXIT_FAILURE
+        if streams is not None:
+            try:
+                streams.on_event(ev.STUDY_END, exit_code=code)
+            finally:
+                streams.close()
     if summary is not None:
-        print(summary_line(summary))
+        print(summary_line(summary, simulated))
     return code
 
 
-def summary_line(summary: dict[str, Any]) -> str:
+def summary_line(summary: dict[str, Any], simulated: bool = False) -> str:
     r = summary["trial_result"]
+    tag = "SIMULATED " if simulated else ""
     if r is None:
-        return (
+        return tag + (
             f"no trial result: the source ended first ({summary['sent']} poses sent, "
             f"last error {summary['last_error_deg']})"
         )
-    return (
+    return tag + (
         f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
         f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
         f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
@@ -203,4 +406,4 @@ def summary_line(summary: dict[str, Any]) -> str:
     )
 
 
-__all__ = ["run_stream", "stream_command"]
+__all__ = ["open_participant", "run_stream", "stream_command", "summary_line"]
