@@ -57,6 +57,8 @@ def install_plan(store, path):
     if len(data) > pf.REGION_BYTES or not staged.write(0, data):
         return "plan file %s refused: not a plan file (%d bytes)" % (path, len(data))
     status, new = pf.load_plan(staged)
+    if status == pf.OLD_LAYOUT:
+        return "plan file %s refused: %s" % (path, pf.OLD_LAYOUT_FIX)
     if status != pf.OK:
         return "plan file %s refused: %s" % (path, pf.STORE_STATUS_NAMES[status])
     new_id = pf.plan_id(new)
@@ -148,6 +150,9 @@ def main(config=CONFIG):
         mounted = runner.boot()
         if mounted != pf.OK:
             print("graspguide: the results log cannot be read:", pf.STORE_STATUS_NAMES[mounted])
+            return
+        if runner.plan is None and runner.plan_status == pf.OLD_LAYOUT:
+            print("graspguide: not started:", pf.OLD_LAYOUT_FIX)
             return
         if runner.plan is None:
             print("graspguide: no plan stored in", config["store_path"], "- deploy one first")

@@ -115,49 +115,65 @@ def pwm_gain(mode, alpha):
     return float(PWM_SPAN) if mode == MODE_C else alpha
 
 
-class PwmPlan:
-    """What one posture's PWM needs, worked out once (pwm.h's plan_pwm): which motors are
-    on, 2 |m_i|, and the gain below which no motor reaches 255."""
+# A participant's calibration (graspguide_frame/motor_calibration.h): per motor a PWM floor
+# and a gain; IDENTITY_FLOOR / IDENTITY_GAIN give the paper's mapping bit for bit.
+CALIBRATION_MOTORS = 4
+IDENTITY_FLOOR = (PWM_MIN,) * CALIBRATION_MOTORS
+IDENTITY_GAIN = (1.0,) * CALIBRATION_MOTORS
 
-    def __init__(self, levels=None, k=0):
+
+class PwmPlan:
+    """What one posture's PWM needs, worked out once (pwm.h's plan_pwm with a calibration):
+    which motors are on, 2 floor_i, 2 (gain_i |m_i|), and the gain below which no motor
+    reaches 255."""
+
+    def __init__(self, levels=None, k=0, pwm_floor=IDENTITY_FLOOR, gain=IDENTITY_GAIN):
         self.on = 0
+        self.twice_floor = [0, 0, 0, 0]
         self.twice_level = [0.0, 0.0, 0.0, 0.0]
         self.gain_limit = 0.0
         if levels is not None:
-            self.set(levels, k)
+            self.set(levels, k, pwm_floor, gain)
 
-    def set(self, levels, k):
+    def set(self, levels, k, pwm_floor=IDENTITY_FLOOR, gain=IDENTITY_GAIN):
         self.on = 0
-        largest = 0.0
+        self.gain_limit = _INF
         for i in range(MAX_CONTACTS):
             self.twice_level[i] = 0.0
+            self.twice_floor[i] = 2 * pwm_floor[i]
             if i >= k:
                 continue
             level = abs(levels[i])
             # At or below the off level (and NaN) a motor stays off: float noise never
-            # switches it on at PWM_MIN.
+            # switches it on at its floor. The rule is on |m_i|, before the gain.
             if not level > MOTOR_OFF_LEVEL:
                 continue
             self.on |= 1 << i
-            self.twice_level[i] = level + level
-            if self.twice_level[i] > largest:
-                largest = self.twice_level[i]
-        self.gain_limit = 0.0
-        if 0.0 < largest < _INF:
-            self.gain_limit = (2 * 255 - 1 - 2 * PWM_MIN) / largest
+            # gain_i |m_i| first, then doubled (exact): the reference's order,
+            # floor_i + G (gain_i |m_i|).
+            scaled = gain[i] * level
+            self.twice_level[i] = scaled + scaled
+            if self.twice_level[i] > 0.0:
+                limit = (2 * 255 - 1 - self.twice_floor[i]) / self.twice_level[i]
+                if limit < self.gain_limit:
+                    self.gain_limit = limit
+        # No motor on, or an infinite level: every frame takes the checked path.
+        if not self.gain_limit < _INF or self.gain_limit != self.gain_limit:
+            self.gain_limit = 0.0
         return self
 
 
 def pwm_from_plan(plan, gain, duty):
-    """duty[0..3] (a bytearray) = floor(PWM_MIN + gain |m_i| + 0.5) clamped to 0..255, by
-    pwm.h's doubling trick (the same integers as the float64 reference's rounding)."""
+    """duty[0..3] (a bytearray) = floor(floor_i + gain (gain_i |m_i|) + 0.5) clamped to
+    0..255, by pwm.h's doubling trick (the same integers as the float64 reference's
+    rounding)."""
     in_range = 0.0 <= gain < plan.gain_limit
     on = plan.on
     for i in range(MAX_CONTACTS):
         duty[i] = 0
         if not on & (1 << i):
             continue
-        twice = 2 * PWM_MIN + gain * plan.twice_level[i]
+        twice = plan.twice_floor[i] + gain * plan.twice_level[i]
         if not in_range:
             if not twice >= 0.0:  # below 0 (clamped), or NaN
                 continue
@@ -167,9 +183,9 @@ def pwm_from_plan(plan, gain, duty):
         duty[i] = (int(twice) + 1) >> 1
 
 
-def pwm_from_levels(levels, k, gain):
+def pwm_from_levels(levels, k, gain, pwm_floor=IDENTITY_FLOOR, calibration_gain=IDENTITY_GAIN):
     duty = bytearray(MAX_CONTACTS)
-    pwm_from_plan(PwmPlan(levels, k), gain, duty)
+    pwm_from_plan(PwmPlan(levels, k, pwm_floor, calibration_gain), gain, duty)
     return duty
 
 

@@ -1,9 +1,12 @@
 """The study plan in the store: plan_store.h's region at offset 0, byte for byte.
 
 Preamble (16 bytes): magic "GGPL", layout version, reserved 0, payload length, payload
-CRC-32; then the header (148 bytes) and trial_count trials (35 bytes each), little-endian
-field by field. Saving zeroes the old magic first and writes the new one last, so a cut
-at any byte leaves the old plan or no plan, never a wrong one. The range checks are
+CRC-32; then the header (168 bytes: PLAN_BEGIN's fields, the participant's motor
+calibration last) and trial_count trials (35 bytes each), little-endian field by field.
+A plan of an older layout (version 1 had no calibration) loads as OLD_LAYOUT: never read
+with this layout's fields, and named so the plan can be stored again. Saving zeroes the
+old magic first and writes the new one last, so a cut at any byte leaves the old plan or
+no plan, never a wrong one. The range checks are
 study_plan.h's check_header / check_trial, with the same field indices."""
 
 import math
@@ -15,11 +18,12 @@ from graspguide_mp.store import crc32
 MAX_PLAN_TRIALS = 128
 PARTICIPANT_BYTES = 8
 CONFIG_HASH_BYTES = 8
-HEADER_BYTES = 148
+HEADER_BYTES = 168
 TRIAL_BYTES = 35
 PREAMBLE_BYTES = 16
 PLAN_MAGIC = 0x4C504747  # "GGPL"
-LAYOUT_VERSION = 1
+# 2: the header ends with the calibration (pwm_floor u8[4], gain f32[4]).
+LAYOUT_VERSION = 2
 SECTOR_BYTES = 4096
 REGION_BYTES = (
     (PREAMBLE_BYTES + HEADER_BYTES + TRIAL_BYTES * MAX_PLAN_TRIALS + SECTOR_BYTES - 1)
@@ -35,6 +39,10 @@ CONSTRAINTS_MAX = 2
 POLICY_MAX = 1
 MODE_MAX = 1
 WRENCH_CLASS_MAX = 2
+# The calibration's ranges (motor_calibration.h; tools/graspguide/core/motor_calibration.py).
+CALIBRATION_FLOOR_MAX = 254
+CALIBRATION_GAIN_MIN = 0.25
+CALIBRATION_GAIN_MAX = 4.0
 
 # PLAN_BEGIN's fields in the schema's order: the index is what a refusal reports.
 HEADER_FIELDS = (
@@ -51,6 +59,8 @@ HEADER_FIELDS = (
     "hand_k3",
     "hand_k4",
     "imu_to_hand_wxyz",
+    "pwm_floor",
+    "gain",
 )
 TRIAL_FIELDS = (
     "position",
@@ -75,6 +85,7 @@ STORAGE_FAILED = 3
 TOO_SMALL = 4
 NO_RECORD = 5
 BAD_PLAN = 6
+OLD_LAYOUT = 7  # a whole plan of another layout version: store the plan again
 STORE_STATUS_NAMES = (
     "ok",
     "no_plan",
@@ -83,9 +94,17 @@ STORE_STATUS_NAMES = (
     "too_small",
     "no_record",
     "bad_plan",
+    "old_layout",
 )
 
-_HEADER_FMT = "<8sB8sHB3f4f9f12f4f"
+# What to do about a plan of an older layout: main.py prints it.
+OLD_LAYOUT_FIX = (
+    "the plan was written for an older firmware (plan layout before version %d, without the"
+    " motor calibration): write it again with `graspguide plan` (or `graspguide mp deploy"
+    " --plan-protocol`)" % LAYOUT_VERSION
+)
+
+_HEADER_FMT = "<8sB8sHB3f4f9f12f4f4B4f"
 _TRIAL_FMT = "<HBBBBBBBBB6f"
 _PREAMBLE_FMT = "<IHHII"
 
@@ -105,6 +124,9 @@ class PlanHeader:
         self.hand_k3 = [[0.0, 0.0, 0.0] for _ in range(3)]
         self.hand_k4 = [[0.0, 0.0, 0.0] for _ in range(4)]
         self.imu_to_hand_wxyz = [1.0, 0.0, 0.0, 0.0]
+        # The participant's calibration (graspguide calibrate); identity = the paper's PWM.
+        self.pwm_floor = list(frame.IDENTITY_FLOOR)
+        self.gain = list(frame.IDENTITY_GAIN)
 
     def participant_name(self):
         return self.participant.split(b"\0")[0].decode()
@@ -165,12 +187,14 @@ def encode_header(h):
             + flat
             + flat4
             + list(h.imu_to_hand_wxyz)
+            + list(h.pwm_floor)
+            + list(h.gain)
         ),
     )
 
 
 def decode_header(b):
-    """A PlanHeader from its 148 bytes, or None when a stored bool is not 0 or 1 (not
+    """A PlanHeader from its 168 bytes, or None when a stored bool is not 0 or 1 (not
     data this code wrote)."""
     v = struct.unpack(_HEADER_FMT, b)
     if v[1] > 1:
@@ -187,6 +211,8 @@ def decode_header(b):
     h.hand_k3 = [list(f[7 + 3 * i : 10 + 3 * i]) for i in range(3)]
     h.hand_k4 = [list(f[16 + 3 * i : 19 + 3 * i]) for i in range(4)]
     h.imu_to_hand_wxyz = list(f[28:32])
+    h.pwm_floor = list(f[32:36])
+    h.gain = list(f[36:40])
     return h
 
 
@@ -300,6 +326,23 @@ def check_header(h):
     n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]
     if not QUAT_NORM_MIN * QUAT_NORM_MIN <= n2 <= QUAT_NORM_MAX * QUAT_NORM_MAX:
         _header_fail(12, "a unit quaternion (norm within 0.5..2), got %r" % (q,))
+    fl = h.pwm_floor
+    if len(fl) != frame.CALIBRATION_MOTORS or not all(
+        isinstance(v, int) and 0 <= v <= CALIBRATION_FLOOR_MAX for v in fl
+    ):
+        _header_fail(
+            13, "4 PWM counts 0..%d (the identity is 70), got %r" % (CALIBRATION_FLOOR_MAX, fl)
+        )
+    g = h.gain
+    if len(g) != frame.CALIBRATION_MOTORS or not all(
+        CALIBRATION_GAIN_MIN <= v <= CALIBRATION_GAIN_MAX
+        for v in g  # NaN too
+    ):
+        _header_fail(
+            14,
+            "4 numbers %g..%g (1 = the paper's mapping), got %r"
+            % (CALIBRATION_GAIN_MIN, CALIBRATION_GAIN_MAX, g),
+        )
 
 
 def check_trial(t):
@@ -364,15 +407,19 @@ def save_plan(store, p):
 
 
 def load_plan(store):
-    """(status, plan or None): OK with the stored plan; NO_PLAN when the region holds no
-    complete, intact plan of this layout that passes the checks; STORAGE_FAILED on a read
-    fault; TOO_SMALL."""
+    """(status, plan or None): OK with the stored plan; OLD_LAYOUT when the region holds a
+    plan of an older layout version (its magic is written last, so that plan was whole);
+    NO_PLAN when it holds no complete, intact plan of this layout that passes the checks;
+    STORAGE_FAILED on a read fault; TOO_SMALL."""
     if store.size_bytes() < REGION_BYTES:
         return TOO_SMALL, None
     pre = store.read(0, PREAMBLE_BYTES)
     if pre is None:
         return STORAGE_FAILED, None
     magic, version, reserved, length, crc = struct.unpack(_PREAMBLE_FMT, pre)
+    if magic == PLAN_MAGIC and reserved == 0 and 1 <= version < LAYOUT_VERSION:
+        # A plan stored by an older firmware: its bytes mean other fields here.
+        return OLD_LAYOUT, None
     if (
         magic != PLAN_MAGIC
         or version != LAYOUT_VERSION

@@ -191,6 +191,7 @@ class HostlessRunner:
         self.trial = frame.Trial()
         self.patterns = PatternPlayer()
         self.plan = None
+        self.plan_status = pf.NO_PLAN
         self.plan_id = 0
         self.phase = PH_OFF
         self.position = 0
@@ -223,6 +224,7 @@ class HostlessRunner:
         """At power-up: the stored plan (if any) and the log. Returns the log's mount
         status (plan_file's OK, TOO_SMALL or STORAGE_FAILED)."""
         s, p = pf.load_plan(self.store)
+        self.plan_status = s  # OLD_LAYOUT: main.py says how to store the plan again
         self.plan = p if s == pf.OK else None
         if self.plan is not None:
             self._adopt_plan()
@@ -361,7 +363,10 @@ class HostlessRunner:
         self.f_hat[0] = f0 / n
         self.f_hat[1] = f1 / n
         self.f_hat[2] = f2 / n
-        self.pwm_plan.set(levels, t.k)
+        h = self.plan.header
+        # The participant's calibration applies to every trial's PWM (not to the patterns,
+        # which are told apart by rhythm at one fixed duty).
+        self.pwm_plan.set(levels, t.k, h.pwm_floor, h.gain)
         self.mode = t.mode
         return st.OK
 

@@ -59,6 +59,34 @@ def test_pwm_matches_reference():
         assert all(d == 0 for d in duty[len(levels) :])
 
 
+def test_pwm_with_a_calibration_matches_the_float64_reference():
+    # floor_i + G (gain_i |m_i|), rounded half up and clamped: the float64 reference's
+    # (tests/host/make_reference.py), the same integers through the doubling trick.
+    duty = bytearray(4)
+    cases = _ref()["pwm_calibrated"]
+    assert len(cases) > 40
+    changed = 0
+    for levels, mode, alpha, floor, gain, want, identity_pwm in cases:
+        m = frame.MODE_C if mode == "C" else frame.MODE_V
+        plan = frame.PwmPlan(levels, len(levels), floor, gain)
+        frame.pwm_from_plan(plan, frame.pwm_gain(m, alpha), duty)
+        assert list(duty[: len(levels)]) == want, (levels, mode, alpha, floor, gain, list(duty))
+        assert all(d == 0 for d in duty[len(levels) :])
+        changed += want != identity_pwm
+    assert changed > len(cases) // 2, "the calibration changed too few cases to test it"
+
+
+def test_identity_calibration_is_the_papers_pwm():
+    duty = bytearray(4)
+    plain = bytearray(4)
+    for levels, mode, alpha, want in _ref()["pwm"]:
+        m = frame.MODE_C if mode == "C" else frame.MODE_V
+        plan = frame.PwmPlan(levels, len(levels), frame.IDENTITY_FLOOR, frame.IDENTITY_GAIN)
+        frame.pwm_from_plan(plan, frame.pwm_gain(m, alpha), duty)
+        frame.pwm_from_plan(frame.PwmPlan(levels, len(levels)), frame.pwm_gain(m, alpha), plain)
+        assert duty == plain and list(duty[: len(levels)]) == want
+
+
 def test_pwm_off_rules():
     duty = bytearray(b"\x09\x09\x09\x09")
     plan = frame.PwmPlan([0.5, NAN, frame.MOTOR_OFF_LEVEL, -0.5], 4)

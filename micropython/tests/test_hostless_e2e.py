@@ -3,9 +3,9 @@ booted from it, the virtual participant's scripted IMU samples (tests/data/
 hostless_script.json, made on the host by tests/host/make_reference.py with imu_world and
 the virtual participant, SIMULATED) fed one by one, the button pressed when the script
 pressed it. The trial must end with success when the host-side device's did, the PWM of
-every frame must agree with that device's (C++ estimator, float64 reference error and PWM)
-within one count, and the record must be in the results log, with the log readable
-after a reboot."""
+every frame must agree with that device's (C++ estimator, float64 reference error, PWM
+under the plan's motor calibration) within one count, and the record must be in the
+results log, with the log readable after a reboot."""
 
 from graspguide_mp import plan_file as pf
 from graspguide_mp import runner as rn
@@ -24,7 +24,8 @@ def _plan(sc):
     h.participant = name + b"\0" * (pf.PARTICIPANT_BYTES - len(name))
     h.simulated = True
     h.trial_count = 1
-    for key in ("threshold_deg", "hold_s", "timeout_s", "rest_s", "y_axis", "imu_to_hand_wxyz"):
+    keys = ("threshold_deg", "hold_s", "timeout_s", "rest_s", "y_axis", "imu_to_hand_wxyz")
+    for key in keys + ("pwm_floor", "gain"):
         setattr(h, key, hs[key])
     h.hand_k3 = hs["hand_k3"]
     t = pf.PlanTrial()
@@ -90,6 +91,7 @@ def test_hostless_trial_end_to_end():
             worst_alpha = a if a > worst_alpha else worst_alpha
             compared += 1
     assert compared > 100, compared
+    assert sc["header"]["pwm_floor"] != [70, 70, 70, 70], "the script must test a calibration"
     assert worst_err < 1e-6, "error_deg differs from the host's by %g deg" % worst_err
     assert worst_alpha < 1e-6, "alpha differs from the host's by %g" % worst_alpha
     # Off by one only where a duty sits on a rounding edge: rare.

@@ -55,6 +55,57 @@ def test_plan_round_trip():
     assert q.header.participant_name() == "U1"
 
 
+def _calibrated(p, floor=(60, 75, 80, 90), gain=(1.25, 0.75, 2.0, 0.5)):
+    p.header.pwm_floor = list(floor)
+    p.header.gain = list(gain)
+    return p
+
+
+def test_plan_with_a_calibration_is_stored_and_reloaded():
+    s = store.MemoryStore()
+    p = _calibrated(make_plan(4))
+    assert pf.save_plan(s, p) == pf.OK
+    status, q = pf.load_plan(s)
+    assert status == pf.OK
+    assert q.header.pwm_floor == [60, 75, 80, 90]
+    # float32 on the store: these gains are exact in binary32.
+    assert q.header.gain == [1.25, 0.75, 2.0, 0.5]
+    assert pf.plan_id(q) == pf.plan_id(p)
+    # The calibration is part of the plan: the same trials under another calibration are
+    # another plan (its records are not this one's).
+    assert pf.plan_id(make_plan(4)) != pf.plan_id(p)
+    assert make_plan(1).header.pwm_floor == [70, 70, 70, 70]
+    assert make_plan(1).header.gain == [1.0, 1.0, 1.0, 1.0]
+
+
+def _layout1_region(p):
+    """The region an older firmware (layout 1: the header without the calibration) wrote."""
+    import struct
+
+    header = pf.encode_header(p.header)[: pf.HEADER_BYTES - 20]
+    payload = header + b"".join(pf.encode_trial(t) for t in p.trials)
+    pre = struct.pack("<IHHII", pf.PLAN_MAGIC, 1, 0, len(payload), store.crc32(payload))
+    return pre + payload
+
+
+def test_an_old_layout_plan_is_refused_never_misread():
+    p = make_plan(3)
+    s = store.MemoryStore()
+    assert s.write(0, _layout1_region(p))
+    assert pf.load_plan(s) == (pf.OLD_LAYOUT, None)
+    assert "graspguide plan" in pf.OLD_LAYOUT_FIX
+    # A whole plan of this layout relabelled version 1 is refused the same way: its
+    # version, not its length or CRC, decides.
+    s = store.MemoryStore()
+    assert pf.save_plan(s, _calibrated(make_plan(3))) == pf.OK
+    s.data[4] = 1
+    assert pf.load_plan(s) == (pf.OLD_LAYOUT, None)
+    # Storing the plan again replaces it.
+    assert pf.save_plan(s, p) == pf.OK
+    status, q = pf.load_plan(s)
+    assert status == pf.OK and pf.plan_id(q) == pf.plan_id(p)
+
+
 def test_plan_checks_name_the_field():
     cases = (
         ("participant", lambda p: setattr(p.header, "participant", b"\0" * 8)),
@@ -69,6 +120,12 @@ def test_plan_checks_name_the_field():
         ("hand_k3", lambda p: setattr(p.header, "hand_k3", [[0.0] * 3, [1.5, 0, 0], [0.0] * 3])),
         ("hand_k4", lambda p: setattr(p.header, "hand_k4", [[0.0] * 3] * 3 + [[0, 0, NAN]])),
         ("imu_to_hand_wxyz", lambda p: setattr(p.header, "imu_to_hand_wxyz", [3.0, 0, 0, 0])),
+        ("pwm_floor", lambda p: setattr(p.header, "pwm_floor", [70, 70, 255, 70])),
+        ("pwm_floor", lambda p: setattr(p.header, "pwm_floor", [70, -1, 70, 70])),
+        ("pwm_floor", lambda p: setattr(p.header, "pwm_floor", [70, 70, 70])),
+        ("gain", lambda p: setattr(p.header, "gain", [1.0, 1.0, 0.2, 1.0])),
+        ("gain", lambda p: setattr(p.header, "gain", [1.0, 4.5, 1.0, 1.0])),
+        ("gain", lambda p: setattr(p.header, "gain", [NAN, 1.0, 1.0, 1.0])),
         ("trial_index", lambda p: setattr(p.trials[1], "trial_index", 0)),
         ("session_trial", lambda p: setattr(p.trials[1], "session_trial", 0)),
         ("k", lambda p: setattr(p.trials[1], "k", 5)),
@@ -94,7 +151,7 @@ def test_plan_checks_name_the_field():
 
 def test_plan_save_cut_at_every_byte():
     old = make_plan(2, participant=b"OLD")
-    new = make_plan(3, participant=b"NEW")
+    new = _calibrated(make_plan(3, participant=b"NEW"))
     total = 4 + pf.PREAMBLE_BYTES - 4 + pf.payload_bytes(3) + 4
     seen_none = 0
     for budget in range(total + 1):

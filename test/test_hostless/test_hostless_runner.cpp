@@ -488,3 +488,97 @@ TEST(HostlessRunner, AFullLogStopsTheRunAndOverwritesNothing) {
   EXPECT_EQ(rig.runner.log().append(r, gd::plan_id(rig.runner.plan())), gd::StoreStatus::kFull);
   EXPECT_EQ(rig.runner.log().records(), 1);
 }
+
+TEST(HostlessRunner, ThePlansCalibrationShapesEveryGuidedFrame) {
+  // The same trial under the identity and under a participant's calibration: the error and
+  // alpha are the same, the PWM is floor_i + G (gain_i |m_i|) rounded half up (float64,
+  // from the levels of an independent solve), motor by motor.
+  Rig plain, calibrated;
+  gd::PlanHeader h = header(1);
+  gd::PlanTrial t = trial(1, 4, kSideways);
+  t.mode = 1;  // V: the span is alpha, so the duties move with the error
+  ASSERT_TRUE(plain.upload(h, {t}).ok());
+  const uint8_t floor[4] = {40, 90, 0, 120};
+  const float gain[4] = {1.5f, 0.5f, 4.0f, 0.75f};
+  std::memcpy(h.pwm_floor, floor, sizeof floor);
+  std::memcpy(h.gain, gain, sizeof gain);
+  ASSERT_TRUE(calibrated.upload(h, {t}).ok());
+  for (Rig* r : {&plain, &calibrated}) {
+    ASSERT_TRUE(r->runner.start().ok());
+    r->until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
+    r->runner.on_button(true, r->clock.now_us());
+  }
+  // The levels, solved apart from the runner.
+  gg::Scene<Real> s;
+  s.k = 4;
+  s.contacts.setZero();
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 3; ++j) s.contacts(j, i) = h.hand_k4[i][j];
+  gg::Guidance<Real> g;
+  gg::Vec6<Real> w;
+  for (int j = 0; j < 6; ++j) w(j) = t.wrench[j];
+  ASSERT_EQ(g.set_scene(s), gg::Status::kOk);
+  ASSERT_EQ(g.set_wrench(w), gg::Status::kOk);
+  gg::FrameResult<Real> probe;
+  ASSERT_EQ(g.update(Eigen::Matrix<Real, 4, 1>(1, 0, 0, 0), probe), gg::Status::kOk);
+  const Eigen::Vector3d f = g.grasp().force_unit.cast<double>();
+  int frames = 0, exact = 0, changed = 0;
+  for (double off_deg : {50.0, 30.0, 15.0, 8.0}) {
+    const double a = off_deg * M_PI / 180;
+    const Eigen::Vector3d target = (std::cos(a) * f + std::sin(a) * across(f)).normalized();
+    plain.turn_to(target);
+    calibrated.turn_to(target);
+    for (int i = 0; i < 20; ++i) {
+      const gd::HostlessFrame p = plain.sample(target);
+      const gd::HostlessFrame c = calibrated.sample(target);
+      ASSERT_TRUE(c.trial_running);
+      EXPECT_EQ(double(p.error_deg), double(c.error_deg));
+      EXPECT_EQ(double(p.alpha), double(c.alpha));
+      for (int m = 0; m < 4; ++m) {
+        const double level = std::fabs(double(g.grasp().levels[m]));
+        const double span = t.mode == 0 ? double(gg::kPwmSpan) : double(c.alpha);
+        double want = 0;
+        if (level > gg::kMotorOffLevel) {
+          const double x = double(floor[m]) + span * (double(gain[m]) * level);
+          want = std::min(255.0, std::max(0.0, std::floor(x + 0.5)));
+        }
+        const int got = c.pwm.duty[m];
+        EXPECT_LE(std::fabs(got - want), 1.0) << "motor " << m << " at " << off_deg << " deg";
+        exact += got == int(want);
+        changed += c.pwm.duty[m] != p.pwm.duty[m];
+        ++frames;
+      }
+    }
+  }
+  EXPECT_EQ(exact, frames) << "motor frames equal to the float64 formula";
+  EXPECT_GT(changed, frames / 2) << "the calibration changed too few duties to test it";
+}
+
+TEST(HostlessRunner, ABadCalibrationIsRefusedAtPlanBeginNamingItsField) {
+  Rig rig;
+  gd::PlanHeader h = header(1);
+  h.pwm_floor[1] = 255;
+  gd::HostlessReply r = rig.runner.begin_plan(h);
+  EXPECT_EQ(r.refusal, gd::HostlessRefusal::kBadPlan);
+  EXPECT_EQ(r.detail, uint8_t(gd::PlanBeginField::kPwmFloor));
+  h = header(1);
+  h.gain[3] = std::nanf("");
+  r = rig.runner.begin_plan(h);
+  EXPECT_EQ(r.refusal, gd::HostlessRefusal::kBadPlan);
+  EXPECT_EQ(r.detail, uint8_t(gd::PlanBeginField::kGain));
+  EXPECT_EQ(13, int(gd::PlanBeginField::kPwmFloor));  // PLAN_BEGIN's schema order
+  EXPECT_EQ(14, int(gd::PlanBeginField::kGain));
+}
+
+TEST(HostlessRunner, APlanOfAnOlderLayoutIsNotRunAndSaysSo) {
+  Rig rig;
+  ASSERT_TRUE(rig.upload(header(1), {trial(1, 4, kSideways)}).ok());
+  rig.store.bytes()[4] = 1;  // the plan's layout version: an older firmware's
+  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+                              kGyroFs);
+  EXPECT_EQ(rebooted.boot(), gd::StoreStatus::kOk);  // the log is fine
+  EXPECT_EQ(rebooted.plan_status(), gd::StoreStatus::kOldLayout);
+  EXPECT_FALSE(rebooted.plan_stored());
+  EXPECT_EQ(rebooted.start().refusal, gd::HostlessRefusal::kNoPlan);
+  EXPECT_FALSE(rebooted.running());
+}

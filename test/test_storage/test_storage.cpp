@@ -112,10 +112,41 @@ void expect_plan_eq(const gd::StudyPlan& a, const gd::StudyPlan& b) {
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 3; ++j) EXPECT_EQ(x.hand_k4[i][j], y.hand_k4[i][j]);
   for (int i = 0; i < 4; ++i) EXPECT_EQ(x.imu_to_hand_wxyz[i], y.imu_to_hand_wxyz[i]);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(x.pwm_floor[i], y.pwm_floor[i]) << "pwm_floor " << i;
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(x.gain[i], y.gain[i]) << "gain " << i;
   for (uint16_t i = 0; i < x.trial_count && i < gd::kMaxPlanTrials; ++i) {
     SCOPED_TRACE("trial " + std::to_string(i));
     expect_trial_eq(a.trials[i], b.trials[i]);
   }
+}
+
+// A participant's calibration, exact in float32, away from the identity on every motor.
+void calibrate(gd::PlanHeader& h) {
+  const uint8_t floor[4] = {60, 75, 0, 254};
+  const float gain[4] = {1.25f, 0.75f, 4.0f, 0.25f};
+  std::memcpy(h.pwm_floor, floor, sizeof floor);
+  std::memcpy(h.gain, gain, sizeof gain);
+}
+
+// The region an older firmware wrote: layout 1, whose header had no calibration (the
+// first kPlanHeaderBytes - 20 bytes of this layout's), with its own length and CRC.
+void write_layout1_plan(Store64& store, const gd::StudyPlan& p) {
+  namespace sd = gd::store_detail;
+  std::vector<uint8_t> payload(sd::plan_payload_bytes(p.header.trial_count));
+  sd::BufferSink sink(payload.data(), uint32_t(payload.size()));
+  ASSERT_TRUE(sd::encode_plan(sink, p));
+  constexpr uint32_t kCalibrationBytes = 4 + 4 * 4;
+  payload.erase(payload.begin() + (gd::kPlanHeaderBytes - kCalibrationBytes),
+                payload.begin() + gd::kPlanHeaderBytes);
+  uint8_t pre[gd::kPlanPreambleBytes];
+  sd::BufferSink ps(pre, sizeof pre);
+  sd::put_u32(ps, gd::kPlanMagic);
+  sd::put_u16(ps, 1);
+  sd::put_u16(ps, 0);
+  sd::put_u32(ps, uint32_t(payload.size()));
+  sd::put_u32(ps, gd::crc32(payload.data(), uint32_t(payload.size())));
+  ASSERT_TRUE(store.write(gd::kPlanPreambleBytes, payload.data(), uint32_t(payload.size())));
+  ASSERT_TRUE(store.write(0, pre, sizeof pre));
 }
 
 // Bytes save_plan writes in all: the zeroed magic, the payload, the preamble.
@@ -186,7 +217,8 @@ TEST(StorageLayout, SizesMatchTheEncodedFields) {
 
 // ---------------------------------------------------------------------------------------
 // Plan checks: one test per rule, each naming its field by the schema's order
-// (PLAN_BEGIN: 0 participant ... 12 imu_to_hand_wxyz; PLAN_TRIAL: 0 position ... 11 wrench).
+// (PLAN_BEGIN: 0 participant ... 12 imu_to_hand_wxyz, 13 pwm_floor, 14 gain; PLAN_TRIAL: 0 position
+// ... 11 wrench).
 // ---------------------------------------------------------------------------------------
 
 namespace {
@@ -286,6 +318,24 @@ TEST(PlanChecks, ImuQuaternionFiniteWithAPlausibleNorm) {
   EXPECT_EQ(0xFF, header_bad_field([&](gd::PlanHeader& h) { set_norm(h, 1.2f); }));
 }
 
+TEST(PlanChecks, CalibrationFloorsAndGainsAreInTheirRanges) {
+  EXPECT_EQ(13, header_bad_field([](gd::PlanHeader& h) { h.pwm_floor[2] = 255; }));
+  EXPECT_EQ(14, header_bad_field([](gd::PlanHeader& h) {
+              h.gain[1] = graspguide::kCalibrationGainMin * 0.99f;
+            }));
+  EXPECT_EQ(14, header_bad_field([](gd::PlanHeader& h) {
+              h.gain[3] = graspguide::kCalibrationGainMax * 1.01f;
+            }));
+  EXPECT_EQ(14, header_bad_field([](gd::PlanHeader& h) { h.gain[0] = kNaN; }));
+  EXPECT_EQ(14, header_bad_field([](gd::PlanHeader& h) { h.gain[0] = kInf; }));
+  EXPECT_EQ(0xFF, header_bad_field([](gd::PlanHeader& h) { calibrate(h); }));  // the edges
+  const gd::PlanHeader identity;
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(graspguide::kPwmMin, identity.pwm_floor[i]);
+    EXPECT_EQ(1.0f, identity.gain[i]);
+  }
+}
+
 TEST(PlanChecks, TheFirstBadHeaderFieldIsNamed) {
   EXPECT_EQ(3, header_bad_field([](gd::PlanHeader& h) {
               h.trial_count = 0;
@@ -344,6 +394,34 @@ TEST(PlanStore, RoundTripsThePapersPlan) {
   for (uint32_t i = gd::kPlanRegionBytes; i < kStore64KiB; ++i) ASSERT_EQ(0xFF, store->bytes()[i]);
 }
 
+TEST(PlanStore, ACalibrationIsStoredAndReloaded) {
+  auto store = std::make_unique<Store64>();
+  gd::StudyPlan plan = paper_plan();
+  calibrate(plan.header);
+  ASSERT_EQ(gd::StoreStatus::kOk, gd::save_plan(*store, plan));
+  gd::StudyPlan back;
+  ASSERT_EQ(gd::StoreStatus::kOk, gd::load_plan(*store, back));
+  expect_plan_eq(plan, back);
+  EXPECT_EQ(gd::plan_id(plan), gd::plan_id(back));
+  EXPECT_NE(gd::plan_id(paper_plan()), gd::plan_id(back));  // another calibration, another plan
+}
+
+TEST(PlanStore, AnOldLayoutPlanIsRefusedNeverMisread) {
+  auto store = std::make_unique<Store64>();
+  write_layout1_plan(*store, paper_plan());
+  gd::StudyPlan back = paper_plan();
+  EXPECT_EQ(gd::StoreStatus::kOldLayout, gd::load_plan(*store, back));
+  EXPECT_EQ(0, back.header.trial_count);  // nothing of it is read
+  // This layout's plan under an older version number: the version decides, not the length.
+  ASSERT_EQ(gd::StoreStatus::kOk, gd::save_plan(*store, paper_plan()));
+  store->bytes()[4] = 1;
+  EXPECT_EQ(gd::StoreStatus::kOldLayout, gd::load_plan(*store, back));
+  // Storing the plan again replaces it.
+  ASSERT_EQ(gd::StoreStatus::kOk, gd::save_plan(*store, paper_plan()));
+  ASSERT_EQ(gd::StoreStatus::kOk, gd::load_plan(*store, back));
+  expect_plan_eq(paper_plan(), back);
+}
+
 TEST(PlanStore, AnErasedStoreHoldsNoPlan) {
   auto store = std::make_unique<Store64>();
   gd::StudyPlan back = paper_plan();
@@ -369,6 +447,8 @@ TEST(PlanStore, PlanIdIsStableAndChangesWithEveryField) {
       {"hand_k3", [](gd::StudyPlan& p) { p.header.hand_k3[2][2] += 0.001f; }},
       {"hand_k4", [](gd::StudyPlan& p) { p.header.hand_k4[3][0] += 0.001f; }},
       {"imu_to_hand_wxyz", [](gd::StudyPlan& p) { p.header.imu_to_hand_wxyz[1] = 0.1f; }},
+      {"pwm_floor", [](gd::StudyPlan& p) { p.header.pwm_floor[3] = 71; }},
+      {"gain", [](gd::StudyPlan& p) { p.header.gain[0] = 1.0625f; }},
       {"trial_index", [](gd::StudyPlan& p) { p.trials[57].trial_index = 200; }},
       {"session", [](gd::StudyPlan& p) { p.trials[57].session += 1; }},
       {"session_trial", [](gd::StudyPlan& p) { p.trials[57].session_trial += 1; }},
@@ -431,15 +511,18 @@ TEST(PlanStore, ATornSaveNeverReadsAsAPlanItDidNotFinish) {
   gd::StudyPlan new_plan = paper_plan();
   new_plan.header.participant[1] = '7';
   new_plan.header.trial_count = 60;
+  calibrate(new_plan.header);
   const uint32_t total = plan_write_bytes(new_plan);
   auto erased = std::make_unique<Store64>();
   auto with_old = std::make_unique<Store64>();
   ASSERT_EQ(gd::StoreStatus::kOk, gd::save_plan(*with_old, old_plan));
+  auto with_layout1 = std::make_unique<Store64>();  // stored by an older firmware
+  write_layout1_plan(*with_layout1, old_plan);
   auto store = std::make_unique<Store64>();
   gd::StudyPlan back;
   uint32_t misread = 0;
   for (uint32_t m = 0; m <= total; ++m) {
-    for (const Store64* start : {erased.get(), with_old.get()}) {
+    for (const Store64* start : {erased.get(), with_old.get(), with_layout1.get()}) {
       *store = *start;
       store->fail_writes_after_bytes(m);
       const gd::StoreStatus saved = gd::save_plan(*store, new_plan);
@@ -451,6 +534,9 @@ TEST(PlanStore, ATornSaveNeverReadsAsAPlanItDidNotFinish) {
       } else if (m == 0 && start == with_old.get()) {  // nothing written: the old plan stands
         EXPECT_EQ(gd::StoreStatus::kStorageFailed, saved);
         misread += loaded != gd::StoreStatus::kOk || gd::plan_id(back) != gd::plan_id(old_plan);
+      } else if (m == 0 && start == with_layout1.get()) {  // still the older firmware's plan
+        EXPECT_EQ(gd::StoreStatus::kStorageFailed, saved);
+        misread += loaded != gd::StoreStatus::kOldLayout;
       } else {
         EXPECT_EQ(gd::StoreStatus::kStorageFailed, saved) << m;
         misread += loaded != gd::StoreStatus::kNoPlan;
@@ -458,7 +544,7 @@ TEST(PlanStore, ATornSaveNeverReadsAsAPlanItDidNotFinish) {
     }
   }
   EXPECT_EQ(0u, misread);
-  std::printf("torn-plan sweep: %u cut points x 2 starting states, %u misread\n",
+  std::printf("torn-plan sweep: %u cut points x 3 starting states, %u misread\n",
               unsigned(total + 1), unsigned(misread));
 }
 

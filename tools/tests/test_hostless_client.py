@@ -174,6 +174,56 @@ def test_plan_messages_carry_the_runners_plan(paper):
         assert codec.message_of(frame) == msg
 
 
+def test_plan_messages_carry_the_participants_calibration(paper):
+    from graspguide.core.motor_calibration import MotorCalibration
+
+    protocol, planned, begin, _ = paper
+    assert (begin.pwm_floor, begin.gain) == ((70,) * 4, (1.0,) * 4), "none: the identity"
+    # A gain that is not a float32 crosses the wire rounded, as the device will hold it.
+    cal = MotorCalibration((60, 0, 254, 70), (0.25, 1.1, 4.0, 1.0))
+    calibrated, _ = pu.plan_messages(protocol, "U1", planned, True, REST_S, calibration=cal)
+    assert calibrated.pwm_floor == cal.pwm_floor
+    assert calibrated.gain == tuple(gd.to_f32(g) for g in cal.gain)
+    assert calibrated.gain[1] != 1.1 and abs(calibrated.gain[1] - 1.1) < 1e-7
+    assert dataclasses.replace(calibrated, pwm_floor=begin.pwm_floor, gain=begin.gain) == begin
+    frame = codec.check_frame(codec.cobs_decode(codec.encode_message(calibrated, 1)[:-1]))[1]
+    assert codec.message_of(frame) == calibrated
+
+
+def test_a_calibration_file_is_read_or_refused_naming_file_and_field(tmp_path):
+    from graspguide.core.motor_calibration import MotorCalibration
+    from graspguide.hostless import calibration_file as cf
+
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps({"pwm_floor": [60, 80, 70, 70], "gain": [1.5, 0.5, 1, 1]}))
+    assert cf.read_calibration(str(path)) == MotorCalibration((60, 80, 70, 70), (1.5, 0.5, 1, 1))
+    # Nested under "calibration" (a results file that holds more), read the same.
+    nested = tmp_path / "nested.json"
+    nested.write_text(json.dumps({"calibration": json.loads(path.read_text()), "fingers": {}}))
+    assert cf.read_calibration(str(nested)) == cf.read_calibration(str(path))
+    # OUT/PID/calibration.json is picked up; none means the identity (None).
+    (tmp_path / "U1").mkdir()
+    assert cf.participant_calibration(str(tmp_path), "U1") == (None, None)
+    path.replace(tmp_path / "U1" / "calibration.json")
+    got, where = cf.participant_calibration(str(tmp_path), "U1")
+    assert got is not None and got.pwm_floor == (60, 80, 70, 70)
+    assert where == str(tmp_path / "U1" / "calibration.json")
+    for content, words in [
+        ("[1, 2]", "must be an object"),
+        ('{"gain": [1, 1, 1, 1]}', "missing pwm_floor"),
+        ('{"pwm_floor": [70, 70, 70, 70.5], "gain": [1, 1, 1, 1]}', "pwm_floor[3] (palm)"),
+        ('{"pwm_floor": [70, 70, 70, 70], "gain": [1, 1, 0.1, 1]}', "gain[2] (middle)"),
+        ("not json", "is not JSON"),
+    ]:
+        bad = tmp_path / "bad.json"
+        bad.write_text(content)
+        with pytest.raises(ValueError) as e:
+            cf.read_calibration(str(bad))
+        assert words in str(e.value) and str(bad) in str(e.value), str(e.value)
+    with pytest.raises(ValueError, match="does not exist.*graspguide calibrate"):
+        cf.read_calibration(str(tmp_path / "missing.json"))
+
+
 def test_plan_messages_refuse_what_the_device_cannot_hold(paper):
     protocol, planned, _, _ = paper
     with pytest.raises(ValueError, match=rf"1\.\.{m.MAX_PLAN_TRIALS}.*\[wrenches\] count"):
@@ -209,6 +259,18 @@ def test_upload_plan_sends_begin_trials_commit_in_order(paper):
         c.upload_plan(dataclasses.replace(begin, trial_count=3), trials)
     with pytest.raises(ValueError, match="position"):
         c.upload_plan(begin, list(reversed(trials)))
+
+
+def test_upload_plan_sends_the_calibration_in_plan_begin(paper):
+    from graspguide.core.motor_calibration import MotorCalibration
+
+    protocol, planned, _, _ = paper
+    cal = MotorCalibration((60, 75, 80, 90), (1.25, 0.75, 2.0, 0.5))
+    begin, trials = pu.plan_messages(protocol, "U1", planned, True, REST_S, calibration=cal)
+    fake = HostlessFake()
+    hostless_client(fake).upload_plan(begin, trials, calibration=cal)
+    assert fake.stored.pwm_floor == cal.pwm_floor and fake.stored.gain == cal.gain
+    assert fake.stored == begin
 
 
 def _index(cls, name: str) -> int:

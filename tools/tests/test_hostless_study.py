@@ -554,3 +554,98 @@ def test_cli_usage_errors(tmp_path):
     assert r.returncode == 2 and "closed-loop" in r.stderr
     r = gg(*base, "--port", "sim", "--source", "participant", "--hostless", "--rest-s", "nan")
     assert r.returncode == 2 and "--rest-s" in r.stderr
+
+
+def test_the_plans_calibration_shapes_every_telemetry_pwm(tmp_path, core, report_figure):
+    """A plan carrying a participant's calibration: every guided TELEMETRY PWM of the
+    simulated host-less run is the float64 reference's floor_i + G (gain_i |m_i|), from the
+    C++ core's levels of the plan's (float32) posture and the device's own alpha."""
+    from graspguide.core import reference
+    from graspguide.core.motor_calibration import MotorCalibration
+    from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
+    from graspguide.link.sim import SimulatedDevice
+
+    path = tmp_path / "one_each.toml"
+    path.write_text(ONE_EACH)
+    protocol = pf.load_protocol(str(path))
+    cal = MotorCalibration((55, 90, 64, 120), (1.5, 0.75, 1.25, 2.0))
+    levels = {}
+    for t in pf.plan(protocol, "U1"):
+        g = core.Guidance()
+        hand = [[_f32(x) for x in c] for c in protocol.hands[t.k]]
+        assert g.set_scene(hand, policy=t.policy, mode=t.mode, y_axis=list(protocol.y_axis)) == "ok"
+        assert g.set_wrench([_f32(x) for x in t.wrench]) == "ok"
+        levels[t.trial_index] = (g.update([1.0, 0.0, 0.0, 0.0])["levels"], t.mode)
+    seen = []
+
+    def on_sample(t_s, q, tel, trial):
+        running = tel.flags & TELEMETRY_FLAG_TRIAL_RUNNING
+        if trial is not None and running and int(tel.solver_status) == 0:
+            lv, mode = levels[trial.trial_index]
+            want = reference.pwm_from_levels(np.asarray(lv), mode, float(tel.alpha), cal)
+            plain = reference.pwm_from_levels(np.asarray(lv), mode, float(tel.alpha))
+            seen.append((list(tel.pwm[: len(lv)]), want, plain))
+
+    with SimulatedDevice(virtual_clock=True, store=str(tmp_path / "s.bin"), start=True) as dev:
+        summary = hr.run_hostless(
+            protocol,
+            "U1",
+            dv.DeviceClient(dev),
+            str(tmp_path / "out"),
+            open_runner_source("participant", protocol, "U1").model,
+            on_sample=on_sample,
+            progress=Progress(out=io.StringIO(), tty=False),
+            calibration=cal,
+            calibration_file="(test)",
+        )
+    assert summary.completed == summary.planned == 2
+    assert len(seen) > protocol.pose_rate_hz, "over a second of guided samples"
+    worst = max(abs(a - b) for got, want, _ in seen for a, b in zip(got, want))
+    exact = sum(got == want for got, want, _ in seen)
+    report_figure(
+        "host-less calibrated PWM vs reference",
+        f"{exact} of {len(seen)} guided TELEMETRY frames equal, worst {worst} count (SIMULATED)",
+    )
+    # alpha crosses the link as float32: a duty on a rounding edge may differ by one.
+    assert worst <= 1 and exact >= len(seen) * 99 // 100, (worst, exact, len(seen))
+    assert sum(got != plain for got, _, plain in seen) > len(seen) // 2, "calibration unused?"
+    runs = read_lines(tmp_path / "out" / "U1" / "runs.jsonl")
+    start = [r for r in runs if r["event"] == "start"][-1]
+    assert start["calibration"] == cal.to_json() and start["calibration_file"] == "(test)"
+
+
+def test_resuming_under_another_calibration_is_refused_naming_both(tmp_path):
+    """The stored plan's calibration is the one the study began with: a resume from the same
+    folder under another one is refused before anything runs (LOG_INFO cannot show it; the
+    folder's runs.jsonl says which one was uploaded)."""
+    from graspguide.core.motor_calibration import MotorCalibration
+    from graspguide.link.sim import SimulatedDevice
+    from graspguide.study.errors import RunnerError
+
+    path = tmp_path / "one_each.toml"
+    path.write_text(ONE_EACH)
+    protocol = pf.load_protocol(str(path))
+    first = MotorCalibration((55, 90, 64, 120), (1.5, 0.75, 1.25, 2.0))
+    store = str(tmp_path / "s.bin")
+
+    def run(cal, where):
+        with SimulatedDevice(virtual_clock=True, store=store, start=True) as dev:
+            return hr.run_hostless(
+                protocol,
+                "U1",
+                dv.DeviceClient(dev),
+                str(tmp_path / "out"),
+                open_runner_source("participant", protocol, "U1").model,
+                progress=Progress(out=io.StringIO(), tty=False),
+                calibration=cal,
+                calibration_file=where,
+            )
+
+    assert run(first, "first.json").uploaded
+    again = run(first, "first.json")
+    assert not again.uploaded and again.ran == 0 and again.completed == 2
+    with pytest.raises(RunnerError) as e:
+        run(MotorCalibration.identity(), None)
+    text = str(e.value)
+    assert "first.json" in text and "[55, 90, 64, 120]" in text and "[70, 70, 70, 70]" in text
+    assert "graspguide device erase" in text

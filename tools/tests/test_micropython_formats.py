@@ -21,6 +21,9 @@ ROOT = Path(__file__).resolve().parents[2]
 PORT = ROOT / "micropython"
 REGION_BYTES = 8192  # plan_store.h kPlanRegionBytes; the port's plan_file.REGION_BYTES
 
+# A participant's calibration (gains exact in float32): the plan carries it across.
+CALIBRATION = {"pwm_floor": [62, 84, 70, 91], "gain": [1.25, 0.5, 2.0, 1.0]}
+
 PROTOCOL = small_protocol_toml(
     "mp-formats", seed=5, participants=1, modalities=("F+V", "Fperp+C"), wrenches=1, single_motor=0
 )
@@ -41,6 +44,8 @@ if plan is not None:
     out["simulated"] = h.simulated
     out["trial_count"] = h.trial_count
     out["rest_s"] = h.rest_s
+    out["pwm_floor"] = list(h.pwm_floor)
+    out["gain"] = list(h.gain)
     out["plan_id"] = pf.plan_id(plan)
     out["trials"] = [{"trial_index": t.trial_index, "session": t.session, "k": t.k,
                       "policy": t.policy, "mode": t.mode, "wrench": t.wrench} for t in plan.trials]
@@ -137,6 +142,9 @@ def protocol(tmp_path: Path) -> Path:
 
 def test_the_port_reads_the_plan_and_records_the_cpp_device_stored(tmp_path, protocol):
     out = tmp_path / "study"
+    # Where `graspguide calibrate` leaves it: `trial --hostless` puts it into the plan.
+    (out / "U1").mkdir(parents=True)
+    (out / "U1" / "calibration.json").write_text(json.dumps(CALIBRATION))
     r = gg(
         "trial",
         "--protocol",
@@ -158,6 +166,7 @@ def test_the_port_reads_the_plan_and_records_the_cpp_device_stored(tmp_path, pro
     assert got["plan_status"] == "ok" and got["mount"] == "ok" and got["torn"] == 0
     assert got["participant"] == "U1" and got["simulated"] is True
     assert got["rest_s"] == pytest.approx(0.3, rel=1e-7)
+    assert (got["pwm_floor"], got["gain"]) == (CALIBRATION["pwm_floor"], CALIBRATION["gain"])
     trials = read_lines(out / "U1" / "trials.jsonl")
     assert got["trial_count"] == len(trials) == len(got["records"]) == 2
     by_index = {t["trial_index"]: t for t in trials}
@@ -182,8 +191,11 @@ def test_the_port_reads_the_plan_and_records_the_cpp_device_stored(tmp_path, pro
 
 def test_the_cpp_device_reads_the_records_and_plan_the_port_wrote(tmp_path, protocol):
     store = tmp_path / "a.store"
+    cal = tmp_path / "calibration.json"
+    cal.write_text(json.dumps(CALIBRATION))
     r = gg("device", "plan", "--port", "sim", "--store", str(store),
-           "--protocol", str(protocol), "--participant", "U1")  # fmt: skip
+           "--protocol", str(protocol), "--participant", "U1",
+           "--calibration", str(cal))  # fmt: skip
     assert r.returncode == 0, r.stdout + r.stderr
     cpp_region = store.read_bytes()[:REGION_BYTES]
     script = tmp_path / "write_store.py"

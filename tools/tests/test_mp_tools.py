@@ -41,14 +41,27 @@ PREAMBLE = struct.Struct("<IHHII")
 LEVELS_HEAD = struct.Struct("<IHHI")
 LEVELS_TRIAL = struct.Struct("<BBH4f3f")
 PLAN_ARGS = ["--participant", "U2", "--rest-s", "1.5", "--imu-to-hand", "0,1,0,0", "--simulated"]
+# Layout 2: the 148 bytes of PLAN_BEGIN's fields of layout 1, then pwm_floor u8[4], gain f32[4].
+PLAN_LAYOUT = 2
+HEADER_BYTES = 148 + 4 + 4 * 4
+TRIAL_BYTES = 35
+# A participant's calibration as `graspguide calibrate` writes it (the gains exact in f32).
+CALIBRATION = {"pwm_floor": [55, 80, 64, 70], "gain": [1.5, 0.75, 1.25, 1.0]}
 
 
-def _cpp_plan_region(tmp_path: Path) -> bytes:
+def _calibration_file(tmp_path: Path) -> str:
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps({"participant": "U2", **CALIBRATION}))
+    return str(path)
+
+
+def _cpp_plan_region(tmp_path: Path, *extra: str) -> bytes:
     """The plan region the C++ simulated device stores for PLAN_ARGS."""
     store = tmp_path / "u2.store"
     rc = main(
         ["device", "plan", "--port", "sim", "--store", str(store), "--protocol", PROTOCOL]
         + PLAN_ARGS
+        + list(extra)
     )
     assert rc == 0
     data = store.read_bytes()
@@ -65,16 +78,53 @@ def _plan_cli(tmp_path: Path, *extra: str) -> bytes:
 def test_plan_file_is_the_cpp_devices_plan_region(tmp_path: Path) -> None:
     region = _cpp_plan_region(tmp_path)
     assert _plan_cli(tmp_path) == region
+    begin, _ = _decode_region(region)
+    assert (begin.pwm_floor, begin.gain) == ((70,) * 4, (1.0,) * 4), "no calibration: identity"
+
+
+def test_a_calibrated_plan_file_is_the_cpp_devices_calibrated_plan_region(tmp_path: Path) -> None:
+    cal = _calibration_file(tmp_path)
+    region = _cpp_plan_region(tmp_path, "--calibration", cal)
+    assert _plan_cli(tmp_path, "--calibration", cal) == region
+    begin, _ = _decode_region(region)
+    assert list(begin.pwm_floor) == CALIBRATION["pwm_floor"]
+    assert list(begin.gain) == CALIBRATION["gain"]
+    assert region != _plan_cli(tmp_path), "the calibration is part of the plan"
+
+
+@pytest.mark.parametrize(
+    ("content", "words"),
+    [
+        (None, "does not exist"),
+        ("{", "is not JSON"),
+        ('{"pwm_floor": [70, 70, 70]}', "missing gain"),
+        ('{"pwm_floor": [70, 70, 255, 70], "gain": [1, 1, 1, 1]}', "pwm_floor[2] (middle)"),
+        ('{"pwm_floor": [70, 70, 70, 70], "gain": [1, 9, 1, 1]}', "gain[1] (index)"),
+    ],
+)
+def test_plan_with_a_bad_calibration_file_is_a_usage_error_naming_the_field(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str | None, words: str
+) -> None:
+    path = tmp_path / "calibration.json"
+    if content is not None:
+        path.write_text(content)
+    out = tmp_path / "plan.bin"
+    args = ["plan", "--protocol", PROTOCOL, "--out", str(out), *PLAN_ARGS]
+    assert main([*args, "--calibration", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and str(path) in err, err
+    assert not out.exists(), "nothing written from a calibration half read"
 
 
 def _decode_region(region: bytes) -> tuple[PlanBegin, list[PlanTrial]]:
     magic, version, _, length, crc = PREAMBLE.unpack_from(region)
-    assert (magic, version, zlib.crc32(region[16:])) == (0x4C504747, 1, crc)
-    begin = PlanBegin.unpack(region[16 : 16 + 148])
+    assert (magic, version, zlib.crc32(region[16:])) == (0x4C504747, PLAN_LAYOUT, crc)
+    begin = PlanBegin.unpack(region[16 : 16 + HEADER_BYTES])
+    assert length == HEADER_BYTES + TRIAL_BYTES * begin.trial_count
     trials = []
     for i in range(begin.trial_count):
-        at = 16 + 148 + 35 * i
-        trials.append(PlanTrial.unpack(struct.pack("<H", i) + region[at : at + 35]))
+        at = 16 + HEADER_BYTES + TRIAL_BYTES * i
+        trials.append(PlanTrial.unpack(struct.pack("<H", i) + region[at : at + TRIAL_BYTES]))
     return begin, trials
 
 
@@ -129,8 +179,8 @@ def test_levels_text_holds_each_trials_float32_levels(tmp_path: Path) -> None:
     protocol = load_protocol(PROTOCOL)
     begin, trials = plan_messages(protocol, "U1", planned_trials(protocol, "U1"), False, 2.0)
     data, levels = encode_plan_file(begin, trials, with_levels=True)
-    block = data[16 + 148 + 35 * len(trials) + LEVELS_HEAD.size :]
-    plan = zlib.crc32(data[16 : 16 + 148 + 35 * len(trials)])
+    block = data[16 + HEADER_BYTES + TRIAL_BYTES * len(trials) + LEVELS_HEAD.size :]
+    plan = zlib.crc32(data[16 : 16 + HEADER_BYTES + TRIAL_BYTES * len(trials)])
     text = levels_text(trials, levels, plan).splitlines()
     assert text[1] == f"plan_id {plan:08x}"
     rows = [line.split() for line in text[2:]]

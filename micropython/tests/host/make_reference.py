@@ -1,13 +1,15 @@
 """HOST side (CPython with numpy and the installed graspguide package, not MicroPython):
 writes the data the port's interpreter tests compare against, from independent sources:
 
-  tests/data/frame_reference.json   error/alpha and PWM from the float64 reference
-      (graspguide.core.reference: atan2 of the rotated force, round-half-away PWM), and
+  tests/data/frame_reference.json   error/alpha and PWM (also under motor calibrations)
+      from the float64 reference (graspguide.core.reference: atan2 of the rotated force,
+      round-half-away PWM), and
       the C++ gravity estimator (graspguide.core._core, double) on a simulated IMU stream;
   tests/data/hostless_script.json   one host-less trial of the virtual participant: the
       IMU samples (graspguide.hostless.imu_world) of a hand the virtual participant moves
       in reaction to the PWM a host-side device shows (the C++ estimator, the reference's
-      error and PWM, levels from the C++ core), and that device's PWM and trial outcome.
+      error, PWM under the script's motor calibration, levels from the C++ core), and
+      that device's PWM and trial outcome.
       SIMULATED: a model, never a measurement.
 
     python micropython/tests/host/make_reference.py
@@ -23,6 +25,7 @@ import sys
 import numpy as np
 
 from graspguide.core import _core, reference
+from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.hostless.imu_world import ImuWorld
 from graspguide.imu.synthetic import sweep_poses
 from graspguide.study.participant import VirtualParticipant
@@ -88,6 +91,41 @@ def pwm_cases(rng):
     return cases
 
 
+def calibrated_pwm(levels, mode, alpha, floor, gain):
+    """The float64 reference's PWM under a calibration: floor_i + G (gain_i |m_i|), rounded
+    half away from zero and clamped (G = 185 in mode C, alpha in mode V)."""
+    cal = MotorCalibration(tuple(int(f) for f in floor), tuple(float(g) for g in gain))
+    return reference.pwm_from_levels(np.asarray(levels, dtype=float), mode, alpha, cal)
+
+
+def pwm_calibrated_cases(rng):
+    """(levels, mode, alpha, pwm_floor, gain, pwm, the identity's pwm): random calibrations
+    in the calibration's ranges (floors 0..254, gains 0.25..4, float32 as stored), edges of
+    both, and duties exactly half-way between two integers."""
+    cases = []
+    for i in range(80):
+        k = 3 + (i % 2)
+        levels = list(rng.uniform(-1.0, 1.0, size=k))
+        if i % 9 == 0:
+            levels[i % k] = [0.0, 1e-3, 1.0001e-3][i % 3]
+        mode = "C" if i % 3 == 0 else "V"
+        alpha = float(rng.uniform(0.0, 185.0))
+        floor = [int(x) for x in rng.integers(0, 255, size=4)]
+        gain = [f32(x) for x in rng.uniform(0.25, 4.0, size=4)]
+        if i % 10 == 1:
+            floor = [0, 254, 70, 1]
+            gain = [0.25, 4.0, 1.0, 0.25]
+        if mode == "V" and i % 7 == 0:
+            # A duty exactly half-way: gain_i |m_i| and alpha chosen so x = floor + 20.5.
+            gain[0] = 0.5
+            levels[0] = 0.5
+            alpha = 20.5 / 0.25
+        pwm = calibrated_pwm(levels, mode, alpha, floor, gain)
+        identity = reference.pwm_from_levels(np.asarray(levels), mode, alpha)
+        cases.append([levels, mode, alpha, floor, gain, pwm, identity])
+    return cases
+
+
 def estimator_case():
     """A 100 Hz sweep (harder than guidance) with knocks that the gate must drop, through
     the C++ estimator in double: inputs and the gravity and bias after each sample."""
@@ -138,6 +176,9 @@ def hostless_script():
         "y_axis": [0.0, 1.0, 0.0],
         "hand_k3": hand,
         "imu_to_hand_wxyz": mount32,
+        # A participant's calibration (exact in float32), so the trial tests applying it.
+        "pwm_floor": [60, 80, 75, 70],
+        "gain": [1.5, 0.75, 1.25, 1.0],
     }
     trial = {
         "trial_index": 1,
@@ -218,7 +259,7 @@ def hostless_script():
             else:
                 entry_us = None
             if success_at is None:
-                pwm = reference.pwm_from_levels(np.asarray(levels), "V", alpha)
+                pwm = calibrated_pwm(levels, "V", alpha, header["pwm_floor"], header["gain"])
             pwm_log.append(
                 {"sample": len(samples) - 1, "error_deg": err, "alpha": alpha, "pwm": list(pwm)}
             )
@@ -244,6 +285,7 @@ def main(out_dir=DATA):
     ref = {
         "alignment": alignment_cases(rng),
         "pwm": pwm_cases(rng),
+        "pwm_calibrated": pwm_calibrated_cases(rng),
         "estimator": estimator_case(),
     }
     with open(os.path.join(out_dir, "frame_reference.json"), "w") as f:

@@ -26,7 +26,10 @@ appends one checksummed record per completed trial to its non-volatile results l
 
   plan   store one participant's plan of --protocol on the device (checked there: every
          trial solved once), with --imu-to-hand (how the IMU sits on the hand) and
-         --rest-s; refused while the log holds another plan's records
+         --rest-s and the participant's --calibration (the calibration.json of
+         `graspguide calibrate`: a PWM floor and gain per motor, applied to every
+         trial; default the paper's mapping); refused while the log holds another
+         plan's records
   run    start the stored plan now (a board with a plan also starts it at power-up);
          the wearer then works through it with the button, no host needed
   log    download every record into OUT/<participant>/ in the runner's folder format
@@ -43,7 +46,7 @@ non-volatile memory: the plan and the log of an earlier simulated run)."""
 EPILOG = """\
 examples:
   graspguide device plan --port /dev/ttyACM0 --protocol protocols/paper.toml \\
-      --participant U3 --imu-to-hand 0.7071,0,0,0.7071
+      --participant U3 --imu-to-hand 0.7071,0,0,0.7071 --calibration runs/U3/calibration.json
   graspguide device run --port /dev/ttyACM0
   graspguide device log --port /dev/ttyACM0 --out runs/hostless
   graspguide device info --port sim --store runs/hostless/U1.store
@@ -84,6 +87,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_REST_S,
         metavar="S",
         help=f"rest before each trial's ready pattern (default {DEFAULT_REST_S:g})",
+    )
+    plan.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="the participant's calibration.json (`graspguide calibrate`): per-motor PWM "
+        "floor and gain, applied to every trial (default: the paper's mapping)",
     )
     plan.add_argument(
         "--simulated",
@@ -188,21 +197,34 @@ def _act(args: argparse.Namespace, client: Any) -> int:
 
 
 def _store_plan(args: argparse.Namespace, client: Any) -> int:
+    from graspguide.hostless.calibration_file import describe, read_calibration
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
     from graspguide.study.study_protocol import load_protocol, participant_number
 
+    cal = read_calibration(args.calibration) if args.calibration else None
     protocol = load_protocol(args.protocol)
     participant_number(args.participant)
     trials = planned_trials(protocol, args.participant)
     begin, plan_trials = plan_messages(
-        protocol, args.participant, trials, args.simulated, args.rest_s, args.imu_to_hand
+        protocol,
+        args.participant,
+        trials,
+        args.simulated,
+        args.rest_s,
+        args.imu_to_hand,
+        calibration=cal,
     )
-    client.upload_plan(begin, plan_trials)
+    client.upload_plan(begin, plan_trials, calibration=cal)
     kind = "SIMULATED participant" if args.simulated else "participant"
+    calibrated = (
+        f"calibration {args.calibration}: {describe(cal)}"
+        if cal is not None
+        else "no calibration (the paper's PWM mapping)"
+    )
     print(
         f"stored the plan of {kind} {args.participant}: {len(plan_trials)} trials of "
-        f"{args.protocol}, checked by the device; start it with `graspguide device run` "
-        "or by powering the wearable up"
+        f"{args.protocol}, {calibrated}, checked by the device; start it with "
+        "`graspguide device run` or by powering the wearable up"
     )
     return EXIT_OK
 

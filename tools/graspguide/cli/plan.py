@@ -21,17 +21,22 @@ Writes one participant's plan of --protocol to --out in issue 13's byte layout: 
 region a C++ device stores at offset 0 (preamble, header, trials; docs/hostless.md). With
 --levels a block follows with each trial's motor levels and force direction, solved once
 here by the C++ core, for boards too slow to solve a posture themselves (README:
-MicroPython). Every trial is solved either way: a plan the board would refuse is refused
-here. `graspguide mp deploy --plan-protocol` writes the same file onto a board."""
+MicroPython). --calibration FILE puts the participant's calibration (the calibration.json
+of `graspguide calibrate`: a PWM floor and gain per motor) into the plan; the board applies
+it to every trial (default: the paper's mapping). Every trial is solved either way: a plan
+the board would refuse is refused here. `graspguide mp deploy --plan-protocol` writes the
+same file onto a board."""
 
 EPILOG = """\
 examples:
   graspguide plan --protocol protocols/paper.toml --participant U3 --out plan.bin
   graspguide plan --protocol protocols/paper.toml --participant U3 --levels \\
       --imu-to-hand 0.7071,0,0,0.7071 --out plan.bin
+  graspguide plan --protocol protocols/paper.toml --participant U3 \\
+      --calibration runs/U3/calibration.json --out plan.bin
 
 exit status: 0 written, 1 on a write error, 2 on a usage error (a bad protocol or
-participant, a trial the core cannot solve)."""
+participant or calibration file, a trial the core cannot solve)."""
 
 
 def add_plan_arguments(p: argparse.ArgumentParser, protocol_flag: str) -> None:
@@ -66,6 +71,12 @@ def add_plan_arguments(p: argparse.ArgumentParser, protocol_flag: str) -> None:
         help=f"rest before each trial's ready pattern (default {DEFAULT_REST_S:g})",
     )
     p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="the participant's calibration.json (`graspguide calibrate`): per-motor PWM "
+        "floor and gain, applied to every trial (default: the paper's mapping)",
+    )
+    p.add_argument(
         "--simulated",
         action="store_true",
         help="the participant is simulated (the records say so)",
@@ -79,12 +90,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def plan_bytes(args: argparse.Namespace, protocol: str) -> tuple[bytes, list[Any], list[Any]]:
     """(the plan file, its PLAN_TRIALs, each trial's TrialLevels). ValueError for bad input."""
+    from graspguide.hostless.calibration_file import read_calibration
     from graspguide.mp.plan_file import plan_file_for
 
     if not args.participant:
         raise ValueError("--participant is required with a protocol: whose plan (U1, U2, ...)")
+    calibration = getattr(args, "calibration", None)
     return plan_file_for(
-        protocol, args.participant, args.levels, args.rest_s, args.imu_to_hand, args.simulated
+        protocol,
+        args.participant,
+        args.levels,
+        args.rest_s,
+        args.imu_to_hand,
+        args.simulated,
+        read_calibration(calibration) if calibration else None,
     )
 
 
@@ -108,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
         report("plan", f"cannot write {args.out}: {e}")
         return EXIT_FAILURE
     extra = ", with each trial's motor levels" if args.levels else ""
+    if args.calibration:
+        extra += f", calibrated by {args.calibration}"
     n = len(trials)
     print(
         f"{args.out}: the plan of {args.participant} ({n} trials of {args.protocol}{extra}), "

@@ -7,7 +7,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from graspguide.link.client import CONSTRAINT_NAMES, MODE_NAMES, POLICY_NAMES, to_f32
+from graspguide.core.motor_calibration import MotorCalibration
+from graspguide.link.client import (
+    CONSTRAINT_NAMES,
+    MODE_NAMES,
+    POLICY_NAMES,
+    calibration_message,
+    to_f32,
+)
 from graspguide.link.messages import (
     CONFIG_HASH_SIZE,
     MAX_PLAN_TRIALS,
@@ -152,11 +159,15 @@ def plan_messages(
     simulated: bool,
     rest_s: float,
     imu_to_hand_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+    calibration: MotorCalibration | None = None,
 ) -> tuple[PlanBegin, list[PlanTrial]]:
     """(PLAN_BEGIN, the PLAN_TRIALs in run order) of ``planned_trials`` (the runner's plan
-    of ``participant``). ValueError naming the field and the fix for a plan the device
-    cannot hold: more than MAX_PLAN_TRIALS trials, an id longer than
-    PARTICIPANT_ID_SIZE, a wrench number beyond 255, a rest out of REST_S_RANGE."""
+    of ``participant``), carrying the participant's ``calibration`` (the identity, the
+    paper's mapping, when None): the device applies it to every trial's PWM. Upload it with
+    ``client.upload_plan(begin, trials, calibration=calibration)``. ValueError naming the
+    field and the fix for a plan the device cannot hold: more than MAX_PLAN_TRIALS trials,
+    an id longer than PARTICIPANT_ID_SIZE, a wrench number beyond 255, a rest out of
+    REST_S_RANGE."""
     _check_participant(participant)
     planned = list(planned_trials)
     if not 1 <= len(planned) <= MAX_PLAN_TRIALS:
@@ -174,6 +185,7 @@ def plan_messages(
     if not (math.isfinite(rest_s) and lo <= rest_s <= hi):
         raise ValueError(f"rest_s must be in [{lo:g}, {hi:g}] seconds, got {rest_s!r}")
     ks = {t.k for t in planned}
+    cal = calibration_message(calibration or MotorCalibration.identity())
     begin = PlanBegin(
         participant=participant,
         simulated=bool(simulated),
@@ -188,6 +200,8 @@ def plan_messages(
         hand_k3=_posture(protocol, 3, 3 in ks),
         hand_k4=_posture(protocol, 4, 4 in ks),
         imu_to_hand_wxyz=_check_rotation(imu_to_hand_wxyz),
+        pwm_floor=cal.pwm_floor,
+        gain=cal.gain,
     )
     return begin, [plan_trial(i, t) for i, t in enumerate(planned)]
 

@@ -30,6 +30,7 @@ again resumes at the first trial without a record.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import sys
@@ -41,6 +42,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.hostless.imu_world import ImuWorld, unit_quaternion
 from graspguide.imu.synthetic import ImuNoise
 from graspguide.study.errors import RunnerError
@@ -447,6 +449,28 @@ def _plan_matches(info: Any, participant: str, hash8: bytes, n: int) -> bool:
     )
 
 
+def _uploaded_calibration(runs_path: str) -> tuple[dict[str, Any], str | None] | None:
+    """(calibration, its file) of the last plan this folder's runs uploaded (runs.jsonl's
+    start events), or None when none of them uploaded one."""
+    found = None
+    try:
+        with open(runs_path, encoding="utf-8") as f:
+            for line in f:
+                try:
+                    event = json.loads(line)
+                except json.JSONDecodeError:
+                    continue  # a line cut by a crash: the others still count
+                if event.get("event") == "start" and event.get("plan_uploaded"):
+                    cal = event.get("calibration")
+                    if isinstance(cal, dict):
+                        found = (cal, event.get("calibration_file"))
+                    else:  # uploaded before plans carried a calibration: the identity
+                        found = (MotorCalibration.identity().to_json(), None)
+    except FileNotFoundError:
+        return None
+    return found
+
+
 def run_hostless(
     protocol: Protocol,
     participant: str,
@@ -466,6 +490,8 @@ def run_hostless(
     err: TextIO | None = None,
     protocol_file: str | None = None,
     port: str = "",
+    calibration: MotorCalibration | None = None,
+    calibration_file: str | None = None,
 ) -> HostlessSummary:
     """Run what is left of ``participant``'s plan host-less on ``client`` (a DeviceClient
     of a device with CAPABILITY_HOSTLESS and CAPABILITY_SIM_MESSAGES), then download its log
@@ -474,7 +500,9 @@ def run_hostless(
     default: where the last run on this client ended, else 0, so that a run resumed on
     the same device never turns its clock back.
     ``on_trial_result`` is called with every TRIAL_RESULT as it arrives, ``on_sample(t_s,
-    hand_quat, telemetry, trial or None)`` after every sample's TELEMETRY. Raises
+    hand_quat, telemetry, trial or None)`` after every sample's TELEMETRY. ``calibration``
+    (the identity when None; read from ``calibration_file``, logged) goes into the plan:
+    the device applies it to every trial's PWM. Raises
     RunnerError, LinkError (DeviceError), KeyboardInterrupt; STOP is sent on every way
     out, and the device's store keeps every completed trial."""
     from graspguide.hostless.device_log import download_log
@@ -515,8 +543,27 @@ def run_hostless(
         hash8 = bytes.fromhex(protocol.config_hash)[:8]
         n = len(runner.plan)
         log = client.log_info()
-        uploaded = False
-        if not _plan_matches(log, participant, hash8, n):
+        same_study = _plan_matches(log, participant, hash8, n)
+        want_cal = (calibration or MotorCalibration.identity()).to_json()
+        upload = not same_study
+        if same_study:
+            # LOG_INFO does not show the stored plan's calibration: the host's own log of
+            # the upload (runs.jsonl) says which one it was.
+            recorded = _uploaded_calibration(runner.runs_path)
+            if recorded is None:
+                # Not uploaded from this folder: the same plan again keeps its records;
+                # one with another calibration is refused while records are stored.
+                upload = calibration is not None and not calibration.is_identity()
+            elif recorded[0] != want_cal:
+                raise RunnerError(
+                    f"the device stores {participant}'s plan with the calibration "
+                    f"{recorded[0]} ({recorded[1] or 'none given'}), this run has {want_cal} "
+                    f"({calibration_file or 'none given'}): resume with the calibration the "
+                    "study began with, or download the records (`graspguide device log "
+                    "--port P --out DIR`), erase them (`graspguide device erase --port P "
+                    "--yes`) and start again"
+                )
+        if upload:
             begin, trials = plan_messages(
                 protocol,
                 participant,
@@ -524,10 +571,20 @@ def run_hostless(
                 simulated=True,
                 rest_s=float(rest_s),
                 imu_to_hand_wxyz=tuple(float(x) for x in imu_to_hand),
+                calibration=calibration,
             )
             try:
-                client.upload_plan(begin, trials)
+                client.upload_plan(begin, trials, calibration=calibration)
             except DeviceError as e:
+                if e.code_name == "log_not_empty" and same_study:
+                    raise RunnerError(
+                        f"the device stores {participant}'s plan with records made under "
+                        f"another calibration or settings than this run's (calibration "
+                        f"{calibration_file or 'none'}): resume with those the study began "
+                        "with, or download its records (`graspguide device log --port P "
+                        "--out DIR`), erase them (`graspguide device erase --port P --yes`) "
+                        "and start again"
+                    ) from None
                 if e.code_name == "log_not_empty":
                     raise RunnerError(
                         f"the device's log holds records of another plan (participant "
@@ -536,8 +593,8 @@ def run_hostless(
                         "(`graspguide device erase --port P --yes`), then run again"
                     ) from None
                 raise
-            uploaded = True
             log = client.log_info()
+        uploaded = upload
         before = int(log.records)
         runner._log_run(
             "start",
@@ -551,6 +608,8 @@ def run_hostless(
             imu_to_hand_wxyz=list(imu_to_hand),
             imu_noise=dataclasses.asdict(imu_noise or ImuNoise()),
             plan_uploaded=uploaded,
+            calibration=(calibration or MotorCalibration.identity()).to_json(),
+            calibration_file=calibration_file,
             records_before=before,
             device={
                 "board": info.board,
@@ -657,8 +716,10 @@ def hostless_trial_command(
 ) -> int:
     """`graspguide trial --hostless`: ``participant``'s study run host-less on the
     simulated device (its store ``store``, default OUT/PID/device-store.bin), the world
-    driven by the source ``source``; the log downloaded into ``out``. Returns the exit
-    code."""
+    driven by the source ``source``; the log downloaded into ``out``. The plan carries the
+    participant's calibration: OUT/PID/calibration.json when `graspguide calibrate` wrote
+    one (a file that is there but wrong is a usage error), else the identity.
+    Returns the exit code."""
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -666,6 +727,13 @@ def hostless_trial_command(
         EXIT_USAGE,
         fail,
         report,
+    )
+    from graspguide.hostless.calibration_file import (
+        describe as describe_calibration,
+    )
+    from graspguide.hostless.calibration_file import (
+        participant_calibration,
+        participant_calibration_path,
     )
     from graspguide.link.client import DeviceClient
     from graspguide.link.sim import SIM_PORT
@@ -696,6 +764,7 @@ def hostless_trial_command(
         check_settings(rest_s, DEFAULT_REACTION_S, mount)
         loaded = load_protocol(protocol)
         participant_number(participant)
+        cal, cal_file = participant_calibration(out, participant)
         src = open_runner_source(source, loaded, participant)
         if not (src.closed_loop and src.simulated):
             raise RunnerError(
@@ -703,7 +772,7 @@ def hostless_trial_command(
                 f"closed-loop plugin class), got --source {source}",
                 usage=True,
             )
-    except (ProtocolFileError, RunnerError) as e:
+    except (ProtocolFileError, RunnerError, ValueError) as e:
         report("trial", e)
         return EXIT_USAGE
     store_path = store or os.path.join(out, participant, "device-store.bin")
@@ -723,6 +792,13 @@ def hostless_trial_command(
         f"SIMULATED host-less study: {participant}, the simulated device's store {store_path}",
         flush=True,
     )
+    print(
+        f"calibration: {cal_file}: {describe_calibration(cal)}"
+        if cal is not None and cal_file is not None
+        else "calibration: none (the paper's PWM mapping; `graspguide calibrate` writes "
+        f"{participant_calibration_path(out, participant)})",
+        flush=True,
+    )
     try:
         summary = run_hostless(
             loaded,
@@ -735,6 +811,8 @@ def hostless_trial_command(
             source_spec=source,
             protocol_file=protocol,
             port=port,
+            calibration=cal,
+            calibration_file=cal_file,
         )
         print(
             f"{participant}: all {summary.planned} trials stored on the device and downloaded "

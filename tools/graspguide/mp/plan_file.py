@@ -6,9 +6,11 @@ Layout, little-endian throughout:
 
 1. **The plan region** exactly as ``plan_store.h`` writes it at offset 0 of a device's store
    (not padded to its 8,192 bytes): the 16-byte preamble (u32 magic ``"GGPL"``, u16 layout
-   version 1, u16 reserved 0, u32 payload length, u32 CRC-32 of the payload), then the
-   payload: the 148-byte header (PLAN_BEGIN's fields in order) and one 35-byte trial per
-   planned trial (PLAN_TRIAL's fields without ``position``).
+   version 2, u16 reserved 0, u32 payload length, u32 CRC-32 of the payload), then the
+   payload: the 168-byte header (PLAN_BEGIN's fields in order, ending with the
+   participant's calibration: u8 pwm_floor[4], f32 gain[4]) and one 35-byte trial per
+   planned trial (PLAN_TRIAL's fields without ``position``). Layout 1 (no calibration) is
+   refused by the board, never misread.
 2. **The levels block** (optional; absent when the file ends after the payload):
 
    ======  =====  ==========================================================
@@ -36,13 +38,14 @@ import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.link.client import CONSTRAINT_NAMES, MODE_NAMES, POLICY_NAMES
 from graspguide.link.messages import PlanBegin, PlanTrial
 
 PLAN_MAGIC = 0x4C504747  # "GGPL"
-PLAN_LAYOUT_VERSION = 1
+PLAN_LAYOUT_VERSION = 2  # 2: the header ends with the calibration
 PLAN_PREAMBLE = struct.Struct("<IHHII")
-PLAN_HEADER_BYTES = 148
+PLAN_HEADER_BYTES = 168
 PLAN_TRIAL_BYTES = 35
 
 LEVELS_MAGIC = 0x564C4747  # "GGLV"
@@ -191,9 +194,11 @@ def plan_file_for(
     rest_s: float,
     imu_to_hand_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
     simulated: bool = False,
+    calibration: MotorCalibration | None = None,
 ) -> tuple[bytes, list[PlanTrial], list[TrialLevels]]:
-    """The plan file of ``participant`` in the protocol file: the same plan
-    ``graspguide device plan`` uploads (graspguide.hostless.plan_upload)."""
+    """The plan file of ``participant`` in the protocol file, with the participant's
+    ``calibration`` (the identity when None): the same plan ``graspguide device plan``
+    uploads (graspguide.hostless.plan_upload)."""
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
     from graspguide.study.study_protocol import load_protocol, participant_number
 
@@ -201,7 +206,7 @@ def plan_file_for(
     participant_number(participant)
     trials = planned_trials(protocol, participant)
     begin, plan_trials = plan_messages(
-        protocol, participant, trials, simulated, rest_s, imu_to_hand_wxyz
+        protocol, participant, trials, simulated, rest_s, imu_to_hand_wxyz, calibration
     )
     data, levels = encode_plan_file(begin, plan_trials, with_levels)
     return data, plan_trials, levels

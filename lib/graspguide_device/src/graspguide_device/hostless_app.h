@@ -84,9 +84,11 @@ class HostlessRunner {
         imu_config_(make_imu_config(accel_full_scale_mps2, gyro_full_scale_radps)),
         imu_(imu_config_, clock.now_us()) {}
 
-  // At power-up: the stored plan (if any) and the log. Returns the log's mount status.
+  // At power-up: the stored plan (if any) and the log. Returns the log's mount status;
+  // plan_status() says why no plan was loaded (kOldLayout: upload the plan again).
   StoreStatus boot() {
-    plan_stored_ = load_plan(store_, plan_) == StoreStatus::kOk;
+    plan_status_ = load_plan(store_, plan_);
+    plan_stored_ = plan_status_ == StoreStatus::kOk;
     if (plan_stored_) adopt_plan();
     return log_.mount();
   }
@@ -138,6 +140,7 @@ class HostlessRunner {
       return abandon(refuse(HostlessRefusal::kStorageFailed));
     uploading_ = false;
     plan_stored_ = true;
+    plan_status_ = StoreStatus::kOk;
     adopt_plan();
     return HostlessReply{};
   }
@@ -266,6 +269,9 @@ class HostlessRunner {
   bool running() const { return phase_ != RunPhase::kOff; }
   RunPhase phase() const { return phase_; }
   bool plan_stored() const { return plan_stored_; }
+  // What the last load of the stored plan found: kOldLayout is a plan of an older firmware,
+  // refused (never misread) until the host uploads it again.
+  StoreStatus plan_status() const { return plan_status_; }
   const StudyPlan& plan() const { return plan_; }
   ResultsLog& log() { return log_; }
   const ImuFaultCounts& imu_faults() const { return imu_.faults(); }
@@ -317,6 +323,9 @@ class HostlessRunner {
     scene.trial.threshold_deg = h.threshold_deg;
     scene.trial.hold_s = h.hold_s;
     scene.trial.timeout_s = h.timeout_s;
+    // The participant's calibration shapes every trial's PWM (the patterns stay at their
+    // fixed duty: they are told apart by rhythm). Checked with the plan's header.
+    guidance_.set_calibration(plan_calibration(h));
     Vec6<Real> w;
     for (int j = 0; j < 6; ++j) w(j) = Real(t.wrench[j]);
     Status s = geometry_status<Real>(scene);
@@ -491,7 +500,8 @@ class HostlessRunner {
   HostlessReply abandon(HostlessReply r) {
     uploading_ = false;
     plan_id_valid_ = false;
-    plan_stored_ = load_plan(store_, plan_) == StoreStatus::kOk;
+    plan_status_ = load_plan(store_, plan_);
+    plan_stored_ = plan_status_ == StoreStatus::kOk;
     if (plan_stored_) adopt_plan();
     return r;
   }
@@ -518,6 +528,7 @@ class HostlessRunner {
   uint32_t samples_ = 0, faults_at_start_ = 0, plan_id_cache_ = 0;
   uint64_t trial_elapsed_us_ = 0;
   TrialResult last_result_;
+  StoreStatus plan_status_ = StoreStatus::kNoPlan;
   bool plan_stored_ = false, uploading_ = false, have_sample_ = false;
   bool result_pending_ = false, plan_id_valid_ = false;
 };

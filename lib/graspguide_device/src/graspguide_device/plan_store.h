@@ -1,7 +1,9 @@
 // The study plan in non-volatile storage: a versioned region at offset 0 of the store,
 // little-endian field by field (no struct padding or CPU byte order in it), CRC-32 checked.
 // A region that is torn, foreign or of another layout version reads as "no plan", never as
-// a wrong plan. Also the byte codec the results log shares (a record holds a plan trial).
+// a wrong plan; a whole plan of an older layout loads as kOldLayout (never read with this
+// layout's fields), so the device can say to store it again. Also the byte codec the results log
+// shares (a record holds a plan trial).
 #pragma once
 
 #include <cstdint>
@@ -14,7 +16,8 @@
 namespace graspguide::device {
 
 // kNoRecord: ResultsLog::read past the last record. kBadPlan: save_plan refused a plan that
-// fails check_header/check_trial (nothing written).
+// fails check_header/check_trial (nothing written). kOldLayout: load_plan found a whole plan
+// of an older layout version (stored by an older firmware): upload the plan again.
 enum class StoreStatus : uint8_t {
   kOk = 0,
   kNoPlan,
@@ -23,15 +26,17 @@ enum class StoreStatus : uint8_t {
   kTooSmall,
   kNoRecord,
   kBadPlan,
+  kOldLayout,
 };
 
-inline constexpr uint32_t kPlanHeaderBytes = 148;   // PlanHeader's fields, packed
+inline constexpr uint32_t kPlanHeaderBytes = 168;   // PlanHeader's fields, packed
 inline constexpr uint32_t kPlanTrialBytes = 35;     // PlanTrial's fields, packed
 inline constexpr uint32_t kPlanPreambleBytes = 16;  // magic, version, reserved, length, CRC
 // "GGPL" in the store's byte order. No byte of it is 0x00 or 0xFF, so a magic cut part way
 // over an invalidated (zeroed) or erased one can never read as whole.
 inline constexpr uint32_t kPlanMagic = 0x4C504747u;
-inline constexpr uint16_t kPlanLayoutVersion = 1;
+// 2: the header ends with the participant's calibration (pwm_floor u8[4], gain f32[4]).
+inline constexpr uint16_t kPlanLayoutVersion = 2;
 // Rounded up to 4 KiB, the usual flash erase sector, so the log starts on a sector.
 inline constexpr uint32_t kPlanSectorBytes = 4096;
 inline constexpr uint32_t kPlanRegionBytes =
@@ -241,7 +246,8 @@ bool encode_header(Sink& s, const PlanHeader& h) {
          put_u16(s, h.trial_count) && put_u8(s, h.constraints) && put_f32s(s, h.y_axis, 3) &&
          put_f32(s, h.threshold_deg) && put_f32(s, h.hold_s) && put_f32(s, h.timeout_s) &&
          put_f32(s, h.rest_s) && put_f32s(s, &h.hand_k3[0][0], 9) &&
-         put_f32s(s, &h.hand_k4[0][0], 12) && put_f32s(s, h.imu_to_hand_wxyz, 4);
+         put_f32s(s, &h.hand_k4[0][0], 12) && put_f32s(s, h.imu_to_hand_wxyz, 4) &&
+         s.put(h.pwm_floor, kMaxContacts) && put_f32s(s, h.gain, kMaxContacts);
 }
 template <typename Source>
 bool decode_header(Source& s, PlanHeader& h) {
@@ -250,7 +256,8 @@ bool decode_header(Source& s, PlanHeader& h) {
          get_u16(s, h.trial_count) && get_u8(s, h.constraints) && get_f32s(s, h.y_axis, 3) &&
          get_f32(s, h.threshold_deg) && get_f32(s, h.hold_s) && get_f32(s, h.timeout_s) &&
          get_f32(s, h.rest_s) && get_f32s(s, &h.hand_k3[0][0], 9) &&
-         get_f32s(s, &h.hand_k4[0][0], 12) && get_f32s(s, h.imu_to_hand_wxyz, 4);
+         get_f32s(s, &h.hand_k4[0][0], 12) && get_f32s(s, h.imu_to_hand_wxyz, 4) &&
+         s.get(h.pwm_floor, kMaxContacts) && get_f32s(s, h.gain, kMaxContacts);
 }
 
 // The plan's stored bytes: the header, then header.trial_count trials (capped, so a bad
@@ -317,7 +324,8 @@ inline StoreStatus save_plan(NvStorage& store, const StudyPlan& plan) {
   return StoreStatus::kOk;
 }
 
-// kOk with the stored plan; kNoPlan (plan reset to StudyPlan{}, as on any failure) when the region
+// kOk with the stored plan; kOldLayout when it holds a plan of an older layout version;
+// kNoPlan (plan reset to StudyPlan{}, as on any failure) when the region
 // holds no complete, intact plan of this layout that passes the checks; kStorageFailed on a read
 // fault; kTooSmall when the store cannot hold a plan region.
 inline StoreStatus load_plan(NvStorage& store, StudyPlan& plan) {
@@ -334,6 +342,10 @@ inline StoreStatus load_plan(NvStorage& store, StudyPlan& plan) {
   get_u16(ps, reserved);
   get_u32(ps, length);
   get_u32(ps, crc);
+  // The magic is written last, so an older version under it is a whole plan of that
+  // layout: named, never decoded with this one's fields.
+  if (magic == kPlanMagic && reserved == 0 && version >= 1 && version < kPlanLayoutVersion)
+    return StoreStatus::kOldLayout;
   if (magic != kPlanMagic || version != kPlanLayoutVersion || reserved != 0 ||
       length < plan_payload_bytes(1) || length > plan_payload_bytes(kMaxPlanTrials))
     return StoreStatus::kNoPlan;

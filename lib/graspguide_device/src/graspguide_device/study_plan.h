@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "graspguide_frame/motor_calibration.h"
 #include "graspguide_frame/pwm.h"
 #include "graspguide_frame/trial_config.h"
 
@@ -49,6 +50,10 @@ struct PlanHeader {
   float hand_k3[3][3] = {};
   float hand_k4[4][3] = {};
   float imu_to_hand_wxyz[4] = {1, 0, 0, 0};
+  // The participant's per-motor calibration, applied to every trial's PWM; the identity
+  // (kPwmMin, 1) is the paper's mapping.
+  uint8_t pwm_floor[kMaxContacts] = {kPwmMin, kPwmMin, kPwmMin, kPwmMin};
+  float gain[kMaxContacts] = {1, 1, 1, 1};
 };
 
 struct StudyPlan {
@@ -71,6 +76,8 @@ enum class PlanBeginField : uint8_t {
   kHandK3,
   kHandK4,
   kImuToHandWxyz,
+  kPwmFloor,
+  kGain,
 };
 enum class PlanTrialField : uint8_t {
   kPosition = 0,
@@ -88,6 +95,16 @@ enum class PlanTrialField : uint8_t {
 };
 
 enum class PlanCheck : uint8_t { kOk = 0, kBadField };
+
+// The plan's calibration as the per-frame layer takes it (the same fields, the same order).
+inline MotorCalibration plan_calibration(const PlanHeader& h) {
+  MotorCalibration c;
+  for (int i = 0; i < kMaxContacts; ++i) {
+    c.pwm_floor[i] = h.pwm_floor[i];
+    c.gain[i] = h.gain[i];
+  }
+  return c;
+}
 
 namespace plan_detail {
 
@@ -156,6 +173,10 @@ inline PlanCheck check_header(const PlanHeader& h, uint8_t* bad_field) {
   const float n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
   if (!(n2 >= kPlanQuatNormMin * kPlanQuatNormMin && n2 <= kPlanQuatNormMax * kPlanQuatNormMax))
     return fail(F::kImuToHandWxyz);
+  // SET_CALIBRATION's ranges, from the one place that defines them.
+  const CalibrationCheck cc = check_calibration(plan_calibration(h));
+  if (cc != CalibrationCheck::kOk)
+    return fail(calibration_field(cc) == CalibrationField::kPwmFloor ? F::kPwmFloor : F::kGain);
   if (bad_field) *bad_field = 0;
   return PlanCheck::kOk;
 }
