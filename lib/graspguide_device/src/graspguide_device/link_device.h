@@ -307,6 +307,8 @@ class LinkDevice {
     std::memcpy(h.hand_k3, m.hand_k3, sizeof h.hand_k3);
     std::memcpy(h.hand_k4, m.hand_k4, sizeof h.hand_k4);
     std::memcpy(h.imu_to_hand_wxyz, m.imu_to_hand_wxyz, sizeof h.imu_to_hand_wxyz);
+    std::memcpy(h.pwm_floor, m.pwm_floor, sizeof h.pwm_floor);
+    std::memcpy(h.gain, m.gain, sizeof h.gain);
     answer(hostless_->begin_plan(h), link::MsgId::kPlanBegin);
   }
 
