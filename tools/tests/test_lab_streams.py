@@ -270,3 +270,75 @@ def test_no_interface_up_is_a_clear_error(flags, up):
         assert problem is None
     else:
         assert problem is not None and "ip link set lo up" in problem
+
+
+def test_trial_lsl_matches_the_trial_records(lsl, tmp_path):
+    """`graspguide trial --lsl`: one telemetry sample per recorded frame, in order and
+    value for value, and a trial_start / trial_end marker pair per trial of trials.jsonl."""
+    from conftest import small_protocol_toml
+
+    protocol = tmp_path / "p.toml"
+    protocol.write_text(
+        small_protocol_toml("lsl", seed=4, participants=1, modalities=("F+V",), wrenches=2)
+    )
+    name = _name()
+    out = tmp_path / "study"
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "graspguide", "trial", "--protocol", str(protocol)]
+        + ["--participant", "U1", "--port", "sim", "--source", "participant"]
+        + ["--out", str(out), "--lsl", name, "--lsl-wait", "60"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
+    try:
+        inlets = [
+            lsl.StreamInlet(_resolve(lsl, f"{name}-{kind}"), max_buflen=360, recover=False)
+            for kind in ("Telemetry", "Markers")
+        ]
+        for inlet in inlets:
+            inlet.open_stream(20)
+        (samples, _), (markers, _) = _pull_until_closed(lsl, inlets, 120.0)
+        out_text, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert "LSL: publishing" in err and "SIMULATED" in err, err
+
+    trials = [json.loads(line) for line in open(out / "U1" / "trials.jsonl")]
+    assert len(trials) == 2, out_text
+    rows = []
+    for t in trials:
+        frames = out / "U1" / "frames" / f"trial-{t['trial_index']:04d}.csv"
+        rows.extend(csv.DictReader(open(frames)))
+    want = np.asarray(
+        [
+            [
+                float(r["error_deg"]),
+                float(r["alpha"]),
+                *(float(r[f"pwm{i}"]) for i in range(4)),
+                float(r["solver_status"]),  # a number in the trial frames
+            ]
+            for r in rows
+        ],
+        dtype=np.float32,
+    )
+    got = np.asarray(samples, dtype=np.float32)
+    assert len(rows) > 100 and got.shape[0] == len(rows)
+    np.testing.assert_array_equal(got[:, :7], want)
+
+    events = [json.loads(m[0]) for m in markers]
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "session_start" and kinds[-1] == "study_end", kinds
+    starts = [e for e in events if e["event"] == "trial_start"]
+    ends = [e for e in events if e["event"] == "trial_end"]
+    assert [e["trial_index"] for e in starts] == [t["trial_index"] for t in trials]
+    assert [(e["trial_index"], e["success"]) for e in ends] == [
+        (t["trial_index"], t["success"]) for t in trials
+    ]

@@ -192,3 +192,34 @@ def quaternion_arg(text: str) -> tuple[float, float, float, float]:
             f"want four finite numbers w,x,y,z, not all zero (e.g. 1,0,0,0), got {text!r}"
         )
     return (q[0], q[1], q[2], q[3])
+
+
+def non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def add_lsl_arguments(p: argparse.ArgumentParser) -> None:
+    """--lsl [NAME] and --lsl-wait S (graspguide.study.lab_streams)."""
+    p.add_argument(
+        "--lsl",
+        nargs="?",
+        const="GraspGuide",
+        default=None,
+        metavar="NAME",
+        help="publish the telemetry and the trial markers as LSL streams NAME-Telemetry "
+        "and NAME-Markers (default NAME: GraspGuide)",
+    )
+    p.add_argument(
+        "--lsl-wait",
+        type=non_negative_float,
+        default=0.0,
+        metavar="S",
+        help="with --lsl: wait up to S seconds for a recorder (LabRecorder) to connect "
+        "to both streams before the trial starts (default 0: do not wait)",
+    )

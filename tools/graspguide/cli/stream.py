@@ -6,7 +6,12 @@ from __future__ import annotations
 import argparse
 import math
 
-from graspguide.cli.common import add_port_arguments, call_with_options, signals_interrupt
+from graspguide.cli.common import (
+    add_lsl_arguments,
+    add_port_arguments,
+    call_with_options,
+    signals_interrupt,
+)
 from graspguide.link.sim import SIM_PORT
 
 HELP = "run a trial: stream poses from a source to a device"
@@ -68,16 +73,6 @@ def wrench_arg(text: str) -> list[float]:
     return values + [0.0] * (6 - len(values))
 
 
-def non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds >= 0, got {text!r}")
-    return value
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_port_arguments(p, required=True)
     p.add_argument(
@@ -131,23 +126,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="with --port sim: the device's clock follows the poses' times, so "
         "the trial runs as fast as possible",
     )
-    p.add_argument(
-        "--lsl",
-        nargs="?",
-        const="GraspGuide",
-        default=None,
-        metavar="NAME",
-        help="publish the telemetry and the trial markers as LSL streams NAME-Telemetry "
-        "and NAME-Markers (default NAME: GraspGuide)",
-    )
-    p.add_argument(
-        "--lsl-wait",
-        type=non_negative_float,
-        default=0.0,
-        metavar="S",
-        help="with --lsl: wait up to S seconds for a recorder (LabRecorder) to connect "
-        "to both streams before the trial starts (default 0: do not wait)",
-    )
+    add_lsl_arguments(p)
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record

@@ -7,6 +7,7 @@ import argparse
 
 from graspguide.cli.common import (
     DEFAULT_REST_S,
+    add_lsl_arguments,
     add_port_arguments,
     add_protocol_argument,
     call_with_options,
@@ -59,6 +60,14 @@ operator's keys: p pause (STOP; Enter restarts the trial from scratch), r redo a
 trial is not run again on resume and is not a failure for the analysis.
 --dry-run walks the plan without a device (no --port, no --source): each session and
 trial, the NASA-TLX with its anchors, the best and worst total time. Writes nothing.
+
+--lsl [NAME] publishes the run as two Lab Streaming Layer streams, NAME-Telemetry (error,
+alpha, PWM per finger, status per TELEMETRY) and NAME-Markers (session_start, trial_start,
+trial_end, pause, redo, skip, note, study_end), for LabRecorder (docs/lab-streams.md).
+
+A stored calibration, OUT/PID/calibration.json (graspguide calibrate), is sent to the device
+before the first trial (each motor's PWM floor and gain, docs/calibration.md); without one
+the device gets the paper's mapping.
 
 --tlx FILE: JSON Lines, one object per session, e.g.
   {"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}
@@ -149,6 +158,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "axes to the hand's (default 1,0,0,0); declared in the plan and used by the world",
     )
 
+    add_lsl_arguments(p)
+
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the run like Ctrl-C: STOP; trials are kept
 def run(args: argparse.Namespace) -> int:
@@ -168,6 +179,13 @@ def run(args: argparse.Namespace) -> int:
     if args.hostless and args.operator:
         report("trial", "--operator goes without --hostless (the device runs those trials)")
         return EXIT_USAGE
+    if args.hostless and args.lsl is not None:
+        report(
+            "trial",
+            "--lsl goes without --hostless (a host-less device streams nothing during its "
+            "trials; its records are read afterwards)",
+        )
+        return EXIT_USAGE
     if args.hostless:
         from graspguide.hostless.runner import hostless_trial_command
 
@@ -179,5 +197,4 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     from graspguide.study.runner import trial_command
 
-    args.observers = ()  # TrialObservers of the run (lab streams) built from the options
     return call_with_options(trial_command, args)

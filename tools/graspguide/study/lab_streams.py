@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -277,7 +278,46 @@ class LabStreams:
         self.samples += 1
 
 
+def open_lab_streams(
+    command: str,
+    name: str,
+    wait_s: float,
+    *,
+    participant: str = "",
+    session: str = "",
+    nominal_rate_hz: float = 0.0,
+    simulated: bool = False,
+    extra: dict[str, Any] | None = None,
+) -> LabStreams:
+    """The LSL outlets of ``COMMAND --lsl NAME``, opened, after waiting up to ``wait_s``
+    seconds for a recorder (a warning when none came: what is sent before one connects
+    is not recorded); raises LabStreamsError."""
+    streams = LabStreams(
+        name,
+        participant=participant,
+        session=session,
+        nominal_rate_hz=nominal_rate_hz,
+        simulated=simulated,
+        extra=extra,
+    ).open()
+    print(
+        f"graspguide {command}: LSL: publishing {streams.telemetry_name} and "
+        f"{streams.marker_name}" + (" (SIMULATED participant)" if simulated else ""),
+        file=sys.stderr,
+        flush=True,
+    )
+    if wait_s > 0 and not streams.wait_for_consumers(wait_s):
+        print(
+            f"graspguide {command}: warning: no LSL recorder connected within {wait_s:g} s; "
+            "streaming anyway (what is sent before one connects is not recorded)",
+            file=sys.stderr,
+            flush=True,
+        )
+    return streams
+
+
 __all__ = [
+    "open_lab_streams",
     "LabStreams",
     "LabStreamsError",
     "LabStreamsUsageError",

@@ -1081,12 +1081,15 @@ def trial_command(
     tlx: str | None,
     rest_s: float | None = None,
     operator: bool = False,
-    observers: Sequence[TrialObserver] = (),
+    lsl: str | None = None,
+    lsl_wait: float = 0.0,
 ) -> int:
     """`graspguide trial`: ``participant``'s trials of the protocol file ``protocol`` on
     the device at ``port`` into ``out``, poses from the source spec ``source``, the
     NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
-    stopped; STOP on every way out. With a person (a source not SIMULATED, or
+    stopped; STOP on every way out. ``lsl``: publish the run as the LSL streams
+    LSL-Telemetry and LSL-Markers (graspguide.study.lab_streams), after waiting up to
+    ``lsl_wait`` s for a recorder. With a person (a source not SIMULATED, or
     ``operator``) and a terminal on stdin: the ready prompt, the rest (``rest_s``, default
     PERSON_REST_S; 0 for a simulated source) and the operator's keys. Returns the exit
     code."""
@@ -1151,9 +1154,35 @@ def trial_command(
     if rest_s is None:
         rest_s = PERSON_REST_S if person else 0.0
     virtual_clock = port == SIM_PORT and poses.simulated and not poses.live
+    observers: list[TrialObserver] = []
+    if lsl is not None:
+        from graspguide.study.lab_streams import (
+            LabStreamsError,
+            LabStreamsUsageError,
+            open_lab_streams,
+        )
+
+        try:
+            observers.append(
+                open_lab_streams(
+                    "trial",
+                    lsl,
+                    lsl_wait,
+                    participant=participant,
+                    session="trial",
+                    nominal_rate_hz=0.0 if virtual_clock else float(loaded.pose_rate_hz),
+                    simulated=poses.simulated,
+                    extra={"protocol": protocol_file, "source": source_spec},
+                )
+            )
+        except LabStreamsError as e:
+            report("trial", e)
+            return EXIT_USAGE if isinstance(e, LabStreamsUsageError) else EXIT_FAILURE
     try:
         device = DeviceSession("trial", port, baud, timeout, virtual_clock)
     except LinkError as e:
+        for obs in observers:
+            obs.close()  # type: ignore[attr-defined]
         return fail("trial", e)
     code = EXIT_OK
     runner = None
@@ -1216,6 +1245,8 @@ def trial_command(
             console.restore()
         if not device.close():
             code = code or EXIT_FAILURE
+        for obs in observers:
+            obs.close()  # type: ignore[attr-defined]
     return code
 
 

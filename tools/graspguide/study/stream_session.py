@@ -200,30 +200,6 @@ def _feel_lag_error() -> Any:
     return FeelLagError
 
 
-def _open_lab_streams(lsl: str, lsl_wait: float, nominal_rate_hz: float, simulated: bool, extra):
-    """The LSL outlets of ``--lsl NAME``, after waiting up to ``lsl_wait`` s for a
-    recorder; raises LabStreamsError."""
-    from graspguide.study.lab_streams import LabStreams
-
-    streams = LabStreams(
-        lsl, session="stream", nominal_rate_hz=nominal_rate_hz, simulated=simulated, extra=extra
-    ).open()
-    print(
-        f"graspguide stream: LSL: publishing {streams.telemetry_name} and {streams.marker_name}"
-        + (" (SIMULATED participant)" if simulated else ""),
-        file=sys.stderr,
-        flush=True,
-    )
-    if lsl_wait > 0 and not streams.wait_for_consumers(lsl_wait):
-        print(
-            f"graspguide stream: warning: no LSL recorder connected within {lsl_wait:g} s; "
-            "streaming anyway (what is sent before one connects is not recorded)",
-            file=sys.stderr,
-            flush=True,
-        )
-    return streams
-
-
 def stream_command(
     *,
     scene: str,
@@ -245,7 +221,11 @@ def stream_command(
     recorder). STOP is sent and the log's end record written on every way out; returns
     the exit code."""
     from graspguide.core.units import moment_unit_problem
-    from graspguide.study.lab_streams import LabStreamsError, LabStreamsUsageError
+    from graspguide.study.lab_streams import (
+        LabStreamsError,
+        LabStreamsUsageError,
+        open_lab_streams,
+    )
     from graspguide.study.live_view import StatusView, TrialProgress
     from graspguide.study.records import SessionLog
     from graspguide.study.scene_file import SceneError, config_hash, load_scene
@@ -286,12 +266,14 @@ def stream_command(
     streams = None
     if lsl:
         try:
-            streams = _open_lab_streams(
+            streams = open_lab_streams(
+                "stream",
                 lsl,
                 lsl_wait,
-                0.0 if virtual_clock else float(poses.rate_hz or 0.0),
-                simulated,
-                {"scene_config_hash": trial_scene.config_hash(), "source": source_spec},
+                session="stream",
+                nominal_rate_hz=0.0 if virtual_clock else float(poses.rate_hz or 0.0),
+                simulated=simulated,
+                extra={"scene_config_hash": trial_scene.config_hash(), "source": source_spec},
             )
         except LabStreamsError as e:
             report("stream", e)
