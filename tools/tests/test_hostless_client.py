@@ -190,30 +190,53 @@ def test_plan_messages_carry_the_participants_calibration(paper):
     assert codec.message_of(frame) == calibrated
 
 
+def _calibrate_record(participant: str, cal: dict) -> dict:
+    """A calibration.json as `graspguide calibrate` writes it (its schema), holding ``cal``."""
+    from graspguide.calibration.calibration_file import SCHEMA
+
+    return {
+        "schema": SCHEMA,
+        "participant": participant,
+        "date": "2026-11-24T12:00:00+00:00",
+        "operator": "test",
+        "simulated": True,
+        "calibration": cal,
+        "fingers": {},
+        "trials": [],
+        "false_alarm_rate": None,
+    }
+
+
 def test_a_calibration_file_is_read_or_refused_naming_file_and_field(tmp_path):
     from graspguide.core.motor_calibration import MotorCalibration
     from graspguide.hostless import calibration_file as cf
 
+    bare = {"pwm_floor": [60, 80, 70, 70], "gain": [1.5, 0.5, 1, 1]}
+    want = MotorCalibration((60, 80, 70, 70), (1.5, 0.5, 1, 1))
     path = tmp_path / "calibration.json"
-    path.write_text(json.dumps({"pwm_floor": [60, 80, 70, 70], "gain": [1.5, 0.5, 1, 1]}))
-    assert cf.read_calibration(str(path)) == MotorCalibration((60, 80, 70, 70), (1.5, 0.5, 1, 1))
-    # Nested under "calibration" (a results file that holds more), read the same.
-    nested = tmp_path / "nested.json"
-    nested.write_text(json.dumps({"calibration": json.loads(path.read_text()), "fingers": {}}))
-    assert cf.read_calibration(str(nested)) == cf.read_calibration(str(path))
+    path.write_text(json.dumps(bare))
+    assert cf.read_calibration(str(path)) == want
+    # The file `graspguide calibrate` writes, read the same.
+    full = tmp_path / "full.json"
+    full.write_text(json.dumps(_calibrate_record("U1", bare)))
+    assert cf.read_calibration(str(full)) == want
     # OUT/PID/calibration.json is picked up; none means the identity (None).
     (tmp_path / "U1").mkdir()
     assert cf.participant_calibration(str(tmp_path), "U1") == (None, None)
-    path.replace(tmp_path / "U1" / "calibration.json")
+    full.replace(tmp_path / "U1" / "calibration.json")
     got, where = cf.participant_calibration(str(tmp_path), "U1")
-    assert got is not None and got.pwm_floor == (60, 80, 70, 70)
-    assert where == str(tmp_path / "U1" / "calibration.json")
+    assert got == want and where == str(tmp_path / "U1" / "calibration.json")
+    # Another participant's file in U1's folder is refused, not used.
+    (tmp_path / "U1" / "calibration.json").write_text(json.dumps(_calibrate_record("U2", bare)))
+    with pytest.raises(ValueError, match="another participant"):
+        cf.participant_calibration(str(tmp_path), "U1")
     for content, words in [
         ("[1, 2]", "must be an object"),
         ('{"gain": [1, 1, 1, 1]}', "missing pwm_floor"),
         ('{"pwm_floor": [70, 70, 70, 70.5], "gain": [1, 1, 1, 1]}', "pwm_floor[3] (palm)"),
         ('{"pwm_floor": [70, 70, 70, 70], "gain": [1, 1, 0.1, 1]}', "gain[2] (middle)"),
         ("not json", "is not JSON"),
+        (json.dumps({**_calibrate_record("U1", bare), "operator": None}), "'operator'"),
     ]:
         bad = tmp_path / "bad.json"
         bad.write_text(content)

@@ -144,7 +144,12 @@ def test_the_port_reads_the_plan_and_records_the_cpp_device_stored(tmp_path, pro
     out = tmp_path / "study"
     # Where `graspguide calibrate` leaves it: `trial --hostless` puts it into the plan.
     (out / "U1").mkdir(parents=True)
-    (out / "U1" / "calibration.json").write_text(json.dumps(CALIBRATION))
+    from graspguide.calibration.calibration_file import SCHEMA
+
+    record = {"schema": SCHEMA, "participant": "U1", "date": "2026-11-24T12:00:00+00:00",
+              "operator": "test", "simulated": True, "calibration": CALIBRATION,
+              "fingers": {}, "trials": [], "false_alarm_rate": None}  # fmt: skip
+    (out / "U1" / "calibration.json").write_text(json.dumps(record))
     r = gg(
         "trial",
         "--protocol",

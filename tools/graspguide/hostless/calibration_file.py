@@ -2,10 +2,12 @@
 `graspguide plan` and `graspguide device plan`, and OUT/PID/calibration.json, which
 `graspguide calibrate` writes and `graspguide trial --hostless` picks up by itself.
 
-The file is JSON with ``pwm_floor`` (4 PWM counts) and ``gain`` (4 numbers) at its top level
-or under ``"calibration"`` (MotorCalibration.from_json reads them). Every problem is a
-ValueError naming the file, the field and the fix: a plan must never be built from a
-calibration that was half read."""
+``--calibration FILE`` takes the file `graspguide calibrate` writes (checked whole by
+graspguide.calibration.calibration_file) or a bare ``{"pwm_floor": [4 counts], "gain": [4
+numbers]}`` (MotorCalibration.from_json). OUT/PID/calibration.json is read by the same
+function the tracker-driven `graspguide trial` uses, so both runs take the same file the same
+way. Every problem is a ValueError naming the file, the field and the fix: a plan must never
+be built from a calibration that was half read."""
 
 from __future__ import annotations
 
@@ -36,10 +38,10 @@ def read_calibration(path: str) -> MotorCalibration:
             f"calibration file {path} is not JSON ({e}): it must hold "
             '{"pwm_floor": [4 integers], "gain": [4 numbers]}'
         ) from None
-    if isinstance(obj, Mapping) and "pwm_floor" not in obj and "gain" not in obj:
-        inner = obj.get("calibration")
-        if isinstance(inner, Mapping):
-            obj = inner
+    if isinstance(obj, Mapping) and "schema" in obj:  # what `graspguide calibrate` wrote
+        from graspguide.calibration.calibration_file import read_calibration_file
+
+        return read_calibration_file(path).calibration
     return MotorCalibration.from_json(obj, where=f"calibration file {path}")
 
 
@@ -53,12 +55,15 @@ def participant_calibration(
 ) -> tuple[MotorCalibration | None, str | None]:
     """(the calibration, its file) from OUT/PID/calibration.json, or (None, None) when the
     participant has none (the device then keeps the identity, the paper's mapping). A file
-    that is there but wrong is a ValueError: running a study with the identity instead of
-    the participant's measured calibration would go unnoticed."""
-    path = participant_calibration_path(out_dir, participant)
-    if not os.path.exists(path):
+    that is there but wrong, or another participant's, is a ValueError: running a study
+    with the identity instead of the participant's measured calibration would go
+    unnoticed."""
+    from graspguide.calibration.calibration_file import load_participant_calibration
+
+    cal = load_participant_calibration(out_dir, participant)
+    if cal is None:
         return None, None
-    return read_calibration(path), path
+    return cal, participant_calibration_path(out_dir, participant)
 
 
 def describe(cal: MotorCalibration) -> str:
