@@ -208,8 +208,8 @@ def _calibrate_record(participant: str, cal: dict) -> dict:
 
 
 def test_a_calibration_file_is_read_or_refused_naming_file_and_field(tmp_path):
+    from graspguide.calibration import calibration_file as cf
     from graspguide.core.motor_calibration import MotorCalibration
-    from graspguide.hostless import calibration_file as cf
 
     bare = {"pwm_floor": [60, 80, 70, 70], "gain": [1.5, 0.5, 1, 1]}
     want = MotorCalibration((60, 80, 70, 70), (1.5, 0.5, 1, 1))
@@ -222,14 +222,13 @@ def test_a_calibration_file_is_read_or_refused_naming_file_and_field(tmp_path):
     assert cf.read_calibration(str(full)) == want
     # OUT/PID/calibration.json is picked up; none means the identity (None).
     (tmp_path / "U1").mkdir()
-    assert cf.participant_calibration(str(tmp_path), "U1") == (None, None)
-    full.replace(tmp_path / "U1" / "calibration.json")
-    got, where = cf.participant_calibration(str(tmp_path), "U1")
-    assert got == want and where == str(tmp_path / "U1" / "calibration.json")
+    assert cf.load_participant_calibration(str(tmp_path), "U1") is None
+    full.replace(cf.calibration_path(str(tmp_path), "U1"))
+    assert cf.load_participant_calibration(str(tmp_path), "U1") == want
     # Another participant's file in U1's folder is refused, not used.
     (tmp_path / "U1" / "calibration.json").write_text(json.dumps(_calibrate_record("U2", bare)))
     with pytest.raises(ValueError, match="another participant"):
-        cf.participant_calibration(str(tmp_path), "U1")
+        cf.load_participant_calibration(str(tmp_path), "U1")
     for content, words in [
         ("[1, 2]", "must be an object"),
         ('{"gain": [1, 1, 1, 1]}', "missing pwm_floor"),

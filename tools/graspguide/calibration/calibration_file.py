@@ -149,6 +149,42 @@ def load_participant_calibration(out_dir: str, participant: str) -> MotorCalibra
     return record.calibration
 
 
+def read_calibration(path: str) -> MotorCalibration:
+    """``--calibration FILE``: the file `graspguide calibrate` writes (checked whole), or a
+    bare ``{"pwm_floor": [4 counts], "gain": [4 numbers]}``; CalibrationFileError naming
+    the file and what is wrong (a plan must never be built from a half-read calibration)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            obj = json.load(f)
+    except FileNotFoundError:
+        raise CalibrationFileError(
+            f"calibration file {path} does not exist: give the calibration.json that "
+            "`graspguide calibrate` wrote (OUT/PID/calibration.json)"
+        ) from None
+    except OSError as e:
+        raise CalibrationFileError(
+            f"calibration file {path} cannot be read: {e.strerror or e}"
+        ) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CalibrationFileError(
+            f"calibration file {path} is not JSON ({e}): it must hold "
+            '{"pwm_floor": [4 integers], "gain": [4 numbers]}'
+        ) from None
+    if isinstance(obj, dict) and "schema" in obj:
+        return read_calibration_file(path).calibration
+    try:
+        return MotorCalibration.from_json(obj, where=f"calibration file {path}")
+    except ValueError as e:
+        raise CalibrationFileError(str(e)) from None
+
+
+def describe(cal: MotorCalibration) -> str:
+    """One line for the terminal: the floors and gains of motors 1..4."""
+    floors = ", ".join(str(v) for v in cal.pwm_floor)
+    gains = ", ".join(f"{v:g}" for v in cal.gain)
+    return f"PWM floor {floors}; gain {gains} (motors 1..4)"
+
+
 __all__ = [
     "SCHEMA",
     "FILE_NAME",
@@ -158,4 +194,6 @@ __all__ = [
     "write_calibration_file",
     "read_calibration_file",
     "load_participant_calibration",
+    "read_calibration",
+    "describe",
 ]

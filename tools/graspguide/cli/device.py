@@ -197,7 +197,7 @@ def _act(args: argparse.Namespace, client: Any) -> int:
 
 
 def _store_plan(args: argparse.Namespace, client: Any) -> int:
-    from graspguide.hostless.calibration_file import describe, read_calibration
+    from graspguide.calibration.calibration_file import describe, read_calibration
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
     from graspguide.study.study_protocol import load_protocol, participant_number
 

@@ -90,7 +90,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def plan_bytes(args: argparse.Namespace, protocol: str) -> tuple[bytes, list[Any], list[Any]]:
     """(the plan file, its PLAN_TRIALs, each trial's TrialLevels). ValueError for bad input."""
-    from graspguide.hostless.calibration_file import read_calibration
+    from graspguide.calibration.calibration_file import read_calibration
     from graspguide.mp.plan_file import plan_file_for
 
     if not args.participant:

@@ -720,6 +720,14 @@ def hostless_trial_command(
     participant's calibration: OUT/PID/calibration.json when `graspguide calibrate` wrote
     one (a file that is there but wrong is a usage error), else the identity.
     Returns the exit code."""
+    from graspguide.calibration.calibration_file import (
+        CalibrationFileError,
+        calibration_path,
+        load_participant_calibration,
+    )
+    from graspguide.calibration.calibration_file import (
+        describe as describe_calibration,
+    )
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -727,13 +735,6 @@ def hostless_trial_command(
         EXIT_USAGE,
         fail,
         report,
-    )
-    from graspguide.hostless.calibration_file import (
-        describe as describe_calibration,
-    )
-    from graspguide.hostless.calibration_file import (
-        participant_calibration,
-        participant_calibration_path,
     )
     from graspguide.link.client import DeviceClient
     from graspguide.link.sim import SIM_PORT
@@ -764,7 +765,7 @@ def hostless_trial_command(
         check_settings(rest_s, DEFAULT_REACTION_S, mount)
         loaded = load_protocol(protocol)
         participant_number(participant)
-        cal, cal_file = participant_calibration(out, participant)
+        cal = load_participant_calibration(out, participant)
         src = open_runner_source(source, loaded, participant)
         if not (src.closed_loop and src.simulated):
             raise RunnerError(
@@ -772,9 +773,10 @@ def hostless_trial_command(
                 f"closed-loop plugin class), got --source {source}",
                 usage=True,
             )
-    except (ProtocolFileError, RunnerError, ValueError) as e:
+    except (ProtocolFileError, RunnerError, CalibrationFileError, ValueError) as e:
         report("trial", e)
         return EXIT_USAGE
+    cal_file = calibration_path(out, participant)
     store_path = store or os.path.join(out, participant, "device-store.bin")
     try:
         os.makedirs(os.path.dirname(os.path.abspath(store_path)), exist_ok=True)
@@ -794,9 +796,9 @@ def hostless_trial_command(
     )
     print(
         f"calibration: {cal_file}: {describe_calibration(cal)}"
-        if cal is not None and cal_file is not None
+        if cal is not None
         else "calibration: none (the paper's PWM mapping; `graspguide calibrate` writes "
-        f"{participant_calibration_path(out, participant)})",
+        f"{cal_file})",
         flush=True,
     )
     try:
@@ -812,7 +814,7 @@ def hostless_trial_command(
             protocol_file=protocol,
             port=port,
             calibration=cal,
-            calibration_file=cal_file,
+            calibration_file=cal_file if cal is not None else None,
         )
         print(
             f"{participant}: all {summary.planned} trials stored on the device and downloaded "

@@ -1095,8 +1095,10 @@ def trial_command(
     code."""
     from graspguide.calibration.calibration_file import (
         CalibrationFileError,
+        calibration_path,
         load_participant_calibration,
     )
+    from graspguide.calibration.calibration_file import describe as describe_calibration
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -1130,9 +1132,8 @@ def trial_command(
         return EXIT_USAGE
     if calibration is not None:
         print(
-            f"{participant}: per-finger calibration from "
-            f"{os.path.join(out, participant, 'calibration.json')}: PWM floor "
-            f"{list(calibration.pwm_floor)}, gain {[round(g, 3) for g in calibration.gain]}",
+            f"{participant}: calibration: {calibration_path(out, participant)}: "
+            f"{describe_calibration(calibration)}",
             flush=True,
         )
     from graspguide.study.operator_console import KEYS_HELP, ConsoleClosed, OperatorConsole
