@@ -41,6 +41,22 @@ class FingerSensitivity:
     magnitude: float
 
 
+def draw_finger_sensitivities(seed: int) -> dict[str, FingerSensitivity]:
+    """The per-finger sensitivities of the simulated person ``seed`` (every finger of
+    FINGER_NAMES). Drawn from the seed alone, so the same seed is the same person whatever
+    fingers a run calibrates -- and the same fingers the trials' virtual participant feels
+    with (``--source participant:fingers=N``, graspguide.study.participant)."""
+    draw = random.Random(f"graspguide-virtual-observer-params:{int(seed)}")
+    return {
+        name: FingerSensitivity(
+            draw.uniform(*THRESHOLD_RANGE_PWM),
+            draw.uniform(*SPREAD_RANGE_PWM),
+            draw.uniform(*MAGNITUDE_RANGE),
+        )
+        for name in FINGER_NAMES
+    }
+
+
 class VirtualObserver:
     """Seeded answers of a simulated participant (:meth:`detect`, :meth:`compare`)."""
 
@@ -67,17 +83,7 @@ class VirtualObserver:
         self.weber = float(weber)
         self._rng = random.Random(f"graspguide-virtual-observer:{self.seed}")
         if fingers is None:
-            # Drawn from the seed alone, so the same seed is the same person whatever
-            # fingers a run calibrates.
-            draw = random.Random(f"graspguide-virtual-observer-params:{self.seed}")
-            fingers = {
-                name: FingerSensitivity(
-                    draw.uniform(*THRESHOLD_RANGE_PWM),
-                    draw.uniform(*SPREAD_RANGE_PWM),
-                    draw.uniform(*MAGNITUDE_RANGE),
-                )
-                for name in FINGER_NAMES
-            }
+            fingers = draw_finger_sensitivities(self.seed)
         self.fingers = dict(fingers)
 
     def _finger(self, finger: str) -> FingerSensitivity:
@@ -174,4 +180,9 @@ def parse_participant_source(spec: str) -> VirtualObserver | None:
     return VirtualObserver(**kw)  # type: ignore[arg-type]
 
 
-__all__ = ["FingerSensitivity", "VirtualObserver", "parse_participant_source"]
+__all__ = [
+    "FingerSensitivity",
+    "VirtualObserver",
+    "draw_finger_sensitivities",
+    "parse_participant_source",
+]

@@ -254,7 +254,7 @@ class VirtualParticipant:
 
     SIMULATED = True
 
-    def __init__(self, params: ParticipantParams, seed: int):
+    def __init__(self, params: ParticipantParams, seed: int, fingers: int | None = None):
         if not isinstance(params, ParticipantParams):
             raise TypeError(f"params must be a ParticipantParams, got {type(params).__name__}")
         _validate_params(params)
@@ -265,13 +265,39 @@ class VirtualParticipant:
         self.rate_hz = float(params.rate_hz)
         self._rng = np.random.default_rng(self.seed)
         self._trial = False
+        # Opt-in per-finger sensitivities (None: every motor felt alike, the default).
+        self.fingers_seed: int | None = None
+        self._sens: tuple[tuple[float, float], ...] | None = None
+        self._mag_ref = 1.0
+        self._thr_ref = float(PWM_FLOOR)
+        if fingers is not None:
+            self._set_fingers(fingers)
+
+    def _set_fingers(self, fingers: Any) -> None:
+        """Feel with the fingers of the calibration's simulated person ``fingers``
+        (graspguide.calibration.virtual_observer.draw_finger_sensitivities): motor i is
+        FINGER_NAMES[i]; its perceived strength is magnitude_i * max(0, speed_i -
+        threshold_i), and distances are read on the reference finger's scale
+        (magnitude_ref * PWM_RANGE; the reference is calibrate's default, index)."""
+        if isinstance(fingers, bool) or not isinstance(fingers, (int, np.integer)):
+            raise ValueError(f"fingers must be an integer seed (fingers=3), got {fingers!r}")
+        from graspguide.calibration.session import DEFAULT_REFERENCE
+        from graspguide.calibration.virtual_observer import draw_finger_sensitivities
+        from graspguide.core.motor_calibration import FINGER_NAMES
+
+        sens = draw_finger_sensitivities(int(fingers))
+        self.fingers_seed = int(fingers)
+        self._sens = tuple((sens[n].threshold_pwm, sens[n].magnitude) for n in FINGER_NAMES)
+        self._mag_ref = sens[DEFAULT_REFERENCE].magnitude
+        self._thr_ref = sens[DEFAULT_REFERENCE].threshold_pwm
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_spec(cls, spec: str, seed: int) -> VirtualParticipant:
         """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams
         fields); also just the part after ``participant:`` (``""`` for the defaults)."""
-        return cls(parse_spec(spec), seed)
+        params, fingers = _parse_spec(spec)
+        return cls(params, seed, fingers=fingers)
 
     # ------------------------------------------------------------------ trial
     def begin_trial(
@@ -366,12 +392,35 @@ class VirtualParticipant:
         self._trial = True
 
     # ------------------------------------------------------------------ perception
+    def perceived(
+        self, speeds: Sequence[float], noise: Sequence[float] | None = None
+    ) -> list[float]:
+        """Per-finger model only: the perceived strength of each motor,
+        ``magnitude_i * max(0, speed_i - threshold_i)``; with ``noise`` (standard normal
+        draws, one per motor) the speed carries the Weber noise of the uniform model's
+        distance reading, SD ``weber_frac / 2`` of the whole speed."""
+        if self._sens is None:
+            raise RuntimeError("perceived() needs the per-finger model (fingers=N)")
+        s = [float(v) for v in speeds]
+        if noise is not None:
+            g = 0.5 * self.params.weber_frac
+            s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
+        return [m * max(0.0, v - thr) for v, (thr, m) in zip(s, self._sens)]
+
+    def _felt(self, speeds: Sequence[float]) -> list[bool]:
+        if self._sens is None:
+            return [float(v) >= 0.5 * PWM_FLOOR for v in speeds]
+        return [float(v) > thr for v, (thr, _) in zip(speeds, self._sens)]
+
     def _direction(self, speeds: Sequence[float], noise: Sequence[float] | None) -> Vec3 | None:
         s = [float(v) for v in speeds]
-        felt = [v >= 0.5 * PWM_FLOOR for v in s]
+        felt = self._felt(s)
         if not any(felt):
             return None
-        above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
+        if self._sens is None:
+            above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
+        else:
+            above = self.perceived(s)
         if noise is not None:
             g = 0.5 * self.params.weber_frac
             above = [max(a * (1.0 + g * float(e)), 0.0) for a, e in zip(above, noise)]
@@ -397,9 +446,16 @@ class VirtualParticipant:
         if self.mode != "V":
             return None
         s = [float(v) for v in (self._motor if speeds is None else speeds)]
-        felt = [v >= 0.5 * PWM_FLOOR for v in s]
+        felt = self._felt(s)
         if not any(felt):
             return None
+        if self._sens is not None:
+            # Read on the reference finger's scale: calibrated, every finger's strength
+            # is magnitude_ref * alpha * |m_i|, so L = alpha |m| / PWM_RANGE as in the
+            # uniform model.
+            p = [a if f else 0.0 for a, f in zip(self.perceived(s, noise), felt)]
+            level = min(1.0, math.sqrt(sum(a * a for a in p)) / (self._mag_ref * PWM_RANGE))
+            return math.degrees(2.0 * math.asin(level))
         if noise is not None:
             g = 0.5 * self.params.weber_frac
             s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
@@ -410,7 +466,9 @@ class VirtualParticipant:
     def resolution_deg(self) -> float:
         """The smallest distance a V participant can tell from the weakest vibration
         [deg]: one Weber step of the motor speed at the floor."""
-        step = 0.5 * self.params.weber_frac * PWM_FLOOR
+        # Per-finger model: one Weber step of the speed at the reference's threshold.
+        base = PWM_FLOOR if self._sens is None else self._thr_ref
+        step = 0.5 * self.params.weber_frac * base
         return math.degrees(2.0 * math.asin(min(1.0, step / PWM_RANGE)))
 
     # ------------------------------------------------------------------ the loop
@@ -558,7 +616,7 @@ class VirtualParticipant:
         if self._cue_onset is None:
             while len(self._history) > 1 and self._history[1][0] <= t - self.params.reaction_time_s:
                 self._history.popleft()
-            if max(motor) >= 0.5 * PWM_FLOOR:
+            if max(motor) >= 0.5 * PWM_FLOOR if self._sens is None else any(self._felt(motor)):
                 # First felt cue. Relative strengths can be judged once the motors have
                 # (nearly) reached their steady speed (3 tau: 95 %); the first movement
                 # starts a reaction time after that percept.
@@ -849,9 +907,25 @@ def _hex_lattice(spacing_deg: float) -> tuple[np.ndarray, ...]:
 # --------------------------------------------------------------------------------------
 def parse_spec(spec: str) -> ParticipantParams:
     """ParticipantParams from ``participant``, ``participant:key=val,key=val`` or the part
-    after ``participant:`` alone (``""``: the defaults)."""
+    after ``participant:`` alone (``""``: the defaults). ``fingers=N`` is not a parameter
+    of the movement model: :meth:`VirtualParticipant.from_spec` takes it."""
+    params, fingers = _parse_spec(spec)
+    if fingers is not None:
+        raise ValueError(
+            "participant spec key 'fingers' selects the per-finger model; "
+            "use VirtualParticipant.from_spec for it"
+        )
+    return params
+
+
+def _parse_spec(spec: str) -> tuple[ParticipantParams, int | None]:
+    """(ParticipantParams, the fingers=N seed or None) from a participant spec."""
     names = [f.name for f in fields(ParticipantParams)]
-    usage = "expected 'participant' or 'participant:key=value,...' with keys " + ", ".join(names)
+    usage = (
+        "expected 'participant' or 'participant:key=value,...' with keys "
+        + ", ".join(names)
+        + ", fingers (an integer seed: the calibration's simulated person)"
+    )
     if not isinstance(spec, str):
         raise ValueError(f"participant spec must be a string; {usage}")
     head, sep, rest = spec.partition(":")
@@ -859,6 +933,7 @@ def parse_spec(spec: str) -> ParticipantParams:
         # Also accepted: what follows 'participant:' alone ('' = the defaults).
         head, sep, rest = "participant", (":" if spec.strip() else ""), spec
     values: dict[str, float] = {}
+    fingers: int | None = None
     if sep:
         if not rest.strip():
             raise ValueError(f"participant spec {spec!r} has ':' but no key=value; {usage}")
@@ -867,9 +942,22 @@ def parse_spec(spec: str) -> ParticipantParams:
             key = key.strip()
             if not eq:
                 raise ValueError(f"participant spec item {item!r} is not key=value; {usage}")
+            if key == "fingers":
+                if fingers is not None:
+                    raise ValueError("participant parameter 'fingers' given twice")
+                try:
+                    fingers = int(val.strip())
+                except ValueError:
+                    raise ValueError(
+                        f"participant parameter fingers={val.strip()!r} must be an integer "
+                        "seed (the N of calibrate --source participant:seed=N)"
+                    ) from None
+                continue
             if key not in names:
                 raise ValueError(
-                    f"unknown participant parameter {key!r}; known: " + ", ".join(names)
+                    f"unknown participant parameter {key!r}; known: "
+                    + ", ".join(names)
+                    + ", fingers"
                 )
             if key in values:
                 raise ValueError(f"participant parameter {key!r} given twice")
@@ -882,7 +970,7 @@ def parse_spec(spec: str) -> ParticipantParams:
             values[key] = x
     params = ParticipantParams(**values)
     _validate_params(params)
-    return params
+    return params, fingers
 
 
 __all__ = [
