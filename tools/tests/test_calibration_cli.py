@@ -275,6 +275,7 @@ def test_operator_full_run_and_apply(tmp_path, held_sim):
             "--seed",
             "5",
             "--apply",
+            "--no-headroom",  # the matched gain itself (headroom: test_calibration_procedure)
         ],
         tmp_path,
     )

@@ -26,6 +26,7 @@ from graspguide.calibration.virtual_observer import (
     parse_participant_source,
 )
 from graspguide.core.motor_calibration import GAIN_RANGE
+from graspguide.core.reference import PWM_RANGE
 
 SEEDS = range(100)
 FINGERS = ("thumb", "index", "middle")
@@ -120,7 +121,7 @@ def test_whole_procedure_recovers_floors_and_gains():
     floor_err, gain_err = [], []
     for seed in range(60):
         obs = VirtualObserver(seed)
-        settings = CalibrationSettings(seed=seed, min_floor=0)
+        settings = CalibrationSettings(seed=seed, min_floor=0, headroom=False)
         stim = NoDevice()
         result = run_procedure(settings, obs, stim)
         assert len(stim.stimuli) >= len(result.trials)  # every trial presented something
@@ -188,6 +189,38 @@ def test_floor_never_below_the_motor_start():
     for r in result.fingers.values():
         assert r.threshold_pwm < 70 and r.pwm_floor == 70 and r.floor_clamped
     assert sum("below the motor's start" in w for w in result.warnings) == 3
+
+
+def test_headroom_scales_every_gain_alike_so_no_finger_clips():
+    """With headroom (the default), no measured finger's strongest duty passes 255, and
+    the gains are the matched ones times one factor (the same trials: the scaling comes
+    after the measurement), rounded down to 4 decimals."""
+    from graspguide.calibration.session import headroom_scale
+
+    scaled_runs = 0
+    for seed in range(40):
+        raw = run_procedure(
+            CalibrationSettings(seed=seed, headroom=False), VirtualObserver(seed), NoDevice()
+        )
+        cal = run_procedure(CalibrationSettings(seed=seed), VirtualObserver(seed), NoDevice())
+        assert [t["answer"] for t in cal.trials] == [t["answer"] for t in raw.trials]
+        fingers = list(raw.fingers.values())
+        scale = headroom_scale([r.pwm_floor for r in fingers], [r.gain for r in fingers])
+        for r in fingers:
+            got = cal.fingers[r.finger]
+            assert got.pwm_floor == r.pwm_floor
+            assert got.pwm_floor + got.gain * PWM_RANGE <= 255 + 1e-9, (seed, r.finger)
+            if scale < 1:
+                # each rounded down to 4 decimals, the scale and the gain
+                tol = 1e-4 * (1 + r.gain) + 1e-12
+                assert got.gain == pytest.approx(r.gain * scale, abs=tol), (seed, r.finger)
+                assert got.gain_scale < 1
+            else:
+                assert got.gain == r.gain and got.gain_scale == 1.0
+        if scale < 1:
+            scaled_runs += 1
+            assert any("scaled by" in w for w in cal.warnings)
+    assert scaled_runs >= 5  # the observer's fingers do saturate often enough to test it
 
 
 def test_gain_outside_the_range_is_clipped_with_a_warning():

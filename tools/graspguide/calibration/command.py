@@ -55,6 +55,7 @@ def _settings(
     stimulus_s: float,
     gap_s: float,
     seed: int,
+    headroom: bool = True,
 ) -> CalibrationSettings:
     use_last = max(2, min(reversals, reversals - 4))
     return CalibrationSettings(
@@ -68,6 +69,7 @@ def _settings(
         stimulus_s=stimulus_s,
         gap_s=gap_s,
         seed=seed,
+        headroom=headroom,
     )
 
 
@@ -146,6 +148,7 @@ def calibrate_command(
     reversals: int,
     catch_rate: float,
     seed: int | None,
+    no_headroom: bool = False,
 ) -> int:
     from graspguide.link.transport import LinkError
     from graspguide.study.device_session import DeviceSession
@@ -170,6 +173,7 @@ def calibrate_command(
             stimulus_s,
             gap_s,
             seed,
+            headroom=not no_headroom,
         )
     except (ProtocolFileError, ValueError) as e:
         return fail(COMMAND, e, EXIT_USAGE)

@@ -76,6 +76,10 @@ class CalibrationSettings:
     stimulus_s: float = DEFAULT_STIMULUS_S
     gap_s: float = DEFAULT_GAP_S
     seed: int = 0
+    # Scale every gain (the reference's too) so that no finger's strongest duty,
+    # floor + gain * 185, passes 255: a clipped finger would distort the relative strengths
+    # that mode C renders (docs/calibration.md, "Headroom").
+    headroom: bool = True
 
     def __post_init__(self) -> None:
         if not self.fingers:
@@ -128,6 +132,7 @@ class FingerResult:
     gain_raw: float | None = None
     gain: float = 1.0
     gain_clipped: bool = False
+    gain_scale: float = 1.0  # the headroom factor applied to every finger's gain
 
     @property
     def false_alarm_rate(self) -> float | None:
@@ -344,6 +349,47 @@ def _set_gains(results: dict[str, FingerResult], settings: CalibrationSettings) 
             warnings.append(
                 f"{r.finger}: a matching staircase stopped at its trial limit: the gain is rough"
             )
+    if settings.headroom:
+        warnings += _make_headroom(results)
+    return warnings
+
+
+def headroom_scale(floors: list[int], gains: list[float]) -> float:
+    """The largest factor <= 1 by which every gain can be multiplied so that no finger's
+    strongest duty, floor + gain * 185, passes 255."""
+    scale = 1.0
+    for floor, gain in zip(floors, gains, strict=True):
+        top = floor + gain * PWM_RANGE
+        if top > 255:
+            scale = min(scale, (255 - floor) / (gain * PWM_RANGE))
+    return scale
+
+
+def _make_headroom(results: dict[str, FingerResult]) -> list[str]:
+    """Every gain times one factor, so relative strengths stay matched and no finger
+    saturates before |m| = 1; a gain pushed below the allowed range is clipped (and said)."""
+    ordered = list(results.values())
+    scale = headroom_scale([r.pwm_floor for r in ordered], [r.gain for r in ordered])
+    if scale >= 1.0:
+        return []
+    # Rounded down, so the rounded gains still leave the headroom.
+    scale = math.floor(scale * 1e4) / 1e4
+    warnings = []
+    for r in ordered:
+        r.gain_scale = scale
+        scaled = math.floor(r.gain * scale * 1e4) / 1e4
+        if scaled < GAIN_RANGE[0]:
+            r.gain_clipped = True
+            warnings.append(
+                f"{r.finger}: gain {scaled:.3f} after the headroom scaling is below "
+                f"{GAIN_RANGE[0]:g}; clipped (its strongest cue is then stronger than the others')"
+            )
+            scaled = GAIN_RANGE[0]
+        r.gain = scaled
+    warnings.append(
+        f"every gain scaled by {scale:.3f} so that no finger passes PWM 255 (relative "
+        "strengths kept; --no-headroom keeps the matched gains and lets strong cues clip)"
+    )
     return warnings
 
 

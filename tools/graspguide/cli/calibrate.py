@@ -163,6 +163,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="seed of the trial order (catch trials, matching order); default: random "
         "(the virtual participant's seed when simulated); stored in the file",
     )
+    p.add_argument(
+        "--no-headroom",
+        action="store_true",
+        help="keep the matched gains as they are, even when a finger's strongest cue then "
+        "passes PWM 255 and clips (default: every gain scaled by one factor so none does)",
+    )
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP stop like Ctrl-C: motors off, nothing written
