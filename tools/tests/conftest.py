@@ -10,6 +10,7 @@ package here, first, keeps ``graspguide`` the installed one for the whole sessio
 from __future__ import annotations
 
 import os
+import pathlib
 import sys
 
 import pytest
@@ -103,6 +104,22 @@ def subprocess_env() -> dict:
     env.pop("PYTHONPATH", None)
     env["PYTHONIOENCODING"] = "utf-8"
     return env
+
+
+@pytest.fixture(scope="session")
+def sketch_build(tmp_path_factory):
+    """The Pro Mini sketch, built once per test run with arduino-cli into a temporary
+    folder (graspguide.promini.build): no test depends on a build left in build/promini."""
+    from graspguide.promini import build
+
+    return build.build_sketch(pathlib.Path(REPO_ROOT), tmp_path_factory.mktemp("promini_sketch"))
+
+
+@pytest.fixture(scope="session")
+def sketch_elf(sketch_build) -> str:
+    """Its ELF, for --port promini-sim (graspguide.link.promini_sim: pass it as ``elf=`` or
+    in $GRASPGUIDE_PROMINI_ELF to a command)."""
+    return str(sketch_build.elf)
 
 
 # --------------------------------------------------------------------------------------

@@ -66,13 +66,6 @@ class Board:
         return [tuple(int(v) for v in r[1:]) for r in rows[1:]]
 
 
-@pytest.fixture(scope="module")
-def sketch_elf(tmp_path_factory) -> str:
-    from graspguide.promini import build
-
-    return str(build.build_sketch(ROOT, tmp_path_factory.mktemp("promini_sketch")).elf)
-
-
 @pytest.fixture(scope="module", params=["sim", "promini-sim", "qemu"])
 def board(request, tmp_path_factory) -> Iterator[Board]:
     kind = request.param

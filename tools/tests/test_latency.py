@@ -22,6 +22,7 @@ from graspguide.bench.latency import (
     pwm_latencies_trace,
     summarize,
 )
+from graspguide.link.promini_sim import PROMINI_ELF_ENV
 
 CLI = [sys.executable, "-m", "graspguide"]
 
@@ -83,13 +84,16 @@ def test_trace_rows_are_matched_by_duties_across_the_32_bit_wrap():
     assert pwm_latencies_trace(timings, rows) == [30.0, 60.0, None]
 
 
-def _latency(port: str, tmp_path, count: int, *extra: str) -> dict:
+def _latency(port: str, tmp_path, count: int, *extra: str, elf: str | None = None) -> dict:
     out = tmp_path / f"{port}.json"
+    env = subprocess_env()
+    if elf is not None:
+        env[PROMINI_ELF_ENV] = elf
     done = subprocess.run(
         CLI + ["latency", "--port", port, "--count", str(count), "--json", str(out), *extra],
         capture_output=True,
         text=True,
-        env=subprocess_env(),
+        env=env,
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
@@ -116,8 +120,8 @@ def test_latency_on_sim(tmp_path, report_figure):
     report_figure("latency sim: POSE->TELEMETRY p50", f"{r['pose_to_telemetry']['p50_us']:.0f} us")
 
 
-def test_latency_on_promini_sim(tmp_path, report_figure):
-    r = _latency("promini-sim", tmp_path, 60)
+def test_latency_on_promini_sim(tmp_path, report_figure, sketch_elf):
+    r = _latency("promini-sim", tmp_path, 60, elf=sketch_elf)
     _check_summary(r["pose_to_telemetry"], 60)
     _check_summary(r["pose_to_pwm"], 60)
     assert "AVR cycles" in r["pose_to_pwm_method"]

@@ -287,9 +287,9 @@ def test_ctrl_c_leaves_the_motors_off(sim_with_trace):
     assert status.bad_frames == 0 and status.state in (m.DeviceState.IDLE, m.DeviceState.STOPPED)
 
 
-def test_motors_on_promini_sim_drives_the_pins(tmp_path):
+def test_motors_on_promini_sim_drives_the_pins(tmp_path, sketch_elf):
     trace = tmp_path / "pins.csv"
-    with ProMiniSimDevice(trace=str(trace)) as dev:
+    with ProMiniSimDevice(elf=sketch_elf, trace=str(trace)) as dev:
         argv = CLI + ["motors", "--port", dev.pty_path, "--finger", "middle", "--pwm", "150"]
         code, out = run_in_pty(argv + ["--duration-s", "0.6"])
     assert code == 0, out

@@ -321,18 +321,6 @@ STALE_TIMEOUT_MS = 200  # GRASPGUIDE_STALE_TIMEOUT_MS of lib/graspguide_frame_de
 SWEEP_AXIS = (0.6, 0.0, 0.8)
 
 
-@pytest.fixture(scope="module")
-def sketch_build(tmp_path_factory):
-    from graspguide.promini import build
-
-    return build.build_sketch(ROOT, tmp_path_factory.mktemp("promini_sketch"))
-
-
-@pytest.fixture(scope="module")
-def sketch_elf(sketch_build) -> str:
-    return str(sketch_build.elf)
-
-
 def _sweep(n: int, from_deg: float = 60.0, to_deg: float = 20.0) -> list[tuple[float, ...]]:
     """Orientations turning towards the identity about one axis: the guidance error falls
     but stays above the success threshold, so the trial keeps running."""
