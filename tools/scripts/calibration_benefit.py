@@ -12,7 +12,8 @@ Three conditions, the same protocol and participants U1..UP on --port sim:
   participant:seed=N` (the same person N) wrote OUT/calibrated/PID/calibration.json,
   which `graspguide trial` sends to the device before the first trial;
 * truth (a diagnostic): the same, but the file's calibration replaced by the observer's
-  true values (floor = its 50 % threshold rounded, gain = magnitude_ref / magnitude_i):
+  true values (floor = its 50 % threshold rounded, gain = magnitude_ref / magnitude_i,
+  every gain then scaled by calibrate's headroom factor):
   what a perfect measurement would buy, to tell the model's limits from the procedure's.
 
     python tools/scripts/calibration_benefit.py [--participants P] [--jobs J]
@@ -53,6 +54,8 @@ def source(condition: str, pid: str) -> str:
 class CalibrateJob(TrialJob):
     """`graspguide calibrate` for one participant, run by the same pool as the trials."""
 
+    headroom: bool = True
+
     def command(self) -> list[str]:
         return [
             sys.executable,
@@ -69,22 +72,24 @@ class CalibrateJob(TrialJob):
             CAL_FINGERS,
             "--source",
             f"participant:seed={person(self.participant)}",
-        ]
+        ] + ([] if self.headroom else ["--no-headroom"])
 
 
-def write_true_calibration(measured: str, path: str, n: int) -> None:
+def write_true_calibration(measured: str, path: str, n: int, headroom: bool = True) -> None:
     """The measured calibration file with its calibration replaced by person ``n``'s
     truth (the index finger is calibrate's default reference)."""
+    from graspguide.calibration.session import headroom_scale
     from graspguide.calibration.virtual_observer import VirtualObserver
     from graspguide.core.motor_calibration import FINGER_NAMES
 
     obs = VirtualObserver(seed=n)
     with open(measured, encoding="utf-8") as f:
         data = json.load(f)
-    data["calibration"] = {
-        "pwm_floor": [int(round(obs.fingers[f].threshold_pwm)) for f in FINGER_NAMES],
-        "gain": [obs.true_gain(f, "index") for f in FINGER_NAMES],
-    }
+    floors = [int(round(obs.fingers[f].threshold_pwm)) for f in FINGER_NAMES]
+    gains = [obs.true_gain(f, "index") for f in FINGER_NAMES]
+    # The same headroom as calibrate's default: one factor for every gain, none clips.
+    scale = headroom_scale(floors, gains) if headroom else 1.0
+    data["calibration"] = {"pwm_floor": floors, "gain": [g * scale for g in gains]}
     data["warnings"] = list(data.get("warnings", [])) + [
         "calibration replaced by the virtual observer's true values (calibration_benefit.py)"
     ]
@@ -199,6 +204,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=None, help="default logs/calibration-benefit")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures here")
+    p.add_argument(
+        "--no-headroom",
+        action="store_true",
+        help="calibrate --no-headroom: the matched gains as they are, strong cues may clip",
+    )
     a = p.parse_args(argv)
     if not 1 <= a.participants <= 256:
         p.error(f"--participants must be in 1..256, got {a.participants}")
@@ -215,7 +225,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{job.tag} {job.participant}: exit {rc} ({job.log})", file=sys.stderr, flush=True)
 
     calibrations: list[TrialJob] = [
-        CalibrateJob(protocol, cal_dir, pid, "", os.path.join(logs, f"calibrate-{pid}.log"))
+        CalibrateJob(
+            protocol,
+            cal_dir,
+            pid,
+            "",
+            os.path.join(logs, f"calibrate-{pid}.log"),
+            headroom=not a.no_headroom,
+        )
         for pid in pids
         if not os.path.exists(os.path.join(cal_dir, pid, "calibration.json"))
     ]
@@ -239,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
                 truth = os.path.join(out, "truth", pid, "calibration.json")
                 if not os.path.exists(truth):
                     measured = os.path.join(cal_dir, pid, "calibration.json")
-                    write_true_calibration(measured, truth, person(pid))
+                    write_true_calibration(measured, truth, person(pid), not a.no_headroom)
         interrupted, failed = run_trial_jobs(batch, a.jobs, on_exit)
         if interrupted:
             print("interrupted; run again to resume", file=sys.stderr)
