@@ -422,7 +422,8 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
     QpInfo info;
     const Status s = project_forces<T, K>(
         st, start, constrained_bits<K>(m), static_cast<uint16_t>(fixed | implied), violation_tol,
-        feasibility_rel, Tolerances<T>::kStructuredDependentTol, max_iterations, out.lambda, info);
+        Tolerances<T>::kRoundingRelTol, Tolerances<T>::kStructuredDependentTol, max_iterations,
+        out.lambda, info);
     out.iterations += info.iterations;
     if (s == Status::kQpInfeasible) continue;
     if (s != Status::kOk) return s;

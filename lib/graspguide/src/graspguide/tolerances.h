@@ -14,6 +14,9 @@ struct Tolerances;
 template <>
 struct Tolerances<float> {
   static constexpr float kFeasRelTol = 1e-4f;
+  // The share of |lambda| a QP iterate's rounding may take (force_qp.h): the violation
+  // bound is the larger of kFeasRelTol |lambda0| and this times |lambda|.
+  static constexpr float kRoundingRelTol = 1e-5f;
   static constexpr float kDependentRelTol = 1e-4f;
   // The structured QP's rows are projector columns computed to a few ulps (force_qp.h),
   // so dependence is judged 10 times finer than on the SVD route's null basis.
@@ -23,6 +26,7 @@ struct Tolerances<float> {
 template <>
 struct Tolerances<double> {
   static constexpr double kFeasRelTol = 1e-9;
+  static constexpr double kRoundingRelTol = 1e-9;
   static constexpr double kDependentRelTol = 1e-9;
   static constexpr double kStructuredDependentTol = 1e-9;
 };
