@@ -34,6 +34,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from graspguide.study.jobs import TrialJob, default_out, default_protocol, run_trial_jobs
+from graspguide.study.outcome_summary import format_outcome, outcome_summary
 from graspguide.study.records import read_jsonl
 from graspguide.study.study_protocol import draw_wrenches, load_protocol
 
@@ -145,17 +146,6 @@ def _rows(study_dir: str, pids: Sequence[str]) -> list[dict[str, Any]]:
     return out
 
 
-def _stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
-    ok = sum(1 for r in recs if r["success"])
-    return {
-        "trials": len(recs),
-        "successes": ok,
-        "success_rate": ok / len(recs) if recs else None,
-        # completion_s counts a failure as the timeout, as the analysis does
-        "mean_completion_s": sum(r["completion_s"] for r in recs) / len(recs) if recs else None,
-    }
-
-
 def _mode(r: dict[str, Any]) -> str:
     return str(r["modality"]).rsplit("+", 1)[-1]
 
@@ -167,22 +157,13 @@ def tabulate(out: str, pids: Sequence[str]) -> dict[str, Any]:
         res["conditions"][cond] = {
             "source": [source(cond, p) for p in pids],
             **{
-                f"k={k} {m}": _stats([r for r in rows if r["k"] == k and _mode(r) == m])
+                f"k={k} {m}": outcome_summary([r for r in rows if r["k"] == k and _mode(r) == m])
                 for k in (3, 4)
                 for m in ("C", "V")
             },
-            **{m: _stats([r for r in rows if _mode(r) == m]) for m in ("C", "V")},
+            **{m: outcome_summary([r for r in rows if _mode(r) == m]) for m in ("C", "V")},
         }
     return res
-
-
-def _fmt(s: dict[str, Any]) -> str:
-    if not s["trials"]:
-        return f"{'-':>24}"
-    return (
-        f"{s['successes']:>4}/{s['trials']:<4} {100 * s['success_rate']:5.1f}%"
-        f" {s['mean_completion_s']:6.1f} s"
-    )
 
 
 def format_table(res: dict[str, Any]) -> str:
@@ -193,7 +174,9 @@ def format_table(res: dict[str, Any]) -> str:
         f"{'':<8} " + " ".join(f"{c:>24}" for c in CONDITIONS),
     ]
     for key in ("C", "V", "k=3 C", "k=3 V", "k=4 C", "k=4 V"):
-        lines.append(f"{key:<8} " + " ".join(_fmt(res["conditions"][c][key]) for c in CONDITIONS))
+        lines.append(
+            f"{key:<8} " + " ".join(format_outcome(res["conditions"][c][key]) for c in CONDITIONS)
+        )
     return "\n".join(lines)
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 from graspguide.study.demo import HostlessTrialJob
 from graspguide.study.jobs import TrialJob, default_out, default_protocol, run_trial_jobs
+from graspguide.study.outcome_summary import format_outcome, outcome_summary
 from graspguide.study.records import read_jsonl
 from graspguide.study.study_protocol import load_protocol
 
@@ -43,18 +44,6 @@ def _rows(study_dir: str, pids: Sequence[str]) -> dict[tuple[int, str], list[dic
             if not r.get("familiarization"):
                 rows.setdefault((r["k"], r["modality"]), []).append(r)
     return rows
-
-
-def _stats(recs: list[dict[str, Any]]) -> dict[str, Any]:
-    ok = [r for r in recs if r["success"]]
-    return {
-        "trials": len(recs),
-        "successes": len(ok),
-        "success_rate": len(ok) / len(recs) if recs else None,
-        # completion_s counts a failure as the timeout, as the analysis does
-        "mean_completion_s": sum(r["completion_s"] for r in recs) / len(recs) if recs else None,
-        "mean_success_time_s": sum(r["completion_s"] for r in ok) / len(ok) if ok else None,
-    }
 
 
 def _truth(study_dir: str, pids: Sequence[str]) -> dict[str, Any]:
@@ -101,10 +90,12 @@ def compare(out: str, pids: Sequence[str]) -> dict[str, Any]:
             {
                 "k": k,
                 "modality": modality,
-                **{kind: _stats(by_kind[kind].get((k, modality), [])) for kind in KINDS},
+                **{kind: outcome_summary(by_kind[kind].get((k, modality), [])) for kind in KINDS},
             }
         )
-    total = {kind: _stats([r for rs in by_kind[kind].values() for r in rs]) for kind in KINDS}
+    total = {
+        kind: outcome_summary([r for rs in by_kind[kind].values() for r in rs]) for kind in KINDS
+    }
     return {
         "simulated": True,
         "participants": list(pids),
@@ -114,13 +105,8 @@ def compare(out: str, pids: Sequence[str]) -> dict[str, Any]:
     }
 
 
-def _fmt(s: dict[str, Any]) -> str:
-    if not s["trials"]:
-        return f"{'-':>22}"
-    return (
-        f"{s['successes']:>3}/{s['trials']:<3} {100 * s['success_rate']:5.1f}%"
-        f" {s['mean_completion_s']:7.2f} s"
-    )
+def _cell(s: dict[str, Any]) -> str:
+    return format_outcome(s, count_width=3, time_digits=2)
 
 
 def format_table(res: dict[str, Any]) -> str:
@@ -131,8 +117,8 @@ def format_table(res: dict[str, Any]) -> str:
     ]
     for row in res["by_condition"]:
         cond = f"k={row['k']} {row['modality']}"
-        lines.append(f"{cond:<14} {_fmt(row['tracker'])}   {_fmt(row['hostless'])}")
-    lines.append(f"{'all':<14} {_fmt(res['all']['tracker'])}   {_fmt(res['all']['hostless'])}")
+        lines.append(f"{cond:<14} {_cell(row['tracker'])}   {_cell(row['hostless'])}")
+    lines.append(f"{'all':<14} {_cell(res['all']['tracker'])}   {_cell(res['all']['hostless'])}")
     t = res["hostless_truth"]
     if t["results"]:
         lines.append(
