@@ -28,13 +28,13 @@ from typing import IO, Any
 from graspguide.link.sim import die_with_parent, find_repo_root
 from graspguide.link.transport import (
     DEFAULT_BAUDRATE,
+    ChildPtyTransport,
     DeviceDisconnected,
     DeviceNotFound,
     LinkError,
     LinkTimeout,
     SerialTransport,
     SimNotBuilt,
-    Transport,
 )
 
 QEMU_PORT = "qemu"
@@ -273,10 +273,12 @@ class QemuFirmware:
             self._tmpdir = None
 
 
-class QemuFirmwareDevice(Transport):
+class QemuFirmwareDevice(ChildPtyTransport):
     """``--port qemu``: :class:`QemuFirmware` and a serial transport on its pty, ready
     (the first HELLO answered) after :meth:`start`. ``firmware`` is the running QEMU
     (motor registers for the tests and the latency self-test)."""
+
+    child_name = "the QEMU firmware"
 
     def __init__(
         self,
@@ -318,11 +320,6 @@ class QemuFirmwareDevice(Transport):
                 f"{self.firmware.stderr_text()}"  # type: ignore[union-attr]
             ) from e
 
-    def _transport(self) -> SerialTransport:
-        if self._serial is None:
-            raise LinkError("the QEMU firmware is not running: call start() first")
-        return self._serial
-
     def _gone(self, what: str, cause: LinkError) -> LinkError:
         fw = self.firmware
         if fw is not None and not fw.alive():
@@ -330,18 +327,6 @@ class QemuFirmwareDevice(Transport):
                 f"qemu exited with code {fw.process.poll()} while {what}; {fw.stderr_text()}"
             )
         return cause
-
-    def write(self, data: bytes) -> None:
-        try:
-            self._transport().write(data)
-        except LinkError as e:
-            raise self._gone("writing", e) from e
-
-    def read(self, max_bytes: int, timeout: float) -> bytes:
-        try:
-            return self._transport().read(max_bytes, timeout)
-        except LinkError as e:
-            raise self._gone("reading", e) from e
 
     def motor_registers(self) -> tuple[int, ...]:
         if self.firmware is None:

@@ -21,13 +21,13 @@ from typing import IO
 
 from graspguide.link.transport import (
     DEFAULT_BAUDRATE,
+    ChildPtyTransport,
     DeviceDisconnected,
     DeviceNotFound,
     LinkError,
     LinkTimeout,
     SerialTransport,
     SimNotBuilt,
-    Transport,
 )
 
 SIM_PORT = "sim"
@@ -160,7 +160,7 @@ def _sim_options(
     return options
 
 
-class SimulatedDevice(Transport):
+class SimulatedDevice(ChildPtyTransport):
     """The simulated device as a process on a pseudo-terminal, and a Transport to it.
 
     ``with SimulatedDevice(virtual_clock=True, trace="motors.csv") as sim:`` starts
@@ -176,6 +176,8 @@ class SimulatedDevice(Transport):
     host-less capability.
     After start: ``pty_path``, ``process``, ``start_time_s`` (spawn to pty line).
     """
+
+    child_name = "the simulated device"
 
     def __init__(
         self,
@@ -283,37 +285,18 @@ class SimulatedDevice(Transport):
         except (OSError, ValueError):
             return ""
 
-    def _check_alive(self, what: str, cause: Exception) -> LinkError:
+    def _gone(self, what: str, cause: LinkError) -> LinkError:
         code = None if self.process is None else self.process.poll()
         if code is not None:
             return DeviceDisconnected(
                 f"the simulated device exited with code {code} while "
                 f"{what}; stderr: {self._stderr_text() or '(empty)'}"
             )
-        return cause if isinstance(cause, LinkError) else LinkError(str(cause))
-
-    def _transport(self) -> SerialTransport:
-        if self._serial is None:
-            raise LinkError(
-                "the simulated device is not running: call start() or use it as a context manager"
-            )
-        return self._serial
+        return cause
 
     @property
     def serial_transport(self) -> SerialTransport:
         return self._transport()
-
-    def write(self, data: bytes) -> None:
-        try:
-            self._transport().write(data)
-        except LinkError as e:
-            raise self._check_alive("writing", e) from e
-
-    def read(self, max_bytes: int, timeout: float) -> bytes:
-        try:
-            return self._transport().read(max_bytes, timeout)
-        except LinkError as e:
-            raise self._check_alive("reading", e) from e
 
     def alive(self) -> bool:
         return self.process is not None and self.process.poll() is None

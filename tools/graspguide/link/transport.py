@@ -245,6 +245,39 @@ class SerialTransport(Transport):
             pass
 
 
+class ChildPtyTransport(Transport):
+    """A device that is a child process (the simulator, simavr, QEMU) reached through a
+    serial transport on its pseudo-terminal. A link error while the child has died is
+    reported as its death, with what it printed (:meth:`_gone`)."""
+
+    _serial: SerialTransport | None = None
+    #: What "not running" names in the error of a transport used before start().
+    child_name = "the device"
+
+    def _transport(self) -> SerialTransport:
+        if self._serial is None:
+            raise LinkError(
+                f"{self.child_name} is not running: call start() or use it as a context manager"
+            )
+        return self._serial
+
+    @abc.abstractmethod
+    def _gone(self, what: str, cause: LinkError) -> LinkError:
+        """DeviceDisconnected naming the child's exit when it has exited, else ``cause``."""
+
+    def write(self, data: bytes) -> None:
+        try:
+            self._transport().write(data)
+        except LinkError as e:
+            raise self._gone("writing", e) from e
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        try:
+            return self._transport().read(max_bytes, timeout)
+        except LinkError as e:
+            raise self._gone("reading", e) from e
+
+
 def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transport:
     """A started Transport for a ``--port`` value: ``"sim"`` starts the simulated device
     (keyword arguments go to :class:`SimulatedDevice`: virtual_clock, trace, stale_ms,
