@@ -24,6 +24,7 @@ Run from the repository root with the project's .venv active:
     #    src/harness/stage_counts/stage_scenes.h, `pio run -e m4f_stages` there, run the
     #    image on qemu-system-arm and count the agreement
     python tools/scripts/issue17_m4f_agreement.py m4f --count 1300 /tmp/wt_after /tmp/wt_before
+    #    (--scene p049778 adds that random scene, however far into the set it is)
 
 Step 3 overwrites the worktrees' stage_scenes.h: give it worktrees (`git worktree add`),
 never the main checkout. The harness prints PWM and status, not the model, so on the M4F
@@ -183,6 +184,18 @@ def random_paper_scenes(count: int, seed: int = SEED) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+def named_scenes(names: Sequence[str]) -> list[dict[str, Any]]:
+    """Random scenes by their names (p000123: the 124th random scene), for a measurement
+    that needs a few scenes from far into the set (the M4F image holds only ~1,300)."""
+    indexes = []
+    for name in names:
+        if not re.fullmatch(r"p\d{6}", name):
+            raise ValueError(f"scene name {name!r}: expected p followed by 6 digits, e.g. p049778")
+        indexes.append(int(name[1:]))
+    drawn = random_paper_scenes(max(indexes) + 1) if indexes else []
+    return [dict(drawn[i], name=f"p{i:06d}") for i in indexes]
 
 
 def scene_set(count: int) -> list[dict[str, Any]]:
@@ -422,6 +435,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     m = sub.add_parser("m4f", help="the M4F image of each worktree under QEMU")
     m.add_argument("--count", type=int, default=1300)
     m.add_argument("--jobs", type=int, default=2)
+    m.add_argument(
+        "--scene",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="also run this random scene (e.g. p049778), whatever --count; repeatable",
+    )
     m.add_argument("worktrees", type=Path, nargs="+")
     args = ap.parse_args(argv)
 
@@ -453,8 +473,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.json.write_text(json.dumps(res, indent=1))
         print(f"({time.perf_counter() - t0:.0f} s)")
         return 0
-    scenes = [as_float32(s) for s in scene_set(args.count)]
+    extra = [as_float32(s) for s in named_scenes(args.scene)]
+    scenes = [as_float32(s) for s in scene_set(args.count)] + extra
     answers = reference_all(args.count, args.jobs, rounded=True)
+    answers += [reference_answer(s) for s in extra]
     header = render_header(scenes, answers)
     for wt in args.worktrees:
         res = m4f_agreement(run_m4f(wt.resolve(), header), len(ISSUE17_SCENES))
@@ -462,6 +484,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{wt}: M4F float agrees with float64 (status, PWM within 1) on "
             f"{res['issue'][0]}/{res['issue'][1]} issue scenes and "
             f"{res['random'][0]}/{res['random'][1]} random paper scenes"
+            + (f" (with {len(extra)} named by --scene)" if extra else "")
         )
         for line in res["failed"]:
             print(f"  {line}")

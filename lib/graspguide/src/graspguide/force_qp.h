@@ -193,9 +193,11 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
   eq.n = 0;
   eq.fixed = fixed;
   eq.have_c = true;
+  const T eps = std::numeric_limits<T>::epsilon();
   for (int r = 0; r < 6; ++r) {
     ForceVec<T, K> v = st.g_hat.row(r).transpose();
     T rhs = v.dot(start);
+    T size = std::abs(rhs);  // what the right-hand side's cancellations started from
     for (int j = 0; j < 3 * K; ++j)
       if (fixed & (1u << j)) v(j) = T(0);  // lambda_j = 0: no right-hand side to carry
     for (int pass = 0; pass < 2; ++pass)
@@ -203,10 +205,16 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
         const T d = eq.own.row(i).dot(v.transpose());
         v.noalias() -= d * eq.own.row(i).transpose();
         rhs -= d * eq.c(i);
+        size += std::abs(d * eq.c(i));
       }
     const T norm = v.norm();
     if (!(norm > dependent_tol)) {
-      if (!(std::abs(rhs) <= consistency_tol)) return Status::kQpInfeasible;
+      // Beyond the tolerance, the right-hand side carries the rounding of its own
+      // cancellations, and the row left over (norm) sees the solution, whose free part
+      // the c so far measure: a hand whose x components equilibrium nearly fixes holds
+      // forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0| (issue 17).
+      const T bound = consistency_tol + T(kBasisNoiseUlps) * eps * size + norm * eq.c.norm();
+      if (!(std::abs(rhs) <= bound)) return Status::kQpInfeasible;
       continue;
     }
     eq.own.row(eq.n) = v.transpose() / norm;
