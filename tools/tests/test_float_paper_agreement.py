@@ -117,7 +117,7 @@ def test_random_paper_scenes_float_agrees_with_float64_outside_the_band(
     ]
     # The issue's bar: none outside the band (docs/performance.md, "Issue 17": 142 on the
     # QR route, 9 before kRoundingRelTol, 3 before the structured QP allowed for the
-    # rounding of hands that need internal forces of 25,000 |lambda0| or more).
+    # rounding of hands that need internal forces of 45,000 |lambda0| or more).
     assert not outside, f"{len(outside)} disagreements outside the band:\n" + "\n".join(
         details[:20]
     )
