@@ -163,7 +163,7 @@ class _EqualityRows:
                 out[m] += qr[m] * a
 
 
-def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eq):
+def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eps, eq):
     own = [[0.0] * dim for _ in range(6)]
     eq.q = own
     eq.n = 0
@@ -172,6 +172,7 @@ def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eq):
     for row in range(6):
         v = list(g_hat[row])
         rhs = dot(v, start, dim)
+        size = abs(rhs)
         for j in range(dim):
             if fixed & (1 << j):
                 v[j] = 0.0
@@ -181,10 +182,14 @@ def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eq):
                 d = dot(oi, v, dim)
                 for j in range(dim):
                     v[j] -= d * oi[j]
-                rhs -= d * eq.c[i]
+                t_ = d * eq.c[i]
+                rhs -= t_
+                size += abs(t_)
         nv = norm(v, dim)
         if not nv > dependent_tol:
-            if not abs(rhs) <= consistency_tol:
+            # The allowance for the right-hand side's own rounding (force_qp.h).
+            bound = consistency_tol + _BASIS_NOISE_ULPS * eps * size + nv * norm(eq.c, 6)
+            if not abs(rhs) <= bound:
                 return st.QP_INFEASIBLE
             continue
         on = own[eq.n]
@@ -227,7 +232,7 @@ def project_forces(
         for j in range(dim):
             lam[j] = start[j]
     else:
-        s = _fixed_rows(g_hat, dim, start, fixed, dependent_tol, violation_tol, eq)
+        s = _fixed_rows(g_hat, dim, start, fixed, dependent_tol, violation_tol, eps, eq)
         if s != st.OK:
             return s
         for j in range(dim):
@@ -366,10 +371,11 @@ def paper_x_rows(k, fallback_mask, x_moment, axis, w, violation_tol, out):
 
 def solve_forces(frames, g_hat, w, lambda0, start, requested, max_iterations, tol, lam, out):
     """The models in turn from `requested` (0 paper, 1 normal, 2 none). out =
-    [used, iterations, active]. tol: the precision's (feas_rel, dependent, eps)."""
+    [used, iterations, active]. tol: the precision's (feas_rel, rounding_rel, dependent,
+    eps)."""
     k = frames.k
     dim = 3 * k
-    feas_rel, dependent_tol, eps = tol
+    feas_rel, rounding_rel, dependent_tol, eps = tol
     violation_tol = feas_rel * norm(lambda0, dim)
     out[1] = 0
     xr = [0, 0]
@@ -392,7 +398,7 @@ def solve_forces(frames, g_hat, w, lambda0, start, requested, max_iterations, to
             constrained_bits(k, model),
             fixed,
             violation_tol,
-            feas_rel,
+            rounding_rel,
             dependent_tol,
             eps,
             max_iterations,

@@ -32,10 +32,18 @@ PWM_MIN = 70
 PWM_SPAN = 185
 _RAD_TO_DEG = 180.0 / math.pi
 
-# (kFeasRelTol, kStructuredDependentTol, machine epsilon, kUnitNormSlack, largest finite)
+# (kFeasRelTol, kRoundingRelTol, kStructuredDependentTol, machine epsilon, kUnitNormSlack,
+# largest finite)
 PRECISIONS = {
-    "double": (1e-9, 1e-9, 2.220446049250313e-16, 8.8817841970012523e-16, 1.7976931348623157e308),
-    "single": (1e-4, 1e-5, 1.1920929e-07, 4.76837158e-7, 3.4028235e38),
+    "double": (
+        1e-9,
+        1e-9,
+        1e-9,
+        2.220446049250313e-16,
+        8.8817841970012523e-16,
+        1.7976931348623157e308,
+    ),
+    "single": (1e-4, 1e-5, 2e-6, 1.1920929e-07, 4.76837158e-7, 3.4028235e38),
 }
 
 
@@ -411,7 +419,7 @@ def solve(
     k = len(contacts)
     res = Result(k)
     tol = PRECISIONS[precision or interpreter_precision()]
-    feas_rel, dependent_tol, eps, slack, largest_finite = tol
+    feas_rel, rounding_rel, dependent_tol, eps, slack, largest_finite = tol
     model = qp.MODELS.index(constraints)
     if policy not in ("F", "Fperp") or mode not in ("C", "V"):
         raise ValueError("policy must be F or Fperp, mode C or V")
@@ -475,7 +483,7 @@ def solve(
         start,
         model,
         max_iterations,
-        (feas_rel, dependent_tol, eps),
+        (feas_rel, rounding_rel, dependent_tol, eps),
         lam,
         sol,
     )

@@ -224,3 +224,33 @@ def test_emulated_float32_against_the_cores_float(cases):
     assert n_ok > 100
     assert within_core >= 0.999 * n_ok, (within_core, n_ok)
     assert within_ref >= 0.999 * n_ok, (within_ref, n_ok)
+
+
+def test_emulated_float32_on_the_issue17_paper_scenes():
+    """Issue 17 in the port: its single-precision QP gives the float64 reference's model
+    and PWM (within 1) on the issue's 8 scenes and on the 3 hands that need internal
+    forces of 45,000 |lambda0| or more, the last the C++ float core got wrong."""
+    scripts = os.path.join(_ROOT, "tools", "scripts")
+    if scripts not in sys.path:
+        sys.path.insert(0, scripts)
+    import issue17_m4f_agreement as issue17
+
+    port, port_status = _port_solver()
+    scenes = issue17.scene_set(0) + issue17.named_scenes(["p049778", "p054288", "p072575"])
+    problems = []
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        for scene in scenes:
+            res = port.solve(
+                _f32(scene["contacts"]),
+                _f32(issue17.wrench(scene)),
+                scene["policy"],
+                "C",
+                "paper",
+                precision="single",
+            )
+            got = (port_status.name(res.status), res.used, [int(v) for v in res.pwm])
+            ref = issue17.reference_answer(issue17.as_float32(scene))
+            if not issue17.agrees(got, ref):
+                problems.append(f"{scene['name']}: port {got}, float64 reference {ref}")
+    assert len(scenes) == 11
+    assert not problems, "\n".join(problems)
