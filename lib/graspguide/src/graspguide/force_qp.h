@@ -210,9 +210,10 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
     const T norm = v.norm();
     if (!(norm > dependent_tol)) {
       // Beyond the tolerance, the right-hand side carries the rounding of its own
-      // cancellations, and the row left over (norm) sees the solution, whose free part
-      // the c so far measure: a hand whose x components equilibrium nearly fixes holds
-      // forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0| (issue 17).
+      // cancellations, and the dropped left-over row (norm) sees the solution, whose
+      // shared part the c so far hold: a hand whose x components equilibrium nearly fixes
+      // holds forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0|
+      // (issue 17).
       const T bound = consistency_tol + T(kBasisNoiseUlps) * eps * size + norm * eq.c.norm();
       if (!(std::abs(rhs) <= bound)) return Status::kQpInfeasible;
       continue;
