@@ -123,6 +123,24 @@ def test_random_paper_scenes_float_agrees_with_float64_outside_the_band(
     )
 
 
+def test_float_and_double_choose_the_same_model_outside_the_band(run, report_figure):
+    # The issue's first condition, read directly off the two cores.
+    other_model = [i for i in run["differ"] if run["floats"][i][:2] != run["doubles"][i][:2]]
+    margins = {i: issue17.x_fixed_margin(run["scenes"][i]) for i in other_model}
+    outside = [i for i in other_model if not _inside_band(margins[i])]
+    report_figure(
+        "issue 17: float and double models",
+        f"{RANDOM_COUNT} random paper scenes: another status or model on {len(other_model)} "
+        f"(x-fixed margins {sorted(round(m, 8) for m in margins.values())}), "
+        f"{len(outside)} outside the band",
+    )
+    details = [
+        _describe(run["scenes"][i], run["floats"][i], run["doubles"][i], margins[i])
+        for i in outside
+    ]
+    assert not outside, "\n".join(details[:20])
+
+
 def test_the_double_core_agrees_with_float64_on_the_sample_and_where_float_differs(run):
     # What lets a scene where float equals double count as agreeing with float64.
     outside = [i for i in run["double_bad"] if not _inside_band(run["margins"][i])]
