@@ -11,9 +11,17 @@ from __future__ import annotations
 
 import os
 import pathlib
+import signal
 import sys
 
 import pytest
+
+# A suite started as a background job of a non-interactive shell (a CI runner's, or
+# `cmd &` in a script) inherits SIGINT ignored, and exec keeps an ignored signal ignored
+# in every child: the commands under test would then never see the Ctrl-C the tests
+# send. A handler here is reset to the default by exec, as a terminal's children have it.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REPO_ROOT = os.path.dirname(TOOLS_DIR)
