@@ -19,6 +19,8 @@ Run from the repository root with the project's .venv active:
     # 2. the float core the interpreter imports against it; for another commit's core put
     #    that build first on PYTHONPATH (pip install --target DIR ./tools in its worktree)
     python tools/scripts/issue17_m4f_agreement.py host --reference /tmp/issue17_ref.npz
+    #    or, with no saved reference, the test's layered check on many more scenes
+    python tools/scripts/issue17_m4f_agreement.py layered --count 1000000
     # 3. the M4F: for each worktree, write the 8 + N scenes (float-rounded, with the
     #    reference's status and PWM on those rounded inputs) into its
     #    src/harness/stage_counts/stage_scenes.h, `pio run -e m4f_stages` there, run the
@@ -331,6 +333,34 @@ def host(count: int, ref_answers: list[tuple[str, str, list[int]]]) -> dict[str,
     }
 
 
+# ------------------------------------------------------------------------------ layered
+def layered(count: int) -> dict[str, Any]:
+    """The test's layered check on `count` random scenes (too many for the reference on
+    each): the float and double cores on every scene, the float64 reference where they
+    differ. A scene where they agree counts as agreeing with float64, as the test's sample
+    and the known answers show the double core right."""
+    scenes = scene_set(count)[len(ISSUE17_SCENES) :]
+    differ = []
+    for s in scenes:
+        f, d = core_answer(s, "float"), core_answer(s, "double")
+        if f != d:
+            differ.append((s, f, d))
+    found: dict[str, list[dict[str, Any]]] = {"float": [], "double": [], "model": []}
+    for s, f, d in differ:
+        ref = reference_answer(s)
+        margin: float | None = None
+        for key, core in (("float", f), ("double", d)):
+            if not agrees(core, ref):
+                margin = x_fixed_margin(s) if margin is None else margin
+                found[key].append(
+                    {"name": s["name"], key: core, "reference": ref, "margin": margin}
+                )
+        if f[:2] != d[:2]:
+            margin = x_fixed_margin(s) if margin is None else margin
+            found["model"].append({"name": s["name"], "float": f, "double": d, "margin": margin})
+    return {"scenes": count, "differ": len(differ), **found}
+
+
 # ----------------------------------------------------------------------------------- m4f
 def _f32(x: float) -> float:
     return float(np.float32(x))
@@ -432,6 +462,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     h = sub.add_parser("host", help="the imported float core against a saved reference")
     h.add_argument("--reference", type=Path, required=True)
     h.add_argument("--json", type=Path, help="also write the figures and every disagreement")
+    lay = sub.add_parser(
+        "layered", help="the test's layered check (no saved reference) on --count scenes"
+    )
+    lay.add_argument("--count", type=int, default=1_000_000)
     m = sub.add_parser("m4f", help="the M4F image of each worktree under QEMU")
     m.add_argument("--count", type=int, default=1300)
     m.add_argument("--jobs", type=int, default=2)
@@ -450,6 +484,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         answers = reference_all(args.count, args.jobs)
         save_reference(args.out, args.count, answers)
         print(f"wrote {args.out}: {len(answers)} scenes in {time.perf_counter() - t0:.0f} s")
+        return 0
+    if args.command == "layered":
+        res = layered(args.count)
+        outside = lambda rows: [r for r in rows if abs(r["margin"]) > FLOAT_BAND_TOL]  # noqa: E731
+        print(
+            f"{res['scenes']} random paper scenes: float and double cores differ on {res['differ']}"
+        )
+        for key, what in (
+            ("model", "float and double choose another status or model"),
+            ("float", "float disagrees with float64"),
+            ("double", "double disagrees with float64"),
+        ):
+            print(
+                f"{what} on {len(res[key])}, {len(outside(res[key]))} with "
+                f"|x-fixed margin| > {FLOAT_BAND_TOL:g}"
+            )
+        for row in outside(res["float"]):
+            print(
+                f"  {row['name']}: float {row['float']} reference {row['reference']} "
+                f"margin {row['margin']:.3g}"
+            )
+        print(f"({time.perf_counter() - t0:.0f} s)")
         return 0
     if args.command == "host":
         count, answers = load_reference(args.reference)
