@@ -163,12 +163,14 @@ class _EqualityRows:
                 out[m] += qr[m] * a
 
 
-def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eps, eq):
+def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eps, known, eq):
     own = [[0.0] * dim for _ in range(6)]
     eq.q = own
     eq.n = 0
     eq.fixed = fixed
     eq.have_c = True
+    dependent = 0
+    consistent = True
     for row in range(6):
         v = list(g_hat[row])
         rhs = dot(v, start, dim)
@@ -189,8 +191,9 @@ def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eps, e
         if not nv > dependent_tol:
             # The allowance for the right-hand side's own rounding (force_qp.h).
             bound = consistency_tol + _BASIS_NOISE_ULPS * eps * size + nv * norm(eq.c, 6)
+            dependent += 1
             if not abs(rhs) <= bound:
-                return st.QP_INFEASIBLE
+                consistent = False
             continue
         on = own[eq.n]
         for j in range(dim):
@@ -199,7 +202,8 @@ def _fixed_rows(g_hat, dim, start, fixed, dependent_tol, consistency_tol, eps, e
         eq.n += 1
         if nv < eq.smallest:
             eq.smallest = nv
-    return st.OK
+    # `known` dependences the caller decided (force_qp.h: the moment row about y_O).
+    return st.OK if consistent or dependent <= known else st.QP_INFEASIBLE
 
 
 def project_forces(
@@ -215,6 +219,7 @@ def project_forces(
     max_iterations,
     lam,
     info,
+    known_dependences=0,
 ):
     """From start (on the equilibrium set) to the projection onto the model's set; lam
     is written in place. info = [iterations, active]. Returns a status code."""
@@ -232,7 +237,9 @@ def project_forces(
         for j in range(dim):
             lam[j] = start[j]
     else:
-        s = _fixed_rows(g_hat, dim, start, fixed, dependent_tol, violation_tol, eps, eq)
+        s = _fixed_rows(
+            g_hat, dim, start, fixed, dependent_tol, violation_tol, eps, known_dependences, eq
+        )
         if s != st.OK:
             return s
         for j in range(dim):
@@ -404,6 +411,7 @@ def solve_forces(frames, g_hat, w, lambda0, start, requested, max_iterations, to
             max_iterations,
             lam,
             info,
+            1 if model == 0 and xr[1] else 0,
         )
         out[1] += info[0]
         if s == st.QP_INFEASIBLE:

@@ -247,10 +247,10 @@ ForceProblem<K> force_problem(const graspguide_test::RandomScene& s) {
 
 template <int K>
 gg::Status project(const ForceProblem<K>& p, uint16_t constrained, uint16_t fixed, int max_it,
-                   gg::ForceVec<double, K>& lambda, gg::QpInfo& info) {
+                   gg::ForceVec<double, K>& lambda, gg::QpInfo& info, int known = 0) {
   return gg::project_forces<double, K>(
       p.st, p.start, constrained, fixed, p.violation_tol, gg::Tolerances<double>::kFeasRelTol,
-      gg::Tolerances<double>::kDependentRelTol, max_it, lambda, info);
+      gg::Tolerances<double>::kDependentRelTol, max_it, lambda, info, known);
 }
 
 // Where the SVD route's solver finds no point for a model, project_forces must say
@@ -300,6 +300,41 @@ TEST(ForceQp, IterationCapIsAStatus) {
     EXPECT_EQ((again - lambda).norm(), 0.0);
   }
   EXPECT_GT(capped, 10);
+}
+
+// A dependence the caller vouches for (the moment row about y_O, which paper_x_rows
+// decided) skips only its own right-hand-side check: with no moment the answer is the
+// one the check gives, and a second dependent row, here from holding contact 0 off as
+// well, is still checked and contradicts equilibrium.
+TEST(ForceQp, AKnownDependenceSkipsOnlyItsOwnCheck) {
+  std::mt19937_64 rng(34);
+  int same = 0, contradicted = 0;
+  for (int n = 0; n < 200; ++n) {
+    auto s = graspguide_test::random_scene(rng, 3);
+    s.wrench.tail<3>().setZero();
+    const auto p = force_problem<3>(s);
+    uint16_t fixed = 0, implied = 0;
+    ASSERT_EQ((gg::paper_x_rows<double, 3>(p.f, p.w, p.violation_tol, fixed, implied)),
+              gg::Status::kOk);
+    const uint16_t paper = gg::constrained_bits<3>(gg::ConstraintModel::kPaper);
+    const auto x_rows = static_cast<uint16_t>(fixed | implied);
+    gg::ForceVec<double, 3> checked, vouched;
+    gg::QpInfo i1, i2;
+    const gg::Status s1 = project<3>(p, paper, x_rows, 64, checked, i1, 0);
+    const gg::Status s2 = project<3>(p, paper, x_rows, 64, vouched, i2, 1);
+    EXPECT_EQ(s2, s1) << n;
+    if (s1 == gg::Status::kOk && s2 == gg::Status::kOk) {
+      EXPECT_EQ((vouched - checked).norm(), 0.0) << n;
+      ++same;
+    }
+    // Contact 0 held off too: 5 rows held, 4 free directions for G's 6 rows, so two
+    // dependences, and equilibrium cannot hold with contact 0 off and every x at 0.
+    const auto off = static_cast<uint16_t>(x_rows | 0x7u);
+    EXPECT_EQ(project<3>(p, paper, off, 64, vouched, i2, 1), gg::Status::kQpInfeasible) << n;
+    ++contradicted;
+  }
+  EXPECT_GT(same, 50);
+  EXPECT_EQ(contradicted, 200);
 }
 
 // With no moment about y_O every x component of the paper model is 0, and the x rows

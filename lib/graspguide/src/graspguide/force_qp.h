@@ -184,16 +184,21 @@ void whitened_rows(const GraspStructure<T, K>& st, EqualityRows<T, K>& eq) {
 // against each other by Gram-Schmidt twice. A row that the earlier ones span to within
 // dependent_tol adds nothing, if its right-hand side agrees within consistency_tol;
 // otherwise the equalities contradict each other (equilibrium needs a fixed component
-// that is not zero) and the result is kQpInfeasible.
+// that is not zero) and the result is kQpInfeasible. The caller may know that `known`
+// dependences hold (the paper model's moment row about y_O, which paper_x_rows decided in
+// closed form): when no more than that many rows turn out dependent, their right-hand
+// sides are not checked again from rounded sums.
 template <typename T, int K>
 Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, uint16_t fixed,
-                  T dependent_tol, T consistency_tol, EqualityRows<T, K>& eq) {
+                  T dependent_tol, T consistency_tol, int known, EqualityRows<T, K>& eq) {
   eq.own.setZero();
   eq.q = &eq.own;
   eq.n = 0;
   eq.fixed = fixed;
   eq.have_c = true;
   const T eps = std::numeric_limits<T>::epsilon();
+  int dependent = 0;
+  bool consistent = true;
   for (int r = 0; r < 6; ++r) {
     ForceVec<T, K> v = st.g_hat.row(r).transpose();
     T rhs = v.dot(start);
@@ -215,14 +220,15 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
       // holds forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0|
       // (issue 17).
       const T bound = consistency_tol + T(kBasisNoiseUlps) * eps * size + norm * eq.c.norm();
-      if (!(std::abs(rhs) <= bound)) return Status::kQpInfeasible;
+      ++dependent;
+      if (!(std::abs(rhs) <= bound)) consistent = false;
       continue;
     }
     eq.own.row(eq.n) = v.transpose() / norm;
     eq.c(eq.n++) = rhs / norm;
     if (norm < eq.smallest) eq.smallest = norm;
   }
-  return Status::kOk;
+  return consistent || dependent <= known ? Status::kOk : Status::kQpInfeasible;
 }
 
 }  // namespace detail
@@ -237,7 +243,8 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
 template <typename T, int K>
 Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
                       uint16_t constrained, uint16_t fixed, T violation_tol, T rel_tol,
-                      T dependent_tol, int max_iterations, ForceVec<T, K>& lambda, QpInfo& info) {
+                      T dependent_tol, int max_iterations, ForceVec<T, K>& lambda, QpInfo& info,
+                      int known_dependences = 0) {
   using Rows = detail::ActiveRows<T, K>;
   using Vec = ForceVec<T, K>;
   constexpr int kMax = Rows::kMax;
@@ -255,7 +262,8 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
     detail::whitened_rows<T, K>(st, eq);
     lambda = start;
   } else {
-    const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol, eq);
+    const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol,
+                                              known_dependences, eq);
     if (s != Status::kOk) return s;
     // The shared part plus the free part of start (start less its parts along the q and
     // its fixed components).
@@ -432,7 +440,7 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
     const Status s = project_forces<T, K>(
         st, start, constrained_bits<K>(m), static_cast<uint16_t>(fixed | implied), violation_tol,
         Tolerances<T>::kRoundingRelTol, Tolerances<T>::kStructuredDependentTol, max_iterations,
-        out.lambda, info);
+        out.lambda, info, implied != 0 ? 1 : 0);
     out.iterations += info.iterations;
     if (s == Status::kQpInfeasible) continue;
     if (s != Status::kOk) return s;
