@@ -26,7 +26,8 @@ Run from the repository root with the project's .venv active:
     #    src/harness/stage_counts/stage_scenes.h, `pio run -e m4f_stages` there, run the
     #    image on qemu-system-arm and count the agreement
     python tools/scripts/issue17_m4f_agreement.py m4f --count 1300 /tmp/wt_after /tmp/wt_before
-    #    (--scene p049778 adds that random scene, however far into the set it is)
+    #    (--scene p049778 adds that scene of the test's 100,000; --scene-set 1000000 reads
+    #    the names in `layered`'s million instead)
 
 Step 3 overwrites the worktrees' stage_scenes.h: give it worktrees (`git worktree add`),
 never the main checkout. The harness prints PWM and status, not the model, so on the M4F
@@ -188,15 +189,20 @@ def random_paper_scenes(count: int, seed: int = SEED) -> list[dict[str, Any]]:
     return out
 
 
-def named_scenes(names: Sequence[str]) -> list[dict[str, Any]]:
-    """Random scenes by their names (p000123: the 124th random scene), for a measurement
-    that needs a few scenes from far into the set (the M4F image holds only ~1,300)."""
+def named_scenes(names: Sequence[str], drawn_from: int = 100_000) -> list[dict[str, Any]]:
+    """Random scenes by their names in the set of `drawn_from` scenes (p000123: its 124th),
+    for a measurement that needs a few scenes from far into a set (the M4F image holds only
+    ~1,300). A name means something only with its set's size: the generator draws every
+    offset, then every force, so the same index has another force in a set of another
+    size. 100,000 is the test's set."""
     indexes = []
     for name in names:
         if not re.fullmatch(r"p\d{6}", name):
             raise ValueError(f"scene name {name!r}: expected p followed by 6 digits, e.g. p049778")
         indexes.append(int(name[1:]))
-    drawn = random_paper_scenes(max(indexes) + 1) if indexes else []
+        if indexes[-1] >= drawn_from:
+            raise ValueError(f"scene {name} is not in a set of {drawn_from} scenes")
+    drawn = random_paper_scenes(drawn_from) if indexes else []
     return [dict(drawn[i], name=f"p{i:06d}") for i in indexes]
 
 
@@ -476,6 +482,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="NAME",
         help="also run this random scene (e.g. p049778), whatever --count; repeatable",
     )
+    m.add_argument(
+        "--scene-set",
+        type=int,
+        default=100_000,
+        metavar="N",
+        help="the size of the set the --scene names come from (100000: the test's; "
+        "1000000: `layered`'s default)",
+    )
     m.add_argument("worktrees", type=Path, nargs="+")
     args = ap.parse_args(argv)
 
@@ -529,7 +543,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.json.write_text(json.dumps(res, indent=1))
         print(f"({time.perf_counter() - t0:.0f} s)")
         return 0
-    extra = [as_float32(s) for s in named_scenes(args.scene)]
+    extra = [as_float32(s) for s in named_scenes(args.scene, args.scene_set)]
     scenes = [as_float32(s) for s in scene_set(args.count)] + extra
     answers = reference_all(args.count, args.jobs, rounded=True)
     answers += [reference_answer(s) for s in extra]
