@@ -238,8 +238,9 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
 // lambda_j >= -max(violation_tol, rel_tol |lambda|) for every j in `constrained`. A row
 // whose projection onto the remaining free directions is shorter than dependent_tol
 // (|P e_j| <= 1), or than the equality basis's own rounding, counts as dependent on the
-// active rows. Returns kOk, kQpInfeasible or
-// kQpIterationLimit; lambda is valid only on kOk.
+// active rows. known_dependences: how many dependences among the fixed rows and
+// equilibrium the caller has already decided hold (fixed_rows). Returns kOk,
+// kQpInfeasible or kQpIterationLimit; lambda is valid only on kOk.
 template <typename T, int K>
 Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& start,
                       uint16_t constrained, uint16_t fixed, T violation_tol, T rel_tol,
