@@ -48,32 +48,8 @@ def _describe(scene: dict[str, Any], core: tuple, ref: tuple, margin: float) -> 
 @pytest.fixture(scope="module")
 def run() -> dict[str, Any]:
     t0 = time.perf_counter()
-    scenes = issue17.scene_set(RANDOM_COUNT)
-    n8 = len(issue17.ISSUE17_SCENES)
-    random_scenes = scenes[n8:]
-    floats, doubles = [], []
-    for s in random_scenes:
-        floats.append(issue17.core_answer(s, "float"))
-        doubles.append(issue17.core_answer(s, "double"))
-    differ = [i for i, (f, d) in enumerate(zip(floats, doubles)) if f != d]
-    checked = sorted(set(differ) | set(range(0, RANDOM_COUNT, SAMPLE_STEP)))
-    refs = {i: issue17.reference_answer(random_scenes[i]) for i in checked}
-    float_bad = [i for i in checked if not issue17.agrees(floats[i], refs[i])]
-    double_bad = [i for i in checked if not issue17.agrees(doubles[i], refs[i])]
-    margins = {i: issue17.x_fixed_margin(random_scenes[i]) for i in set(float_bad + double_bad)}
-    return {
-        "issue_scenes": scenes[:n8],
-        "scenes": random_scenes,
-        "floats": floats,
-        "doubles": doubles,
-        "differ": differ,
-        "sample": range(0, RANDOM_COUNT, SAMPLE_STEP),
-        "refs": refs,
-        "float_bad": float_bad,
-        "double_bad": double_bad,
-        "margins": margins,
-        "seconds": time.perf_counter() - t0,
-    }
+    res = issue17.layered(RANDOM_COUNT, SAMPLE_STEP)
+    return {**res, "seconds": time.perf_counter() - t0}
 
 
 def _inside_band(margin: float) -> bool:
@@ -125,13 +101,12 @@ def test_random_paper_scenes_float_agrees_with_float64_outside_the_band(
 
 def test_float_and_double_choose_the_same_model_outside_the_band(run, report_figure):
     # The issue's first condition, read directly off the two cores.
-    other_model = [i for i in run["differ"] if run["floats"][i][:2] != run["doubles"][i][:2]]
-    margins = {i: issue17.x_fixed_margin(run["scenes"][i]) for i in other_model}
+    other_model, margins = run["other_model"], run["margins"]
     outside = [i for i in other_model if not _inside_band(margins[i])]
     report_figure(
         "issue 17: float and double models",
         f"{RANDOM_COUNT} random paper scenes: another status or model on {len(other_model)} "
-        f"(x-fixed margins {sorted(round(m, 8) for m in margins.values())}), "
+        f"(x-fixed margins {sorted(round(margins[i], 8) for i in other_model)}), "
         f"{len(outside)} outside the band",
     )
     details = [
