@@ -22,20 +22,14 @@ reference, to tell a scene inside the band from a real disagreement.
 
 from __future__ import annotations
 
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import pytest
+from issue17_script import issue17
 
 RANDOM_COUNT = 100_000
 SAMPLE_STEP = 40
-_SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "issue17_m4f_agreement.py"
-
-
-sys.path.insert(0, str(_SCRIPT.parent))
-import issue17_m4f_agreement as issue17  # noqa: E402
 
 
 def _describe(scene: dict[str, Any], core: tuple, ref: tuple, margin: float) -> str:

@@ -230,10 +230,7 @@ def test_emulated_float32_on_the_issue17_paper_scenes():
     """Issue 17 in the port: its single-precision QP gives the float64 reference's model
     and PWM (within 1) on the issue's 8 scenes and on the 3 hands that need internal
     forces of 45,000 |lambda0| or more, the last the C++ float core got wrong."""
-    scripts = os.path.join(_ROOT, "tools", "scripts")
-    if scripts not in sys.path:
-        sys.path.insert(0, scripts)
-    import issue17_m4f_agreement as issue17
+    from issue17_script import issue17
 
     port, port_status = _port_solver()
     scenes = issue17.scene_set(0) + issue17.named_scenes(["p049778", "p054288", "p072575"])
