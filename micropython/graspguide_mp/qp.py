@@ -260,7 +260,7 @@ def project_forces(
         limit = kmax
     active = fixed
     step_error = 0.0
-    step_ulps = 4.0 * eps
+    step_ulps = 2.0 * eps
     d = [0.0] * kmax
     coeff = [0.0] * kmax
     settled = 0
@@ -268,10 +268,12 @@ def project_forces(
     have_shared = False
 
     while True:
-        ln = rel_tol * norm(lam, dim)
-        tol = violation_tol if violation_tol > ln else ln
-        if step_error > tol:
-            tol = step_error
+        # A violation counts once it exceeds the iterate's rounding, the steps' bound only
+        # up to violation_tol, which itself only judges infeasibility (force_qp.h).
+        tol = rel_tol * norm(lam, dim)
+        hidden = step_error if step_error < violation_tol else violation_tol
+        if hidden > tol:
+            tol = hidden
         cand = -1
         worst = -tol
         for j in range(dim):
@@ -302,7 +304,13 @@ def project_forces(
                     t_ = coeff[i] * shared[w[i]]
                     value -= t_
                     size += abs(t_)
-                if value >= -(violation_tol + step_ulps * size):
+                can_leave = False
+                for i in range(rows.n):
+                    can_leave = can_leave or coeff[i] > 0.0
+                rounding = tol if tol > step_ulps * size else step_ulps * size
+                if value >= -rounding or (
+                    not can_leave and value >= -(violation_tol + step_ulps * size)
+                ):
                     settled |= 1 << cand
                     break
             t_dual = _INF

@@ -302,6 +302,55 @@ TEST(ForceQp, IterationCapIsAStatus) {
   EXPECT_GT(capped, 10);
 }
 
+// The feasibility tolerance judges infeasibility only; it is not where the iterations
+// stop. With a tolerance 1e7 times wider (1e-2 |lambda0|) every model that holds within
+// the tight one reaches the same optimum: a violation the tolerance allows still takes its
+// primal or dual step (issue 17: float stopped one dual step short, a motor off instead
+// of on).
+TEST(ForceQp, TheToleranceDoesNotStopTheIterationsEarly) {
+  std::mt19937_64 rng(35);
+  int moved = 0, compared = 0;
+  for (int n = 0; n < 400; ++n) {
+    auto s = graspguide_test::random_scene(rng, 3 + n % 2);
+    s.wrench.tail<3>().setZero();
+    const auto check = [&](auto k_tag) {
+      constexpr int K = decltype(k_tag)::value;
+      auto p = force_problem<K>(s);
+      uint16_t fixed = 0, implied = 0;
+      ASSERT_EQ((gg::paper_x_rows<double, K>(p.f, p.w, p.violation_tol, fixed, implied)),
+                gg::Status::kOk);
+      const auto x_rows = static_cast<uint16_t>(fixed | implied);
+      for (const auto model : {gg::ConstraintModel::kPaper, gg::ConstraintModel::kNormal}) {
+        const uint16_t held = model == gg::ConstraintModel::kPaper ? x_rows : 0;
+        const int known = model == gg::ConstraintModel::kPaper && implied != 0 ? 1 : 0;
+        gg::ForceVec<double, K> tight, loose;
+        gg::QpInfo i1, i2;
+        if (project<K>(p, gg::constrained_bits<K>(model), held, 64, tight, i1, known) !=
+            gg::Status::kOk)
+          continue;
+        auto wide = p;
+        wide.violation_tol = 1e-2 * p.lambda0.norm();
+        ASSERT_EQ(project<K>(wide, gg::constrained_bits<K>(model), held, 64, loose, i2, known),
+                  gg::Status::kOk)
+            << n;
+        EXPECT_LT((loose - tight).norm(), 1e-9 * (1 + tight.norm())) << n;
+        ++compared;
+        // The scenes where a step is taken at all within the wide tolerance.
+        bool small = false;
+        for (int j = 0; j < 3 * K; ++j)
+          small = small || (p.start(j) < 0 && p.start(j) > -wide.violation_tol);
+        moved += small;
+      }
+    };
+    if (s.k == 3)
+      check(std::integral_constant<int, 3>());
+    else
+      check(std::integral_constant<int, 4>());
+  }
+  EXPECT_GT(compared, 300);
+  EXPECT_GT(moved, 10);
+}
+
 // A dependence the caller vouches for (the moment row about y_O, which paper_x_rows
 // decided) skips only its own right-hand-side check: with no moment the answer is the
 // one the check gives, and a second dependent row, here from holding contact 0 off as

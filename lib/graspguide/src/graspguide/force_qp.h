@@ -285,9 +285,11 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   // A running bound on the rounding error the steps have put into lambda: a row's
   // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
   // A step along a row 1e-4 long (a near-degenerate vertex) is large, and so is its error;
-  // violations below the bound are rounding, not a reason to move again.
+  // violations below the bound are rounding, not a reason to move again. Two ulps, not
+  // four: at four it hid violations float had computed to 3e-7 behind a bound of 7e-5
+  // (issue 17).
   T step_error = T(0);
-  const T kStepUlps = T(4) * std::numeric_limits<T>::epsilon();
+  const T kStepUlps = T(2) * std::numeric_limits<T>::epsilon();
   T d[kMax], coeff[kMax];
   // Rows found to hold at the current vertex although rounding shows them violated;
   // cleared whenever the active set changes.
@@ -296,12 +298,18 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   bool have_shared = false;
 
   for (;;) {
-    // The most violated inactive constraint (lowest index on ties). Violations are
-    // measured against the larger of the tolerance and its share of the iterate: a
-    // paper-model optimum can hold internal forces 1000 times |lambda0|, and in float
-    // their rounding alone would otherwise read as a violation.
-    T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
-    if (step_error > tol) tol = step_error;
+    // The most violated inactive constraint (lowest index on ties). A violation counts
+    // once it exceeds the iterate's rounding: a few ulps of |lambda|, which a paper-model
+    // optimum can hold at 1000 times |lambda0|, or the steps' running bound, but that
+    // bound only up to violation_tol. The bound adds every step's worst case; past the
+    // tolerance it hid violations float had computed to 0.2 % (issue 17), and a row
+    // examined needlessly costs one harmless step, or for a dependent row the formula
+    // below, free of the steps' rounding. violation_tol itself is no reason to stop
+    // moving: it judges infeasibility, and a float iterate that stopped at a violation it
+    // allows was one dual step short of double's optimum, a motor off instead of on.
+    T tol = rel_tol * lambda.norm();
+    const T hidden = step_error < violation_tol ? step_error : violation_tol;
+    if (hidden > tol) tol = hidden;
     int cand = -1;
     T worst = -tol;
     for (int j = 0; j < 3 * K; ++j) {
@@ -326,7 +334,9 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
         // equilibrium alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of
         // the rounding the iterate carries from large steps. A degenerate vertex (the
         // paper model's common case) holds it at zero; only a value below zero beyond
-        // that formula's own rounding is a real violation.
+        // that formula's own rounding is a real violation. A real violation takes the dual
+        // step like any other, unless no active row can leave: then it is settled when
+        // the tolerance allows it, and otherwise certifies infeasibility (below).
         if (!have_shared) {
           eq.shared_part(start, shared);
           have_shared = true;
@@ -336,7 +346,10 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
           value -= coeff[i] * shared(w[i]);
           size += std::abs(coeff[i] * shared(w[i]));
         }
-        if (value >= -(violation_tol + kStepUlps * size)) {
+        bool can_leave = false;
+        for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
+        const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
+        if (value >= -rounding || (!can_leave && value >= -(violation_tol + kStepUlps * size))) {
           settled = static_cast<uint16_t>(settled | (1u << cand));
           break;
         }

@@ -14,15 +14,18 @@ struct Tolerances;
 template <>
 struct Tolerances<float> {
   static constexpr float kFeasRelTol = 1e-4f;
-  // The share of |lambda| a QP iterate's rounding may take (force_qp.h): the violation
-  // bound is the larger of kFeasRelTol |lambda0| and this times |lambda|.
-  static constexpr float kRoundingRelTol = 1e-5f;
+  // The share of |lambda| a QP iterate's rounding may take (force_qp.h): 4 ulps. A
+  // smaller violation is not worth a step; a larger one is, whatever kFeasRelTol allows,
+  // which only judges infeasibility. At 1e-5 (170 ulps) float kept hands float64 proves
+  // infeasible by twice kFeasRelTol once their forces reached 100 |lambda0| (issue 17).
+  static constexpr float kRoundingRelTol = 5e-7f;
   static constexpr float kDependentRelTol = 1e-4f;
   // The structured QP's rows are projector columns computed to a few ulps (force_qp.h),
-  // so dependence is judged 50 times finer than on the SVD route's null basis: 17 ulps,
-  // 4 times what Gram-Schmidt leaves of a dependent row (kBasisNoiseUlps). A k=4 hand
-  // can need a row 7e-6 long to hold the paper model (issue 17; 1e-5 refused it).
-  static constexpr float kStructuredDependentTol = 2e-6f;
+  // so dependence is judged 100 times finer than on the SVD route's null basis: 8 ulps,
+  // twice what Gram-Schmidt leaves of a dependent row (kBasisNoiseUlps). A k=4 hand can
+  // need a row 7e-6 long to hold the paper model, another one 1.8e-6 (issue 17; 1e-5
+  // and then 2e-6 refused them).
+  static constexpr float kStructuredDependentTol = 1e-6f;
 };
 
 template <>
