@@ -61,6 +61,17 @@ def test_the_issue_scenes_give_float64s_model_and_pwm_in_float():
         assert issue17.agrees(core, ref), _describe(scene, core, ref, margin)
 
 
+@pytest.mark.parametrize("scene", issue17.LARGE_SET_SCENES, ids=lambda s: s["name"])
+def test_hands_larger_sets_found_give_float64s_answer_in_float(scene):
+    """Hands that the same check on one and two million scenes found float getting wrong:
+    each outside the band, so float must give float64's model and PWM within 1."""
+    core = issue17.core_answer(scene, "float")
+    ref = issue17.reference_answer(scene)
+    margin = issue17.x_fixed_margin(scene)
+    assert not _inside_band(margin), _describe(scene, core, ref, margin)
+    assert issue17.agrees(core, ref), _describe(scene, core, ref, margin)
+
+
 def test_random_paper_scenes_float_agrees_with_float64_outside_the_band(
     run, record_property, report_figure
 ):
