@@ -27,7 +27,7 @@ Run from the repository root with the project's .venv active:
     #    image on qemu-system-arm and count the agreement
     python tools/scripts/issue17_m4f_agreement.py m4f --count 1300 /tmp/wt_after /tmp/wt_before
     #    (--scene p049778 adds that scene of the test's 100,000; --scene-set 1000000 reads
-    #    the names in `layered`'s million instead)
+    #    the names in `layered`'s million instead; --large-set-scenes adds LARGE_SET_SCENES)
 
 Step 3 overwrites the worktrees' stage_scenes.h: give it worktrees (`git worktree add`),
 never the main checkout. The harness prints PWM and status, not the model, so on the M4F
@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import subprocess
@@ -83,6 +84,10 @@ POLICIES = ("F", "Fperp")
 # (Float's epsilon, 1.2e-7, times the internal forces of a paper optimum, which reach
 # ~1000 ||lambda0||, is of the same order.)
 FLOAT_BAND_TOL = 1e-4
+# Beyond forces of this many ||lambda0|| the float QP's rounding floor, kRoundingRelTol
+# (4 ulps) of ||lambda||, exceeds the whole load: float cannot hold the load apart from
+# the forces at all. `layered` counts the disagreements there separately.
+FLOAT_FORCE_LIMIT = 1 / 5e-7
 
 # The issue's 8 requests (policy F or Fperp, mode C, constraints paper, no moment).
 ISSUE17_SCENES: list[dict[str, Any]] = [
@@ -286,8 +291,20 @@ def reference_answer(scene: dict[str, Any]) -> tuple[str, str, list[int]]:
     return r["status"], r["constraints_used"], list(r["pwm"])
 
 
+def force_ratio(scene: dict[str, Any]) -> float:
+    """||lambda|| / ||lambda0|| of the float64 reference's optimum, in the model it used."""
+    r = reference.solve(
+        scene["contacts"], wrench(scene), scene["policy"], "C", "paper", compute_margins=False
+    )
+    lam0 = np.asarray(r["diagnostics"]["lam0"], np.float64)
+    return float(np.linalg.norm(r["lambda"]) / np.linalg.norm(lam0))
+
+
 def x_fixed_margin(scene: dict[str, Any]) -> float:
-    """reference.paper_margin_x_fixed of one scene (HiGHS: a few ms)."""
+    """reference.paper_margin_x_fixed of one scene (HiGHS: a few ms); -inf where HiGHS finds
+    that no force with x = 0 holds equilibrium within its tolerance (a hand whose x-fixed
+    equalities are singular to it, which a core may still solve with forces of 1e7
+    |lambda0|)."""
     C = np.asarray(scene["contacts"], np.float64)
     status, frames = reference.contact_frames(C, np.array([0.0, 1.0, 0.0]))
     if status != "ok" or frames is None:
@@ -295,7 +312,12 @@ def x_fixed_margin(scene: dict[str, Any]) -> float:
     G = reference.grasp_matrix(frames)
     w_l = np.asarray(wrench(scene))
     lam0 = reference.min_norm_solution(G, w_l)
-    return reference.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(lam0)))
+    try:
+        return reference.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(lam0)))
+    except RuntimeError as e:
+        if "infeasible" not in str(e).lower():
+            raise
+        return -math.inf
 
 
 def core_answer(scene: dict[str, Any], scalar: str) -> tuple[str, str, list[int]]:
@@ -400,8 +422,9 @@ def layered(count: int, sample_step: int = 0) -> dict[str, Any]:
     the float and double cores on every scene, the float64 reference where they differ and
     on every `sample_step`-th scene (none when 0). A scene where the cores agree counts as
     agreeing with float64, as the sample and the known answers show the double core right.
-    Indexes are into "scenes"; "margins" holds the x-fixed margin of every scene where a
-    core disagrees with float64 or the two cores choose another model."""
+    Indexes are into "scenes"; "margins" and "ratios" hold the x-fixed margin and the
+    float64 optimum's force ratio of every scene where a core disagrees with float64 or
+    the two cores choose another model."""
     scenes = scene_set(count)[len(ISSUE17_SCENES) :]
     floats = [core_answer(s, "float") for s in scenes]
     doubles = [core_answer(s, "double") for s in scenes]
@@ -411,7 +434,9 @@ def layered(count: int, sample_step: int = 0) -> dict[str, Any]:
     float_bad = [i for i in refs if not agrees(floats[i], refs[i])]
     double_bad = [i for i in refs if not agrees(doubles[i], refs[i])]
     other_model = [i for i in differ if floats[i][:2] != doubles[i][:2]]
-    margins = {i: x_fixed_margin(scenes[i]) for i in set(float_bad + double_bad + other_model)}
+    odd = set(float_bad + double_bad + other_model)
+    margins = {i: x_fixed_margin(scenes[i]) for i in odd}
+    ratios = {i: force_ratio(scenes[i]) for i in odd}
     return {
         "scenes": scenes,
         "floats": floats,
@@ -422,6 +447,7 @@ def layered(count: int, sample_step: int = 0) -> dict[str, Any]:
         "double_bad": double_bad,
         "other_model": other_model,
         "margins": margins,
+        "ratios": ratios,
     }
 
 
@@ -548,6 +574,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="the size of the set the --scene names come from (100000: the test's; "
         "1000000: `layered`'s default)",
     )
+    m.add_argument(
+        "--large-set-scenes",
+        action="store_true",
+        help="also run the hands larger sets found (LARGE_SET_SCENES)",
+    )
     m.add_argument("worktrees", type=Path, nargs="+")
     args = ap.parse_args(argv)
 
@@ -570,15 +601,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             ("double_bad", "double disagrees with float64"),
         ):
             outside = [i for i in res[key] if abs(margins[i]) > FLOAT_BAND_TOL]
+            beyond = [i for i in outside if res["ratios"][i] > FLOAT_FORCE_LIMIT]
             print(
                 f"{what} on {len(res[key])}, {len(outside)} with |x-fixed margin| > "
-                f"{FLOAT_BAND_TOL:g}"
+                f"{FLOAT_BAND_TOL:g} ({len(beyond)} of them with forces above "
+                f"{FLOAT_FORCE_LIMIT:.0e} |lambda0|)"
             )
         for i in res["float_bad"]:
             if abs(margins[i]) > FLOAT_BAND_TOL:
                 print(
                     f"  {res['scenes'][i]['name']}: float {res['floats'][i]} reference "
-                    f"{res['refs'][i]} margin {margins[i]:.3g}"
+                    f"{res['refs'][i]} margin {margins[i]:.3g} forces "
+                    f"{res['ratios'][i]:.3g} |lambda0|"
                 )
         print(f"({time.perf_counter() - t0:.0f} s)")
         return 0
@@ -605,6 +639,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"({time.perf_counter() - t0:.0f} s)")
         return 0
     extra = [as_float32(s) for s in named_scenes(args.scene, args.scene_set)]
+    if args.large_set_scenes:
+        extra += [as_float32(s) for s in LARGE_SET_SCENES]
     scenes = [as_float32(s) for s in scene_set(args.count)] + extra
     answers = reference_all(args.count, args.jobs, rounded=True)
     answers += [reference_answer(s) for s in extra]
