@@ -283,7 +283,7 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   const int limit = 3 * K - eq.rank() < kMax ? 3 * K - eq.rank() : kMax;
   uint16_t active = fixed;  // fixed rows are held by eq, never by `rows`
   // A running bound on the rounding error the steps have put into lambda: a row's
-  // projection is known to a few ulps absolute, so a step t along it is off by ~4 eps |t|.
+  // projection is known to a few ulps absolute, so a step t along it is off by ~2 eps |t|.
   // A step along a row 1e-4 long (a near-degenerate vertex) is large, and so is its error;
   // violations below the bound are rounding, not a reason to move again. Two ulps, not
   // four: at four it hid violations float had computed to 3e-7 behind a bound of 7e-5
