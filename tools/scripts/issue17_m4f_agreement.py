@@ -283,19 +283,25 @@ def as_float32(scene: dict[str, Any]) -> dict[str, Any]:
     return dict(scene, contacts=f32(scene["contacts"]), force=f32(scene["force"]))
 
 
-def reference_answer(scene: dict[str, Any]) -> tuple[str, str, list[int]]:
-    """(status, model, pwm) of the float64 reference on one scene."""
-    r = reference.solve(
+def reference_solve(scene: dict[str, Any]) -> dict[str, Any]:
+    """The float64 reference's full result on one scene."""
+    return reference.solve(
         scene["contacts"], wrench(scene), scene["policy"], "C", "paper", compute_margins=False
     )
+
+
+def answer_of(r: dict[str, Any]) -> tuple[str, str, list[int]]:
+    """(status, model, pwm) of a reference result."""
     return r["status"], r["constraints_used"], list(r["pwm"])
 
 
-def force_ratio(scene: dict[str, Any]) -> float:
-    """||lambda|| / ||lambda0|| of the float64 reference's optimum, in the model it used."""
-    r = reference.solve(
-        scene["contacts"], wrench(scene), scene["policy"], "C", "paper", compute_margins=False
-    )
+def reference_answer(scene: dict[str, Any]) -> tuple[str, str, list[int]]:
+    """(status, model, pwm) of the float64 reference on one scene."""
+    return answer_of(reference_solve(scene))
+
+
+def force_ratio(r: dict[str, Any]) -> float:
+    """||lambda|| / ||lambda0|| of a reference result's optimum, in the model it used."""
     lam0 = np.asarray(r["diagnostics"]["lam0"], np.float64)
     return float(np.linalg.norm(r["lambda"]) / np.linalg.norm(lam0))
 
@@ -430,13 +436,14 @@ def layered(count: int, sample_step: int = 0) -> dict[str, Any]:
     doubles = [core_answer(s, "double") for s in scenes]
     differ = [i for i, (f, d) in enumerate(zip(floats, doubles)) if f != d]
     sample = range(0, count, sample_step) if sample_step > 0 else range(0)
-    refs = {i: reference_answer(scenes[i]) for i in sorted(set(differ) | set(sample))}
+    solved = {i: reference_solve(scenes[i]) for i in sorted(set(differ) | set(sample))}
+    refs = {i: answer_of(r) for i, r in solved.items()}
     float_bad = [i for i in refs if not agrees(floats[i], refs[i])]
     double_bad = [i for i in refs if not agrees(doubles[i], refs[i])]
     other_model = [i for i in differ if floats[i][:2] != doubles[i][:2]]
     odd = set(float_bad + double_bad + other_model)
     margins = {i: x_fixed_margin(scenes[i]) for i in odd}
-    ratios = {i: force_ratio(scenes[i]) for i in odd}
+    ratios = {i: force_ratio(solved[i]) for i in odd}
     return {
         "scenes": scenes,
         "floats": floats,
