@@ -293,15 +293,6 @@ def project_forces(
                 return st.QP_ITERATION_LIMIT
             z_norm = rows.split(v, d, z, coeff)
             dependent = (not z_norm > dep_tol) or rows.n >= limit
-            t_dual = _INF
-            drop = -1
-            for i in range(rows.n):
-                if not coeff[i] > 0.0:
-                    continue
-                ratio = u[i] / coeff[i]
-                if ratio < t_dual:
-                    t_dual = ratio
-                    drop = i
             if dependent and u_cand == 0.0:
                 # The row's value on this face from equilibrium alone (force_qp.h).
                 if not have_shared:
@@ -313,12 +304,24 @@ def project_forces(
                     t_ = coeff[i] * shared[w[i]]
                     value -= t_
                     size += abs(t_)
+                can_leave = False
+                for i in range(rows.n):
+                    can_leave = can_leave or coeff[i] > 0.0
                 rounding = tol if tol > step_ulps * size else step_ulps * size
                 if value >= -rounding or (
-                    drop < 0 and value >= -(violation_tol + step_ulps * size)
+                    not can_leave and value >= -(violation_tol + step_ulps * size)
                 ):
                     settled |= 1 << cand
                     break
+            t_dual = _INF
+            drop = -1
+            for i in range(rows.n):
+                if not coeff[i] > 0.0:
+                    continue
+                ratio = u[i] / coeff[i]
+                if ratio < t_dual:
+                    t_dual = ratio
+                    drop = i
             if dependent and drop < 0:
                 return st.QP_INFEASIBLE
             t_primal = _INF if dependent else -lam[cand] / (z_norm * z_norm)

@@ -329,17 +329,6 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       // With as many active rows as null(G) has dimensions, nothing is left to move along,
       // whatever rounding says.
       const bool dependent = !(z_norm > dep_tol) || rows.n >= limit;
-      // Dual step limit: the first inequality multiplier to reach zero.
-      T t_dual = inf;
-      int drop = -1;
-      for (int i = 0; i < rows.n; ++i) {
-        if (!(coeff[i] > T(0))) continue;
-        const T ratio = u[i] / coeff[i];
-        if (ratio < t_dual) {
-          t_dual = ratio;
-          drop = i;
-        }
-      }
       if (dependent && u_cand == T(0)) {
         // A row the active ones determine: on this face its value follows from
         // equilibrium alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of
@@ -357,10 +346,23 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
           value -= coeff[i] * shared(w[i]);
           size += std::abs(coeff[i] * shared(w[i]));
         }
+        bool can_leave = false;
+        for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
         const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
-        if (value >= -rounding || (drop < 0 && value >= -(violation_tol + kStepUlps * size))) {
+        if (value >= -rounding || (!can_leave && value >= -(violation_tol + kStepUlps * size))) {
           settled = static_cast<uint16_t>(settled | (1u << cand));
           break;
+        }
+      }
+      // Dual step limit: the first inequality multiplier to reach zero.
+      T t_dual = inf;
+      int drop = -1;
+      for (int i = 0; i < rows.n; ++i) {
+        if (!(coeff[i] > T(0))) continue;
+        const T ratio = u[i] / coeff[i];
+        if (ratio < t_dual) {
+          t_dual = ratio;
+          drop = i;
         }
       }
       if (dependent && drop < 0) return Status::kQpInfeasible;
