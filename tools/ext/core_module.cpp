@@ -196,6 +196,7 @@ nb::dict result_dict(gg::Status status, int k, const gg::FrameResult<T>& fr,
   }
   d["iterations"] = g.iterations;
   d["rank_ratio"] = double(g.rank_ratio);
+  d["retried"] = g.retried;
   d["recomputed"] = fr.recomputed;
   return d;
 }
@@ -489,7 +490,8 @@ constexpr const char* kResultDoc =
     "lambda (3k floats: contact forces [x y z] per contact before normalisation), "
     "constraints_used ('paper'/'normal'/'none', '' unless ok), relevant (k bools), "
     "error_deg, alpha (floats), fallback_mask (int), iterations (int: QP active-set "
-    "changes), rank_ratio (float), recomputed (bool: the grasp part ran). levels, lambda, "
+    "changes), rank_ratio (float), retried (bool: a float solve that could not vouch for "
+    "its answer ran again in double), recomputed (bool: the grasp part ran). levels, lambda, "
     "relevant, error_deg and alpha are None unless status is 'ok'.";
 
 // ---------------------------------------------------------------------------------------

@@ -9,6 +9,13 @@
 #define GRASPGUIDE_USE_DOUBLE 0  // microcontrollers with a single-precision FPU
 #endif
 
+// A float solve that cannot vouch for its answer retries the posture in double
+// (answer_certificate.h): once per posture, in software on an FPU without double. 0 keeps
+// float's answer, as the benchmark does to measure what the retry buys.
+#ifndef GRASPGUIDE_DOUBLE_RETRY
+#define GRASPGUIDE_DOUBLE_RETRY 1
+#endif
+
 namespace graspguide {
 
 // The one precision switch: the scalar the firmware and tools run with by default.

@@ -42,6 +42,10 @@ struct ForceSolution {
   ConstraintModel used = ConstraintModel::kNone;
   int iterations = 0;   // active-set changes, summed over the models tried
   uint16_t active = 0;  // bit j: lambda_j held at 0 in the model used
+  bool firm = true;     // every model found infeasible was found so by a firm verdict
+  // The answer is one float can vouch for (answer_certificate.h); always true in double
+  // and on the SVD route. solve_grasp retries in double when it is false.
+  bool certain = true;
 };
 
 // Bit j of a 3k-bit mask: component j of lambda (contact j / 3, axis j % 3: x y z).
@@ -148,6 +152,7 @@ struct EqualityRows {
   uint16_t fixed = 0;
   bool have_c = false;  // c is formed on demand for G_hat's rows
   T smallest = T(1);    // the shortest row Gram-Schmidt kept, before normalising
+  bool firm = true;     // a contradiction found was beyond its rounding (QpInfo::firm)
 
   int rank() const { return n + __builtin_popcount(fixed); }
 
@@ -196,6 +201,7 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
   eq.n = 0;
   eq.fixed = fixed;
   eq.have_c = true;
+  eq.firm = true;
   const T eps = std::numeric_limits<T>::epsilon();
   int dependent = 0;
   bool consistent = true;
@@ -221,7 +227,13 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
       // (issue 17).
       const T bound = consistency_tol + T(kBasisNoiseUlps) * eps * size + norm * eq.c.norm();
       ++dependent;
-      if (!(std::abs(rhs) <= bound)) consistent = false;
+      if (!(std::abs(rhs) <= bound)) {
+        // Never firm: float cannot tell a dependent row from a real one shorter than
+        // dependent_tol, along which float64 may hold the hand with 1e6 |lambda0|. Rare: no
+        // contradiction here in 20,000 random hands.
+        consistent = false;
+        eq.firm = false;
+      }
       continue;
     }
     eq.own.row(eq.n) = v.transpose() / norm;
@@ -265,7 +277,10 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   } else {
     const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol,
                                               known_dependences, eq);
-    if (s != Status::kOk) return s;
+    if (s != Status::kOk) {
+      info.firm = eq.firm;
+      return s;
+    }
     // The shared part plus the free part of start (start less its parts along the q and
     // its fixed components).
     const Vec6<T> along = eq.c - eq.own * start;
@@ -296,6 +311,22 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
   uint16_t settled = 0;
   Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
   bool have_shared = false;
+  // A row the active ones determine: on this face its value follows from equilibrium
+  // alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of the rounding the
+  // iterate carries from large steps. `size` is what its sum's cancellations started from.
+  auto dependent_value = [&](int cand, const T* coeff, T& size) {
+    if (!have_shared) {
+      eq.shared_part(start, shared);
+      have_shared = true;
+    }
+    T value = shared(cand);
+    size = std::abs(shared(cand));
+    for (int i = 0; i < rows.n; ++i) {
+      value -= coeff[i] * shared(w[i]);
+      size += std::abs(coeff[i] * shared(w[i]));
+    }
+    return value;
+  };
 
   for (;;) {
     // The most violated inactive constraint (lowest index on ties). A violation counts
@@ -330,22 +361,13 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       // whatever rounding says.
       const bool dependent = !(z_norm > dep_tol) || rows.n >= limit;
       if (dependent && u_cand == T(0)) {
-        // A row the active ones determine: on this face its value follows from
-        // equilibrium alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of
-        // the rounding the iterate carries from large steps. A degenerate vertex (the
-        // paper model's common case) holds it at zero; only a value below zero beyond
-        // that formula's own rounding is a real violation. A real violation takes the dual
-        // step like any other, unless no active row can leave: then it is settled when
-        // the tolerance allows it, and otherwise certifies infeasibility (below).
-        if (!have_shared) {
-          eq.shared_part(start, shared);
-          have_shared = true;
-        }
-        T value = shared(cand), size = std::abs(shared(cand));
-        for (int i = 0; i < rows.n; ++i) {
-          value -= coeff[i] * shared(w[i]);
-          size += std::abs(coeff[i] * shared(w[i]));
-        }
+        // A degenerate vertex (the paper model's common case) holds a dependent row at
+        // zero; only a value below zero beyond its formula's own rounding is a real
+        // violation. A real violation takes the dual step like any other, unless no
+        // active row can leave: then it is settled when the tolerance allows it, and
+        // otherwise certifies infeasibility (below).
+        T size;
+        const T value = dependent_value(cand, coeff, size);
         bool can_leave = false;
         for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
         const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
@@ -365,7 +387,27 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
           drop = i;
         }
       }
-      if (dependent && drop < 0) return Status::kQpInfeasible;
+      if (dependent && drop < 0) {
+        // Firm only when the row is clearly dependent and its violation clears the
+        // tolerance by the margin over the formula's rounding. A row left 0.5 dep_tol long
+        // may be a real one, along which float64 holds the hand with 4e5 |lambda0|; the
+        // typical dependent row is left under 0.1 dep_tol. The formula's rounding is its
+        // terms' and the shared part's, which the equality basis computed dividing by its
+        // shortest row and coeff = r^-1 d amplifies by the active rows' shortest: a basis
+        // row 3e-3 long made it 1e-4 |lambda0| where two ulps of the terms were assumed,
+        // and float gave up a hand float64 holds (issue 17).
+        T size;
+        const T value = dependent_value(cand, coeff, size);
+        T r_min = T(1), spread = T(1);
+        for (int i = 0; i < rows.n; ++i) {
+          if (std::abs(rows.r[i][i]) < r_min) r_min = std::abs(rows.r[i][i]);
+          spread += std::abs(coeff[i]);
+        }
+        const T noise = kStepUlps * (size + spread * start.norm() / eq.smallest) / r_min;
+        info.firm = (rows.n >= limit || z_norm <= T(kFirmDependentShare) * dep_tol) &&
+                    -value >= violation_tol + T(kFirmVerdictFactor) * noise;
+        return Status::kQpInfeasible;
+      }
       const T t_primal = dependent ? inf : -lambda(cand) / (z_norm * z_norm);
       const T t = t_primal <= t_dual ? t_primal : t_dual;
       if (!dependent) {
@@ -443,10 +485,13 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
                     T feasibility_rel = Tolerances<T>::kFeasRelTol) {
   const T violation_tol = feasibility_rel * lambda0.norm();
   out.iterations = 0;
+  out.firm = true;
   for (int model = static_cast<int>(requested); model <= static_cast<int>(ConstraintModel::kNone);
        ++model) {
     const auto m = static_cast<ConstraintModel>(model);
     uint16_t fixed = 0, implied = 0;
+    // A firm verdict whatever the precision: the budget is one three-term dot product,
+    // rounded to a few ulps of |tau|, 1e-3 of the tolerance it is compared with.
     if (m == ConstraintModel::kPaper &&
         paper_x_rows<T, K>(frames, w, violation_tol, fixed, implied) == Status::kQpInfeasible)
       continue;
@@ -456,7 +501,10 @@ Status solve_forces(const ContactFrames<T, K>& frames, const GraspStructure<T, K
         Tolerances<T>::kRoundingRelTol, Tolerances<T>::kStructuredDependentTol, max_iterations,
         out.lambda, info, implied != 0 ? 1 : 0);
     out.iterations += info.iterations;
-    if (s == Status::kQpInfeasible) continue;
+    if (s == Status::kQpInfeasible) {
+      out.firm = out.firm && info.firm;
+      continue;
+    }
     if (s != Status::kOk) return s;
     out.used = m;
     out.active = info.active;

@@ -2,6 +2,7 @@
 // orientation, so it can be kept while the posture stays fixed.
 #pragma once
 
+#include "graspguide/answer_certificate.h"
 #include "graspguide/force_qp.h"
 #include "graspguide/motor_levels.h"
 #include "graspguide/relevance.h"
@@ -22,6 +23,7 @@ struct GraspSolution {
   uint16_t active = 0;
   int iterations = 0;
   T rank_ratio = T(0);
+  bool retried = false;  // a float solve that could not vouch for its answer ran in double
 };
 
 // Steps 2-5 for the chosen route: the rank, lambda0 (for the relevance) and the QP optimum.
@@ -55,8 +57,18 @@ Status grasp_forces(const ContactFrames<T, K>& frames, const Vec6<T>& w, const V
   relevant = relevance<T, K>(frames, force);
   const ForceVec<T, K> start =
       project_onto_equilibrium<T, K>(st, w_hat, desired_forces<T, K>(lambda0, relevant));
-  return solve_forces<T, K>(frames, st, w, lambda0, start, model, settings.max_iterations, forces);
+  const Status qp =
+      solve_forces<T, K>(frames, st, w, lambda0, start, model, settings.max_iterations, forces);
+  // Double answers for itself: the certificate is float's, and the retry's.
+  if (qp == Status::kOk && sizeof(T) < sizeof(double))
+    forces.certain = answer_certain<T, K>(st, w_hat, lambda0, forces);
+  return qp;
 }
+
+template <typename T, int K>
+Status retried_in_double(const Contacts<T, K>& contacts, const Vec6<T>& wrench,
+                         const Vec3<T>& y_axis, ConstraintModel model, Policy policy,
+                         const SolverSettings& settings, GraspSolution<T>& out);
 
 template <typename T, int K>
 Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const Vec3<T>& y_axis,
@@ -77,6 +89,9 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   ForceSolution<T, K> forces;
   s = grasp_forces<T, K>(frames, w, force, model, settings, out.rank_ratio, relevant, forces);
   out.iterations = forces.iterations;
+  if (sizeof(T) < sizeof(double) && settings.double_retry &&
+      ((s == Status::kOk && !forces.certain) || s == Status::kQpIterationLimit))
+    return retried_in_double<T, K>(contacts, wrench, y_axis, model, policy, settings, out);
   if (s != Status::kOk) return s;
 
   LevelVec<T, K> levels;
@@ -94,6 +109,31 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   out.fallback_mask = frames.fallback_mask;
   out.active = forces.active;
   return Status::kOk;
+}
+
+// The whole solve again in double from the same (float) inputs, its answer rounded back.
+template <typename T, int K>
+Status retried_in_double(const Contacts<T, K>& contacts, const Vec6<T>& wrench,
+                         const Vec3<T>& y_axis, ConstraintModel model, Policy policy,
+                         const SolverSettings& settings, GraspSolution<T>& out) {
+  GraspSolution<double> d;
+  const Status s =
+      solve_grasp<double, K>(contacts.template cast<double>(), wrench.template cast<double>(),
+                             y_axis.template cast<double>(), model, policy, settings, d);
+  const int float_iterations = out.iterations;
+  out = GraspSolution<T>{};
+  out.k = d.k;
+  out.lambda = d.lambda.template cast<T>();
+  out.levels = d.levels.template cast<T>();
+  out.force_unit = d.force_unit.template cast<T>();
+  out.used = d.used;
+  out.relevant_mask = d.relevant_mask;
+  out.fallback_mask = d.fallback_mask;
+  out.active = d.active;
+  out.iterations = float_iterations + d.iterations;
+  out.rank_ratio = T(d.rank_ratio);
+  out.retried = true;
+  return s;
 }
 
 // Declared here with EXTERN = extern, defined once in grasp_solution.cpp with EXTERN empty.

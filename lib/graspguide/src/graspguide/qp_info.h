@@ -8,6 +8,9 @@ namespace graspguide {
 struct QpInfo {
   int iterations = 0;   // active-set changes (additions and removals)
   uint16_t active = 0;  // bit j: constraint j active at the solution
+  // An infeasibility verdict cleared the rounding that could have produced it by
+  // kFirmVerdictFactor (force_qp.h); a float verdict that did not is retried in double.
+  bool firm = true;
 };
 
 }  // namespace graspguide

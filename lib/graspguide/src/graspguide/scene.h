@@ -47,6 +47,7 @@ inline bool parse_mode(const char* s, Mode* out) { return parse_name<Mode, 2>(s,
 struct SolverSettings {
   int max_iterations = kDefaultMaxIterations;
   Decomposition decomposition = Decomposition::kStructured;
+  bool double_retry = GRASPGUIDE_DOUBLE_RETRY != 0;  // float only (answer_certificate.h)
 };
 
 template <typename T>

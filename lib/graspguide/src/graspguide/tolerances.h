@@ -26,6 +26,10 @@ struct Tolerances<float> {
   // need a row 7e-6 long to hold the paper model, another one 1.8e-6 (issue 17; 1e-5
   // and then 2e-6 refused them).
   static constexpr float kStructuredDependentTol = 1e-6f;
+  // How far from equilibrium, relative to |lambda0|, an optimum float vouches for may
+  // be: the ones float gets right miss it by up to 4e-3 (rows within the tolerance zeroed
+  // at the end), the ones it gets wrong by 2 to 3e5 (issue 17). Beyond it, double decides.
+  static constexpr float kCertainResidualRel = 1e-2f;
 };
 
 template <>
@@ -34,6 +38,7 @@ struct Tolerances<double> {
   static constexpr double kRoundingRelTol = 1e-9;
   static constexpr double kDependentRelTol = 1e-9;
   static constexpr double kStructuredDependentTol = 1e-9;
+  static constexpr double kCertainResidualRel = 1e-2;
 };
 
 inline constexpr double kCoincidentRelTol = 1e-4;
@@ -44,6 +49,13 @@ inline constexpr double kRankRelTol = 1e-4;
 inline constexpr double kZeroForceRelTol = 1e-6;
 inline constexpr double kRelevanceCosTol = 1e-5;
 inline constexpr double kTinyRel = 1e-12;
+// A QP's infeasibility verdict is firm when its violation exceeds the tolerance by this
+// many times the rounding that could have produced it, conditioning included
+// (force_qp.h). A float verdict that is not firm is retried in double (issue 17).
+inline constexpr double kFirmVerdictFactor = 16.0;
+// ... and when the row it concerns is left shorter than this share of the dependence
+// threshold: a real row that short would need forces float cannot resolve.
+inline constexpr double kFirmDependentShare = 0.25;
 
 inline constexpr int kDefaultMaxIterations = 64;
 

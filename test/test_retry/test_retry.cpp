@@ -1,0 +1,193 @@
+// The float solve's certificate and its retry in double (answer_certificate.h,
+// grasp_solution.h): hands four million random scenes found float getting wrong, one for
+// each way float shows it cannot vouch for an answer, are retried and come out as the
+// double core's answer on the same float inputs; ordinary hands are not retried; the
+// retry can be switched off, and double never retries. The hands are
+// tools/scripts/issue17_m4f_agreement.py's RETRY_SCENES, whose test
+// (tools/tests/test_float_paper_agreement.py) compares them with the float64 reference.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <random>
+
+#include "common/hand_scenes.h"
+#include "graspguide.h"
+
+namespace gg = graspguide;
+
+namespace {
+
+// Why float cannot vouch for the hand's answer.
+enum class Doubt { kVerdict, kResidual };
+
+struct HardHand {
+  const char* name;
+  int k;
+  double contacts[4][3];
+  double force[3];
+  gg::Policy policy;
+  Doubt doubt;
+};
+
+const HardHand kHands[] = {
+    {"p2204522", 3, {{0.04494037585436739, 0.03053429712849922, 0.02266664723980756}, {0.0034042718550601047, 0.0936372274491434, 0.04528011312471476}, {-0.0008358505308126273, 0.10035906448590609, 0.047446552315281484}, {0, 0, 0}},
+     {-0.46772854432514194, 0.8662874692784672, 0.1754309818549512}, gg::Policy::kFperp, Doubt::kVerdict},
+    {"p1453642", 3, {{0.049673006960451814, 0.04444279826351377, 0.04946824877769698}, {0.021290198851965834, 0.10906204826065943, 0.04436559409614136}, {-0.007043224497789708, 0.0986230492963951, 0.03927807832390602}, {0, 0, 0}},
+     {-0.25615441567575364, -0.9572968717493527, 0.13404333131012683}, gg::Policy::kFperp, Doubt::kResidual},
+    {"p106034", 3, {{0.04966689690685262, 0.04904829611896976, 0.028451813224532364}, {0.015150478548027601, 0.08653778858444987, 0.04477521817827912}, {0.0026737704556028443, 0.09859745445699755, 0.05067568391195605}, {0, 0, 0}},
+     {-0.7315100647478698, 0.43412553421836625, -0.5257642491765538}, gg::Policy::kFperp, Doubt::kVerdict},
+    {"p2629315", 4, {{0.05987951702495167, 0.03420736161367301, 0.03660593936668528}, {0.005796428972927941, 0.08790590508182465, 0.05329308046545888}, {-0.020436409997482412, 0.10461078872731762, 0.04811943651930693}, {0.000818933349785278, 0.04828420629934567, -0.008466220551860134}},
+     {-0.38660475577729636, -0.17613507622123836, -0.9052696823239557}, gg::Policy::kFperp, Doubt::kVerdict},
+    {"p2811766", 3, {{0.05485703701071162, 0.05465707963124879, 0.035008042702543235}, {0.004148189523642333, 0.09639376161412362, 0.043008875423138165}, {-0.0011276620677085087, 0.09011119765015829, 0.043841289508471284}, {0, 0, 0}},
+     {-0.9084423493251154, -0.3656606419845235, 0.20254577965519593}, gg::Policy::kFperp, Doubt::kVerdict},
+    {"p088019", 4, {{0.05842269759759068, 0.03797525790643823, 0.023508602738658825}, {0.016381862968775293, 0.09412782146845693, 0.04094672097384096}, {-0.0025551265951760504, 0.11335564010399796, 0.043548343426526526}, {0.010984554721106873, 0.04987878496888214, -0.0013707045366395942}},
+     {-0.7874333864068572, 0.5977609094119497, -0.15043456102514416}, gg::Policy::kFperp, Doubt::kResidual},
+};
+
+template <int K>
+gg::Contacts<float, K> contacts_of(const HardHand& h) {
+  gg::Contacts<float, K> c;
+  for (int i = 0; i < K; ++i)
+    for (int j = 0; j < 3; ++j) c(j, i) = float(h.contacts[i][j]);
+  return c;
+}
+
+gg::Vec6<float> wrench_of(const HardHand& h) {
+  gg::Vec6<float> w;
+  w << float(h.force[0]), float(h.force[1]), float(h.force[2]), 0.0f, 0.0f, 0.0f;
+  return w;
+}
+
+template <typename T, int K>
+gg::Status solve(const gg::Contacts<float, K>& c, const gg::Vec6<float>& w, gg::Policy policy,
+                 const gg::SolverSettings& settings, gg::GraspSolution<T>& out) {
+  return gg::solve_grasp<T, K>(c.template cast<T>(), w.template cast<T>(),
+                               gg::Vec3<T>::UnitY(), gg::ConstraintModel::kPaper, policy,
+                               settings, out);
+}
+
+// The float structured route's pieces, as grasp_forces runs them: whether its verdicts
+// were firm and whether it vouches for its answer.
+template <int K>
+gg::ForceSolution<float, K> float_forces(const HardHand& h) {
+  const auto c = contacts_of<K>(h);
+  const auto w_in = wrench_of(h);
+  gg::ContactFrames<float, K> frames;
+  EXPECT_EQ((gg::contact_frames<float, K>(c, gg::Vec3<float>::UnitY(), frames)), gg::Status::kOk);
+  const gg::Vec6<float> w = gg::scaled_wrench<float>(w_in, frames.length_scale);
+  gg::GraspStructure<float, K> st;
+  EXPECT_EQ((gg::grasp_structure<float, K>(frames, st)), gg::Status::kOk);
+  const gg::Vec6<float> w_hat = gg::whitened_wrench<float, K>(st, w);
+  const gg::ForceVec<float, K> lambda0 = gg::min_norm_forces<float, K>(st, w_hat);
+  const uint8_t relevant = gg::relevance<float, K>(frames, w_in.head<3>());
+  const gg::ForceVec<float, K> start = gg::project_onto_equilibrium<float, K>(
+      st, w_hat, gg::desired_forces<float, K>(lambda0, relevant));
+  gg::ForceSolution<float, K> f;
+  EXPECT_EQ((gg::solve_forces<float, K>(frames, st, w, lambda0, start,
+                                        gg::ConstraintModel::kPaper, 64, f)),
+            gg::Status::kOk);
+  f.certain = gg::answer_certain<float, K>(st, w_hat, lambda0, f);
+  return f;
+}
+
+template <int K>
+void check_hand(const HardHand& h) {
+  SCOPED_TRACE(h.name);
+  const auto c = contacts_of<K>(h);
+  const auto w = wrench_of(h);
+  const auto f = float_forces<K>(h);
+  EXPECT_FALSE(f.certain);
+  // Each hand fails the check it was kept for: an infeasibility verdict within float's
+  // rounding, or an optimum off equilibrium.
+  EXPECT_EQ(f.firm, h.doubt != Doubt::kVerdict);
+
+  gg::SolverSettings on, off;
+  off.double_retry = false;
+  gg::GraspSolution<float> retried, kept;
+  gg::GraspSolution<double> twin;
+  const gg::Status s = solve<float, K>(c, w, h.policy, on, retried);
+  ASSERT_EQ((solve<double, K>(c, w, h.policy, on, twin)), s);
+  ASSERT_EQ(s, gg::Status::kOk);
+  EXPECT_TRUE(retried.retried);
+  EXPECT_FALSE(twin.retried);
+  EXPECT_EQ(retried.used, twin.used);
+  EXPECT_EQ(retried.active, twin.active);
+  for (int i = 0; i < K; ++i) EXPECT_EQ(retried.levels(i), float(twin.levels(i))) << i;
+
+  // Switched off, float keeps its own answer, which is not double's: another model or a
+  // motor more than one count away.
+  ASSERT_EQ((solve<float, K>(c, w, h.policy, off, kept)), gg::Status::kOk);
+  EXPECT_FALSE(kept.retried);
+  const gg::Pwm a = gg::pwm_from_levels(kept.levels.data(), K, gg::pwm_gain(gg::Mode::kC, 0.0f));
+  const gg::Pwm b = gg::pwm_from_levels(twin.levels.data(), K, gg::pwm_gain(gg::Mode::kC, 0.0));
+  int worst = 0;
+  for (int i = 0; i < K; ++i) worst = std::max(worst, std::abs(int(a.duty[i]) - int(b.duty[i])));
+  EXPECT_TRUE(kept.used != twin.used || worst > 1) << worst;
+}
+
+}  // namespace
+
+TEST(DoubleRetry, HandsFloatCannotVouchForGetDoublesAnswer) {
+  for (const auto& h : kHands) {
+    if (h.k == 3)
+      check_hand<3>(h);
+    else
+      check_hand<4>(h);
+  }
+}
+
+// Ordinary hands, including the quarter whose paper model is infeasible, are decided in
+// float: the retry stays rare, and where it happens it gives double's answer.
+TEST(DoubleRetry, OrdinaryHandsAreRarelyRetried) {
+  std::mt19937_64 rng(17);
+  int retried = 0, fell_back = 0, total = 0;
+  for (int n = 0; n < 4000; ++n) {
+    const auto r = graspguide_test::random_scene(rng, 3 + n % 2);
+    const gg::Policy policy = n % 4 < 2 ? gg::Policy::kF : gg::Policy::kFperp;
+    const gg::SolverSettings settings;
+    const auto run = [&](auto k_tag) {
+      constexpr int K = decltype(k_tag)::value;
+      const gg::Contacts<float, K> c = r.contacts.template leftCols<K>().template cast<float>();
+      const gg::Vec6<float> w = r.wrench.cast<float>();
+      gg::GraspSolution<float> f;
+      gg::GraspSolution<double> d;
+      const gg::Status s = solve<float, K>(c, w, policy, settings, f);
+      if (s != gg::Status::kOk) return;
+      ++total;
+      fell_back += f.used != gg::ConstraintModel::kPaper;
+      if (!f.retried) return;
+      ++retried;
+      ASSERT_EQ((solve<double, K>(c, w, policy, settings, d)), gg::Status::kOk) << n;
+      EXPECT_EQ(f.used, d.used) << n;
+      for (int i = 0; i < K; ++i) EXPECT_EQ(f.levels(i), float(d.levels(i))) << n;
+    };
+    if (r.k == 3)
+      run(std::integral_constant<int, 3>());
+    else
+      run(std::integral_constant<int, 4>());
+  }
+  RecordProperty("retried", retried);
+  RecordProperty("fell_back", fell_back);
+  EXPECT_GT(total, 3900);
+  EXPECT_GT(fell_back, total / 20);  // the verdicts below are exercised
+  // 34 of 4,000 when the retry came in (0.85 %), most of them hands under a moment whose
+  // left-over row is 0.25 to 1 times the dependence threshold; 0.16 % with no moment.
+  EXPECT_LE(retried, total / 50) << retried << " of " << total;
+}
+
+// An iteration cap float hits is retried too, under the same cap.
+TEST(DoubleRetry, AnIterationLimitIsRetriedUnderTheSameCap) {
+  const auto& h = kHands[0];
+  gg::SolverSettings capped, capped_off;
+  capped.max_iterations = capped_off.max_iterations = 1;
+  capped_off.double_retry = false;
+  gg::GraspSolution<float> f, kept;
+  gg::GraspSolution<double> d;
+  ASSERT_EQ((solve<float, 3>(contacts_of<3>(h), wrench_of(h), h.policy, capped_off, kept)),
+            gg::Status::kQpIterationLimit);
+  const gg::Status s = solve<float, 3>(contacts_of<3>(h), wrench_of(h), h.policy, capped, f);
+  EXPECT_EQ(s, (solve<double, 3>(contacts_of<3>(h), wrench_of(h), h.policy, capped, d)));
+  EXPECT_TRUE(f.retried);
+  EXPECT_FALSE(kept.retried);
+}
