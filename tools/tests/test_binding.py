@@ -38,6 +38,7 @@ RESULT_KEYS = {
     "fallback_mask",
     "iterations",
     "rank_ratio",
+    "retried",
     "recomputed",
 }
 

@@ -34,6 +34,13 @@
 #include <BluetoothSerial.h>
 #endif
 
+#if defined(ARDUINO_ARCH_ESP32)
+// The loop task's stack, 8 KB by default: a posture float cannot vouch for is solved again
+// in double (docs/algorithm.md, step 5), and that took the Cortex-M4F firmware's stack
+// peak to 7.4 KB under QEMU (tools/tests/test_qemu_firmware.py).
+SET_LOOP_TASK_STACK_SIZE(16 * 1024);
+#endif
+
 namespace {
 
 namespace gb = graspguide::board;

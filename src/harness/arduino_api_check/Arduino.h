@@ -53,6 +53,9 @@ void analogWriteFrequency(uint8_t pin, float frequency_hz);
 #ifndef ESP_ARDUINO_VERSION_MAJOR
 #define ESP_ARDUINO_VERSION_MAJOR 2
 #endif
+// The loop task's stack size, as esp32-hal.h declares it (cores 2.x and 3.x).
+#define SET_LOOP_TASK_STACK_SIZE(sz) \
+  size_t getArduinoLoopTaskStackSize() { return sz; }
 #if ESP_ARDUINO_VERSION_MAJOR >= 3
 bool ledcAttach(uint8_t pin, uint32_t frequency_hz, uint8_t resolution_bits);
 bool ledcWrite(uint8_t pin, uint32_t duty);

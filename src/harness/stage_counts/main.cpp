@@ -7,9 +7,11 @@
 // m7_stages_double does for the M7's double FPU), the stages of the structured route:
 //   contact frames | grasp structure (whitened G, rank) | minimum-norm forces, relevance
 //   and the unconstrained optimum | QP | motor mapping
-// then whole frames through Guidance<T>: cold (fresh solver), the SVD reference
-// route, and a fixed-posture frame. One line per scene goes out through semihosting;
-// `graspguide bench --target m4f` (tools/graspguide/bench/targets.py) reads them.
+// then whole frames through Guidance<T>: cold (fresh solver; a float solve that cannot
+// vouch for its answer retries the posture in double there), the SVD reference route, a
+// fixed-posture frame, and cold with the retry switched off (full_float). One line per scene goes
+// out through semihosting; `graspguide bench --target m4f` (tools/graspguide/bench/targets.py)
+// reads them.
 #include <cstdint>
 
 #include "graspguide.h"
@@ -105,8 +107,8 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   scene.constraints = c.constraints;
   scene.policy = c.policy;
   scene.mode = c.mode;
-  gg::FrameResult<T> cold, fixed, svd;
-  int32_t t_cold = -1, t_fixed = -1, t_svd = -1;
+  gg::FrameResult<T> cold, fixed, svd, own;
+  int32_t t_cold = -1, t_fixed = -1, t_svd = -1, t_own = -1;
   {
     gg::Guidance<T> guide;
     // A scene or wrench the solver refuses is that frame's status (motors off).
@@ -125,6 +127,20 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
     }
   }
   {
+    // The same cold frame with the retry in double switched off: what float alone costs,
+    // so that the baseline guards it apart from the retry (full_cold's maximum on a float
+    // image is a posture retried in double).
+    scene.solver.double_retry = false;
+    gg::Guidance<T> guide;
+    if ((own.status = guide.set_scene(scene)) == gg::Status::kOk &&
+        (own.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
+      const uint32_t t0 = ticks();
+      guide.update(q, own);
+      t_own = elapsed(t0, ticks());
+    }
+    scene.solver.double_retry = gg::SolverSettings{}.double_retry;
+  }
+  {
     scene.solver.decomposition = gg::Decomposition::kSVD;
     gg::Guidance<T> guide;
     if ((svd.status = guide.set_scene(scene)) == gg::Status::kOk &&
@@ -138,7 +154,7 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(cold.pwm.duty[i]);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(c.pwm[i]);
   for (int32_t v : stage) line.sp().num(v);
-  line.sp().num(t_cold).sp().num(t_svd).sp().num(t_fixed);
+  line.sp().num(t_cold).sp().num(t_svd).sp().num(t_fixed).sp().num(t_own);
   line.sp().str(gg::status_name(svd.status));
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(svd.pwm.duty[i]);
   stages::write0(line.end());
@@ -160,10 +176,11 @@ int main() {
   const int32_t loop_b = elapsed(t0, ticks());
   stages::write0(line.str("CAL ").num(empty).sp().num(loop_a).sp().num(loop_b).end());
   stages::write0(line.str("SCALAR ").str(kScalarName).end());
-  stages::write0(line.str("COLUMNS name k status ref_status pwm0 pwm1 pwm2 pwm3 ref0 ref1 ref2 "
-                          "ref3 frames structure forces qp mapping full_cold full_svd fixed "
-                          "svd_status svd0 svd1 svd2 svd3")
-                     .end());
+  stages::write0(
+      line.str("COLUMNS name k status ref_status pwm0 pwm1 pwm2 pwm3 ref0 ref1 ref2 "
+               "ref3 frames structure forces qp mapping full_cold full_svd fixed full_float "
+               "svd_status svd0 svd1 svd2 svd3")
+          .end());
   for (int i = 0; i < stages::kStageSceneCount; ++i) {
     const stages::StageScene& c = stages::kStageScenes[i];
     if (c.k == 3)

@@ -315,8 +315,9 @@ def solve(
     Returns a dict: ``status`` (``"ok"`` or a name from :data:`STATUS_NAMES`), ``pwm``
     (k ints, all 0 unless ok), ``levels`` (k), ``lambda`` (3k), ``constraints_used``,
     ``relevant`` (k bools), ``error_deg``, ``alpha``, ``fallback_mask``, ``iterations``,
-    ``rank_ratio``, ``recomputed``; levels, lambda, relevant, error_deg and alpha are
-    None unless the status is ok.
+    ``rank_ratio``, ``retried`` (a float solve that could not vouch for its answer ran
+    again in double; docs/algorithm.md, step 5), ``recomputed``; levels, lambda,
+    relevant, error_deg and alpha are None unless the status is ok.
 
     Raises :class:`RequestError` (a ValueError) for a wrong type, length or name, and
     ValueError for an unknown scalar or decomposition.

@@ -65,15 +65,17 @@ Status grasp_forces(const ContactFrames<T, K>& frames, const Vec6<T>& w, const V
   return qp;
 }
 
+// Steps 1-6 once, in T. `certain` is false when a float solve cannot vouch for its
+// answer (answer_certificate.h) or hit the iteration cap; out then holds float's answer,
+// if any. Never inlined, so that its frame is gone before a retry pushes the double one:
+// the M4F firmware's stack peak is the larger of the two, not their sum.
 template <typename T, int K>
-Status retried_in_double(const Contacts<T, K>& contacts, const Vec6<T>& wrench,
-                         const Vec3<T>& y_axis, ConstraintModel model, Policy policy,
-                         const SolverSettings& settings, GraspSolution<T>& out);
-
-template <typename T, int K>
-Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const Vec3<T>& y_axis,
-                   ConstraintModel model, Policy policy, const SolverSettings& settings,
-                   GraspSolution<T>& out) {
+__attribute__((noinline)) Status solve_grasp_once(const Contacts<T, K>& contacts,
+                                                  const Vec6<T>& wrench, const Vec3<T>& y_axis,
+                                                  ConstraintModel model, Policy policy,
+                                                  const SolverSettings& settings,
+                                                  GraspSolution<T>& out, bool& certain) {
+  certain = true;
   if (!wrench.allFinite()) return Status::kNonFiniteInput;
   ContactFrames<T, K> frames;
   Status s = contact_frames<T, K>(contacts, y_axis, frames);
@@ -89,9 +91,7 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
   ForceSolution<T, K> forces;
   s = grasp_forces<T, K>(frames, w, force, model, settings, out.rank_ratio, relevant, forces);
   out.iterations = forces.iterations;
-  if (sizeof(T) < sizeof(double) && settings.double_retry &&
-      ((s == Status::kOk && !forces.certain) || s == Status::kQpIterationLimit))
-    return retried_in_double<T, K>(contacts, wrench, y_axis, model, policy, settings, out);
+  certain = s == Status::kOk ? forces.certain : s != Status::kQpIterationLimit;
   if (s != Status::kOk) return s;
 
   LevelVec<T, K> levels;
@@ -113,13 +113,16 @@ Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const 
 
 // The whole solve again in double from the same (float) inputs, its answer rounded back.
 template <typename T, int K>
-Status retried_in_double(const Contacts<T, K>& contacts, const Vec6<T>& wrench,
-                         const Vec3<T>& y_axis, ConstraintModel model, Policy policy,
-                         const SolverSettings& settings, GraspSolution<T>& out) {
+__attribute__((noinline)) Status retried_in_double(const Contacts<T, K>& contacts,
+                                                   const Vec6<T>& wrench, const Vec3<T>& y_axis,
+                                                   ConstraintModel model, Policy policy,
+                                                   const SolverSettings& settings,
+                                                   GraspSolution<T>& out) {
   GraspSolution<double> d;
-  const Status s =
-      solve_grasp<double, K>(contacts.template cast<double>(), wrench.template cast<double>(),
-                             y_axis.template cast<double>(), model, policy, settings, d);
+  bool certain = true;  // double vouches for itself
+  const Status s = solve_grasp_once<double, K>(
+      contacts.template cast<double>(), wrench.template cast<double>(),
+      y_axis.template cast<double>(), model, policy, settings, d, certain);
   const int float_iterations = out.iterations;
   out = GraspSolution<T>{};
   out.k = d.k;
@@ -134,6 +137,18 @@ Status retried_in_double(const Contacts<T, K>& contacts, const Vec6<T>& wrench,
   out.rank_ratio = T(d.rank_ratio);
   out.retried = true;
   return s;
+}
+
+// Steps 1-6, and in a float build the retry in double of an answer float cannot vouch for.
+template <typename T, int K>
+Status solve_grasp(const Contacts<T, K>& contacts, const Vec6<T>& wrench, const Vec3<T>& y_axis,
+                   ConstraintModel model, Policy policy, const SolverSettings& settings,
+                   GraspSolution<T>& out) {
+  bool certain = true;
+  const Status s =
+      solve_grasp_once<T, K>(contacts, wrench, y_axis, model, policy, settings, out, certain);
+  if (certain || !settings.double_retry || sizeof(T) >= sizeof(double)) return s;
+  return retried_in_double<T, K>(contacts, wrench, y_axis, model, policy, settings, out);
 }
 
 // Declared here with EXTERN = extern, defined once in grasp_solution.cpp with EXTERN empty.
