@@ -283,16 +283,21 @@ TEST(Properties, Issue17ScenesGiveTheSameModelAndPwmInFloatAndDouble) {
         solve_once<double>(graspguide_test::make_scene<double>(r, gg::ConstraintModel::kPaper,
                                                                scene.policy, gg::Mode::kC),
                            r.wrench, r.orientation);
-    const auto f =
-        solve_once<float>(graspguide_test::make_scene<float>(r, gg::ConstraintModel::kPaper,
-                                                             scene.policy, gg::Mode::kC),
-                          r.wrench, r.orientation);
+    // Float's own QP, the retry in double switched off: it holds these hands by itself.
+    // With the retry on (the default), 5 of the 8 run again in double, because float's
+    // forces, 1,500 to 21,000 |lambda0|, miss equilibrium by more than 1e-2 |lambda0|
+    // (answer_certificate.h).
+    auto float_scene = graspguide_test::make_scene<float>(r, gg::ConstraintModel::kPaper,
+                                                          scene.policy, gg::Mode::kC);
+    float_scene.solver.double_retry = false;
+    const auto f = solve_once<float>(float_scene, r.wrench, r.orientation);
     const int n = static_cast<int>(&scene - kIssue17);
     ASSERT_EQ(d.status, gg::Status::kOk) << n;
     ASSERT_EQ(f.status, gg::Status::kOk) << n;
     EXPECT_EQ(d.grasp.used, gg::ConstraintModel::kPaper) << n;
     EXPECT_EQ(f.grasp.used, d.grasp.used) << n;
     EXPECT_LE(graspguide_test::max_pwm_diff(d.frame.pwm, f.frame.pwm), 1) << n;
+    EXPECT_FALSE(f.grasp.retried) << n;
   }
 }
 

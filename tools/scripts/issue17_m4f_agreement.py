@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import re
 import subprocess
@@ -388,23 +387,25 @@ def force_ratio(r: dict[str, Any]) -> float:
 
 
 def x_fixed_margin(scene: dict[str, Any]) -> float:
-    """reference.paper_margin_x_fixed of one scene (HiGHS: a few ms); -inf where HiGHS finds
-    that no force with x = 0 holds equilibrium within its tolerance (a hand whose x-fixed
-    equalities are singular to it, which a core may still solve with forces of 1e7
-    |lambda0|)."""
+    """reference.paper_margin_x_fixed of one scene (HiGHS: a few ms). Where that LP is
+    infeasible (no force with x = 0 and any y/z holds equilibrium: the x-fixed equalities
+    contradict the load), minus reference.x_fixed_equilibrium_gap, how far such a force
+    must leave equilibrium with y/z >= 0: its continuation below zero. It was -inf before,
+    which counted a scene infeasible by 1e-6 |lambda0|, inside float's tolerance, as far
+    outside the band."""
     C = np.asarray(scene["contacts"], np.float64)
     status, frames = reference.contact_frames(C, np.array([0.0, 1.0, 0.0]))
     if status != "ok" or frames is None:
         raise ValueError(f"scene {scene.get('name', '?')}: contacts refused ({status})")
     G = reference.grasp_matrix(frames)
     w_l = np.asarray(wrench(scene))
-    lam0 = reference.min_norm_solution(G, w_l)
+    lam0_norm = float(np.linalg.norm(reference.min_norm_solution(G, w_l)))
     try:
-        return reference.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(lam0)))
+        return reference.paper_margin_x_fixed(G, w_l, lam0_norm)
     except RuntimeError as e:
         if "infeasible" not in str(e).lower():
             raise
-        return -math.inf
+        return -reference.x_fixed_equilibrium_gap(G, w_l, lam0_norm)
 
 
 def core_result(scene: dict[str, Any], scalar: str) -> dict[str, Any]:
@@ -620,10 +621,15 @@ def run_m4f(worktree: Path, header: str) -> list[str]:
 
 
 def m4f_agreement(lines: list[str], n_issue: int) -> dict[str, Any]:
-    """Status equal and PWM within 1 count, read by the harness's COLUMNS names."""
+    """Status equal and PWM within 1 count, read by the harness's COLUMNS names; also each
+    scene's cold full frame in instructions ("cold", by name: what a retry in double
+    costs) and the image's stack high-water mark in bytes ("stack")."""
+    from graspguide.bench import targets
+
     columns = next(ln.split()[1:] for ln in lines if ln.startswith("COLUMNS "))
     col = {name: i for i, name in enumerate(columns)}
-    out = {"issue": [0, 0], "random": [0, 0], "failed": []}
+    out: dict[str, Any] = {"issue": [0, 0], "random": [0, 0], "failed": [], "cold": {}}
+    out["stack"] = next((int(ln.split()[1]) for ln in lines if ln.startswith("STACK ")), None)
     for ln in lines:
         if not ln.startswith("S "):
             continue
@@ -633,6 +639,7 @@ def m4f_agreement(lines: list[str], n_issue: int) -> dict[str, Any]:
         ref = [int(f[col[f"ref{i}"]]) for i in range(k)]
         ok = f[col["status"]] == f[col["ref_status"]] and max_pwm_diff(pwm, ref) <= 1
         group = "issue" if f[col["name"]].startswith("issue17_") else "random"
+        out["cold"][f[col["name"]]] = int(f[col["full_cold"]]) * targets.INSTRUCTIONS_PER_TICK
         out[group][0] += ok
         out[group][1] += 1
         if not ok:
@@ -763,6 +770,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         for line in res["failed"]:
             print(f"  {line}")
+        cold = res["cold"]
+        named = {s["name"] for s in extra}
+        drawn = sorted(
+            v for name, v in cold.items() if re.fullmatch(r"p\d+", name) and name not in named
+        )
+        if drawn:
+            print(
+                f"  cold full frame, instructions: median {drawn[len(drawn) // 2]:,}, max "
+                f"{drawn[-1]:,} over the {len(drawn)} random scenes; stack high-water "
+                f"{res['stack']} bytes"
+            )
+        for s in extra:
+            print(f"  {s['name']}: cold full frame {cold.get(s['name'], -1):,} instructions")
     return 0
 
 

@@ -90,18 +90,6 @@ def test_hands_float_cannot_vouch_for_are_retried_in_double(scene):
     assert issue17.agrees(core, ref), _describe(scene, core, ref, margin)
 
 
-def test_the_issue_scenes_are_answered_in_float_without_a_retry():
-    """The certificate does not send ordinary hands to double: the issue's 8 are decided
-    in float."""
-    from graspguide.core import solver
-
-    for scene in issue17.scene_set(0):
-        r = solver.solve(
-            scene["contacts"], issue17.wrench(scene), scene["policy"], "C", "paper", scalar="float"
-        )
-        assert r["status"] == "ok" and r["retried"] is False, scene["name"]
-
-
 def test_random_paper_scenes_float_agrees_with_float64_outside_the_band(
     run, record_property, report_figure
 ):

@@ -384,3 +384,31 @@ def test_x_fixed_margin_refuses_a_moment_about_the_y_axis():
     G, w_l, _ = _system(sc)
     with pytest.raises(RuntimeError, match="margin LP failed"):
         ref.paper_margin_x_fixed(G, w_l, float(np.linalg.norm(ref.min_norm_solution(G, w_l))))
+
+
+# --------------------------------------------------------------------------------------
+# x_fixed_equilibrium_gap (the margin's continuation where x = 0 cannot hold equilibrium)
+# --------------------------------------------------------------------------------------
+def test_x_fixed_gap_of_a_system_solved_by_hand():
+    # y/z columns the identity, as above: with lam_yz >= 0 the closest equilibrium misses
+    # only the rows whose load needs a negative force, by that force, so the gap is
+    # max(0, max(w_L)) / ||lam0||; the x columns must not matter.
+    rng = np.random.default_rng(6)
+    G = np.zeros((6, 9))
+    G[:, [1, 2, 4, 5, 7, 8]] = np.eye(6)
+    G[:, [0, 3, 6]] = rng.standard_normal((6, 3))
+    w_l = -np.array([0.3, 0.5, 0.2, 0.9, 0.4, 0.7])
+    assert ref.x_fixed_equilibrium_gap(G, w_l, 2.0) == pytest.approx(0.0, abs=1e-9)
+    w_l[3], w_l[5] = 0.9, 0.3  # lam_yz[3] = -0.9 and lam_yz[5] = -0.3 would be needed
+    assert ref.x_fixed_equilibrium_gap(G, w_l, 3.0) == pytest.approx(0.3, abs=1e-9)
+
+
+def test_x_fixed_gap_measures_a_moment_about_the_y_axis():
+    # The margin LP refuses this hand (above); y/z forces make no moment about y_O, so the
+    # gap is at most the moment itself, and positive.
+    sc = _random(3, 1, seed=21)[0]
+    sc = dict(sc, wrench=[0.0, 0.0, -1.0, 0.0, 0.05, 0.0])
+    G, w_l, _ = _system(sc)
+    n0 = float(np.linalg.norm(ref.min_norm_solution(G, w_l)))
+    gap = ref.x_fixed_equilibrium_gap(G, w_l, n0)
+    assert 0.0 < gap <= abs(w_l[4]) / n0 + 1e-9

@@ -108,48 +108,40 @@ void one_scene(const stages::StageScene& c, stages::LineBuffer& line) {
   scene.policy = c.policy;
   scene.mode = c.mode;
   gg::FrameResult<T> cold, fixed, svd, own;
-  int32_t t_cold = -1, t_fixed = -1, t_svd = -1, t_own = -1;
-  {
+  int32_t t_fixed = -1;
+  // One cold frame of `scene` through a fresh Guidance, in ticks; -1 when the solver
+  // refuses the scene or wrench, which is then that frame's status (motors off). `then`
+  // runs on the same Guidance afterwards.
+  const auto cold_frame = [&](const gg::Scene<T>& sc, gg::FrameResult<T>& out, auto then) {
     gg::Guidance<T> guide;
-    // A scene or wrench the solver refuses is that frame's status (motors off).
-    if ((cold.status = guide.set_scene(scene)) == gg::Status::kOk &&
-        (cold.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
-      uint32_t t0 = ticks();
-      guide.update(q, cold);
-      t_cold = elapsed(t0, ticks());
-      // A 0.5 degree turn about x: the hand moved, the posture did not.
-      const Eigen::Matrix<T, 4, 1> turned(
-          q(0) * T(0.99999048) - q(1) * T(0.00436331), q(0) * T(0.00436331) + q(1) * T(0.99999048),
-          q(2) * T(0.99999048) + q(3) * T(0.00436331), q(3) * T(0.99999048) - q(2) * T(0.00436331));
-      t0 = ticks();
-      guide.update(turned, fixed);
-      t_fixed = elapsed(t0, ticks());
-    }
-  }
-  {
-    // The same cold frame with the retry in double switched off: what float alone costs,
-    // so that the baseline guards it apart from the retry (full_cold's maximum on a float
-    // image is a posture retried in double).
-    scene.solver.double_retry = false;
-    gg::Guidance<T> guide;
-    if ((own.status = guide.set_scene(scene)) == gg::Status::kOk &&
-        (own.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
-      const uint32_t t0 = ticks();
-      guide.update(q, own);
-      t_own = elapsed(t0, ticks());
-    }
-    scene.solver.double_retry = gg::SolverSettings{}.double_retry;
-  }
-  {
-    scene.solver.decomposition = gg::Decomposition::kSVD;
-    gg::Guidance<T> guide;
-    if ((svd.status = guide.set_scene(scene)) == gg::Status::kOk &&
-        (svd.status = guide.set_wrench(wrench)) == gg::Status::kOk) {
-      const uint32_t t0 = ticks();
-      guide.update(q, svd);
-      t_svd = elapsed(t0, ticks());
-    }
-  }
+    if ((out.status = guide.set_scene(sc)) != gg::Status::kOk ||
+        (out.status = guide.set_wrench(wrench)) != gg::Status::kOk)
+      return int32_t(-1);
+    const uint32_t t0 = ticks();
+    guide.update(q, out);
+    const int32_t t = elapsed(t0, ticks());
+    then(guide);
+    return t;
+  };
+  const int32_t t_cold = cold_frame(scene, cold, [&](gg::Guidance<T>& guide) {
+    // A 0.5 degree turn about x: the hand moved, the posture did not.
+    const Eigen::Matrix<T, 4, 1> turned(
+        q(0) * T(0.99999048) - q(1) * T(0.00436331), q(0) * T(0.00436331) + q(1) * T(0.99999048),
+        q(2) * T(0.99999048) + q(3) * T(0.00436331), q(3) * T(0.99999048) - q(2) * T(0.00436331));
+    const uint32_t t0 = ticks();
+    guide.update(turned, fixed);
+    t_fixed = elapsed(t0, ticks());
+  });
+  const auto nothing = [](gg::Guidance<T>&) {};
+  // The same cold frame with the retry in double switched off: what float alone costs, so
+  // that the baseline guards it apart from the retry (full_cold's maximum on a float image
+  // is a posture retried in double).
+  gg::Scene<T> own_scene = scene;
+  own_scene.solver.double_retry = false;
+  const int32_t t_own = cold_frame(own_scene, own, nothing);
+  gg::Scene<T> svd_scene = scene;
+  svd_scene.solver.decomposition = gg::Decomposition::kSVD;
+  const int32_t t_svd = cold_frame(svd_scene, svd, nothing);
   line.str("S ").str(c.name).sp().num(K).sp().str(gg::status_name(cold.status)).sp().str(c.status);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(cold.pwm.duty[i]);
   for (int i = 0; i < gg::kMaxContacts; ++i) line.sp().num(c.pwm[i]);

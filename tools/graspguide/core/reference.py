@@ -374,6 +374,38 @@ def paper_margin_x_fixed(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> fl
     return margin
 
 
+def x_fixed_equilibrium_gap(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> float:
+    """How far the paper model with every x component fixed to 0 must leave equilibrium
+    (issue 17): min s s.t. |G lam + w_L|_inf <= s ||lam0||, lam_ix = 0, lam_iy, lam_iz >= 0
+    (HiGHS LP, in units of ||lam0||). 0 (to HiGHS's tolerance) when
+    :func:`paper_margin_x_fixed` has an answer; where that LP is infeasible, because the
+    x-fixed equalities contradict the load or their y/z forces cannot hold it, -gap is the
+    margin's continuation: a scene infeasible by 4e-6 |lam0| is as near the boundary as
+    one with a margin of -4e-6."""
+    from scipy.optimize import linprog
+
+    yz = [j for j in range(G.shape[1]) if j % 3 != 0]
+    A = G[:, yz]
+    n = len(yz)
+    ones = np.ones((6, 1))
+    # Variables [lam_yz, s]; minimise s.
+    c = np.zeros(n + 1)
+    c[-1] = 1.0
+    A_ub = np.vstack([np.hstack([A, -ones]), np.hstack([-A, -ones])])
+    b_ub = np.concatenate([-w_l / lam0_norm, w_l / lam0_norm])
+    res = linprog(
+        c,
+        A_ub=A_ub,
+        b_ub=b_ub,
+        bounds=[(0.0, None)] * (n + 1),
+        method="highs",
+        options={"primal_feasibility_tolerance": kLpTol, "dual_feasibility_tolerance": kLpTol},
+    )
+    if res.status != 0:
+        raise RuntimeError(f"equilibrium gap LP failed: {res.message}")
+    return float(res.x[-1])
+
+
 # --------------------------------------------------------------------------------------
 # Steps 6-7: motor levels, PWM, orientation
 # --------------------------------------------------------------------------------------
@@ -594,6 +626,7 @@ __all__ = [
     "project_enumerate",
     "feasibility_margin",
     "paper_margin_x_fixed",
+    "x_fixed_equilibrium_gap",
     "motor_levels",
     "pwm_from_levels",
     "guidance",
