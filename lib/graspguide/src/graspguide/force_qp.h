@@ -389,13 +389,14 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
       }
       if (dependent && drop < 0) {
         // Firm only when the row is clearly dependent and its violation clears the
-        // tolerance by the margin over the formula's rounding. A row left 0.5 or 0.11
-        // dep_tol long may be a real one, along which float64 holds the hand with 4e5 or
-        // 5e6 |lambda0|; 99.6 % of dependent rows are left under 0.1 dep_tol. The formula's
-        // rounding is its terms' and the shared part's, which the equality basis computed dividing
-        // by its shortest row and coeff = r^-1 d amplifies by the active rows' shortest: a basis
-        // row 3e-3 long made it 1e-4 |lambda0| where two ulps of the terms were assumed,
-        // and float gave up a hand float64 holds (issue 17).
+        // tolerance by a margin over the formula's rounding (issue 17):
+        // - clearly dependent: 99.6 % of dependent rows are left under 0.1 dep_tol long;
+        //   rows left 0.11 and 0.5 dep_tol long were real ones, along which float64 held
+        //   hands with 5e6 and 4e5 |lambda0|;
+        // - the rounding is the terms' and the shared part's. The equality basis divided
+        //   the shared part by its shortest row, and coeff = r^-1 d divides by the active
+        //   rows' shortest: a basis row 3e-3 long made it 1e-4 |lambda0| where two ulps of
+        //   the terms were assumed, and float gave up a hand float64 holds.
         T size;
         const T value = dependent_value(cand, coeff, size);
         T r_min = T(1), spread = T(1);
