@@ -344,14 +344,20 @@ def _x_fixed_by_vertices(G, w_l, lam0_norm):
     return best
 
 
-def test_x_fixed_margin_of_a_system_solved_by_hand():
-    # y/z columns the identity: lam_yz = -w_L is the only equilibrium, so the margin is
-    # min(-w_L) / ||lam0||, capped at 1; the x columns (random) must not matter.
-    rng = np.random.default_rng(5)
+def _identity_yz_system(seed):
+    """A grasp matrix whose y/z columns are the identity (lam_yz = -w_L is the only
+    equilibrium with x = 0) and whose x columns are random, with a load every y/z force
+    can hold with a positive value."""
+    rng = np.random.default_rng(seed)
     G = np.zeros((6, 9))
     G[:, [1, 2, 4, 5, 7, 8]] = np.eye(6)
     G[:, [0, 3, 6]] = rng.standard_normal((6, 3))
-    w_l = -np.array([0.3, 0.5, 0.2, 0.9, 0.4, 0.7])
+    return G, -np.array([0.3, 0.5, 0.2, 0.9, 0.4, 0.7])
+
+
+def test_x_fixed_margin_of_a_system_solved_by_hand():
+    # The margin is min(-w_L) / ||lam0||, capped at 1; the x columns must not matter.
+    G, w_l = _identity_yz_system(5)
     assert ref.paper_margin_x_fixed(G, w_l, 2.0) == pytest.approx(0.1, abs=1e-9)
     assert ref.paper_margin_x_fixed(G, w_l, 0.1) == 1.0  # 0.2 / 0.1 = 2, capped
     w_l[3] = 0.9  # lam_yz[3] = -0.9: infeasible by 0.9 / ||lam0||
@@ -390,14 +396,10 @@ def test_x_fixed_margin_refuses_a_moment_about_the_y_axis():
 # x_fixed_equilibrium_gap (the margin's continuation where x = 0 cannot hold equilibrium)
 # --------------------------------------------------------------------------------------
 def test_x_fixed_gap_of_a_system_solved_by_hand():
-    # y/z columns the identity, as above: with lam_yz >= 0 the closest equilibrium misses
-    # only the rows whose load needs a negative force, by that force, so the gap is
-    # max(0, max(w_L)) / ||lam0||; the x columns must not matter.
-    rng = np.random.default_rng(6)
-    G = np.zeros((6, 9))
-    G[:, [1, 2, 4, 5, 7, 8]] = np.eye(6)
-    G[:, [0, 3, 6]] = rng.standard_normal((6, 3))
-    w_l = -np.array([0.3, 0.5, 0.2, 0.9, 0.4, 0.7])
+    # With lam_yz >= 0 the closest equilibrium misses only the rows whose load needs a
+    # negative force, by that force, so the gap is max(0, max(w_L)) / ||lam0||; the x
+    # columns must not matter.
+    G, w_l = _identity_yz_system(6)
     assert ref.x_fixed_equilibrium_gap(G, w_l, 2.0) == pytest.approx(0.0, abs=1e-9)
     w_l[3], w_l[5] = 0.9, 0.3  # lam_yz[3] = -0.9 and lam_yz[5] = -0.3 would be needed
     assert ref.x_fixed_equilibrium_gap(G, w_l, 3.0) == pytest.approx(0.3, abs=1e-9)
