@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 import statistics
 import subprocess
@@ -70,18 +69,6 @@ FIRST_ANSWER_TIMEOUT = 5.0
 ANSWER_TIMEOUT = 2.0
 START_TIMEOUT = 10.0
 WATCHDOG_MS = m.POSE_WATCHDOG_MS
-LINK_SCRIPT = os.path.join(_ROOT, "src", "platform", "cortex_m", "link.ld")
-
-
-def _stack_reserved_bytes() -> int:
-    """_min_stack_size of the linker script, which the link guarantees above .bss."""
-    with open(LINK_SCRIPT, encoding="utf-8") as f:
-        found = re.search(r"_min_stack_size\s*=\s*(0x[0-9a-fA-F]+|\d+)\s*;", f.read())
-    assert found, f"{LINK_SCRIPT}: no _min_stack_size"
-    return int(found.group(1), 0)
-
-
-STACK_RESERVED_BYTES = _stack_reserved_bytes()
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HAND4 = HAND3 + [[0.0, 0.045, 0.0]]
@@ -323,12 +310,13 @@ def test_stack_and_uart_after_the_session(board, report_figure):
     frame lost in the UART's rings."""
     time.sleep(0.15)
     (peak,) = board.words("m4f_stack_peak")
+    # The stack the link guarantees above .bss (platformio.ini's firmware_flags).
+    reserved = qemu_firmware.firmware_symbol(ELF, "_min_stack_size")
     report_figure(
         "QEMU firmware: stack high-water mark (painted)",
-        f"{peak} bytes after the session, of {STACK_RESERVED_BYTES} reserved by "
-        "src/platform/cortex_m/link.ld",
+        f"{peak} bytes after the session, of {reserved} reserved for the stack by the link",
     )
-    assert 0 < peak < STACK_RESERVED_BYTES
+    assert 0 < peak < reserved
     assert board.uart_losses() == (0, 0)
 
 
