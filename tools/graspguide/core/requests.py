@@ -195,7 +195,7 @@ class Answerer:
         try:
             obj = _decode(line, number)
             obj, units = pop_units(obj)
-            kwargs = in_metres(solver.parse_request(obj), units)
+            kwargs = in_metres(solver.parse_request(obj, _POPPED_FIELDS), units)
         except RequestError as e:
             message = e.message
             if not message.startswith("line "):
@@ -218,6 +218,8 @@ class Answerer:
 
 
 REQUEST_UNITS = ("m", "mm", "any")
+# The fields taken out of a request before solver.parse_request checks the rest.
+_POPPED_FIELDS = ("units",)
 
 
 def pop_units(obj: Any) -> tuple[Any, str]:

@@ -19,7 +19,6 @@ fast path in the binding (``_core.solve_plain``).
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import numbers
@@ -27,6 +26,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from graspguide.core import _core
+from graspguide.core.suggest import unknown_name
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, MODES, POLICIES
 
 STATUS_NAMES: tuple[str, ...] = tuple(_core.STATUS_NAMES)
@@ -423,9 +423,11 @@ def _plain_fields(obj: Any) -> dict[str, Any] | None:
     return None
 
 
-def parse_request(obj: Any) -> dict[str, Any]:
+def parse_request(obj: Any, also_accepted: Sequence[str] = ()) -> dict[str, Any]:
     """Check one decoded JSON request and return the keyword arguments of :func:`solve`
-    (defaults filled in). Raises :class:`RequestError`."""
+    (defaults filled in). Raises :class:`RequestError`. ``also_accepted``: the fields the
+    caller takes out of the request before (such as "units"), so that the message for an
+    unknown field lists every field a request may have and can suggest them too."""
     merged = _plain_fields(obj)
     if merged is not None:
         return _check_kwargs(**merged)
@@ -435,13 +437,8 @@ def parse_request(obj: Any) -> dict[str, Any]:
         )
     unknown = [key for key in obj if key not in REQUEST_FIELDS]
     if unknown:
-        key = unknown[0]
-        close = difflib.get_close_matches(str(key), list(REQUEST_FIELDS), n=1, cutoff=0.6)
-        hint = f' (did you mean "{close[0]}"?)' if close else ""
-        raise RequestError(
-            "bad_request",
-            f"unknown field {_show(key)}{hint}; accepted fields: " + ", ".join(REQUEST_FIELDS),
-        )
+        accepted = [*REQUEST_FIELDS, *(f for f in also_accepted if f not in REQUEST_FIELDS)]
+        raise RequestError("bad_request", unknown_name("field", unknown[0], accepted))
     missing = [key for key, default in REQUEST_FIELDS.items() if default is None and key not in obj]
     if missing:
         raise RequestError(
