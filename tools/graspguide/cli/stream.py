@@ -50,7 +50,7 @@ examples:
       --wrench 0.3,-1.2,-0.8 --source synthetic --log runs/s1
   graspguide stream --port /dev/ttyACM0 --scene my_scene.toml --wrench -1,0,-2 \\
       --source replay:poses.csv --trial-id 3
-  graspguide stream --port sim --scene tools/examples/scene_paper_3.toml \
+  graspguide stream --port sim --scene tools/examples/scene_paper_3.toml \\
       --wrench 0.3,-1.2,-0.8 --source participant:seed=2 --lsl GraspGuide --lsl-wait 30
 
 exit status: 0 when the trial ended (success or failure) or the source ended, 1 on a link
