@@ -5,7 +5,6 @@ accepted by the command's own parser."""
 from __future__ import annotations
 
 import argparse
-import re
 import shlex
 
 import pytest
