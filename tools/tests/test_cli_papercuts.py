@@ -71,3 +71,96 @@ def test_unknown_solve_field_far_from_any_gets_the_list_only():
     message = _solve_answer({**GOOD, "identifier": 7})["message"]
     assert "did you mean" not in message
     assert "units" in _accepted(message)
+
+
+# --------------------------------------------------------------------------------------
+# A closed output pipe (`| head`): no traceback, and a device run still stops the motors
+# --------------------------------------------------------------------------------------
+def _into_closed_pipe(args, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """Run a command whose stdout is a pipe nobody reads any more (its read end is closed
+    before the command starts, as `head` does once it has its lines)."""
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        return subprocess.run(
+            CLI + list(args), stdout=w, stderr=subprocess.PIPE, timeout=timeout, cwd=_ROOT
+        )
+    finally:
+        os.close(w)
+
+
+def _quiet(stderr: bytes) -> None:
+    text = stderr.decode(errors="replace")
+    assert "Traceback" not in text, text
+    assert "Exception ignored" not in text, text
+
+
+def test_dry_run_into_a_closed_pipe_ends_quietly():
+    proc = _into_closed_pipe(
+        ["trial", "--protocol", "protocols/paper.toml", "--participant", "U3", "--dry-run"]
+    )
+    _quiet(proc.stderr)
+    assert proc.returncode == 1, proc.stderr
+
+
+def test_analyze_into_a_closed_pipe_ends_quietly(tmp_path):
+    from test_analysis import make_study
+
+    make_study(tmp_path / "S", n=3)
+    proc = _into_closed_pipe(["analyze", str(tmp_path / "S"), "--out", str(tmp_path / "out")])
+    _quiet(proc.stderr)
+    assert proc.returncode == 1, proc.stderr
+    assert (tmp_path / "out" / "report.md").is_file()  # the files are written all the same
+
+
+def test_stream_into_a_closed_pipe_stops_the_motors(tmp_path):
+    """`graspguide stream ... | head -1`: the device outlives the host (a simulated device
+    the test holds, as a board would) with its POSE watchdog out of the way, so only the
+    host's STOP can leave it STOPPED with every motor off."""
+    import csv
+
+    from graspguide.link import client as gd
+    from graspguide.link import messages as m
+    from graspguide.link import sim as link_sim
+
+    trace = tmp_path / "motors.csv"
+    folder = tmp_path / "log"
+    with link_sim.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:
+        p = subprocess.Popen(
+            CLI
+            + [
+                "stream",
+                "--port",
+                dev.pty_path,
+                "--scene",
+                os.path.join(_TOOLS, "examples", "scene_paper_3.toml"),
+                "--wrench",
+                "0.3,-1.2,-0.8",
+                "--source",
+                "synthetic:rate=100,duration=30",
+                "--log",
+                str(folder),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            cwd=_ROOT,
+        )
+        try:
+            assert p.stdout.readline().startswith(b"t=")  # streaming
+            p.stdout.close()  # `head -1` has its line and goes away
+            _, err = p.communicate(timeout=30)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        _quiet(err)
+        assert p.returncode == 1, err
+        client = gd.DeviceClient(dev, timeout=2.0)
+        client.drain(0.1)
+        assert client.status().state is m.DeviceState.STOPPED
+        rows = list(csv.DictReader(open(trace)))  # while the device still runs
+    pwm = [[int(r[f"pwm{i}"]) for i in range(4)] for r in rows]
+    assert any(any(row) for row in pwm), "the motors never ran: nothing was tested"
+    assert pwm[-1] == [0, 0, 0, 0]
+    end = [json.loads(line) for line in open(folder / "results.jsonl")][-1]
+    assert end["event"] == "end" and end["stop_acknowledged"] is True, end
