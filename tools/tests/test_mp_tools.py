@@ -318,7 +318,18 @@ def test_mp_build_of_the_real_port(tmp_path: Path) -> None:
 
 
 # --- mp deploy / run: the exact mpremote command lines -----------------------------------
-def test_mp_deploy_and_run_command_lines(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.fixture
+def tty_path() -> Iterator[str]:
+    """A serial port that exists (a pty's), for the commands that check --port first."""
+    master, slave = pty.openpty()
+    yield os.ttyname(slave)
+    os.close(master)
+    os.close(slave)
+
+
+def test_mp_deploy_and_run_command_lines(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tty_path: str
+) -> None:
     """mpremote replaced by a recording stub, for this check only: what deploy runs, where,
     with which staged files."""
     record = tmp_path / "calls.jsonl"
@@ -333,14 +344,14 @@ def test_mp_deploy_and_run_command_lines(tmp_path: Path, monkeypatch: pytest.Mon
     stub.chmod(0o755)
     monkeypatch.setenv("GRASPGUIDE_MPREMOTE", str(stub))
     port = _fake_port(tmp_path)
-    assert main(["mp", "deploy", "--port", "/dev/ttyUSB7", "--src", str(port)]) == 0
+    assert main(["mp", "deploy", "--port", tty_path, "--src", str(port)]) == 0
     assert (
         main(
             [
                 "mp",
                 "deploy",
                 "--port",
-                "/dev/ttyUSB7",
+                tty_path,
                 "--src",
                 str(port),
                 "--plan-protocol",
@@ -352,12 +363,12 @@ def test_mp_deploy_and_run_command_lines(tmp_path: Path, monkeypatch: pytest.Mon
         )
         == 0
     )
-    assert main(["mp", "run", "--port", "/dev/ttyUSB7", "--src", str(port)]) == 0
+    assert main(["mp", "run", "--port", tty_path, "--src", str(port)]) == 0
     calls = [json.loads(line) for line in record.read_text().splitlines()]
     assert len(calls) == 3
     for call, plan in zip(calls[:2], (False, True)):
         argv = call["argv"]
-        assert argv[:3] == ["connect", "/dev/ttyUSB7", "exec"]
+        assert argv[:3] == ["connect", tty_path, "exec"]
         assert "_rm('lib/graspguide_mp')" in argv[3]
         assert ("_rm('graspguide_levels.txt')" in argv[3]) == plan
         copies = argv[4:]
@@ -368,15 +379,18 @@ def test_mp_deploy_and_run_command_lines(tmp_path: Path, monkeypatch: pytest.Mon
             want += ["+", "fs", "cp", name, ":" + name]
         assert copies == want
         assert call["files"] == sorted(STAGED + data)
-    assert calls[2]["argv"] == ["connect", "/dev/ttyUSB7", "run", str(port / "main.py")]
+    assert calls[2]["argv"] == ["connect", tty_path, "run", str(port / "main.py")]
 
 
 def test_mp_deploy_without_mpremote_fails_naming_the_fix(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    tty_path: str,
 ) -> None:
     monkeypatch.setenv("GRASPGUIDE_MPREMOTE", str(tmp_path / "no-such-mpremote"))
     port = _fake_port(tmp_path)
-    assert main(["mp", "deploy", "--port", "/dev/ttyUSB7", "--src", str(port)]) == 1
+    assert main(["mp", "deploy", "--port", tty_path, "--src", str(port)]) == 1
     assert "cannot run" in capsys.readouterr().err
 
 

@@ -43,7 +43,8 @@ examples:
       --plan-protocol protocols/paper.toml --participant U3 --levels --new-store
   graspguide mp run --port /dev/ttyUSB0
 
-exit status: 0 done, 1 when mpy-cross or mpremote fails or is missing, 2 on a usage error."""
+exit status: 0 done, 1 when --port is no serial port here (checked before building), or
+when mpy-cross or mpremote fails or is missing, 2 on a usage error."""
 
 
 def _add_build_arguments(p: argparse.ArgumentParser) -> None:
@@ -124,12 +125,13 @@ def _build(args: argparse.Namespace, out: Path) -> None:
 
 
 def _act(args: argparse.Namespace) -> int:
-    from graspguide.mp.deploy import deploy_command, find_port_dir, invoke
+    from graspguide.mp.deploy import check_port, deploy_command, find_port_dir, invoke
     from graspguide.mp.run import run_command
 
     if args.action == "build":
         _build(args, Path(args.out))
         return EXIT_OK
+    check_port(args.port)  # before a build that would be thrown away, or a claim
     if args.action == "log":
         from graspguide.mp.log import download_board_log
 

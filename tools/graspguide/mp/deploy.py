@@ -176,6 +176,40 @@ def build(
     return Build(out=out, files=tuple(files), arch=arch)
 
 
+def check_port(port: str) -> None:
+    """MpToolError unless ``port`` is a serial port that exists: checked before anything
+    is built, copied or claimed, since mpremote only finds out after the build."""
+    if port == "auto" or port.startswith("id:") or "://" in port:
+        return  # mpremote finds these itself: by USB ids, serial number, pyserial's URL
+    path = port[len("port:") :] if port.startswith("port:") else port
+    if os.name != "posix":
+        names = [p["device"] for p in _serial_ports()]
+        if path.upper() in (n.upper() for n in names):
+            return
+    elif os.path.exists(path):
+        if os.path.isdir(path) or os.path.isfile(path):
+            raise MpToolError(
+                f"--port {port}: that is a {'folder' if os.path.isdir(path) else 'file'}, not "
+                "a serial port; give the board's port, e.g. /dev/ttyUSB0 or /dev/ttyACM0"
+            )
+        return
+    found = ", ".join(p["device"] for p in _serial_ports()) or "none (is the board plugged in?)"
+    raise MpToolError(
+        f"--port {port}: no such serial port; the serial ports here: {found} (`graspguide "
+        "ports` or `mpremote connect list` lists them); check the cable and that the board "
+        "is powered"
+    )
+
+
+def _serial_ports() -> list[dict[str, str]]:
+    try:
+        from graspguide.link.transport import list_serial_ports
+
+        return list_serial_ports()
+    except Exception:  # pyserial missing or failing: the message does without the list
+        return []
+
+
 def deploy_command(port: str, staging: Path) -> list[str]:
     """One mpremote invocation (one connection, one soft reset), run in ``staging``: clear
     lib/graspguide_mp and make lib, copy the package, the entry point and the plan."""
@@ -213,6 +247,7 @@ __all__ = [
     "Build",
     "MpToolError",
     "build",
+    "check_port",
     "deploy_command",
     "find_port_dir",
     "invoke",
