@@ -34,6 +34,7 @@ import json
 import math
 import os
 import sys
+import time
 import weakref
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -68,6 +69,16 @@ EVENT_MARGIN_S = 5.0
 #: The protocol's clock is in microseconds on a 32-bit counter; the device compares times
 #: modulo 2^32.
 _U32 = 0xFFFFFFFF
+_HALF_U32 = 1 << 31
+#: Real time between two samples after which the world's clock moves on by that real time
+#: [s]. The simulated device's virtual clock follows real time once no sample has come for
+#: its stale time (200 ms): a host paused that long (a slow disk, a loaded machine) finds
+#: the device's clock ahead, and a sample stamped before it would turn the device's clock
+#: back. Half the stale time, so the world has moved on before the device has.
+FOLLOW_REAL_TIME_AFTER_S = 0.1
+#: How long to wait for the device's first event after HOSTLESS_RUN [s]: it tells the world
+#: where the device's clock is before the first sample.
+FIRST_EVENT_WAIT_S = 2.0
 #: Minimum jerk: peak speed = this x amplitude / duration.
 _MIN_JERK_PEAK = 1.875
 #: OUT/PID/WORLD_FILE: per trial result, the true error of the hand the world moved beside
@@ -256,6 +267,10 @@ class HostlessWorld:
         self.t0_us = int(clock_start_us)
         self.i = 0
         self.t_us = self.t0_us
+        #: The latest device time seen in an event, unwrapped onto the world's clock.
+        self.device_us: int | None = None
+        #: Device time the world skipped to stay at or after the device's clock [us].
+        self.skipped_us = 0
         self.start_q = unit_quaternion(protocol.start_quat, "[trial] start_quat")
         self.q = self.start_q.copy()
         self.state = "wait_rest"  # wait_rest, rest, ready, trial, done
@@ -275,10 +290,23 @@ class HostlessWorld:
         return self.t_us / 1e6
 
     def _event_time_s(self, device_time_us: int) -> float:
-        """A device time (u32) as this world's time: the latest time at or before now
-        with those low 32 bits."""
-        back = (self.t_us - int(device_time_us)) & _U32
-        return (self.t_us - back) / 1e6
+        """A device time (u32) as this world's time [s]: the time with those low 32 bits
+        nearest the world's view of the device's clock (the world's time, or the latest
+        device time seen when that is later), behind it or ahead of it by up to 2^31 us.
+        The device's clock is ahead after it followed real time while the host was slow
+        (before the first sample, or in a pause), behind by the samples since the event."""
+        ref = self.t_us if self.device_us is None else max(self.t_us, self.device_us)
+        t_us = ref + (((int(device_time_us) - ref + _HALF_U32) & _U32) - _HALF_U32)
+        self.device_us = t_us if self.device_us is None else max(self.device_us, t_us)
+        return t_us / 1e6
+
+    def _skip_to(self, t_us: int) -> None:
+        """The world's clock jumps ahead to ``t_us`` (the device's clock is there), so that
+        no sample turns the device's clock back."""
+        if t_us > self.t_us:
+            self.skipped_us += t_us - self.t_us
+            self.t0_us += t_us - self.t_us
+            self.t_us = t_us
 
     # ---- the device's events
     def _events(self) -> None:
@@ -289,6 +317,9 @@ class HostlessWorld:
         for ev in events:
             kind = RunEvent(int(ev.event))
             t_s = self._event_time_s(ev.device_time_us)
+            # An event ahead of the world: the device's clock followed real time while the
+            # host was slow; the world goes on from there.
+            self._skip_to(int(self.device_us or 0))
             if kind is RunEvent.REST:
                 self.state, self.state_since_s = "rest", t_s
             elif kind is RunEvent.READY:
@@ -412,14 +443,27 @@ class HostlessWorld:
 
     def run(self) -> float:
         """Samples until plan_done; returns the device time used [s]."""
-        self._events()  # anything HOSTLESS_RUN's answer brought
+        # HOSTLESS_RUN's answer brings the first event (the rest), stamped with the device's
+        # clock, which may be ahead of the world's: the world starts from there.
+        deadline = time.monotonic() + FIRST_EVENT_WAIT_S
+        while not self.client.hostless_events and time.monotonic() < deadline:
+            self.client.drain(0.02)
+        self._events()
+        start_us = self.t_us
+        last_real = time.monotonic()
         while self.state != "done":
             self.i += 1
             self.t_us = self.t0_us + int(round(self.i * self.period_us))
-            t_s = self._t_s()
-            self._button(t_s)
+            now_real = time.monotonic()
+            if now_real - last_real > FOLLOW_REAL_TIME_AFTER_S:
+                # The host was paused (the disk, the machine): the device's clock may have
+                # followed real time meanwhile; the world's moves on by as much.
+                self._skip_to(self.t_us + int((now_real - last_real) * 1e6))
+            last_real = now_real
+            self._button(self._t_s())
             if self.state == "done":
                 break
+            t_s = self._t_s()  # after the button's events, which may move the world on
             self.q = self._hand(t_s)
             s = self.world.sample(t_s, self.q)
             tel = self.client.sim_imu_sample(self.t_us & _U32, s.accel_mps2, s.gyro_radps)
@@ -437,7 +481,7 @@ class HostlessWorld:
                 self.on_sample(t_s, self.q, tel, self.trial)
             self.pwm = list(tel.pwm)
             self._check_stall(t_s)
-        return (self.t_us - self.t0_us) / 1e6
+        return (self.t_us - start_us) / 1e6
 
 
 def _plan_matches(info: Any, participant: str, hash8: bytes, n: int) -> bool:
