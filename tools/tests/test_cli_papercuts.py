@@ -10,6 +10,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from graspguide.core import solver
 from graspguide.core.suggest import closest, did_you_mean, unknown_name
 
@@ -164,3 +166,41 @@ def test_stream_into_a_closed_pipe_stops_the_motors(tmp_path):
     assert pwm[-1] == [0, 0, 0, 0]
     end = [json.loads(line) for line in open(folder / "results.jsonl")][-1]
     assert end["event"] == "end" and end["stop_acknowledged"] is True, end
+
+
+# --------------------------------------------------------------------------------------
+# Every action's --help: what it does, and an example
+# --------------------------------------------------------------------------------------
+def _description_and_examples(text: str) -> tuple[str, list[str]]:
+    """The paragraph between the usage and the options, and the example command lines."""
+    blocks = text.split("\n\n")
+    start = next(i for i, b in enumerate(blocks) if b.startswith("usage:")) + 1
+    description = blocks[start] if not blocks[start].startswith("options:") else ""
+    examples = [ln.strip() for ln in text.splitlines() if ln.startswith("  graspguide ")]
+    return description, examples
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["device", "plan"],
+        ["device", "run"],
+        ["device", "log"],
+        ["device", "info"],
+        ["device", "erase"],
+        ["mp", "build"],
+        ["mp", "deploy"],
+        ["mp", "run"],
+        ["mp", "log"],
+        ["analyze"],
+    ],
+    ids=" ".join,
+)
+def test_help_has_a_description_and_an_example(command):
+    proc = run_cli([*command, "--help"])
+    assert proc.returncode == 0, proc.stderr
+    text = proc.stdout.decode()
+    description, examples = _description_and_examples(text)
+    assert len(description.split()) >= 8, text
+    assert "example" in text, text
+    assert any(e.startswith("graspguide " + " ".join(command) + " ") for e in examples), text

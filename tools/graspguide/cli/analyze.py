@@ -31,6 +31,13 @@ Exit status: 0 done, 1 bad or insufficient data (the message says what and where
 2 usage error.
 """
 
+EPILOG = """\
+examples:
+  graspguide analyze logs/demo-study
+  graspguide analyze runs/study runs/hostless --out runs/analysis
+  graspguide analyze runs/pilot/U1 --keep-outliers --out runs/pilot/analysis
+"""
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(

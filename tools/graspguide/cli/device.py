@@ -21,7 +21,7 @@ from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, repor
 HELP = "a host-less device's plan and results log: store a plan, run it, download, show, erase"
 
 DESCRIPTION = """\
-A host-less device (issue 13, docs/hostless.md) stores one participant's study plan and
+A host-less device (docs/hostless.md) stores one participant's study plan and
 appends one checksummed record per completed trial to its non-volatile results log.
 
   plan   store one participant's plan of --protocol on the device (checked there: every
@@ -57,6 +57,79 @@ error (a folder holding another study, erase without --yes, --port sim without -
 
 ACTIONS = ("plan", "run", "log", "info", "erase")
 
+# Each action's --help: (one line for `device --help`, what it does, its examples).
+_ACTION_HELP: dict[str, tuple[str, str, str]] = {
+    "plan": (
+        "store a participant's plan on the device",
+        """\
+Store one participant's study plan of --protocol on the device. The device checks it
+(every trial solved once) before it keeps it, together with --imu-to-hand (how the IMU
+sits on the hand), --rest-s and the participant's --calibration (the calibration.json of
+`graspguide calibrate`: a PWM floor and gain per motor, applied to every trial; default
+the paper's mapping). Refused while the log holds another plan's records: download
+them (`graspguide device log`) and erase them first.""",
+        """\
+  graspguide device plan --port /dev/ttyACM0 --protocol protocols/paper.toml \\
+      --participant U3 --imu-to-hand 0.7071,0,0,0.7071 --calibration runs/U3/calibration.json
+  graspguide device plan --port sim --store runs/hostless/U1.store \\
+      --protocol protocols/paper.toml --participant U1 --simulated""",
+    ),
+    "run": (
+        "start the stored plan (HOSTLESS_RUN)",
+        """\
+Start the stored plan now (a board with a plan also starts it at power-up). The wearer
+then works through its trials with the button, no host needed; trials that already have
+a record are not run again. Prints how many trials have a record.""",
+        """\
+  graspguide device run --port /dev/ttyACM0
+  graspguide device run --port sim --store runs/hostless/U1.store""",
+    ),
+    "log": (
+        "download the results log into OUT/<participant>/",
+        """\
+Download every record of the device's results log into OUT/<participant>/ in the
+runner's folder format (trials.jsonl, tlx.jsonl with scales null, device_log.json), so
+`graspguide analyze OUT` reads it unchanged. Downloading again gives the same records;
+a folder holding another participant's or protocol's trials is refused.""",
+        """\
+  graspguide device log --port /dev/ttyACM0 --out runs/hostless
+  graspguide device log --port sim --store runs/hostless/U1.store --out runs/hostless
+  graspguide analyze runs/hostless""",
+    ),
+    "info": (
+        "print the stored plan and log (LOG_INFO)",
+        """\
+Print what the device stores (LOG_INFO): the plan (participant, simulated or not,
+config_hash, number of trials) and the log (records, capacity, torn records, whether
+a plan is running). --json prints it as one JSON object.""",
+        """\
+  graspguide device info --port /dev/ttyACM0
+  graspguide device info --port sim --store runs/hostless/U1.store --json""",
+    ),
+    "erase": (
+        "delete every record of the log (the plan stays)",
+        """\
+Delete every record of the device's results log for good; the stored plan stays, so the
+plan can be run again from its first trial. Needs --yes: download the records first
+(`graspguide device log`).""",
+        """\
+  graspguide device log --port /dev/ttyACM0 --out runs/hostless
+  graspguide device erase --port /dev/ttyACM0 --yes""",
+    ),
+}
+
+
+def _add_action(sub: Any, name: str) -> argparse.ArgumentParser:
+    """The parser of one action, with its description and examples in --help."""
+    short, description, examples = _ACTION_HELP[name]
+    return sub.add_parser(
+        name,
+        help=short,
+        description=description,
+        epilog="examples:\n" + examples,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
 
 def _add_device_arguments(p: argparse.ArgumentParser) -> None:
     add_port_arguments(p, required=True)
@@ -69,7 +142,7 @@ def _add_device_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    plan = sub.add_parser("plan", help="store a participant's plan on the device")
+    plan = _add_action(sub, "plan")
     _add_device_arguments(plan)
     add_protocol_argument(plan, required=True)
     plan.add_argument("--participant", required=True, metavar="PID", help="U1, U2, ...")
@@ -99,15 +172,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="the participant is simulated (default: a person; the records say which)",
     )
-    run = sub.add_parser("run", help="start the stored plan (HOSTLESS_RUN)")
+    run = _add_action(sub, "run")
     _add_device_arguments(run)
-    log = sub.add_parser("log", help="download the results log into OUT/<participant>/")
+    log = _add_action(sub, "log")
     _add_device_arguments(log)
     log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
-    info = sub.add_parser("info", help="print the stored plan and log (LOG_INFO)")
+    info = _add_action(sub, "info")
     _add_device_arguments(info)
     info.add_argument("--json", action="store_true", help="print one JSON object")
-    erase = sub.add_parser("erase", help="delete every record of the log (the plan stays)")
+    erase = _add_action(sub, "erase")
     _add_device_arguments(erase)
     erase.add_argument(
         "--yes", action="store_true", help="really erase (the records are gone for good)"

@@ -47,6 +47,71 @@ exit status: 0 done, 1 when --port is no serial port here (checked before buildi
 when mpy-cross or mpremote fails or is missing, 2 on a usage error."""
 
 
+# Each action's --help: (one line for `mp --help`, what it does, its examples).
+_ACTION_HELP: dict[str, tuple[str, str, str]] = {
+    "build": (
+        "stage the compiled port (and a plan) in a folder",
+        """\
+Compile micropython/graspguide_mp/ with mpy-cross into --out DIR, laid out as the
+board's file system: main.py and lib/graspguide_mp/*.mpy; with --plan-protocol and
+--participant also plan.bin (graspguide plan's file), with --levels
+graspguide_levels.txt (each trial's levels, which main.py then uses instead of
+solving), with --new-store graspguide.bin (a results store holding the plan). Nothing
+is copied to a board: `graspguide mp deploy` does that.""",
+        """\
+  graspguide mp build --out build/mp
+  graspguide mp build --out build/mp --arch xtensawin \\
+      --plan-protocol protocols/paper.toml --participant U3 --levels""",
+    ),
+    "deploy": (
+        "build and copy to a board with mpremote",
+        """\
+Build as `graspguide mp build` does, into a temporary folder (or --staging DIR), and
+copy it to the board on --port with mpremote: lib/graspguide_mp/ is replaced whole, the
+staged files written, every other file left alone (the results store too, unless
+--new-store, which REPLACES the board's records: download them first). --port is
+checked first: a port that does not exist is refused before anything is built.""",
+        """\
+  graspguide mp deploy --port /dev/ttyUSB0 --arch xtensawin
+  graspguide mp deploy --port /dev/ttyUSB0 --arch xtensawin \\
+      --plan-protocol protocols/paper.toml --participant U3 --levels --new-store""",
+    ),
+    "run": (
+        "start the deployed port on the board",
+        """\
+Run main.py on the board on --port now with mpremote and print its output until it
+ends (Ctrl-C stops it); --no-follow starts it and returns. A board also runs main.py
+at power-up.""",
+        """\
+  graspguide mp run --port /dev/ttyUSB0
+  graspguide mp run --port /dev/ttyACM0 --no-follow""",
+    ),
+    "log": (
+        "download the board's results into OUT/<participant>/",
+        """\
+Copy the board's results store (--store-path, main.py's graspguide.bin by default) with
+mpremote and download its records into --out DIR/<participant>/ exactly as
+`graspguide device log` does (the store has the C++ device's layout; the simulated
+device reads the copy), so `graspguide analyze DIR` reads them.""",
+        """\
+  graspguide mp log --port /dev/ttyUSB0 --out runs/field
+  graspguide analyze runs/field""",
+    ),
+}
+
+
+def _add_action(sub: Any, name: str) -> argparse.ArgumentParser:
+    """The parser of one action, with its description and examples in --help."""
+    short, description, examples = _ACTION_HELP[name]
+    return sub.add_parser(
+        name,
+        help=short,
+        description=description,
+        epilog="examples:\n" + examples,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
 def _add_build_arguments(p: argparse.ArgumentParser) -> None:
     from graspguide.mp.deploy import ARCHES
 
@@ -68,16 +133,16 @@ def _add_build_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    build = sub.add_parser("build", help="stage the compiled port (and a plan) in a folder")
+    build = _add_action(sub, "build")
     build.add_argument("--out", required=True, metavar="DIR", help="the staging folder")
     _add_build_arguments(build)
-    deploy = sub.add_parser("deploy", help="build and copy to a board with mpremote")
+    deploy = _add_action(sub, "deploy")
     deploy.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     deploy.add_argument(
         "--staging", metavar="DIR", help="keep the staged files here (default: a temporary folder)"
     )
     _add_build_arguments(deploy)
-    run = sub.add_parser("run", help="start the deployed port on the board")
+    run = _add_action(sub, "run")
     run.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     run.add_argument("--src", metavar="DIR", help="the port's folder (default: micropython/)")
     run.add_argument(
@@ -89,7 +154,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _add_log_arguments(sub: Any) -> None:
     from graspguide.mp.deploy import STORE_FILE
 
-    log = sub.add_parser("log", help="download the board's results into OUT/<participant>/")
+    log = _add_action(sub, "log")
     log.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
     log.add_argument(
