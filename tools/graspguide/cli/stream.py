@@ -20,7 +20,10 @@ DESCRIPTION = """\
 Run one trial on a device: HELLO, SET_SCENE (from --scene), START_TRIAL (--wrench), then
 stream the poses of --source at the source's rate (real time; with --port sim
 --virtual-clock as fast as the link allows, the device's clock following the poses'
-times) while showing the guidance error, the motors' PWM, the rate and dropped frames.
+times) while showing the guidance error, the motors' PWM, the rate achieved and dropped
+frames. One POSE is in flight at a time: a source faster than the link carries is paced
+to it (each POSE sent is the newest pose, the older ones are skipped, not queued), said
+once on stderr with the link's figures (baud rate, frame sizes).
 Stops at the TRIAL_RESULT or at the end of the source, and always sends STOP on the way
 out (also on Ctrl-C, SIGTERM, SIGHUP or an error).
 

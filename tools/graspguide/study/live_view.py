@@ -66,6 +66,18 @@ class TrialProgress:
         return f"not below {self.threshold_deg:.1f} deg (hold 0.00/{self.hold_s:.2f} s)"
 
 
+def rate_text(s: dict[str, Any]) -> str:
+    """The rate achieved and, when the link paces the source, the source's rate and the
+    poses skipped for newer ones."""
+    text = f"{s.get('rate_hz', 0.0):7.1f} POSE/s sent"
+    if s.get("paced"):
+        text += (
+            f" (paced to the link: source {s.get('source_rate_hz', 0.0):g}/s, "
+            f"{s.get('skipped', 0)} older poses skipped)"
+        )
+    return text
+
+
 class StatusView:
     """Live status: a rich panel on a terminal, plain periodic lines otherwise (and a line
     at once when the trial ends). ``k`` motors named after FINGERS; ``simulated`` labels
@@ -123,7 +135,7 @@ class StatusView:
         for finger, pwm in zip(self.fingers, s.get("pwm", [0] * self.k)):
             bar = "#" * (pwm * 30 // 255)
             table.add_row(finger, f"{pwm:3d} [green]{bar:<30}[/green]")
-        table.add_row("rate", f"{s.get('rate_hz', 0.0):7.1f} poses/s")
+        table.add_row("rate", rate_text(s))
         table.add_row("sent / telemetry", f"{s.get('sent', 0)} / {s.get('received', 0)}")
         table.add_row("dropped", str(s.get("dropped", 0)))
         return table
@@ -135,8 +147,14 @@ class StatusView:
         tag = "SIMULATED " if self.simulated else ""
         return (
             f"{tag}t={s['t_s']:7.2f}s state={p.state} error={s['error_deg']:7.2f}deg "
-            f"[{p.hold_text()}] pwm {pwm} rate={s['rate_hz']:.1f}/s sent={s['sent']} "
-            f"dropped={s['dropped']}"
+            f"[{p.hold_text()}] pwm {pwm} rate={s['rate_hz']:.1f}/s"
+            + (
+                f" (paced: source {s.get('source_rate_hz', 0.0):g}/s, "
+                f"skipped={s.get('skipped', 0)})"
+                if s.get("paced")
+                else ""
+            )
+            + f" sent={s['sent']} dropped={s['dropped']}"
         )
 
     def update(self, s: dict[str, Any], force: bool = False) -> None:

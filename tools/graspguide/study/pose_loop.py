@@ -10,7 +10,9 @@ What varies is given, not re-implemented:
   them, up to ``window`` POSEs in flight, bit for bit the lockstep poses);
 * the clock: the virtual one (the POSE's timestamp is the pose's trial time, plus
   ``base_us``, so a simulated device runs as fast as the link allows) or real time (each
-  pose waits for its time; ``skip_late`` drops a pose more than two periods late);
+  pose waits for its time; with ``newest`` an open-loop source is paced to the link:
+  each POSE is the newest pose due, the older ones are skipped, never queued, and
+  ``on_skip`` hears of each skip);
 * what is done with each pose and its TELEMETRY (``on_send``, ``on_frame``: the logs,
   the live view; ``on_frames``: the same for a whole batch at once, the frame CSV);
 * when to give up without a TRIAL_RESULT (``limit_s`` of trial time on the virtual
@@ -70,7 +72,7 @@ class LoopResult:
     trial_result: Any  # the TRIAL_RESULT, or None (the poses ended first)
     frames: int  # TELEMETRY received
     sent: int  # POSEs sent (one more than frames when the device refused the last)
-    late_skipped: int  # poses dropped in real time for being too late
+    skipped: int  # poses skipped in real time for a newer one (the link's pace)
     t_s: float  # the last frame's trial time
     last_tel: Any  # the last TELEMETRY, or None
     ended: bool  # the device said the trial ended
@@ -86,9 +88,29 @@ class OpenLoopPoses:
 
     def __init__(self, samples: Iterable[Pose]):
         self._it: Iterator[Pose] = iter(samples)
+        self._ahead: list[Pose] = []  # samples read to look past the next one
+
+    def _peek(self, n: int) -> list[Pose]:
+        while len(self._ahead) < n:
+            for sample in self._it:
+                self._ahead.append(sample)
+                break
+            else:
+                break
+        return self._ahead[:n]
+
+    def skip_stale(self, now_s: float) -> int:
+        """Skips every sample a later one of which is due by ``now_s`` (trial time), so
+        that the next one is the newest due; returns how many were skipped."""
+        skipped = 0
+        while len(self._peek(2)) == 2 and self._ahead[1][0] <= now_s:
+            self._ahead.pop(0)
+            skipped += 1
+        return skipped
 
     def next_batch(self, index: int) -> list[Pose]:
-        for t_s, quat, contacts in self._it:
+        if self._peek(1):
+            t_s, quat, contacts = self._ahead.pop(0)
             return [(t_s, [float(x) for x in quat], contacts)]
         return []
 
@@ -192,12 +214,15 @@ class PoseLoop:
     client: Any
     virtual_clock: bool
     base_us: int = 0
-    skip_late: bool = False
-    period_s: float = 0.0
+    # Real time, open loop: each POSE is the newest pose due (see OpenLoopPoses.skip_stale):
+    # a link slower than the source gets the freshest hand, never a growing queue.
+    newest: bool = False
     limit_s: float | None = None
     wall_limit_s: float | None = None
     on_send: Callable[[int, float, Sequence[float], Any], None] | None = None
     on_frame: Callable[[Frame], None] | None = None
+    # Each time ``newest`` skips poses: how many (the first call says the loop paces).
+    on_skip: Callable[[int], None] | None = None
     # Once per batch: (index of its first pose, the poses sent, their TELEMETRY), for
     # the frames received (the batch's up to the one that ended the trial, or up to
     # the one the loop failed on); in order, after their on_frame, all before run()
@@ -206,24 +231,20 @@ class PoseLoop:
     on_frames: Callable[[int, list[Stamped], list[Any]], None] | None = None
     sent: int = field(default=0, init=False)
     frames: int = field(default=0, init=False)
-    late_skipped: int = field(default=0, init=False)
+    skipped: int = field(default=0, init=False)
     wall0: float = field(default_factory=time.monotonic, init=False)
 
-    def _stamp(self, t_s: float) -> int | None:
-        """The POSE timestamp of trial time t_s, after waiting for it in real time; None
-        for a pose too late to send."""
+    def _stamp(self, t_s: float) -> int:
+        """The POSE timestamp of trial time t_s, after waiting for it in real time."""
         if self.virtual_clock:
             return (self.base_us + int(round(t_s * 1e6))) & 0xFFFFFFFF
         wait = self.wall0 + t_s - time.monotonic()
         if wait > 0:
             time.sleep(wait)
-        elif self.skip_late and self.period_s and -wait > 2 * self.period_s:
-            return None  # too late for this sample: skip it, keep the pace
         return host_time_us()
 
     def _stamp_batch(self, batch: list[Pose]) -> list[Stamped]:
-        """The batch's poses with their POSE timestamps (a late one left out, counted),
-        each given to on_send."""
+        """The batch's poses with their POSE timestamps, each given to on_send."""
         if self.virtual_clock:  # _stamp's arithmetic, for the whole batch at once
             base_us = self.base_us
             stamped = [
@@ -231,13 +252,7 @@ class PoseLoop:
                 for t, quat, contacts in batch
             ]
         else:
-            stamped = []
-            for t, quat, contacts in batch:
-                t_us = self._stamp(t)
-                if t_us is None:
-                    self.late_skipped += 1
-                    continue
-                stamped.append((t, t_us, quat, contacts))
+            stamped = [(t, self._stamp(t), quat, contacts) for t, quat, contacts in batch]
         if self.on_send is not None:
             for t, t_us, quat, contacts in stamped:
                 self.on_send(t_us, t, quat, contacts)
@@ -283,6 +298,7 @@ class PoseLoop:
         ended = False
         # The frames of the batch before, for on_frames once the next batch is written.
         pending: list[tuple[int, list[Stamped], list[Any]]] = []
+        pace = self.newest and not self.virtual_clock and hasattr(poses, "skip_stale")
 
         def write_pending() -> None:
             while pending:
@@ -291,12 +307,16 @@ class PoseLoop:
 
         try:
             while not ended:
+                if pace:
+                    n = poses.skip_stale(time.monotonic() - self.wall0)
+                    if n:
+                        self.skipped += n
+                        if self.on_skip is not None:
+                            self.on_skip(n)
                 batch = poses.next_batch(index)
                 if not batch:
                     break
                 stamped = self._stamp_batch(batch)
-                if not stamped:
-                    continue
                 answers = self._send(stamped, write_pending)
                 if answers is None:
                     ended = True
@@ -347,7 +367,7 @@ class PoseLoop:
         if not client.trial_results:
             client.drain(0.05)
         result = client.trial_results.popleft() if client.trial_results else None
-        return LoopResult(result, self.frames, self.sent, self.late_skipped, t_s, last_tel, ended)
+        return LoopResult(result, self.frames, self.sent, self.skipped, t_s, last_tel, ended)
 
 
 __all__ = [

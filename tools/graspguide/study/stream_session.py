@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TextIO
 
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail, report
 from graspguide.link.messages import ErrorCode
@@ -79,15 +79,20 @@ def run_stream(
     *,
     observers: Sequence[ev.TrialObserver] = (),
     progress=None,
+    link: dict[str, Any] | None = None,
+    notice: TextIO | None = None,
 ) -> dict[str, Any]:
     """One trial on ``client`` (after HELLO): SET_SCENE, START_TRIAL, the source's poses
-    (paced in real time unless ``virtual_clock``; an open-loop pose more than two periods
-    late is skipped), until TRIAL_RESULT or the end of the source. ``source`` is an
-    open-loop source or a ClosedLoopSource (:func:`open_participant`). Each TELEMETRY
-    goes to the log, ``progress`` (a live_view.TrialProgress), the view and the
-    ``observers`` (trial_start and trial_end events too). Returns a summary dict; raises
-    LinkError, PoseLoopError. STOP is the caller's job."""
+    (in real time unless ``virtual_clock``), until TRIAL_RESULT or the end of the source.
+    ``source`` is an open-loop source or a ClosedLoopSource (:func:`open_participant`).
+    An open-loop source faster than the link is paced to it: each POSE is the newest
+    pose due, the older ones are skipped (never queued), which ``notice`` (stderr) hears
+    once with why (``link``: :func:`link_capacity`). Each TELEMETRY goes to the log,
+    ``progress`` (a live_view.TrialProgress), the view and the ``observers`` (trial_start
+    and trial_end events too). Returns a summary dict; raises LinkError, PoseLoopError.
+    STOP is the caller's job."""
     closed = bool(getattr(source, "closed_loop", False))
+    source_rate = float(getattr(source, "rate_hz", None) or 0.0)
     client.set_scene(**scene.set_scene_kwargs())
     client.start_trial(trial_id, wrench)
     client.trial_results.clear()
@@ -98,10 +103,18 @@ def run_stream(
         "error_deg": float("nan"),
         "pwm": [0] * 4,
         "rate_hz": 0.0,
+        "source_rate_hz": source_rate,
         "sent": 0,
         "received": 0,
         "dropped": 0,
+        "skipped": 0,
+        "paced": False,
     }
+
+    def on_skip(n: int) -> None:
+        if not status["paced"]:
+            status["paced"] = True
+            print(pacing_notice(source_rate, link), file=notice or sys.stderr, flush=True)
 
     def on_frame(frame: Frame) -> None:
         tel = frame.tel
@@ -119,7 +132,8 @@ def run_stream(
             rate_hz=loop.sent / elapsed,
             sent=loop.sent,
             received=loop.frames,
-            dropped=loop.late_skipped + client.device_frames_lost + client.host_bad_frames,
+            dropped=client.device_frames_lost + client.host_bad_frames,
+            skipped=loop.skipped,
         )
         if view is not None:
             view.update(status)
@@ -155,10 +169,10 @@ def run_stream(
         loop = PoseLoop(
             client,
             virtual_clock,
-            skip_late=True,
-            period_s=1.0 / source.rate_hz if source.rate_hz else 0.0,
+            newest=True,
             on_send=on_send,
             on_frame=on_frame,
+            on_skip=on_skip,
         )
     done = loop.run(poses)
     result = done.trial_result
@@ -181,17 +195,82 @@ def run_stream(
             )
         else:
             o.on_event(ev.TRIAL_END, trial_index=trial_id, success=None, reason="source ended")
+    elapsed = max(time.monotonic() - loop.wall0, 1e-9)
+    status.update(
+        rate_hz=done.sent / elapsed,
+        sent=done.sent,
+        received=done.frames,
+        skipped=done.skipped,
+        dropped=client.device_frames_lost + client.host_bad_frames,
+    )
     if view is not None:
         view.update(status, force=True)
     return {
         "trial_result": result,
         "sent": done.sent,
         "received": done.frames,
-        "dropped": status["dropped"] if done.sent else done.late_skipped,
-        "late_skipped": done.late_skipped,
-        "elapsed_s": time.monotonic() - loop.wall0,
+        "dropped": status["dropped"],
+        "skipped": done.skipped,
+        "paced": status["paced"],
+        "rate_hz": status["rate_hz"],
+        "source_rate_hz": source_rate,
+        "virtual_clock": virtual_clock,
+        "elapsed_s": elapsed,
         "last_error_deg": None if done.last_tel is None else done.last_tel.error_deg,
     }
+
+
+def link_capacity(port: str, transport: Any) -> dict[str, Any] | None:
+    """What the wire carries one POSE at a time: its baud rate, the POSE's and the
+    TELEMETRY's frame sizes and the POSEs per second they allow (10 bits a byte). None
+    for a port whose pseudo-terminal models no wire (the simulated device, QEMU)."""
+    from graspguide.link.client import encode_pose_fast
+    from graspguide.link.codec import encode_message
+    from graspguide.link.messages import Telemetry
+    from graspguide.link.qemu_firmware import QEMU_PORT
+    from graspguide.link.sim import SIM_PORT
+
+    baud = getattr(transport, "baudrate", None)
+    if port in (SIM_PORT, QEMU_PORT) or not baud:
+        return None
+    pose = encode_pose_fast(1, 1, (1.0, 0.0, 0.0, 0.0)) or b""
+    tel = Telemetry(
+        host_time_us=1,
+        error_deg=1.0,
+        alpha=1.0,
+        pwm=[1, 1, 1, 1],
+        constraints_used=0,
+        solver_status=ErrorCode.OK,
+        iterations=1,
+        flags=1,
+        compute_time_us=1,
+    )
+    tel_bytes = len(encode_message(tel, 1))
+    wire_s = (len(pose) + tel_bytes) * 10 / float(baud)
+    return {
+        "baud": int(baud),
+        "pose_bytes": len(pose),
+        "telemetry_bytes": tel_bytes,
+        "wire_ms": wire_s * 1e3,
+        "max_hz": 1.0 / wire_s,
+    }
+
+
+def pacing_notice(source_rate_hz: float, link: dict[str, Any] | None) -> str:
+    """The one line that says the stream is paced to the link, and why."""
+    if link is not None:
+        why = (
+            f"at {link['baud']} baud a POSE ({link['pose_bytes']} bytes) and its TELEMETRY "
+            f"({link['telemetry_bytes']} bytes) take {link['wire_ms']:.1f} ms on the wire: "
+            f"at most {link['max_hz']:.0f} POSE/s, less the device's work"
+        )
+    else:
+        why = "the device's answers come slower than the source's poses"
+    return (
+        f"graspguide stream: pacing to the link: the source gives {source_rate_hz:g} poses/s, "
+        f"more than the link carries one POSE at a time ({why}); each POSE sent is the "
+        "newest pose, the older ones are skipped, not queued; the rate achieved is shown"
+    )
 
 
 def _feel_lag_error() -> Any:
@@ -333,6 +412,7 @@ def stream_command(
             view,
             observers=observers,
             progress=progress,
+            link=link_capacity(port, device.transport),
         )
     except (LinkError, OSError, PoseLoopError) as e:  # OSError: the log's disk (RecordWriteError)
         code = EXIT_FAILURE
@@ -377,15 +457,34 @@ def summary_line(summary: dict[str, Any], simulated: bool = False) -> str:
     tag = "SIMULATED " if simulated else ""
     if r is None:
         return tag + (
-            f"no trial result: the source ended first ({summary['sent']} poses sent, "
+            f"no trial result: the source ended first ({rate_text(summary)}, "
             f"last error {summary['last_error_deg']})"
         )
     return tag + (
         f"trial {r.trial_id}: {'success' if r.success else 'failure'} "
         f"completion_s={r.completion_s:.3f} first_entry_s={r.first_entry_s:.3f} "
-        f"final_error_deg={r.final_error_deg:.3f} ({summary['sent']} poses, "
-        f"{summary['dropped']} dropped)"
+        f"final_error_deg={r.final_error_deg:.3f} ({rate_text(summary)})"
     )
 
 
-__all__ = ["open_participant", "run_stream", "stream_command", "summary_line"]
+def rate_text(summary: dict[str, Any]) -> str:
+    """``197 poses sent at 67.3 POSE/s, 0 dropped`` and, when paced, the poses skipped (on
+    the virtual clock no rate: the wall's pace there says nothing of the link's)."""
+    rate = "" if summary.get("virtual_clock") else f" at {summary['rate_hz']:.1f} POSE/s"
+    text = f"{summary['sent']} poses sent{rate}, {summary['dropped']} dropped"
+    if summary.get("paced"):
+        text += (
+            f"; paced to the link from the source's {summary['source_rate_hz']:g}/s: "
+            f"{summary['skipped']} older poses skipped"
+        )
+    return text
+
+
+__all__ = [
+    "open_participant",
+    "run_stream",
+    "stream_command",
+    "summary_line",
+    "link_capacity",
+    "pacing_notice",
+]
