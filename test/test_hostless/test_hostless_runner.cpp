@@ -582,3 +582,196 @@ TEST(HostlessRunner, APlanOfAnOlderLayoutIsNotRunAndSaysSo) {
   EXPECT_EQ(rebooted.start().refusal, gd::HostlessRefusal::kNoPlan);
   EXPECT_FALSE(rebooted.running());
 }
+
+// Waits for the ready pattern, presses, and holds the hand on the trial's force until it
+// succeeds.
+void run_to_success(Rig& rig, const gd::PlanHeader& h, const gd::PlanTrial& t) {
+  rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
+  rig.runner.on_button(true, rig.clock.now_us());
+  rig.until(gd::RunEventCode::kSuccess, force_direction(h, t), 3'000 * kMs);
+}
+
+// The trial_index of every valid record, oldest first.
+std::vector<uint16_t> logged_trials(Rig& rig) {
+  std::vector<uint16_t> out;
+  for (uint16_t i = 0; i < rig.runner.log().records(); ++i) {
+    gd::LogRecord r;
+    EXPECT_EQ(rig.runner.log().read(i, r), gd::StoreStatus::kOk);
+    out.push_back(r.trial.trial_index);
+  }
+  return out;
+}
+
+// One bit of the slot's record flipped (flash wear): the slot reads torn.
+void damage_slot(Rig& rig, uint16_t slot) {
+  rig.store.bytes()[gd::kPlanRegionBytes + uint32_t(slot) * gd::kLogSlotBytes + 12] ^= 0x10;
+}
+
+TEST(HostlessRunner, ADamagedRecordsTrialRunsAgainAndNoTrialRunsTwice) {
+  Rig rig;
+  const gd::PlanHeader h = header(4);
+  const std::vector<gd::PlanTrial> trials = {trial(1, 4, kSideways), trial(2, 3, kOther),
+                                             trial(3, 4, kOther), trial(4, 3, kSideways)};
+  ASSERT_TRUE(rig.upload(h, trials).ok());
+  ASSERT_TRUE(rig.runner.start().ok());
+  for (int i = 0; i < 3; ++i) run_to_success(rig, h, trials[size_t(i)]);
+  rig.runner.stop();
+  ASSERT_EQ(logged_trials(rig), (std::vector<uint16_t>{1, 2, 3}));
+
+  // Trial 2's record goes bad; after a restart the run resumes with trial 2, then skips
+  // trial 3 (recorded) and ends with trial 4.
+  damage_slot(rig, 1);
+  ASSERT_EQ(rig.runner.boot(), gd::StoreStatus::kOk);
+  ASSERT_EQ(rig.runner.log().torn(), 1);
+  ASSERT_EQ(rig.runner.log().records(), 2);
+  rig.events.clear();
+  ASSERT_TRUE(rig.runner.start().ok());
+  rig.drain();
+  ASSERT_FALSE(rig.events.empty());
+  EXPECT_EQ(rig.events.back().code, gd::RunEventCode::kRest);
+  EXPECT_EQ(rig.events.back().trial_index, 2);
+  EXPECT_EQ(rig.runner.position(), 1);
+  run_to_success(rig, h, trials[1]);
+  rig.until(gd::RunEventCode::kRest, kRest, 2'000 * kMs);
+  EXPECT_EQ(rig.events.back().trial_index, 4);
+  EXPECT_EQ(rig.runner.position(), 3);
+  run_to_success(rig, h, trials[3]);
+  rig.until(gd::RunEventCode::kPlanDone, kRest, 2'000 * kMs);
+  EXPECT_EQ(logged_trials(rig), (std::vector<uint16_t>{1, 3, 2, 4}));
+
+  // Every trial has a record now: another start runs nothing.
+  rig.events.clear();
+  ASSERT_TRUE(rig.runner.start().ok());
+  rig.drain();
+  ASSERT_EQ(rig.events.size(), 1u);
+  EXPECT_EQ(rig.events.back().code, gd::RunEventCode::kPlanDone);
+  EXPECT_FALSE(rig.runner.running());
+}
+
+TEST(HostlessRunner, ADamagedRecordOfAFinishedPlanRunsOnlyItsTrialAgain) {
+  Rig rig;
+  const gd::PlanHeader h = header(4);
+  const std::vector<gd::PlanTrial> trials = {trial(1, 4, kSideways), trial(2, 3, kOther),
+                                             trial(3, 4, kOther), trial(4, 3, kSideways)};
+  ASSERT_TRUE(rig.upload(h, trials).ok());
+  ASSERT_TRUE(rig.runner.start().ok());
+  for (const gd::PlanTrial& t : trials) run_to_success(rig, h, t);
+  rig.until(gd::RunEventCode::kPlanDone, kRest, 2'000 * kMs);
+  damage_slot(rig, 1);
+  ASSERT_EQ(rig.runner.boot(), gd::StoreStatus::kOk);
+  ASSERT_TRUE(rig.runner.start().ok());
+  EXPECT_EQ(rig.runner.position(), 1);
+  run_to_success(rig, h, trials[1]);
+  rig.until(gd::RunEventCode::kPlanDone, kRest, 2'000 * kMs);
+  EXPECT_EQ(logged_trials(rig), (std::vector<uint16_t>{1, 3, 4, 2}));
+}
+
+TEST(HostlessRunner, AnUploadThatIsNeverCommittedLeavesTheStoredPlanInUse) {
+  Rig rig;
+  const gd::PlanHeader h = header(1);
+  const gd::PlanTrial t = trial(1, 4, kSideways);
+  ASSERT_TRUE(rig.upload(h, {t}).ok());
+  const uint32_t stored_id = gd::plan_id(rig.runner.plan());
+
+  // Another plan is begun and one of its two trials sent, then the host goes away.
+  gd::PlanHeader other = header(2);
+  std::strcpy(other.participant, "U9");
+  ASSERT_TRUE(rig.runner.begin_plan(other).ok());
+  ASSERT_TRUE(rig.runner.add_trial(0, trial(7, 3, kOther)).ok());
+  // LOG_INFO's view: the stored plan, as it is on the store.
+  EXPECT_TRUE(rig.runner.plan_stored());
+  EXPECT_STREQ(rig.runner.plan().header.participant, "U1");
+  EXPECT_EQ(rig.runner.plan().header.trial_count, 1);
+
+  // HOSTLESS_RUN runs the stored plan; the open upload is dropped.
+  ASSERT_TRUE(rig.runner.start().ok());
+  rig.drain();
+  EXPECT_EQ(rig.events.back().code, gd::RunEventCode::kRest);
+  EXPECT_EQ(rig.events.back().trial_index, 1);
+  EXPECT_EQ(gd::plan_id(rig.runner.plan()), stored_id);
+  run_to_success(rig, h, t);
+  rig.until(gd::RunEventCode::kPlanDone, kRest, 2'000 * kMs);
+  gd::LogRecord r;
+  uint32_t id = 0;
+  ASSERT_EQ(rig.runner.log().read(0, r, &id), gd::StoreStatus::kOk);
+  EXPECT_EQ(id, stored_id);
+  EXPECT_EQ(r.trial.trial_index, 1);
+  EXPECT_EQ(rig.runner.add_trial(1, trial(8, 3, kOther)).refusal, gd::HostlessRefusal::kNoPlan);
+  EXPECT_EQ(rig.runner.commit_plan(2).refusal, gd::HostlessRefusal::kNoPlan);
+}
+
+TEST(HostlessRunner, AnUploadCommitsAfterTheStoredPlanWasAskedFor) {
+  Rig rig;
+  ASSERT_TRUE(rig.upload(header(1), {trial(1, 4, kSideways)}).ok());
+  ASSERT_EQ(rig.runner.log().erase(), gd::StoreStatus::kOk);
+  gd::PlanHeader other = header(2);
+  std::strcpy(other.participant, "U2");
+  ASSERT_TRUE(rig.runner.begin_plan(other).ok());
+  ASSERT_TRUE(rig.runner.add_trial(0, trial(5, 3, kOther)).ok());
+  EXPECT_STREQ(rig.runner.plan().header.participant, "U1");  // LOG_INFO in between
+  ASSERT_TRUE(rig.runner.add_trial(1, trial(6, 4, kSideways)).ok());
+  ASSERT_TRUE(rig.runner.commit_plan(2).ok());
+  EXPECT_STREQ(rig.runner.plan().header.participant, "U2");
+  EXPECT_EQ(rig.runner.plan().header.trial_count, 2);
+  EXPECT_EQ(rig.runner.plan().trials[1].trial_index, 6);
+  // What a restart loads is what ran.
+  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+                              kGyroFs);
+  rebooted.boot();
+  EXPECT_EQ(gd::plan_id(rebooted.plan()), gd::plan_id(rig.runner.plan()));
+}
+
+TEST(HostlessRunner, ASampleOlderThanTheLastAbortsTheTrialWithNoRecord) {
+  Rig rig;
+  start_guiding(rig);
+  if (HasFatalFailure()) return;
+  rig.drain();
+  const size_t seen = rig.events.size();
+  gd::ImuSample back;
+  back.time_us = rig.clock.now_us() - 1;  // 1 us before the last sample
+  back.accel_mps2[2] = kG;
+  const gd::HostlessFrame f = rig.runner.on_sample(back);
+  rig.drain();
+  EXPECT_EQ(f.status, gg::Status::kTimeWentBackwards);
+  EXPECT_FALSE(f.trial_running);
+  EXPECT_TRUE(rig.motors.all_off());
+  EXPECT_EQ(rig.runner.log().records(), 0);
+  uint16_t idx = 0;
+  gg::TrialResult result;
+  EXPECT_FALSE(rig.runner.pop_result(idx, result));
+  // The trial starts over from its rest: no success or timeout was told.
+  ASSERT_GT(rig.events.size(), seen);
+  for (size_t i = seen; i < rig.events.size(); ++i) {
+    EXPECT_NE(rig.events[i].code, gd::RunEventCode::kTimeout);
+    EXPECT_NE(rig.events[i].code, gd::RunEventCode::kSuccess);
+  }
+  EXPECT_EQ(rig.events.back().code, gd::RunEventCode::kRest);
+  EXPECT_EQ(rig.events.back().trial_index, 1);
+  EXPECT_EQ(rig.runner.phase(), gd::RunPhase::kRest);
+
+  // Time goes on from the earlier stamp: the trial runs again and its record is honest.
+  const gd::PlanHeader h = header(1);
+  const gd::PlanTrial t = trial(1, 4, kSideways);
+  rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
+  rig.runner.on_button(true, rig.clock.now_us());
+  const uint32_t pressed = rig.clock.now_us();
+  rig.until(gd::RunEventCode::kSuccess, force_direction(h, t), 3'000 * kMs);
+  ASSERT_EQ(rig.runner.log().records(), 1);
+  gd::LogRecord r;
+  ASSERT_EQ(rig.runner.log().read(0, r), gd::StoreStatus::kOk);
+  EXPECT_TRUE(r.success);
+  EXPECT_NEAR(r.completion_s, (rig.clock.now_us() - pressed) * 1e-6, 0.011);
+  EXPECT_LT(r.completion_s, 3.0f);
+}
+
+TEST(HostlessRunner, ATickBeforeTheLastSampleNeverAdvancesTheTrial) {
+  Rig rig;
+  start_guiding(rig);
+  if (HasFatalFailure()) return;
+  // A loop's "now" read just before the sample it then handles: the step back is no time.
+  rig.runner.tick(rig.clock.now_us() - 5);
+  EXPECT_EQ(rig.runner.phase(), gd::RunPhase::kTrial);
+  for (int i = 0; i < 20; ++i) rig.sample(rig.g_hand);
+  EXPECT_EQ(rig.runner.log().records(), 0);
+  EXPECT_EQ(rig.runner.phase(), gd::RunPhase::kTrial);
+}

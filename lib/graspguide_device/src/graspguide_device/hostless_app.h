@@ -9,6 +9,8 @@
 // and ticks; the link layer (link_device.h) uploads the plan and reads the log.
 #pragma once
 
+#include <cstring>
+
 #include "graspguide.h"
 #include "graspguide_device/hal.h"
 #include "graspguide_device/plan_store.h"
@@ -94,14 +96,18 @@ class HostlessRunner {
   }
 
   // ---- plan upload (refused during a run)
+  // The stored plan stays the device's plan until a commit replaces it: the upload's header
+  // waits in its own copy, so plan_stored() and plan().header (LOG_INFO) go on describing
+  // the stored plan, and an upload that is never committed hides nothing. The uploaded
+  // trials go straight into the RAM plan (one StudyPlan in RAM, not two), so start() drops
+  // an open upload and reloads the stored plan before it runs.
   HostlessReply begin_plan(const PlanHeader& header) {
     if (running()) return refuse(HostlessRefusal::kNotAllowed);
     HostlessReply r;
     if (check_header(header, &r.detail) != PlanCheck::kOk) return bad(r.detail);
-    plan_.header = header;
+    upload_header_ = header;
     uploading_ = true;
     received_ = 0;
-    plan_stored_ = false;  // the RAM copy is being replaced; commit stores or reloads it
     return HostlessReply{};
   }
 
@@ -109,10 +115,11 @@ class HostlessRunner {
     if (running()) return refuse(HostlessRefusal::kNotAllowed);
     if (!uploading_) return refuse(HostlessRefusal::kNoPlan);
     // In order, each once: a lost or repeated PLAN_TRIAL is the host's to resend.
-    if (position != received_ || position >= plan_.header.trial_count) return bad(0);
+    if (position != received_ || position >= upload_header_.trial_count) return bad(0);
     HostlessReply r;
     if (check_trial(trial, &r.detail) != PlanCheck::kOk) return bad(r.detail);
     plan_.trials[position] = trial;
+    plan_id_valid_ = false;
     ++received_;
     return HostlessReply{};
   }
@@ -120,8 +127,10 @@ class HostlessRunner {
   HostlessReply commit_plan(uint16_t trial_count) {
     if (running()) return refuse(HostlessRefusal::kNotAllowed);
     if (!uploading_) return refuse(HostlessRefusal::kNoPlan);
-    if (trial_count != plan_.header.trial_count || received_ != trial_count)
+    if (trial_count != upload_header_.trial_count || received_ != trial_count)
       return abandon(bad(uint8_t(received_ < 255 ? received_ : 255)));
+    plan_.header = upload_header_;
+    plan_id_valid_ = false;
     // Every trial solved once now, so a plan that cannot guide is refused at the desk, not
     // discovered by the wearer in trial 57.
     for (uint16_t i = 0; i < trial_count; ++i) {
@@ -146,11 +155,16 @@ class HostlessRunner {
   }
 
   // ---- the run
-  // From the first trial without a record. A full log is refused before anything moves.
+  // From the first trial of the plan without a valid record, matched by trial_index (not
+  // by counting records: a damaged record in the middle would shift every trial after it),
+  // and each later trial without one; a trial with a record never runs again. A full log is
+  // refused before anything moves. An open upload is dropped: the stored plan runs.
   HostlessReply start() {
     if (running()) return refuse(HostlessRefusal::kNotAllowed);
+    if (uploading_) abandon(HostlessReply{});
     if (!plan_stored_) return refuse(HostlessRefusal::kNoPlan);
-    position_ = log_.records();
+    if (!mark_recorded()) return refuse(HostlessRefusal::kStorageFailed);
+    position_ = first_unrecorded(0);
     if (position_ >= plan_.header.trial_count) {
       emit(RunEventCode::kPlanDone);
       return HostlessReply{};
@@ -183,8 +197,10 @@ class HostlessRunner {
     emit(RunEventCode::kTrialStarted);
   }
 
-  // One IMU sample, in the IMU's axes, stamped with the device's clock.
+  // One IMU sample, in the IMU's axes, stamped with the device's clock. A sample stamped
+  // before the last one (signed 32-bit difference) is refused: see time_went_backwards().
   HostlessFrame on_sample(const ImuSample& s) {
+    if (have_sample_ && int32_t(s.time_us - last_sample_us_) < 0) return time_went_backwards(s);
     HostlessFrame out;
     const Real accel[3] = {Real(s.accel_mps2[0]), Real(s.accel_mps2[1]), Real(s.accel_mps2[2])};
     const Real gyro[3] = {Real(s.gyro_radps[0]), Real(s.gyro_radps[1]), Real(s.gyro_radps[2])};
@@ -217,14 +233,15 @@ class HostlessRunner {
       emit(RunEventCode::kImuFault);
     }
     switch (phase_) {
+      // Elapsed phase time is a signed difference: a "now" from before the phase began
+      // (read just before a sample stamped later) is no time, never 2^32 us.
       case RunPhase::kRest:
-        if (now_us - phase_start_us_ >= rest_us_) {
-          phase_ = RunPhase::kReadyPattern;
-          patterns_.start(kReadyPattern, current().k, now_us);
-        }
+        if (int32_t(now_us - phase_start_us_) >= int32_t(rest_us_))
+          start_pattern(RunPhase::kReadyPattern, kReadyPattern, now_us);
         break;
       case RunPhase::kReadyPattern:
       case RunPhase::kEndPattern:
+        if (int32_t(now_us - phase_start_us_) < 0) break;
         show(patterns_.pwm(now_us));
         if (!patterns_.playing(now_us)) {
           if (phase_ == RunPhase::kReadyPattern) {
@@ -289,6 +306,76 @@ class HostlessRunner {
   }
 
   const PlanTrial& current() const { return plan_.trials[position_]; }
+
+  // Which plan positions hold a valid record of this plan: each record marks the first
+  // unmarked position with its trial_index. False when the log cannot be read.
+  bool mark_recorded() {
+    std::memset(recorded_, 0, sizeof recorded_);
+    const uint32_t id = plan_id_of_plan();
+    const uint16_t n = plan_.header.trial_count;
+    for (uint16_t i = 0; i < log_.records(); ++i) {
+      LogRecord rec;
+      uint32_t rec_id = 0;
+      if (log_.read(i, rec, &rec_id) != StoreStatus::kOk) return false;
+      if (rec_id != id) continue;
+      for (uint16_t p = 0; p < n; ++p)
+        if (!is_recorded(p) && plan_.trials[p].trial_index == rec.trial.trial_index) {
+          set_recorded(p);
+          break;
+        }
+    }
+    return true;
+  }
+
+  bool is_recorded(uint16_t p) const { return (recorded_[p / 8] >> (p % 8)) & 1u; }
+  void set_recorded(uint16_t p) { recorded_[p / 8] = uint8_t(recorded_[p / 8] | (1u << (p % 8))); }
+
+  // The first position at or after from without a record (trial_count: none is left).
+  uint16_t first_unrecorded(uint16_t from) const {
+    const uint16_t n = plan_.header.trial_count;
+    while (from < n && is_recorded(from)) ++from;
+    return from;
+  }
+
+  // A sample stamped before the last one: the device's clock cannot time this phase any
+  // more. The sample is not used (status time_went_backwards, motors off) and time counts
+  // on from its stamp, so a clock that really restarted costs one sample, not the run. A
+  // trial under way is aborted with no record and no result, and begins again with its rest
+  // (as the tracker path ends a trial whose POSE steps back); a rest or a pattern starts
+  // over from this stamp. No duration is ever made from the step.
+  HostlessFrame time_went_backwards(const ImuSample& s) {
+    HostlessFrame out;
+    out.status = Status::kTimeWentBackwards;
+    last_sample_us_ = s.time_us;
+    motors_off();
+    switch (phase_) {
+      case RunPhase::kTrial:
+        trial_.abort();
+        begin_rest(s.time_us);
+        break;
+      case RunPhase::kRest:
+        phase_start_us_ = s.time_us;
+        break;
+      case RunPhase::kReadyPattern:
+        start_pattern(RunPhase::kReadyPattern, kReadyPattern, s.time_us);
+        break;
+      case RunPhase::kEndPattern:
+        start_pattern(RunPhase::kEndPattern,
+                      last_result_.success ? kSuccessPattern : kTimeoutPattern, s.time_us);
+        break;
+      default:
+        break;
+    }
+    out.pwm = shown_;
+    out.trial_running = false;
+    return out;
+  }
+
+  void start_pattern(RunPhase phase, const VibrationPattern& p, uint32_t now_us) {
+    phase_ = phase;
+    phase_start_us_ = now_us;
+    patterns_.start(p, current().k, now_us);
+  }
 
   // The plan's fixed mounting, as a rotation matrix from IMU axes to hand axes (the
   // quaternion was checked to be finite with a norm in [0.5, 2]).
@@ -369,9 +456,13 @@ class HostlessRunner {
     estimator_.update(accel, gyro, dt_s);
   }
 
-  // The trial's time is the device's clock since the press, across its 32-bit wrap.
+  // The trial's time is the device's clock since the press, across its 32-bit wrap, in
+  // steps read as signed differences: a "now" before the last one adds nothing (and is not
+  // kept), so no step back ever reads as 2^32 us.
   void advance_trial_clock(uint32_t now_us) {
-    trial_elapsed_us_ += now_us - trial_started_us_;
+    const int32_t step = int32_t(now_us - trial_started_us_);
+    if (step <= 0) return;
+    trial_elapsed_us_ += uint32_t(step);
     trial_started_us_ = now_us;
   }
 
@@ -424,16 +515,16 @@ class HostlessRunner {
       emit(s == StoreStatus::kFull ? RunEventCode::kLogFull : RunEventCode::kStorageFailed);
       return;
     }
+    set_recorded(position_);
     last_trial_index_ = t.trial_index;
     last_result_ = trial_.result();
     result_pending_ = true;
     emit(rec.success ? RunEventCode::kSuccess : RunEventCode::kTimeout);
-    phase_ = RunPhase::kEndPattern;
-    patterns_.start(rec.success ? kSuccessPattern : kTimeoutPattern, t.k, now_us);
+    start_pattern(RunPhase::kEndPattern, rec.success ? kSuccessPattern : kTimeoutPattern, now_us);
   }
 
   void next_trial(uint32_t now_us) {
-    ++position_;
+    position_ = first_unrecorded(uint16_t(position_ + 1));
     if (position_ >= plan_.header.trial_count) {
       phase_ = RunPhase::kOff;
       motors_off();
@@ -518,6 +609,8 @@ class HostlessRunner {
   Trial trial_;
   PatternPlayer patterns_;
   StudyPlan plan_;
+  PlanHeader upload_header_;  // the open upload's; plan_.header stays the stored plan's
+  uint8_t recorded_[(kMaxPlanTrials + 7) / 8] = {};  // by plan position: a valid record
   Real imu_to_hand_[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   Pwm shown_;
   RunEvent events_[kEventSlots];
