@@ -169,6 +169,19 @@ class ResultsLog:
             valid += 1
         return pf.STORAGE_FAILED, None, 0
 
+    def trial_indices(self, plan_id):
+        """The trial_index of every valid record made under plan_id, oldest first, in one
+        pass over the slots; None when a read fails."""
+        out = []
+        for s in range(self.next_slot):
+            slot = self.store.read(self.slot_offset(s), SLOT_BYTES)
+            if slot is None:
+                return None
+            kind, r, pid = classify(slot)
+            if kind == _VALID and pid == plan_id:
+                out.append(r.trial.trial_index)
+        return out
+
     def erase(self):
         """Every slot back to 0xFF from the last to the first (the plan region is not
         touched), then a remount."""

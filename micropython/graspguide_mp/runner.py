@@ -61,12 +61,19 @@ REFUSED_NONE = None
 REFUSED_NO_PLAN = "no_plan"
 REFUSED_LOG_FULL = "log_full"
 REFUSED_NOT_ALLOWED = "not_allowed"
+REFUSED_STORAGE_FAILED = "storage_failed"  # the log could not be read
 
 
 def ticks_since(now, then):
     """now - then on the wrapping clock, as an unsigned count (a past time is never
     negative): the C++'s uint32 subtraction, good for 2^30 us = 17.9 min."""
     return (now - then) & frame.TICKS_MASK
+
+
+def ticks_elapsed(now, then):
+    """now - then on the wrapping clock as a signed count (frame.ticks_diff): a "now"
+    before "then" is negative, never a period's worth of time."""
+    return frame.ticks_diff(now, then)
 
 
 def pattern_length_us(p):
@@ -218,6 +225,9 @@ class HostlessRunner:
         self._have_sample = False
         self._samples = 0
         self._faults_at_start = 0
+        self._recorded = bytearray(0)  # by plan position: 1 = a valid record
+        self._last_success = False
+        self._rest_elapsed_us = 0
 
     # ---------------------------------------------------------------- boot and run
     def boot(self):
@@ -234,13 +244,18 @@ class HostlessRunner:
         return self.phase != PH_OFF
 
     def start(self):
-        """From the first trial without a record; a full log is refused before anything
-        moves. Returns None, or why it refused."""
+        """From the first plan trial without a valid record, then each later one without
+        one. Records are matched to the plan by trial_index, not counted: a damaged record
+        in the middle leaves only its own trial without a record, and that trial runs again
+        after those already recorded; no trial with a record runs twice. A full log is
+        refused before anything moves. Returns None, or why it refused."""
         if self.running():
             return REFUSED_NOT_ALLOWED
         if self.plan is None:
             return REFUSED_NO_PLAN
-        self.position = self.log.records
+        if not self._mark_recorded():
+            return REFUSED_STORAGE_FAILED
+        self.position = self._first_unrecorded(0)
         if self.position >= self.plan.header.trial_count:
             self._emit(EV_PLAN_DONE)
             return REFUSED_NONE
@@ -272,7 +287,10 @@ class HostlessRunner:
 
     def on_sample(self, accel, gyro, t):
         """One IMU sample in the IMU's axes, stamped with the clock's ticks. Returns the
-        frame's status; error_deg, alpha and duty hold the frame's output."""
+        frame's status; error_deg, alpha and duty hold the frame's output. A sample
+        stamped before the last one is refused (_time_went_backwards)."""
+        if self._have_sample and ticks_elapsed(t, self._last_sample) < 0:
+            return self._time_went_backwards(t)
         was_allowed = self.imu.motors_allowed()
         health = self.imu.on_sample(accel, gyro, t)
         # Any fault's onset in a trial is news (stale is found by tick(), below).
@@ -298,11 +316,20 @@ class HostlessRunner:
             self._motors_off()
             self._emit(EV_IMU_FAULT)
         ph = self.phase
+        # Elapsed phase time is a signed difference: a "now" from before the phase began
+        # (read just before a sample stamped later) is no time.
         if ph == PH_REST:
-            if ticks_since(now, self._phase_start) >= self._rest_us:
-                self.phase = PH_READY_PATTERN
-                self.patterns.start(READY_PATTERN, self._current().k, now)
+            # Summed step by step: a rest (up to 600 s) is longer than the signed half
+            # period of the ticks (2^29 us = 537 s).
+            step = ticks_elapsed(now, self._phase_start)
+            if step > 0:
+                self._rest_elapsed_us += step
+                self._phase_start = now
+            if self._rest_elapsed_us >= self._rest_us:
+                self._start_pattern(PH_READY_PATTERN, READY_PATTERN, now)
         elif ph == PH_READY_PATTERN or ph == PH_END_PATTERN:
+            if ticks_elapsed(now, self._phase_start) < 0:
+                return
             self.patterns.pwm_into(now, self.duty)
             self.motors.write(self.duty)
             if not self.patterns.playing(now):
@@ -314,8 +341,7 @@ class HostlessRunner:
         elif ph == PH_TRIAL:
             # The trial's time is the device's, samples or not: a dead IMU still ends
             # the trial at its timeout (a failure, motors already off).
-            self._trial_elapsed_us += ticks_since(now, self._trial_started)
-            self._trial_started = now
+            self._advance_trial_clock(now)
             if self._trial_elapsed_us >= int(self.plan.header.timeout_s * 1e6):
                 self.trial.expire()
                 self._finish_trial(now)
@@ -327,6 +353,65 @@ class HostlessRunner:
     # ---------------------------------------------------------------- internals
     def _current(self):
         return self.plan.trials[self.position]
+
+    def _mark_recorded(self):
+        """Which plan positions hold a valid record of this plan: each record marks the
+        first unmarked position with its trial_index. False when the log cannot be read."""
+        trials = self.plan.trials
+        n = self.plan.header.trial_count
+        self._recorded = bytearray(n)
+        indices = self.log.trial_indices(self.plan_id)
+        if indices is None:
+            return False
+        for index in indices:
+            for p in range(n):
+                if not self._recorded[p] and trials[p].trial_index == index:
+                    self._recorded[p] = 1
+                    break
+        return True
+
+    def _first_unrecorded(self, p):
+        n = self.plan.header.trial_count
+        while p < n and self._recorded[p]:
+            p += 1
+        return p
+
+    def _time_went_backwards(self, t):
+        """A sample stamped before the last one: the clock cannot time this phase any more.
+        The sample is not used (TIME_WENT_BACKWARDS, motors off) and time counts on from
+        its stamp, so a clock that really restarted costs one sample, not the run. A trial
+        under way is aborted with no record and no result and begins again with its rest
+        (as the tracker path ends a trial whose POSE steps back); a rest or a pattern
+        starts over from this stamp. No duration is ever made from the step."""
+        self._last_sample = t
+        self._motors_off()
+        self.frame_status = st.TIME_WENT_BACKWARDS
+        ph = self.phase
+        if ph == PH_TRIAL:
+            self.trial.abort()
+            self._begin_rest(t)
+        elif ph == PH_REST:
+            self._phase_start = t
+            self._rest_elapsed_us = 0
+        elif ph == PH_READY_PATTERN:
+            self._start_pattern(PH_READY_PATTERN, READY_PATTERN, t)
+        elif ph == PH_END_PATTERN:
+            p = SUCCESS_PATTERN if self._last_success else TIMEOUT_PATTERN
+            self._start_pattern(PH_END_PATTERN, p, t)
+        return st.TIME_WENT_BACKWARDS
+
+    def _start_pattern(self, phase, p, now):
+        self.phase = phase
+        self._phase_start = now
+        self.patterns.start(p, self._current().k, now)
+
+    def _advance_trial_clock(self, now):
+        """The trial's time since the press, in steps read as signed differences: a "now"
+        before the last one adds nothing (and is not kept)."""
+        step = ticks_elapsed(now, self._trial_started)
+        if step > 0:
+            self._trial_elapsed_us += step
+            self._trial_started = now
 
     def _adopt_plan(self):
         """The plan's IMU mounting as a rotation matrix, IMU axes -> hand axes (the
@@ -373,6 +458,7 @@ class HostlessRunner:
     def _begin_rest(self, now):
         self.phase = PH_REST
         self._phase_start = now
+        self._rest_elapsed_us = 0
         self._rest_us = int(self.plan.header.rest_s * 1e6)
         self._motors_off()
         if self._prepare(self._current()) != st.OK:
@@ -396,8 +482,7 @@ class HostlessRunner:
         self.estimator.update(accel, gyro, dt_s)
 
     def _guide(self, now, health):
-        self._trial_elapsed_us += ticks_since(now, self._trial_started)
-        self._trial_started = now
+        self._advance_trial_clock(now)
         if health != st.OK or not self.estimator.initialised:
             self._motors_off()
             self.frame_status = health if health != st.OK else st.IMU_STALE
@@ -442,13 +527,16 @@ class HostlessRunner:
             self.stop()
             self._emit(EV_LOG_FULL if s == pf.FULL else EV_STORAGE_FAILED)
             return
+        self._recorded[self.position] = 1
+        self._last_success = rec.success
         self.result_pending = (t.trial_index, rec)
         self._emit(EV_SUCCESS if rec.success else EV_TIMEOUT)
-        self.phase = PH_END_PATTERN
-        self.patterns.start(SUCCESS_PATTERN if rec.success else TIMEOUT_PATTERN, t.k, now)
+        self._start_pattern(
+            PH_END_PATTERN, SUCCESS_PATTERN if rec.success else TIMEOUT_PATTERN, now
+        )
 
     def _next_trial(self, now):
-        self.position += 1
+        self.position = self._first_unrecorded(self.position + 1)
         if self.position >= self.plan.header.trial_count:
             self.phase = PH_OFF
             self._motors_off()

@@ -245,3 +245,109 @@ def test_levels_file():
             assert "line 1" in str(e), str(e)
         else:
             raise AssertionError("a bad levels line was taken: %r" % bad)
+
+
+def _damage_slot(store, slot):
+    """One bit of the slot's record flipped (flash wear): the slot reads torn."""
+    store.data[pf.REGION_BYTES + slot * rf.SLOT_BYTES + 12] ^= 0x10
+
+
+def test_a_damaged_records_trial_runs_again_and_no_trial_runs_twice():
+    rig = Rig(make_plan(4))
+    rig.r.boot()
+    rig.r.start()
+    for _ in range(3):
+        rig.to_trial()
+        rig.until("success")
+    rig.r.stop()
+    assert [r.trial.trial_index for r in rig.records()] == [1, 2, 3]
+    _damage_slot(rig.store, 1)  # trial 2's record goes bad
+    rig.r.boot()
+    assert rig.r.log.torn == 1 and rig.r.log.records == 2
+    rig.events = []
+    assert rig.r.start() is None
+    rig._drain()
+    assert rig.events == ["rest"] and rig.r.position == 1, (rig.events, rig.r.position)
+    rig.to_trial()
+    rig.until("success")
+    rig.until("rest", rig.off)
+    assert rig.r.position == 3, "trial 3 has its record: skipped"
+    rig.to_trial()
+    rig.until("plan_done")
+    assert [r.trial.trial_index for r in rig.records()] == [1, 3, 2, 4]
+    rig.events = []
+    assert rig.r.start() is None
+    rig._drain()
+    assert rig.events == ["plan_done"] and not rig.r.running()
+
+
+def test_a_damaged_record_of_a_finished_plan_runs_only_its_trial_again():
+    rig = Rig(make_plan(4))
+    rig.r.boot()
+    rig.r.start()
+    for _ in range(4):
+        rig.to_trial()
+        rig.until("success")
+    rig.until("plan_done", rig.off)
+    _damage_slot(rig.store, 1)
+    rig.r.boot()
+    rig.r.start()
+    assert rig.r.position == 1, rig.r.position
+    rig.to_trial()
+    rig.until("plan_done")
+    assert [r.trial.trial_index for r in rig.records()] == [1, 3, 4, 2]
+
+
+def test_a_sample_older_than_the_last_aborts_the_trial_with_no_record():
+    rig = Rig(make_plan(1), timeout_s=5.0)
+    rig.r.boot()
+    rig.r.start()
+    rig.to_trial()
+    for _ in range(5):
+        rig.sample(rig.off)
+    assert not rig.motors.all_off(), "guiding"
+    n = len(rig.events)
+    back = (rig.t - 1) & 0x3FFFFFFF  # 1 us before the last sample
+    status = rig.r.on_sample(rig.off, [0.0, 0.0, 0.0], back)
+    rig._drain()
+    assert status == st.TIME_WENT_BACKWARDS, status
+    assert rig.motors.all_off()
+    assert rig.records() == [] and rig.r.result_pending is None
+    assert rig.events[n:] == ["rest"], rig.events[n:]
+    assert rig.r.phase == rn.PH_REST
+    # The trial runs again from its rest; its record counts only the time it ran.
+    rig.to_trial()
+    pressed = rig.t
+    rig.until("success")
+    recs = rig.records()
+    assert len(recs) == 1 and recs[0].success
+    assert abs(recs[0].completion_s - (rig.t - pressed) * 1e-6) < 0.011, recs[0].completion_s
+
+
+def test_a_tick_before_the_last_sample_never_advances_the_trial():
+    rig = Rig(make_plan(1), timeout_s=5.0)
+    rig.r.boot()
+    rig.r.start()
+    rig.to_trial()
+    rig.sample(rig.off)
+    rig.r.tick((rig.t - 5) & 0x3FFFFFFF)  # a loop's "now" read before the sample
+    for _ in range(20):
+        rig.sample(rig.off)
+    assert rig.r.phase == rn.PH_TRIAL and rig.records() == []
+
+
+def test_the_longest_rest_ends_on_time_across_the_ticks_half_period():
+    # 600 s is longer than the signed half period of the 2^30 us ticks (537 s).
+    rig = Rig(make_plan(1, rest_s=600.0))
+    rig.r.boot()
+    rig.r.start()
+    for _ in range(599):
+        rig.t = (rig.t + 1000000) & 0x3FFFFFFF
+        rig.r.tick(rig.t)
+        rig._drain()
+    assert rig.r.phase == rn.PH_REST, "599 s into a 600 s rest"
+    for _ in range(3):
+        rig.t = (rig.t + 1000000) & 0x3FFFFFFF
+        rig.r.tick(rig.t)
+        rig._drain()
+    assert rig.r.phase != rn.PH_REST, "the rest ended"
