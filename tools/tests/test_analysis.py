@@ -631,14 +631,16 @@ def test_tlx_scales_null_are_left_out_of_table3(tmp_path):
     assert "16 of 32 sessions were logged without a questionnaire" in A.report_markdown(res)
 
 
-def test_error_cut_last_line_says_so(tmp_path):
-    make_study(tmp_path / "S", n=3)
+def test_cut_last_line_is_left_out_and_said(tmp_path):
+    trials, _ = make_study(tmp_path / "S", n=3)
     f = tmp_path / "S" / "U3" / "trials.jsonl"
     text = f.read_text()
     f.write_text(text[:-20])
-    msg = _error([tmp_path / "S"])
+    res = A.analyze([tmp_path / "S"])
     n = len(text.splitlines())
-    assert f"{f}:{n}: malformed JSON" in msg and "write cut short" in msg
+    (line,) = res.left_out
+    assert str(line).startswith(f"{f}:{n}: the last line is a write cut short")
+    assert len(res.trials) == len(trials) - 1
 
 
 def test_default_out_dir_is_the_study_folders_analysis(tmp_path):

@@ -279,8 +279,6 @@ def test_bad_input(tmp_path):
     rows = trials.read_text().splitlines()
     trials.write_text("\n".join([rows[0], rows[1][:40], *rows[2:]]) + "\n")
     _bad([run, *out], 1, f"{trials}:2", "malformed JSON")
-    trials.write_text("\n".join(rows[:-1]) + "\n" + rows[-1][:30])
-    _bad([run, *out], 1, f"{trials}:{len(rows)}", "redoes that trial")
 
     session = tmp_path / "session"
     shutil.copytree(SESSION, session)

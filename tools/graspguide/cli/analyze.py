@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from graspguide.exit_codes import EXIT_OK, fail
@@ -25,7 +26,10 @@ the ANOVA; writes report.md, figure4.png, figure4.svg and CSV tables to --out.
 Simulated records make the report and the output say SIMULATED DATA. With a single
 participant (a pilot), or a single one left after outlier removal, the tables, the
 participant means and Figure 4 are written and the output says that the inferential
-statistics (ANOVA, t-tests) need at least 2 participants.
+statistics (ANOVA, t-tests) need at least 2 participants. A damaged last line of a
+trials.jsonl or tlx.jsonl (a run killed mid-write) is left out with a warning that says
+how to record it again, and the complete records before it are analysed; report.md lists
+it. A damaged line before the last is an error.
 
 Exit status: 0 done, 1 bad or insufficient data (the message says what and where),
 2 usage error.
@@ -72,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         written = write_outputs(res, out)
     except AnalysisError as e:
         return fail("analyze", e)
+    for line in res.left_out:
+        print(f"graspguide analyze: warning: {line}", file=sys.stderr)
     print(summary_text(res))
     print()
     print(f"Wrote {', '.join(p.name for p in written)} to {out}")

@@ -86,6 +86,8 @@ def plot_command(
     out_dir = out or os.path.join(run_dir, PLOTS_DIR)
     try:
         run = open_run(run_dir, participant)
+        for line in run.left_out:
+            print(f"graspguide plot: warning: {line}", file=sys.stderr, flush=True)
         trials = (
             select_trial(run, trial)
             if trial is not None

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from graspguide.core.vocabulary import FINGERS, MODALITIES, modality
-from graspguide.study.records import JsonlDamaged, read_jsonl
+from graspguide.study.records import JsonlDamaged, LeftOutLine, complete_records
 
 STUDY_FILE = "study.json"
 TRIALS_FILE = "trials.jsonl"
@@ -95,6 +95,9 @@ class RunFolder:
     path: str
     criteria: Criteria
     participants: list[Participant]
+    # Damaged last lines of the records, left out (a run killed mid-write): the command
+    # warns about each.
+    left_out: list[LeftOutLine] = field(default_factory=list)
 
 
 # --------------------------------------------------------------------------------------
@@ -115,26 +118,19 @@ def _read_json(path: str) -> Any:
         raise PlotInputError(f"cannot read {path}: {e.strerror or e}") from None
 
 
-def _records(path: str) -> list[tuple[str, dict[str, Any]]]:
-    """(``FILE:LINE``, object) per line; a last line that only lacks its newline is read,
-    any other damaged line is an error."""
+def _records(path: str, left_out: list[LeftOutLine]) -> list[tuple[str, dict[str, Any]]]:
+    """(``FILE:LINE``, object) per complete record (records.complete_records): a damaged
+    last line, what a run killed mid-write leaves, is added to ``left_out``; a damaged
+    earlier line is an error."""
     try:
-        contents = read_jsonl(path)
+        records, tail = complete_records(path)
     except JsonlDamaged as e:
         raise PlotInputError(f"{e}; {_REDO_HINT}") from None
     except OSError as e:
         raise PlotInputError(f"cannot read {path}: {e.strerror or e}") from None
-    out = [(f"{path}:{n}", r) for n, r in zip(contents.lines, contents.records)]
-    if contents.damaged_tail is not None:
-        where = f"{path}:{contents.tail_line}"
-        if contents.tail_record is None:
-            raise PlotInputError(
-                f"{where}: {contents.tail_reason} (a write cut short); running "
-                "`graspguide trial` again for this participant sets the line aside and "
-                "redoes that trial"
-            )
-        out.append((where, contents.tail_record))
-    return out
+    if tail is not None:
+        left_out.append(tail)
+    return records
 
 
 def _field(rec: dict[str, Any], key: str, where: str, ok, what: str) -> Any:
@@ -310,9 +306,9 @@ def _study_trial(pdir: str, where: str, rec: dict[str, Any]) -> TrialInfo:
     )
 
 
-def _participant(pdir: str) -> Participant:
+def _participant(pdir: str, left_out: list[LeftOutLine]) -> Participant:
     path = os.path.join(pdir, TRIALS_FILE)
-    trials = [_study_trial(pdir, where, rec) for where, rec in _records(path)]
+    trials = [_study_trial(pdir, where, rec) for where, rec in _records(path, left_out)]
     trials.sort(key=lambda t: t.trial)
     return Participant(os.path.basename(os.path.normpath(pdir)), trials)
 
@@ -324,7 +320,7 @@ def _study_criteria(study_json: str) -> Criteria:
     return _criteria(trial, f"{study_json}: protocol.trial")
 
 
-def _session(folder: str) -> RunFolder:
+def _session(folder: str, left_out: list[LeftOutLine]) -> RunFolder:
     config_path = os.path.join(folder, "config.json")
     if not os.path.exists(config_path):
         raise PlotInputError(
@@ -344,7 +340,7 @@ def _session(folder: str) -> RunFolder:
     wrench = _field(config, "wrench", config_path, _is_wrench, "3 or 6 numbers")
     trial_id = config.get("trial_id", 1)
     success = completion = None
-    for rec_where, rec in _records(os.path.join(folder, "results.jsonl")):
+    for rec_where, rec in _records(os.path.join(folder, "results.jsonl"), left_out):
         if "success" in rec:  # a TRIAL_RESULT (the end record has "event")
             success = _field(rec, "success", rec_where, lambda v: isinstance(v, bool), "bool")
             completion = float(
@@ -363,12 +359,14 @@ def _session(folder: str) -> RunFolder:
         frames_path=folder,
         source=str(source.get("source", "")) if isinstance(source, dict) else "",
     )
-    return RunFolder("session", folder, criteria, [Participant("", [info])])
+    return RunFolder("session", folder, criteria, [Participant("", [info])], left_out)
 
 
 def open_run(path: str, participant: str | None = None) -> RunFolder:
     """The run folder at ``path``: a study folder (every participant, or ``participant``),
-    a participant folder of a study, or a session folder."""
+    a participant folder of a study, or a session folder. A damaged last line of the
+    records is left out and listed in ``left_out``."""
+    left_out: list[LeftOutLine] = []
     if not os.path.exists(path):
         raise PlotInputError(
             f"{path}: no such folder; give the --out folder of `graspguide trial` or the "
@@ -388,7 +386,7 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
                 "participants; leave out --participant",
                 usage=True,
             )
-        return _session(path)
+        return _session(path, left_out)
     if os.path.exists(os.path.join(path, TRIALS_FILE)):  # a participant folder
         study_json = os.path.join(os.path.dirname(os.path.abspath(path)), STUDY_FILE)
         if not os.path.exists(study_json):
@@ -397,12 +395,12 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
                 "study's protocol: plot the study folder (the one with study.json)",
                 usage=True,
             )
-        p = _participant(path)
+        p = _participant(path, left_out)
         if participant and participant != p.pid:
             raise PlotInputError(
                 f"{path} is participant {p.pid}'s folder, not {participant}'s", usage=True
             )
-        return RunFolder("study", path, _study_criteria(study_json), [p])
+        return RunFolder("study", path, _study_criteria(study_json), [p], left_out)
     study_json = os.path.join(path, STUDY_FILE)
     if not os.path.exists(study_json):
         raise PlotInputError(
@@ -427,8 +425,8 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
             f"{path}: no participant has completed a trial yet (no PID/{TRIALS_FILE})",
             usage=True,
         )
-    parts = [_participant(os.path.join(path, pid)) for pid in pids]
-    return RunFolder("study", path, criteria, parts)
+    parts = [_participant(os.path.join(path, pid), left_out) for pid in pids]
+    return RunFolder("study", path, criteria, parts, left_out)
 
 
 def select_trial(run: RunFolder, trial: int) -> list[TrialInfo]:

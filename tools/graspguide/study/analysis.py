@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from graspguide.core.vocabulary import MODALITIES
-from graspguide.study.records import JsonlDamaged, read_jsonl
+from graspguide.study.records import JsonlDamaged, LeftOutLine, complete_records
 
 # Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
 TABLE_ORDER: tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")
@@ -128,30 +128,19 @@ def _maybe(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
     return _need(rec, key, where, check, what)
 
 
-def _read_jsonl(path: Path) -> list[tuple[str, dict[str, Any]]]:
-    """(``FILE:LINE``, object) for every non-blank line (records.read_jsonl); a bad line
-    is an error, a last line that only lacks its newline is read."""
+def _read_jsonl(path: Path, left_out: list[LeftOutLine]) -> list[tuple[str, dict[str, Any]]]:
+    """(``FILE:LINE``, object) for every complete record (records.complete_records); a
+    damaged last line is left out and added to ``left_out``, a damaged earlier line is
+    an error."""
     try:
-        contents = read_jsonl(path)
+        records, tail = complete_records(path)
     except JsonlDamaged as e:
         raise AnalysisError(str(e)) from None
     except OSError as e:
         raise AnalysisError(f"{path}: cannot read ({e.strerror or e})") from None
-    out = [(f"{path}:{n}", rec) for n, rec in zip(contents.lines, contents.records)]
-    if contents.damaged_tail is not None:
-        where = f"{path}:{contents.tail_line}"
-        if contents.tail_record is not None:
-            out.append((where, contents.tail_record))
-        else:
-            hint = ""
-            if not contents.damaged_tail.endswith(b"\n"):
-                hint = (
-                    "; the last line has no newline: a write cut short, e.g. by a crash "
-                    "(running the study's participant again with graspguide trial moves "
-                    "it aside and redoes that trial)"
-                )
-            raise AnalysisError(f"{where}: {contents.tail_reason}{hint}")
-    return out
+    if tail is not None:
+        left_out.append(tail)
+    return records
 
 
 def _record_identity(where: str, rec: dict[str, Any]) -> dict[str, Any]:
@@ -305,7 +294,7 @@ def participant_dirs(paths: Iterable[str | os.PathLike]) -> list[Path]:
     return found
 
 
-def load(paths: Iterable[str | os.PathLike]):
+def load(paths: Iterable[str | os.PathLike], left_out: list[LeftOutLine] | None = None):
     """Read study or participant folders into ``(trials, tlx)`` pandas DataFrames.
 
     ``trials`` has one row per logged trial, familiarization trials included (flagged in
@@ -314,7 +303,8 @@ def load(paths: Iterable[str | os.PathLike]):
     ``TLX_COLUMNS`` (one column per scale). ``source`` is ``FILE:LINE`` of the record.
     Raises ``AnalysisError`` for a missing file, a malformed line (``FILE:LINE``), a
     missing or mistyped field, a trial or session logged twice, or a participant found in
-    two folders.
+    two folders. A damaged last line of a file (a run killed mid-write) is left out, the
+    records before it read, and the line added to ``left_out``.
     """
     import pandas as pd
 
@@ -349,7 +339,7 @@ def load(paths: Iterable[str | os.PathLike]):
                 tlx_keys,
             ),
         ):
-            for where, rec in _read_jsonl(folder / path):
+            for where, rec in _read_jsonl(folder / path, left_out if left_out is not None else []):
                 row = parse(where, rec)
                 key = key_of(row)
                 if key in keys:
@@ -892,6 +882,8 @@ class Result:
     participants: list[str]
     familiarization_excluded: int
     sources: list[Path]
+    # Damaged last lines left out (a run killed mid-write): said in the report and output.
+    left_out: list[LeftOutLine] = field(default_factory=list)
 
     @property
     def simulated(self) -> bool:
@@ -940,6 +932,10 @@ def report_markdown(
         f"{int(res.tlx[list(TLX_SCALES)].notna().all(axis=1).sum())} answered.",
         "",
     ]
+    if res.left_out:
+        out += ["**Left out**: damaged last lines, not records:", ""]
+        out += [f"- {line}" for line in res.left_out]
+        out += [""]
 
     out += [
         "## Table I — successfully accomplished tasks",
@@ -1136,7 +1132,8 @@ def summary_text(res: Result) -> str:
 def analyze(paths: Iterable[str | os.PathLike], remove_outliers: bool = True) -> Result:
     """Load, then Tables I-III and the statistics (no files written)."""
     paths = list(paths)
-    trials, tlx = load(paths)
+    left_out: list[LeftOutLine] = []
+    trials, tlx = load(paths, left_out)
     data = _analysed(trials)
     means = participant_means(trials)
     stats = paper_statistics(means, remove_outliers=remove_outliers)
@@ -1154,6 +1151,7 @@ def analyze(paths: Iterable[str | os.PathLike], remove_outliers: bool = True) ->
         participants=participants,
         familiarization_excluded=int(len(trials) - len(data)),
         sources=[Path(p) for p in paths],
+        left_out=left_out,
     )
 
 

@@ -259,6 +259,63 @@ def read_jsonl(path: str | os.PathLike) -> JsonlContents:
     return out
 
 
+@dataclass(frozen=True)
+class LeftOutLine:
+    """The damaged last line of a JSON Lines file that :func:`complete_records` leaves
+    out; ``str()`` says where, why, what was read and how to run that trial again."""
+
+    path: str
+    line: int
+    reason: str
+    size: int  # bytes
+    cut_short: bool  # no newline at its end: a write cut short
+    complete: int  # the complete records read before it
+
+    def __str__(self) -> str:
+        what = (
+            "a write cut short (no newline at its end), e.g. by a run killed mid-write"
+            if self.cut_short
+            else "damaged"
+        )
+        return (
+            f"{self.path}:{self.line}: the last line is {what}: {self.reason}, {self.size} "
+            f"bytes; it is left out and the {self.complete} complete records before it are "
+            "read (the file is not changed). To record it again, run the same `graspguide "
+            "trial` command for this participant: it moves the line aside to "
+            f"{os.path.basename(self.path)}.damaged-<time> and runs what it recorded again"
+        )
+
+
+def complete_records(
+    path: str | os.PathLike,
+) -> tuple[list[tuple[str, dict[str, Any]]], LeftOutLine | None]:
+    """(``FILE:LINE``, record) for every complete record of a JSON Lines file the runner
+    appends to, and its damaged last line, left out (None when there is none). Readers of
+    finished runs (the analysis, the plots) read the records this way: a run killed
+    mid-write leaves at most its last line damaged, and the records before it are whole.
+    A last line that only lacks its newline is a complete record. A damaged earlier line
+    raises JsonlDamaged (not a cut write: a person must look); an unreadable file,
+    OSError."""
+    where = os.fspath(path)
+    contents = read_jsonl(where)
+    out = [(f"{where}:{n}", r) for n, r in zip(contents.lines, contents.records)]
+    tail = contents.damaged_tail
+    if tail is None:
+        return out, None
+    if contents.tail_record is not None:
+        out.append((f"{where}:{contents.tail_line}", contents.tail_record))
+        return out, None
+    left_out = LeftOutLine(
+        path=where,
+        line=contents.tail_line,
+        reason=contents.tail_reason or "damaged",
+        size=len(tail),
+        cut_short=not tail.endswith(b"\n"),
+        complete=len(out),
+    )
+    return out, left_out
+
+
 def set_aside_damaged_tail(path: str, contents: JsonlContents) -> str:
     """Move a damaged last line to ``PATH.damaged-<time>`` and cut it from the file.
     Returns the new file's path."""
@@ -397,6 +454,8 @@ class SessionLog:
 
 __all__ = [
     "read_jsonl",
+    "complete_records",
+    "LeftOutLine",
     "JsonlContents",
     "JsonlDamaged",
     "set_aside_damaged_tail",
