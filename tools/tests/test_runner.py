@@ -608,7 +608,7 @@ def test_cli_usage_errors(tmp_path, capsys):
     assert cli.main(base + ["--participant", "Ux", "--source", "synthetic"]) == 2
     assert "participant id 'Ux'" in capsys.readouterr().err
     assert cli.main(base + ["--participant", "U1", "--source", "bogus"]) == 2
-    assert "unknown --source 'bogus'" in capsys.readouterr().err
+    assert 'unknown source "bogus"' in capsys.readouterr().err
     assert (
         cli.main(
             [

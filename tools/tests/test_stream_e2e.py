@@ -287,7 +287,7 @@ def test_run_stream_then_stop_leaves_device_idle():
             ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]
             + ["--source", "participant:reaction_time=0.3"],
             2,
-            "unknown participant parameter 'reaction_time'",
+            'unknown participant key "reaction_time" (did you mean "reaction_time_s"?)',
         ),
         (
             ["--port", "sim", "--scene", SCENE3, "--wrench", WRENCH]

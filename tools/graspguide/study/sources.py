@@ -56,6 +56,34 @@ class SourceError(ValueError):
     """A pose source that cannot be used (bad spec, bad file); says what to fix."""
 
 
+#: Every ``--source`` kind and how it is written: the one list `stream` and `trial` show.
+SOURCE_KINDS: dict[str, str] = {
+    "replay": "replay:FILE.csv",
+    "synthetic": "synthetic[:rate=240,duration=10,seed=0]",
+    "plugin": "plugin:MODULE:CLASS[:ARG]",
+    "participant": "participant[:KEY=VALUE,...]",
+}
+#: The options of ``synthetic:...`` and how each is read.
+SYNTHETIC_OPTIONS = {"rate": float, "duration": float, "seed": int, "tremor_deg": float}
+
+
+def unknown_source(spec: str) -> SourceError:
+    """The error for a ``--source`` whose kind is none of SOURCE_KINDS: every kind, the
+    closest one, and where a tracker's name goes instead."""
+    from graspguide.core.suggest import unknown_name
+
+    kind = spec.partition(":")[0]
+    text = unknown_name("source", kind, list(SOURCE_KINDS))
+    text += "; written " + ", ".join(SOURCE_KINDS.values())
+    if kind.lower() in TRACKER_PRESETS:
+        text += (
+            f"; {kind} is a tracker convention: replay its export with --source "
+            f"replay:FILE.csv --tracker {kind.lower()}, or stream it live with "
+            "--source plugin:MODULE:CLASS (a TrackerAdapter)"
+        )
+    return SourceError(text)
+
+
 # --------------------------------------------------------------------------------------
 # Tracker conventions
 # --------------------------------------------------------------------------------------
@@ -481,14 +509,16 @@ def open_source(spec: str, tracker: str | None = None) -> Source:
     if kind == "plugin":
         return _open_plugin(rest)
     if kind == "synthetic":
+        from graspguide.core.suggest import did_you_mean
+
         kw: dict[str, float] = {}
-        conv = {"rate": float, "duration": float, "seed": int, "tremor_deg": float}
+        conv = SYNTHETIC_OPTIONS
         for item in filter(None, rest.split(",")):
             key, eq, value = item.partition("=")
             key = key.strip()
             if not eq or key not in conv:
                 raise SourceError(
-                    f"synthetic: bad option {item!r}; options are "
+                    f"synthetic: bad option {item!r}{did_you_mean(key, conv)}; options are "
                     f"{', '.join(k + '=N' for k in conv)}"
                 )
             try:
@@ -496,10 +526,7 @@ def open_source(spec: str, tracker: str | None = None) -> Source:
             except ValueError:
                 raise SourceError(f"synthetic: {key} must be a number, got {value!r}") from None
         return SyntheticSource(**kw)  # type: ignore[arg-type]
-    raise SourceError(
-        f"unknown source {spec!r}: use replay:FILE.csv, "
-        "synthetic[:rate=240,duration=10,seed=0] or plugin:MODULE:CLASS[:ARG]"
-    )
+    raise unknown_source(spec)
 
 
 __all__ = [
@@ -507,6 +534,9 @@ __all__ = [
     "ReplaySource",
     "SyntheticSource",
     "SourceError",
+    "SOURCE_KINDS",
+    "SYNTHETIC_OPTIONS",
+    "unknown_source",
     "TrackerConvention",
     "TrackerAdapter",
     "tracker_convention",

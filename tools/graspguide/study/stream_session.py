@@ -45,9 +45,13 @@ def open_participant(spec: str) -> Any:
     from graspguide.study.errors import RunnerError
     from graspguide.study.participant import VirtualParticipant
     from graspguide.study.sources import SourceError
-    from graspguide.study.trial_sources import ClosedLoopSource
+    from graspguide.study.trial_sources import ClosedLoopSource, check_participant_keys
 
     _, _, rest = spec.partition(":")
+    try:
+        check_participant_keys(rest, seed=True)
+    except ValueError as e:
+        raise SourceError(f"--source {spec}: {e}") from None
     seed = 0
     params = []
     for item in filter(None, (x.strip() for x in rest.split(","))):

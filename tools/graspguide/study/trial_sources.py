@@ -13,6 +13,37 @@ from graspguide.study.errors import RunnerError
 from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
 
 
+def participant_keys(seed: bool) -> list[str]:
+    """The keys of ``participant:KEY=VALUE,...``: the virtual participant's parameters
+    (ParticipantParams' fields) and ``fingers``, after ``seed`` where the command takes
+    one (`stream`; `trial` derives it from the protocol and the participant)."""
+    from dataclasses import fields
+
+    from graspguide.study.participant import ParticipantParams
+
+    keys = [f.name for f in fields(ParticipantParams)] + ["fingers"]
+    return ["seed", *keys] if seed else keys
+
+
+def check_participant_keys(spec: str, seed: bool) -> None:
+    """ValueError naming an unknown key of the participant spec ``spec`` (what follows
+    ``participant:``), the closest known one and every key; the values are the
+    participant's to check."""
+    from graspguide.core.suggest import unknown_name
+
+    keys = participant_keys(seed)
+    for item in filter(None, (x.strip() for x in spec.split(","))):
+        key = item.partition("=")[0].strip()
+        if key not in keys:
+            hint = ""
+            if key == "seed":
+                hint = (
+                    " (the seed comes from the protocol's seed and the participant id: "
+                    "the same participant gets the same person on every run)"
+                )
+            raise ValueError(unknown_name("participant key", key, keys) + hint)
+
+
 class RunnerSource:
     """What the runner needs of a source. ``closed_loop``: begin_trial/step in lockstep;
     else ``samples(trial)`` yields (t_s, quat, contacts). ``simulated``: no person (TLX
@@ -118,6 +149,7 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
                 usage=True,
             ) from None
         try:
+            check_participant_keys(rest, seed=False)
             model = cls.from_spec(rest, seed)
         except (ValueError, TypeError) as e:
             raise RunnerError(f"--source {spec}: {e}", usage=True) from None
@@ -186,12 +218,16 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             False,
             base.describe(),
         )
-    raise RunnerError(
-        f"unknown --source {spec!r}: use participant[:PARAMS], "
-        "synthetic[:rate=..,duration=..,seed=..], replay:FILE.csv or "
-        "plugin:MODULE:CLASS[:ARG]",
-        usage=True,
-    )
+    from graspguide.study.sources import unknown_source
+
+    raise RunnerError(f"--source: {unknown_source(spec)}", usage=True)
 
 
-__all__ = ["RunnerSource", "ClosedLoopSource", "OpenLoopSource", "open_runner_source"]
+__all__ = [
+    "RunnerSource",
+    "ClosedLoopSource",
+    "OpenLoopSource",
+    "open_runner_source",
+    "participant_keys",
+    "check_participant_keys",
+]
