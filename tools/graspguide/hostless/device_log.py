@@ -16,6 +16,14 @@ keeps its ``recorded_at``); records the folder holds and the device no longer do
 log was erased after an earlier download) are kept. A folder holding trials of another
 participant, protocol (config_hash), kind (simulated or not) or a host-driven run is
 refused, as is a record that contradicts one already downloaded: nothing is overwritten.
+
+A damaged record (torn: a write cut by a power loss, or a bit flipped in storage) is
+skipped by the device, whose next run runs that trial again after the trials already
+recorded, so the log then holds it out of plan order. The download takes such a log and
+says which trial's record was damaged: run again (its record comes after a later trial's)
+or not yet (no record, below the highest trial recorded). A trial downloaded before its
+record was damaged keeps the result downloaded first; the device's later run of it is not
+used, and the warning says so.
 """
 
 from __future__ import annotations
@@ -293,6 +301,28 @@ def _tlx_lines(
     return sorted(out, key=lambda r: r.get("session", 0))
 
 
+def _damage_text(rerun: dict[int, int], kept_first: list[int], missing: list[int]) -> str:
+    """Which trials a damaged record belonged to, as far as the log shows it."""
+    parts = []
+    for idx, index in sorted(rerun.items()):
+        text = f"trial_index {idx} ran again after its record was damaged (device record {index})"
+        if idx in kept_first:
+            text += (
+                "; the folder keeps the result downloaded before the damage, the device's "
+                "later run of it is not used"
+            )
+        parts.append(text)
+    if missing:
+        listed = ", ".join(str(i) for i in missing)
+        parts.append(
+            f"trial_index {listed} has no record: the next host-less run (`graspguide trial "
+            "--hostless`, or the board at power-up) runs it again"
+        )
+    if not parts:
+        parts.append("their trials have no record until the next host-less run runs them again")
+    return "; " + "; ".join(parts)
+
+
 def download_log(
     client: Any, out_dir: str, err: TextIO | None = None, timeout: float | None = None
 ) -> DownloadSummary:
@@ -317,6 +347,9 @@ def download_log(
     config = bytes(info.config_hash).hex()
     now = _now_iso()
     downloaded: dict[int, dict[str, Any]] = {}
+    # Trials run again after their record was damaged: trial_index -> device record.
+    rerun: dict[int, int] = {}
+    highest = 0
     for index in range(info.records):
         rec = client.log_read(index, timeout)
         if rec.trial_index in downloaded:
@@ -325,6 +358,9 @@ def download_log(
                 "is inconsistent: keep the device as it is and report it"
             )
         downloaded[rec.trial_index] = trial_record(info, rec, now)
+        if info.torn_records and rec.trial_index < highest:
+            rerun[rec.trial_index] = index
+        highest = max(highest, rec.trial_index)
 
     pdir = os.path.join(out_dir, participant)
     trials_path = os.path.join(pdir, TRIALS_FILE)
@@ -342,11 +378,14 @@ def download_log(
             )
         merged[idx] = rec
     new = 0
+    kept_first: list[int] = []
     for idx, rec in downloaded.items():
         old = merged.get(idx)
         if old is None:
             merged[idx] = rec
             new += 1
+        elif idx in rerun and not _same_record(old, rec):
+            kept_first.append(idx)  # the first run's result, downloaded while it was intact
         elif not _same_record(old, rec):
             raise DeviceLogError(
                 f"{trials_path}: trial {idx} already holds another result than the device's "
@@ -378,7 +417,9 @@ def download_log(
     if info.torn_records:
         print(
             f"graspguide device log: warning: the device found {info.torn_records} torn "
-            "record(s) (cut by a power loss) and skipped them; their trials have no record",
+            "record(s) (damaged: a write cut by a power loss, or a bit flipped in storage) "
+            "and skipped them"
+            + _damage_text(rerun, kept_first, sorted(set(range(1, highest)) - set(downloaded))),
             file=err,
             flush=True,
         )
