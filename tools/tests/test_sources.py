@@ -110,7 +110,7 @@ def test_replay_without_contacts(tmp_path):
     "text, where, words",
     [
         ("", "", "empty file"),
-        ("t,qw,qx,qy,qz\n0,1,0,0,0\n", ":1:", "header must start"),
+        ("t,qw,qx,qy,qz\n0,1,0,0,0\n", ":1:", "header must name the columns"),
         ("t_s,qw,qx,qy,qz,thumb_x\n0,1,0,0,0,1\n", ":1:", "contact columns"),
         ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,0\n", ":3:", "4 values"),
         ("t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,1,0,zero,0\n", ":3:", "not a number: 'zero'"),

@@ -28,7 +28,8 @@ Stops at the TRIAL_RESULT or at the end of the source, and always sends STOP on 
 out (also on Ctrl-C, SIGTERM, SIGHUP or an error).
 
 sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker the
-         values are a tracker's raw export and are converted),
+         values are a tracker's raw export and are converted; a --log session's
+         poses.csv, or its folder as replay:DIR, replays the poses it sent),
          synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
          scene's force with gravity),
          plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.study.sources.TrackerAdapter

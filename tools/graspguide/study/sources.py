@@ -5,10 +5,13 @@ right-handed), and optionally the contacts (metres, hand frame) -- at the source
 
 Spec strings (:func:`open_source`):
 
-* ``replay:FILE.csv`` -- a recorded stream. A header line is required; the columns are
-  ``t_s,qw,qx,qy,qz`` and optionally ``thumb_x,thumb_y,thumb_z,index_x,index_y,index_z,
-  middle_x,middle_y,middle_z[,palm_x,palm_y,palm_z]`` (metres, hand frame). Values are in
-  this project's world convention (convert tracker data first, see
+* ``replay:FILE.csv`` -- a recorded stream. A header line is required and names the
+  columns: ``t_s,qw,qx,qy,qz`` and optionally ``thumb_x,thumb_y,thumb_z,index_x,index_y,
+  index_z,middle_x,middle_y,middle_z[,palm_x,palm_y,palm_z]`` (metres, hand frame). The
+  ``poses.csv`` that ``graspguide stream --log DIR`` writes is such a file (its own
+  columns send_time_s, host_time_us and has_contacts are read past), and ``replay:DIR``
+  reads DIR/poses.csv: a logged session replays the poses it sent, at their times.
+  Values are in this project's world convention (convert tracker data first, see
   :class:`TrackerConvention`). ``t_s`` must increase. Errors name the file and line.
 * ``synthetic[:rate=240,duration=10,seed=0]`` -- a scripted hand: from a start orientation
   (seeded: tilted 40..80 degrees about a horizontal axis, so
@@ -33,6 +36,7 @@ from __future__ import annotations
 import csv
 import importlib
 import math
+import os
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 
@@ -193,6 +197,8 @@ class ReplaySource(Source):
 
     @staticmethod
     def _load(path: str, convention: TrackerConvention) -> list[Sample]:
+        if os.path.isdir(path):  # a `graspguide stream --log` session folder
+            path = os.path.join(path, "poses.csv")
         try:
             f = open(path, newline="", encoding="utf-8")
         except OSError as e:
@@ -206,20 +212,8 @@ class ReplaySource(Source):
                     f"{path}: empty file; the first line must be the header "
                     f"{','.join(QUAT_COLUMNS)}[,thumb_x,...]"
                 ) from None
-            if header[:5] != QUAT_COLUMNS:
-                raise SourceError(
-                    f"{path}:1: the header must start with "
-                    f"{','.join(QUAT_COLUMNS)}, got {','.join(header)}"
-                )
-            extra = header[5:]
-            k = len(extra) // 3
-            expected = [f"{n}_{a}" for n in FINGERS[:k] for a in "xyz"]
-            if extra and (k not in (3, 4) or extra != expected):
-                raise SourceError(
-                    f"{path}:1: contact columns must be "
-                    f"{','.join(f'{n}_{a}' for n in FINGERS[:3] for a in 'xyz')}"
-                    f"[,palm_x,palm_y,palm_z], got {','.join(extra)}"
-                )
+            cols = _replay_columns(path, header)
+            k = len(cols.contacts) // 3
             samples: list[Sample] = []
             last_t = -math.inf
             for row in reader:
@@ -231,12 +225,19 @@ class ReplaySource(Source):
                         f"{path}:{line}: {len(row)} values, the header has {len(header)}"
                     )
                 try:
-                    vals = [float(c) for c in row]
+                    all_vals = [float(c) for c in row]
                 except ValueError:
                     bad = next(c for c in row if not _is_float(c))
                     raise SourceError(f"{path}:{line}: not a number: {bad!r}") from None
+                vals = [all_vals[i] for i in cols.quat + cols.contacts]
                 if not all(math.isfinite(v) for v in vals):
                     raise SourceError(f"{path}:{line}: values must be finite")
+                if cols.has_contacts is not None and all_vals[cols.has_contacts]:
+                    raise SourceError(
+                        f"{path}:{line}: this POSE carried contacts (has_contacts=1), which "
+                        "a session log does not keep: it cannot be replayed as it ran; "
+                        "replay a file with the contact columns (thumb_x,...) instead"
+                    )
                 t, q = vals[0], vals[1:5]
                 if t <= last_t:
                     raise SourceError(f"{path}:{line}: t_s must increase ({t} after {last_t})")
@@ -325,6 +326,54 @@ class TrackerAdapter(Source):
             "rate_hz": self.rate_hz,
             "tracker_convention": self.convention.describe(),
         }
+
+
+@dataclass(frozen=True)
+class _Columns:
+    quat: list[int]  # where t_s, qw, qx, qy, qz are
+    contacts: list[int]  # where the contact columns are, finger by finger, x y z
+    has_contacts: int | None  # a session log's has_contacts column
+
+
+def _replay_columns(path: str, header: list[str]) -> _Columns:
+    """Where a replay file's columns are, by name (see :class:`ReplaySource`): t_s, qw,
+    qx, qy, qz, the contact columns of 3 or 4 fingers in order, and a session log's own
+    columns (records.POSE_COLUMNS), which are read past; any other name is refused."""
+    from graspguide.study.records import POSE_COLUMNS
+
+    log_only = [c for c in POSE_COLUMNS if c not in QUAT_COLUMNS]
+    names = {}
+    for i, h in enumerate(header):
+        if h in names:
+            raise SourceError(f"{path}:1: column {h!r} appears twice")
+        names[h] = i
+    missing = [c for c in QUAT_COLUMNS if c not in names]
+    if missing:
+        raise SourceError(
+            f"{path}:1: the header must name the columns {','.join(QUAT_COLUMNS)} "
+            f"(missing {','.join(missing)}), got {','.join(header)}"
+        )
+    every_contact = [f"{n}_{a}" for n in FINGERS for a in "xyz"]
+    contacts = [h for h in header if h in every_contact]
+    unknown = [h for h in header if h not in QUAT_COLUMNS + log_only + every_contact]
+    if unknown:
+        raise SourceError(
+            f"{path}:1: unknown column {unknown[0]!r}; a replay file has "
+            f"{','.join(QUAT_COLUMNS)}, optionally the contacts "
+            f"{','.join(every_contact[:9])}[,palm_x,palm_y,palm_z], and may be a "
+            f"session log's poses.csv ({','.join(POSE_COLUMNS)})"
+        )
+    k = len(contacts) // 3
+    if contacts and (k not in (3, 4) or contacts != every_contact[: 3 * k]):
+        raise SourceError(
+            f"{path}:1: contact columns must be {','.join(every_contact[:9])}"
+            f"[,palm_x,palm_y,palm_z], got {','.join(contacts)}"
+        )
+    return _Columns(
+        [names[c] for c in QUAT_COLUMNS],
+        [names[c] for c in contacts],
+        names.get("has_contacts"),
+    )
 
 
 def _contact_units_problem(
