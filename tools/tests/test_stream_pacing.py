@@ -70,4 +70,6 @@ def test_stream_to_the_simulated_device_is_not_paced(tmp_path):
     done = _stream("sim", log, "", "synthetic:rate=100,duration=1")
     assert "pacing" not in done.stderr, done.stderr
     end = [json.loads(line) for line in open(log / "results.jsonl")][-1]
-    assert end["skipped"] == 0 and end["paced"] is False and end["dropped"] == 0, end
+    assert end["paced"] is False and end["dropped"] == 0, end
+    # a hiccup may skip a pose or two for a newer one, never a steady share
+    assert end["skipped"] <= 0.1 * (end["sent"] + end["skipped"]), end

@@ -41,7 +41,9 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
 The panel names the motors after the fingers (thumb, index, middle, palm) and shows the
 trial's state (waiting, running, holding, success, timeout, stopped) and the hold
 progress against the scene's threshold ("below 3.0 deg for 0.31/0.50 s"); plain lines
-when the output is not a terminal.
+when the output is not a terminal. The last panel (or line) comes after STOP: the final
+state (stopped on Ctrl-C) and what the device answered of the motors ("motors off (STOP
+acknowledged, device stopped)").
 
 --lsl publishes two Lab Streaming Layer streams, NAME-Telemetry (error_deg, alpha,
 pwm_thumb..pwm_palm, status, trial_time_s per TELEMETRY) and NAME-Markers (JSON strings:

@@ -7,7 +7,11 @@ from __future__ import annotations
 import sys
 
 from graspguide.link.client import DeviceClient
+from graspguide.link.messages import DeviceState
 from graspguide.link.transport import LinkError, open_port
+
+# How long the device's state is awaited after STOP: a confirmation, not worth a long wait.
+STATE_TIMEOUT_S = 1.0
 
 
 class DeviceSession:
@@ -22,13 +26,19 @@ class DeviceSession:
         self.transport = open_port(port, baudrate=baud, **kwargs)
         self.client = DeviceClient(self.transport, timeout=timeout)
         self.stop_acknowledged = False
+        self.final_state: DeviceState | None = None  # the device's state after STOP
 
     def close(self) -> bool:
-        """STOP, then close the port. False when STOP failed (said on stderr); a second
+        """STOP, then the device's state (GET_STATUS: the confirmation that the motors are
+        off), then close the port. False when STOP failed (said on stderr); a second
         Ctrl-C during STOP is not a failure: the user asked to leave."""
         try:
             self.client.stop()
             self.stop_acknowledged = True
+            try:
+                self.final_state = self.client.status(timeout=STATE_TIMEOUT_S).state
+            except (LinkError, OSError):
+                self.final_state = None  # the ACK stands; the state is only a confirmation
         except (LinkError, OSError) as e:
             print(f"graspguide {self.command}: STOP failed: {e}", file=sys.stderr)
             return False
@@ -37,6 +47,23 @@ class DeviceSession:
         finally:
             self.transport.close()
         return True
+
+    def motors_text(self) -> str:
+        """What is known of the motors after :meth:`close`, from the device's answers:
+        ``off (STOP acknowledged, device stopped)``, or why it is not known."""
+        if not self.stop_acknowledged:
+            return (
+                "not confirmed off: STOP was not acknowledged (the device's watchdog turns "
+                "them off 200 ms after the last POSE)"
+            )
+        if self.final_state in (DeviceState.STOPPED, DeviceState.IDLE):
+            return f"off (STOP acknowledged, device {self.final_state.name.lower()})"
+        if self.final_state is None:
+            return "off (STOP acknowledged)"
+        return (
+            f"STOP acknowledged but the device says {self.final_state.name.lower()}: check "
+            "the motors"
+        )
 
 
 __all__ = ["DeviceSession"]

@@ -70,10 +70,10 @@ def rate_text(s: dict[str, Any]) -> str:
     """The rate achieved and, when the link paces the source, the source's rate and the
     poses skipped for newer ones."""
     text = f"{s.get('rate_hz', 0.0):7.1f} POSE/s sent"
-    if s.get("paced"):
+    if s.get("skipped"):
         text += (
-            f" (paced to the link: source {s.get('source_rate_hz', 0.0):g}/s, "
-            f"{s.get('skipped', 0)} older poses skipped)"
+            f" of the source's {s.get('source_rate_hz', 0.0):g}/s ({s['skipped']} older "
+            "skipped" + ("; paced to the link)" if s.get("paced") else ")")
         )
     return text
 
@@ -100,6 +100,7 @@ class StatusView:
         self.period_s = period_s
         self.next_t = 0.0
         self.live: Any = None
+        self.last: dict[str, Any] = {}  # the last status shown, for finish()
         self.last_draw = 0.0
         self.last_state = progress.state
         if self.out.isatty():
@@ -120,7 +121,7 @@ class StatusView:
     def _title(self) -> str:
         return "graspguide stream" + (" (SIMULATED participant)" if self.simulated else "")
 
-    def _render(self, s: dict[str, Any]) -> Any:
+    def _render(self, s: dict[str, Any], motors: str | None = None) -> Any:
         from rich.table import Table
 
         p = self.progress
@@ -138,26 +139,30 @@ class StatusView:
         table.add_row("rate", rate_text(s))
         table.add_row("sent / telemetry", f"{s.get('sent', 0)} / {s.get('received', 0)}")
         table.add_row("dropped", str(s.get("dropped", 0)))
+        if motors is not None:
+            table.add_row("motors", f"[bold]{motors}[/bold]")
         return table
 
     def line(self, s: dict[str, Any]) -> str:
         """The plain status line of ``s`` (not a terminal)."""
         p = self.progress
-        pwm = " ".join(f"{f}={x:3d}" for f, x in zip(self.fingers, s["pwm"]))
+        pwm = " ".join(f"{f}={x:3d}" for f, x in zip(self.fingers, s.get("pwm", [0] * self.k)))
         tag = "SIMULATED " if self.simulated else ""
         return (
-            f"{tag}t={s['t_s']:7.2f}s state={p.state} error={s['error_deg']:7.2f}deg "
-            f"[{p.hold_text()}] pwm {pwm} rate={s['rate_hz']:.1f}/s"
+            f"{tag}t={s.get('t_s', 0.0):7.2f}s state={p.state} "
+            f"error={s.get('error_deg', float('nan')):7.2f}deg "
+            f"[{p.hold_text()}] pwm {pwm} rate={s.get('rate_hz', 0.0):.1f}/s"
             + (
-                f" (paced: source {s.get('source_rate_hz', 0.0):g}/s, "
-                f"skipped={s.get('skipped', 0)})"
-                if s.get("paced")
+                f" (source {s.get('source_rate_hz', 0.0):g}/s, skipped={s['skipped']}"
+                + (", paced to the link)" if s.get("paced") else ")")
+                if s.get("skipped")
                 else ""
             )
-            + f" sent={s['sent']} dropped={s['dropped']}"
+            + f" sent={s.get('sent', 0)} dropped={s.get('dropped', 0)}"
         )
 
     def update(self, s: dict[str, Any], force: bool = False) -> None:
+        self.last = s
         if self.live is not None:
             now = time.monotonic()
             if force or now - self.last_draw >= 0.1:
@@ -170,6 +175,15 @@ class StatusView:
         if force or ended or s["t_s"] >= self.next_t:
             self.next_t = s["t_s"] + self.period_s
             print(self.line(s), file=self.out, flush=True)
+
+    def finish(self, motors: str) -> None:
+        """The last panel (or line): the trial's final state with what the device said of
+        the motors once stopped (``motors``), then the view closed."""
+        if self.live is not None:
+            self.live.update(self._render(self.last, motors), refresh=True)
+            self.close()
+            return
+        print(f"{self.line(self.last)} motors {motors}", file=self.out, flush=True)
 
     def close(self) -> None:
         if self.live is not None:

@@ -36,6 +36,10 @@ START_QUAT = [1.0, 0.0, 0.0, 0.0]
 # A closed-loop trial without a TRIAL_RESULT this long after the scene's timeout is an
 # error (the device should have ended it), as in `graspguide trial`.
 RESULT_MARGIN_S = 2.0
+# The stream is paced to the link (and says so) once, this long into the trial, more than
+# this share of the source's poses were skipped for newer ones.
+PACED_AFTER_S = 0.5
+PACED_SHARE = 0.1
 
 
 def open_participant(spec: str) -> Any:
@@ -116,7 +120,11 @@ def run_stream(
     }
 
     def on_skip(n: int) -> None:
-        if not status["paced"]:
+        # A hiccup skips a few poses too (the newest one goes, no backlog is caught up);
+        # the link's pace is a steady share of them skipped.
+        if status["paced"] or time.monotonic() - loop.wall0 < PACED_AFTER_S:
+            return
+        if loop.skipped > PACED_SHARE * (loop.skipped + loop.sent):
             status["paced"] = True
             print(pacing_notice(source_rate, link), file=notice or sys.stderr, flush=True)
 
@@ -426,11 +434,13 @@ def stream_command(
         code = EXIT_INTERRUPTED
         print("graspguide stream: interrupted", file=sys.stderr)
     finally:
-        progress.stop()
-        if view is not None:
-            view.close()
-        if not device.close():
-            code = code or EXIT_FAILURE
+        progress.stop()  # no TRIAL_RESULT (Ctrl-C, an error, the source's end): stopped
+        try:
+            if not device.close():  # STOP, and the device's state as its confirmation
+                code = code or EXIT_FAILURE
+        finally:
+            if view is not None:
+                view.finish(device.motors_text())
         if session_log is not None:
             end = {
                 "event": "end",
@@ -476,10 +486,11 @@ def rate_text(summary: dict[str, Any]) -> str:
     the virtual clock no rate: the wall's pace there says nothing of the link's)."""
     rate = "" if summary.get("virtual_clock") else f" at {summary['rate_hz']:.1f} POSE/s"
     text = f"{summary['sent']} poses sent{rate}, {summary['dropped']} dropped"
-    if summary.get("paced"):
+    if summary.get("skipped"):
         text += (
-            f"; paced to the link from the source's {summary['source_rate_hz']:g}/s: "
-            f"{summary['skipped']} older poses skipped"
+            f"; {summary['skipped']} older poses skipped for newer ones of the source's "
+            f"{summary['source_rate_hz']:g}/s"
+            + (" (paced to the link)" if summary["paced"] else "")
         )
     return text
 
