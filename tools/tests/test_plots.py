@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from conftest import small_protocol_toml, subprocess_env
 
-from graspguide.core.vocabulary import FINGERS
+from graspguide.core.vocabulary import FINGERS, shown
 from graspguide.plots.figures import FINGER_COLOURS, overview_figure, pyplot, trial_figure
 from graspguide.plots.run_folder import load_frames, open_run
 from graspguide.plots.structure import figure_structure, svg_texts
@@ -128,9 +128,9 @@ def test_trial_figure_shows_the_records(index):
         else:
             assert f"timeout at {PROTOCOL_TRIAL['timeout_s']:g} s" in title
             assert _hold_span(ax_err) is None
-        assert f"{rec['modality']}, k = {rec['k']}" in title
+        assert f"{shown(rec['modality'])}, k = {rec['k']}" in title
         assert rec["wrench_id"] in title
-        assert "simulated participant" in title
+        assert "SIMULATED participant" in title
         threshold = [ln for ln in ax_err.get_lines() if ln.get_label().startswith("threshold")]
         assert len(threshold) == 1
         assert set(threshold[0].get_ydata()) == {PROTOCOL_TRIAL["threshold_deg"]}

@@ -25,3 +25,12 @@ def modality(policy: str, mode: str) -> str:
 MODALITIES = tuple(modality(policy, mode) for mode in MODES for policy in POLICIES)
 """The four conditions, in the order of the study protocol and the statistics:
 F+C, Fperp+C, F+V, Fperp+V."""
+
+PERP_SHOWN = "F⊥"
+"""How every figure writes the policy Fperp (the paper's F with the perpendicular sign);
+files, logs and the command line keep the ASCII name."""
+
+
+def shown(name: str) -> str:
+    """A policy or modality name as figures print it: ``"Fperp+C"`` -> ``"F⊥+C"``."""
+    return name.replace("Fperp", PERP_SHOWN)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from graspguide.core.vocabulary import FINGERS
+from graspguide.core.vocabulary import FINGERS, shown
 from graspguide.plots.run_folder import Criteria, Participant, TrialFrames, TrialInfo
 
 FINGER_COLOURS = {
@@ -18,9 +18,16 @@ FINGER_COLOURS = {
     "middle": "#009E73",
     "palm": "#CC79A7",
 }
-# Where motors overlap (mode C drives every active motor at full duty) the thicker line
-# of the finger before shows around the thinner one, so no finger hides another.
+# Where motors overlap (mode C drives every active motor at full duty; every motor runs
+# at the floor near the target) the thicker line of the finger before shows around the
+# thinner one, the line styles differ, and each finger has its own marker at its own
+# places along the line: no finger hides another, in greyscale too.
 FINGER_WIDTHS = {"thumb": 4.4, "index": 3.2, "middle": 2.1, "palm": 1.2}
+FINGER_STYLES = {"thumb": "-", "index": (0, (5, 1.5)), "middle": (0, (2, 1.2)), "palm": "-."}
+FINGER_MARKERS = {"thumb": "o", "index": "s", "middle": "^", "palm": "D"}
+# Markers along each PWM line, and the share of that spacing by which each finger's
+# markers are shifted, so two fingers' markers never sit on the same sample.
+PWM_MARKERS_PER_LINE = 12
 ERROR_COLOUR = "black"
 THRESHOLD_COLOUR = "#D55E00"
 HOLD_COLOUR = "#56B4E9"
@@ -75,7 +82,9 @@ def trial_title(trial: TrialInfo, criteria: Criteria) -> str:
     elif trial.session is not None:
         who += f", session {trial.session}"
     line1 = f"{who}: {outcome_text(trial, criteria)}"
-    cond = f"{trial.modality}, k = {trial.k} (policy {trial.policy}, mode {trial.mode})"
+    cond = (
+        f"{shown(trial.modality)}, k = {trial.k} (policy {shown(trial.policy)}, mode {trial.mode})"
+    )
     wrench = f"F = {_vector(trial.wrench[:3])} N"
     moment = trial.wrench[3:6]
     if any(moment):
@@ -86,8 +95,10 @@ def trial_title(trial: TrialInfo, criteria: Criteria) -> str:
             wrench += f", M = {_vector(moment)} N m"
     if trial.wrench_id:
         wrench = f"{trial.wrench_id}: {wrench}"
-    if trial.simulated:
-        cond += "; simulated participant"
+    if trial.simulated and trial.participant:
+        cond += "; SIMULATED participant"
+    elif trial.simulated:  # a session: the poses did not come from a person
+        cond += f"; SIMULATED (source {trial.source})" if trial.source else "; SIMULATED"
     elif not trial.participant and trial.source:
         cond += f"; source {trial.source}"
     return f"{line1}\n{cond}\nwrench {wrench}"
@@ -159,12 +170,19 @@ def trial_figure(trial: TrialInfo, frames: TrialFrames, criteria: Criteria) -> A
     ax_err.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
     ax_err.grid(True, axis="y", color="0.9", linewidth=0.6)
 
-    for finger, series in list(zip(FINGERS, frames.pwm))[: trial.k]:
+    every = max(1, len(t) // PWM_MARKERS_PER_LINE)
+    for i, (finger, series) in enumerate(list(zip(FINGERS, frames.pwm))[: trial.k]):
         ax_pwm.plot(
             t,
             series,
             color=FINGER_COLOURS[finger],
             linewidth=FINGER_WIDTHS[finger],
+            linestyle=FINGER_STYLES[finger],
+            marker=FINGER_MARKERS[finger],
+            markevery=(i * every // 4, every),
+            markersize=6,
+            markerfacecolor="white",
+            markeredgewidth=1.4,
             drawstyle="steps-post",
             label=finger,
         )
@@ -192,7 +210,7 @@ def trial_figure(trial: TrialInfo, frames: TrialFrames, criteria: Criteria) -> A
 def _session_label(trials: list[TrialInfo]) -> str:
     if trials[0].familiarization:
         return "familiar-\nization"
-    mods = sorted({t.modality for t in trials})
+    mods = sorted({shown(t.modality) for t in trials})
     ks = "/".join(str(k) for k in sorted({t.k for t in trials}))
     head = f"S{trials[0].session}" if trials[0].session is not None else ""
     return f"{head}\n{' '.join(mods)}\nk = {ks}"
@@ -244,7 +262,7 @@ def overview_figure(participant: Participant, criteria: Criteria) -> Any:
     who = participant.pid or "session"
     title = f"{who}: completion time per trial\n{n_ok} of {len(main)} main trials succeeded"
     if any(t.simulated for t in trials):
-        title += "; simulated participant"
+        title += "; SIMULATED participant"
     ax.set_title(title, fontsize=10, loc="left", pad=40)
     ax.set_xlabel("trial (run order)")
     ax.set_ylabel("completion time [s]")
@@ -261,6 +279,8 @@ def overview_figure(participant: Participant, criteria: Criteria) -> Any:
 __all__ = [
     "DPI",
     "FINGER_COLOURS",
+    "FINGER_MARKERS",
+    "FINGER_STYLES",
     "outcome_text",
     "overview_figure",
     "pyplot",

@@ -358,6 +358,9 @@ def _session(folder: str, left_out: list[LeftOutLine]) -> RunFolder:
         completion_s=completion,
         frames_path=folder,
         source=str(source.get("source", "")) if isinstance(source, dict) else "",
+        # `graspguide stream --log` records whether the poses came from the virtual
+        # participant (config.json "simulated").
+        simulated=config.get("simulated") is True,
     )
     return RunFolder("session", folder, criteria, [Participant("", [info])], left_out)
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from graspguide.core.vocabulary import MODALITIES
+from graspguide.core.vocabulary import MODALITIES, shown
 from graspguide.study.records import JsonlDamaged, LeftOutLine, complete_records
 
 # Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
@@ -770,14 +770,13 @@ def figure4(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    labels = {"F+C": "F+C", "Fperp+C": "F$_\\perp$+C", "F+V": "F+V", "Fperp+V": "F$_\\perp$+V"}
     means = [float(stats.retained[m].mean()) for m in MODALITIES]
     sds = [float(stats.retained[m].std(ddof=1)) if stats.n > 1 else 0.0 for m in MODALITIES]
     colors = ["#c0504d", "#e6a19f", "#4f81bd", "#a7c0de"]
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     x = list(range(len(MODALITIES)))
     ax.bar(x, means, yerr=sds, capsize=6, color=colors, edgecolor="black", linewidth=0.8)
-    ax.set_xticks(x, [labels[m] for m in MODALITIES])
+    ax.set_xticks(x, [shown(m) for m in MODALITIES])
     ax.set_ylabel("completion time [s] (participant means)")
     top = max(m + s for m, s in zip(means, sds))
     step = 0.09 * top if top > 0 else 1.0

@@ -405,17 +405,56 @@ def table_lines(result: dict[str, Any]) -> list[str]:
     return lines
 
 
-def plot(result: dict[str, Any], path: str) -> None:
+# Each modality's look in the sweep figure: colour, marker and line style all differ, so
+# lines that meet (every modality at 100 % success) stay apart to the eye, in greyscale
+# too; the markers shrink down the list, so a later one sits inside an earlier one.
+SWEEP_STYLES: dict[str, dict[str, Any]] = {
+    "F+C": {"color": "tab:blue", "marker": "o", "linestyle": "-", "markersize": 9},
+    "Fperp+C": {"color": "tab:cyan", "marker": "s", "linestyle": "--", "markersize": 7.5},
+    "F+V": {"color": "tab:red", "marker": "^", "linestyle": "-.", "markersize": 6.5},
+    "Fperp+V": {"color": "tab:orange", "marker": "D", "linestyle": (0, (1, 1.2)), "markersize": 5},
+}
+_EXTRA_MARKERS = ("v", "P", "X", "*")
+
+
+def _style(m: str, j: int) -> dict[str, Any]:
+    return SWEEP_STYLES.get(
+        m, {"marker": _EXTRA_MARKERS[j % len(_EXTRA_MARKERS)], "linestyle": "-", "markersize": 6}
+    )
+
+
+def _dodged(xs: Sequence[float], j: int, n: int, log: bool) -> list[float]:
+    """The x positions of modality ``j`` of ``n``, moved a little apart so that equal
+    values of two modalities do not hide each other (by a factor on a log axis)."""
+    k = j - (n - 1) / 2
+    if log:
+        return [x * (1.0 + 0.035 * k) for x in xs]
+    return [x + 0.1 * k for x in xs]
+
+
+def sd_range(mean: float | None, sd: float | None, timeout_s: float) -> tuple[float, float]:
+    """(below, above) the mean for its +- SD bar, cut at 0 s and at the timeout: no
+    trial is shorter than 0 or longer than the timeout (a failure counts as it)."""
+    if mean is None or not sd:
+        return 0.0, 0.0
+    return min(sd, max(mean, 0.0)), min(sd, max(timeout_s - mean, 0.0))
+
+
+def sweep_figure(result: dict[str, Any]) -> Any:
     """Two rows (against the threshold, against the pose rate), two columns (success rate,
-    completion time: mean +- SD with failures as the timeout, solid; median over
-    successes, dotted); one line per modality."""
+    completion time: mean +- SD with failures as the timeout, the bar cut at 0 s and the
+    timeout; median over successes, dotted); one line per modality, each with its own
+    colour, marker and line style, dodged sideways. Close it with ``plt.close(fig)``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from graspguide.core.vocabulary import shown
 
     mods = result["modalities"]
-    colors = {"F+C": "tab:blue", "Fperp+C": "tab:cyan", "F+V": "tab:red", "Fperp+V": "tab:orange"}
+    timeout_s = float(result["timeout_s"])
     fig, axes = plt.subplots(2, 2, figsize=(11, 8.2))
     rows = (
         (
@@ -423,68 +462,77 @@ def plot(result: dict[str, Any], path: str) -> None:
             "threshold_deg",
             f"alignment threshold [deg] (at {result['base']['pose_rate_hz']:g} Hz)",
         ),
-        ("rate", "pose_rate_hz", f"pose rate [Hz] (at {result['base']['threshold_deg']:g} deg)"),
+        (
+            "rate",
+            "pose_rate_hz",
+            f"pose rate [Hz], log scale (at {result['base']['threshold_deg']:g} deg)",
+        ),
     )
     for row, (axis, key, label) in enumerate(rows):
         pts = sorted((p for p in result["points"] if axis in p["axes"]), key=lambda p: p[key])
-        xs_all = [p[key] for p in pts]
+        xs = [p[key] for p in pts]
+        log = row == 1 and min(xs) > 0
         for j, m in enumerate(mods):
-            c = colors.get(m, None)
-            xs = [p[key] for p in pts]
-            sr = [
-                None
-                if p["modalities"][m]["success_rate"] is None
-                else 100 * p["modalities"][m]["success_rate"]
-                for p in pts
-            ]
+            style = _style(m, j)
+            off = _dodged(xs, j, len(mods), log)
+            sr = [p["modalities"][m]["success_rate"] for p in pts]
             axes[row][0].plot(
-                xs, [math.nan if v is None else v for v in sr], "o-", color=c, label=m
+                off,
+                [math.nan if v is None else 100 * v for v in sr],
+                markerfacecolor="none",
+                markeredgewidth=1.6,
+                label=shown(m),
+                **style,
             )
-            # small offsets so the error bars do not hide each other
-            span = (max(xs_all) / min(xs_all)) if row == 1 and min(xs_all) > 0 else None
-            if span:
-                off = [x * (1.0 + 0.02 * (j - (len(mods) - 1) / 2)) for x in xs]
-            else:
-                off = [x + 0.06 * (j - (len(mods) - 1) / 2) for x in xs]
             mean = [p["modalities"][m]["completion_mean_s"] for p in pts]
-            sd = [p["modalities"][m]["completion_sd_s"] or 0.0 for p in pts]
+            sd = [p["modalities"][m]["completion_sd_s"] for p in pts]
+            below, above = zip(*(sd_range(mu, s, timeout_s) for mu, s in zip(mean, sd)))
             axes[row][1].errorbar(
                 off,
                 [math.nan if v is None else v for v in mean],
-                yerr=sd,
-                fmt="o-",
-                color=c,
+                yerr=[list(below), list(above)],
                 capsize=3,
-                label=m,
+                markerfacecolor="none",
+                markeredgewidth=1.6,
+                label=shown(m),
+                **style,
             )
             med = [p["modalities"][m]["success_completion_median_s"] for p in pts]
             axes[row][1].plot(
-                xs, [math.nan if v is None else v for v in med], ":", marker="x", color=c
+                off,
+                [math.nan if v is None else v for v in med],
+                linestyle=":",
+                marker="x",
+                color=style.get("color"),
+                linewidth=1.0,
             )
         axes[row][0].set_ylabel("success rate [%]")
         axes[row][0].set_ylim(-3, 103)
-        axes[row][1].set_ylabel(f"completion time [s] (failure = {result['timeout_s']:g} s)")
-        axes[row][1].set_ylim(0, result["timeout_s"] * 1.4)  # room for the legend
+        axes[row][1].set_ylabel(f"completion time [s] (failure = {timeout_s:g} s)")
+        axes[row][1].set_ylim(0, timeout_s * 1.4)  # room for the legend
+        axes[row][1].axhline(timeout_s, color="0.6", linewidth=0.8, linestyle="--")
         for ax in axes[row]:
             ax.set_xlabel(label)
             ax.grid(True, alpha=0.3)
-            if row == 1:
+            if log:
                 ax.set_xscale("log")
-                ax.set_xticks(xs_all)
-                ax.set_xticklabels([f"{x:g}" for x in xs_all])
+                ax.set_xticks(xs)
+                ax.set_xticklabels([f"{x:g}" for x in xs])
                 ax.minorticks_off()
             else:
-                ax.set_xticks(xs_all)
+                ax.set_xticks(xs)
         axes[row][0].legend(fontsize=8, loc="lower right" if row == 0 else "center right")
-    from matplotlib.lines import Line2D
-
-    handles = [Line2D([], [], color=colors.get(m), marker="o", label=m) for m in mods] + [
+    handles = [
+        Line2D([], [], markerfacecolor="none", label=shown(m), **_style(m, j))
+        for j, m in enumerate(mods)
+    ] + [
         Line2D(
             [],
             [],
             color="gray",
             marker="o",
-            label=f"mean +- SD, failure = {result['timeout_s']:g} s",
+            markerfacecolor="none",
+            label=f"mean +- SD (within 0..{timeout_s:g} s), failure = {timeout_s:g} s",
         ),
         Line2D([], [], color="gray", marker="x", linestyle=":", label="median of successes"),
     ]
@@ -499,9 +547,19 @@ def plot(result: dict[str, Any], path: str) -> None:
         fontsize=11,
     )
     fig.tight_layout(rect=(0, 0, 1, 0.94))
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot(result: dict[str, Any], path: str) -> None:
+    """:func:`sweep_figure` saved as ``path`` (PNG)."""
+    import matplotlib.pyplot as plt
+
+    fig = sweep_figure(result)
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def _shown_path(path: str) -> str:
