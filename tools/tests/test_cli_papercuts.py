@@ -168,6 +168,62 @@ def test_stream_into_a_closed_pipe_stops_the_motors(tmp_path):
     assert end["event"] == "end" and end["stop_acknowledged"] is True, end
 
 
+def test_trial_into_a_closed_pipe_stops_the_motors_and_keeps_the_records(tmp_path):
+    """`graspguide trial ... | head -1` on a device that outlives the host: STOPPED, every
+    motor off, and trials.jsonl holds only whole records."""
+    import csv
+
+    from graspguide.link import client as gd
+    from graspguide.link import messages as m
+    from graspguide.link import sim as link_sim
+
+    trace = tmp_path / "motors.csv"
+    out = tmp_path / "study"
+    with link_sim.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:
+        p = subprocess.Popen(
+            CLI
+            + [
+                "trial",
+                "--protocol",
+                "protocols/paper.toml",
+                "--participant",
+                "U1",
+                "--port",
+                dev.pty_path,
+                "--source",
+                "participant",
+                "--out",
+                str(out),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            cwd=_ROOT,
+        )
+        try:
+            assert p.stdout.readline().startswith(b"[1/100]")  # running
+            p.stdout.close()
+            _, err = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        _quiet(err)
+        assert p.returncode == 1, err
+        client = gd.DeviceClient(dev, timeout=2.0)
+        client.drain(0.1)
+        assert client.status().state is m.DeviceState.STOPPED
+        rows = list(csv.DictReader(open(trace)))
+    assert [int(rows[-1][f"pwm{i}"]) for i in range(4)] == [0, 0, 0, 0]
+    data = (
+        (out / "U1" / "trials.jsonl").read_bytes()
+        if (out / "U1" / "trials.jsonl").exists()
+        else b""
+    )
+    assert data == b"" or data.endswith(b"\n")
+    for line in data.splitlines():
+        json.loads(line)
+
+
 # --------------------------------------------------------------------------------------
 # Every action's --help: what it does, and an example
 # --------------------------------------------------------------------------------------
