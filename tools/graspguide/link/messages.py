@@ -352,7 +352,7 @@ class GetStatus(Message):
 
 @dataclass(frozen=True)
 class PlanBegin(Message):
-    """PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while a trial or a host-less run goes on."""
+    """PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run)."""
 
     MSG_ID: ClassVar[int] = MsgId.PLAN_BEGIN
     NAME: ClassVar[str] = "PLAN_BEGIN"
@@ -396,7 +396,7 @@ class PlanBegin(Message):
 
 @dataclass(frozen=True)
 class PlanTrial(Message):
-    """PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan."""
+    """PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run)."""
 
     MSG_ID: ClassVar[int] = MsgId.PLAN_TRIAL
     NAME: ClassVar[str] = "PLAN_TRIAL"
@@ -434,7 +434,7 @@ class PlanTrial(Message):
 
 @dataclass(frozen=True)
 class PlanCommit(Message):
-    """PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed."""
+    """PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run)."""
 
     MSG_ID: ClassVar[int] = MsgId.PLAN_COMMIT
     NAME: ClassVar[str] = "PLAN_COMMIT"
@@ -492,7 +492,7 @@ class LogRead(Message):
 
 @dataclass(frozen=True)
 class LogErase(Message):
-    """LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state during a run."""
+    """LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run)."""
 
     MSG_ID: ClassVar[int] = MsgId.LOG_ERASE
     NAME: ClassVar[str] = "LOG_ERASE"

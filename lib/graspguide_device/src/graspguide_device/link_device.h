@@ -116,7 +116,7 @@ class LinkDevice {
     if (event == link::ParseEvent::kNone) return;
     link::ErrorCode code;
     if (event != link::ParseEvent::kFrame) {
-      app_.motors_off();  // whatever the frame was, it was not what the host meant to send
+      all_motors_off();  // whatever the frame was, it was not what the host meant to send
       // Only frames whose header passed the CRC are answered: their seq can be trusted.
       if (link::has_trusted_header(event) && link::error_code_for(event, &code)) {
         const auto& h = parser_.frame().header;
@@ -291,8 +291,19 @@ class LinkDevice {
     return true;
   }
 
+  // The plan upload and LOG_ERASE write the store, and PLAN_COMMIT first solves every
+  // trial: on a large store that blocks the loop for seconds, and nothing runs the watchdog
+  // meanwhile. So they are refused while anything drives the motors: a tracker trial (from
+  // START_TRIAL on), SET_MOTORS not yet timed out, or a host-less run.
+  bool motors_in_use() {
+    const bool busy =
+        app_.state() == DeviceState::kTrialRunning || app_.motors_on() || hostless_->running();
+    if (busy) send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
+    return busy;
+  }
+
   void on(const link::PlanBegin& m) {
-    if (hostless_missing(link::MsgId::kPlanBegin)) return;
+    if (hostless_missing(link::MsgId::kPlanBegin) || motors_in_use()) return;
     PlanHeader h;
     std::memcpy(h.participant, m.participant, sizeof h.participant);
     h.simulated = m.simulated;
@@ -313,7 +324,7 @@ class LinkDevice {
   }
 
   void on(const link::PlanTrial& m) {
-    if (hostless_missing(link::MsgId::kPlanTrial)) return;
+    if (hostless_missing(link::MsgId::kPlanTrial) || motors_in_use()) return;
     PlanTrial t;
     t.trial_index = m.trial_index;
     t.session = m.session;
@@ -330,7 +341,8 @@ class LinkDevice {
   }
 
   void on(const link::PlanCommit& m) {
-    if (hostless_missing(link::MsgId::kPlanCommit)) return;
+    if (hostless_missing(link::MsgId::kPlanCommit) || motors_in_use()) return;
+    all_motors_off();  // whatever else changes: nothing may vibrate while the loop blocks
     answer(hostless_->commit_plan(m.trial_count), link::MsgId::kPlanCommit);
   }
 
@@ -398,12 +410,13 @@ class LinkDevice {
   }
 
   void on(const link::LogErase& m) {
-    if (hostless_missing(link::MsgId::kLogErase)) return;
-    if (hostless_->running()) {
-      send_error(request_seq_, link::ErrorCode::kNotAllowedInState, uint8_t(app_.state()));
-    } else if (m.key != link::kLogEraseKey) {
+    if (hostless_missing(link::MsgId::kLogErase) || motors_in_use()) return;
+    if (m.key != link::kLogEraseKey) {
       send_error(request_seq_, link::ErrorCode::kBadPlan, 0);
-    } else if (hostless_->log().erase() != StoreStatus::kOk) {
+      return;
+    }
+    all_motors_off();  // whatever else changes: nothing may vibrate while the loop blocks
+    if (hostless_->log().erase() != StoreStatus::kOk) {
       send_error(request_seq_, link::ErrorCode::kStorageFailed, 0);
     } else {
       answer(Reply{}, link::MsgId::kLogErase);
@@ -529,13 +542,21 @@ class LinkDevice {
   // Every ERROR turns the motors off: a host whose request failed has lost track of what
   // the wearer feels, so nothing keeps vibrating on a stale command.
   void send_error(uint16_t seq, link::ErrorCode code, uint8_t detail) {
-    app_.motors_off();
+    all_motors_off();
     link::Error e;
     e.request_seq = seq;
     e.code = code;
     e.detail = detail;
     last_error_ = code;
     send(e);
+  }
+
+  // Off, and kept off: a host-less run would drive them again at its next tick (a pattern
+  // plays on every poll), so an ERROR or a dropped frame during one ends the run, as STOP
+  // does; the trial it was in has no record and runs again on the next HOSTLESS_RUN.
+  void all_motors_off() {
+    if (hostless_ && hostless_->running()) hostless_->stop();
+    app_.motors_off();
   }
 
   template <class Msg>

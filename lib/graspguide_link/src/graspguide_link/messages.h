@@ -724,7 +724,7 @@ void for_each_field(GetStatus& m, Fn&& fn) {
   (void)fn;
 }
 
-// PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while a trial or a host-less run goes on.
+// PLAN_BEGIN (0x08, host -> device): Starts uploading a host-less study plan: its settings and fixed postures. PLAN_TRIALs follow, then PLAN_COMMIT stores it. Answer: ACK, or ERROR bad_plan (detail = the field's index), not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run).
 struct PlanBegin {
   static constexpr MsgId kId = MsgId::kPlanBegin;
   static constexpr const char* kName = "PLAN_BEGIN";
@@ -785,7 +785,7 @@ void for_each_field(PlanBegin& m, Fn&& fn) {
   fn("gain", m.gain);
 }
 
-// PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan.
+// PLAN_TRIAL (0x09, host -> device): One trial of the plan begun by PLAN_BEGIN, in run order. Answer: ACK, or ERROR bad_plan (detail = the field's index), no_plan, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run).
 struct PlanTrial {
   static constexpr MsgId kId = MsgId::kPlanTrial;
   static constexpr const char* kName = "PLAN_TRIAL";
@@ -837,7 +837,7 @@ void for_each_field(PlanTrial& m, Fn&& fn) {
   fn("wrench", m.wrench);
 }
 
-// PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed.
+// PLAN_COMMIT (0x0A, host -> device): Checks the uploaded plan (every trial solved once) and stores it in non-volatile storage. Answer: ACK, or ERROR no_plan, bad_plan (detail = the first missing position), a core status of a trial that cannot be solved (detail = its position), log_not_empty, storage_failed, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run).
 struct PlanCommit {
   static constexpr MsgId kId = MsgId::kPlanCommit;
   static constexpr const char* kName = "PLAN_COMMIT";
@@ -915,7 +915,7 @@ void for_each_field(LogRead& m, Fn&& fn) {
   fn("index", m.index);
 }
 
-// LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state during a run.
+// LOG_ERASE (0x0E, host -> device): Erases every record (and keeps the plan). Answer: ACK, or ERROR bad_plan (detail 0) when key is wrong, not_allowed_in_state while the motors may be driven (a trial, SET_MOTORS not yet off, a host-less run).
 struct LogErase {
   static constexpr MsgId kId = MsgId::kLogErase;
   static constexpr const char* kName = "LOG_ERASE";
