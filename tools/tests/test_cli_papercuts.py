@@ -148,7 +148,7 @@ def test_stream_into_a_closed_pipe_stops_the_motors(tmp_path):
             cwd=_ROOT,
         )
         try:
-            assert p.stdout.readline().startswith(b"t=")  # streaming
+            assert b"t=" in p.stdout.readline()  # streaming (a status line)
             p.stdout.close()  # `head -1` has its line and goes away
             _, err = p.communicate(timeout=30)
         finally:
