@@ -98,3 +98,74 @@ def test_a_result_that_differs_without_a_damaged_record_is_still_refused(paper, 
     fake.records[1] = dataclasses.replace(fake.records[1], completion_s=33.5)
     with pytest.raises(dl.DeviceLogError, match="another result"):
         dl.download_log(client, str(tmp_path), err=io.StringIO())
+
+
+def test_on_the_simulated_device_a_damaged_record_is_run_again_once_and_named(tmp_path, capsys):
+    """The real simulated device: a study killed after 3 trials, one bit of its second
+    record flipped in the store file, the study resumed on a restarted device: trial 2
+    runs again after the trials already recorded, no trial runs twice, and the download
+    names it."""
+    from test_hostless_study import REST_S as STUDY_REST_S
+    from test_hostless_study import _KillAfter, read_lines, short_protocol
+
+    from graspguide.hostless import runner as hr
+    from graspguide.link import client as dv
+    from graspguide.link.sim import SimulatedDevice
+    from graspguide.link.transport import LinkError
+    from graspguide.study import study_protocol as sp
+    from graspguide.study.progress import Progress
+    from graspguide.study.trial_sources import open_runner_source
+
+    _, protocol = short_protocol(tmp_path)
+    out = tmp_path / "study"
+    store = tmp_path / "store.bin"
+    quiet = Progress(out=io.StringIO(), tty=False)
+    with SimulatedDevice(virtual_clock=True, store=str(store), start=True) as dev:
+        client = _KillAfter(dv.DeviceClient(dev, timeout=1.0), dev, 3, 150)
+        model = open_runner_source("participant", protocol, "U1").model
+        with pytest.raises(LinkError):
+            hr.run_hostless(
+                protocol,
+                "U1",
+                client,
+                str(out),
+                model,
+                rest_s=STUDY_REST_S,
+                on_trial_result=client.on_result,
+                progress=quiet,
+                err=io.StringIO(),
+            )
+    # The second record's slot: after the 8 KiB plan region, 72 bytes a slot.
+    data = bytearray(store.read_bytes())
+    slot = 8192 + 72
+    assert data[slot : slot + 4] == b"GGLR", "the second slot holds a record"
+    data[slot + 12] ^= 0x10  # one bit of its trial fields
+    store.write_bytes(bytes(data))
+
+    capsys.readouterr()
+    with SimulatedDevice(virtual_clock=True, store=str(store), start=True) as dev:
+        client = dv.DeviceClient(dev, timeout=1.0)
+        client.hello()
+        info = client.log_info()
+        assert info.torn_records == 1 and info.records >= 2
+        model = open_runner_source("participant", protocol, "U1").model
+        hr.run_hostless(
+            protocol,
+            "U1",
+            client,
+            str(out),
+            model,
+            rest_s=STUDY_REST_S,
+            progress=quiet,
+            err=io.StringIO(),
+        )
+        final_info = client.log_info()
+        order = [client.log_read(i).trial_index for i in range(final_info.records)]
+    planned = [t.trial_index for t in sp.plan(protocol, "U1")]
+    damaged = planned[1]
+    assert sorted(order) == sorted(planned), order  # each planned trial once
+    assert order.index(damaged) > order.index(planned[2]), order  # run again, later
+    final = read_lines(out / "U1" / "trials.jsonl")
+    assert [r["trial_index"] for r in final] == sorted(planned)
+    text = capsys.readouterr().err  # the download's warning
+    assert f"trial_index {damaged} ran again" in text, text
