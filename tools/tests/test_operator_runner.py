@@ -234,7 +234,8 @@ def test_tlx_anchors_shown_per_scale_with_the_virtual_participant_as_a_person(tm
     with open(os.path.join(out, "U1", "tlx.jsonl")) as f:
         (rec,) = [json.loads(line) for line in f]
     assert rec["scales"] == {sc: i + 2 for i, sc in enumerate(TLX_SCALES)}
-    assert rec["origin"] == "interactive" and rec["simulated"] is False
+    # asked of the person; SIMULATED all the same: the device is the simulated one
+    assert rec["origin"] == "interactive" and rec["simulated"] is True
 
 
 def test_dry_run_needs_no_device_and_its_estimate_follows_the_protocol(

@@ -119,7 +119,7 @@ class StatusView:
                 self.live = None
 
     def _title(self) -> str:
-        return "graspguide stream" + (" (SIMULATED participant)" if self.simulated else "")
+        return "graspguide stream" + (" (SIMULATED)" if self.simulated else "")
 
     def _render(self, s: dict[str, Any], motors: str | None = None) -> Any:
         from rich.table import Table
@@ -144,12 +144,13 @@ class StatusView:
         return table
 
     def line(self, s: dict[str, Any]) -> str:
-        """The plain status line of ``s`` (not a terminal)."""
+        """The plain status line of ``s`` (not a terminal): it starts with the time, for
+        readers of the lines, and ends with SIMULATED when the run is."""
         p = self.progress
         pwm = " ".join(f"{f}={x:3d}" for f, x in zip(self.fingers, s.get("pwm", [0] * self.k)))
-        tag = "SIMULATED " if self.simulated else ""
+        tag = " SIMULATED" if self.simulated else ""
         return (
-            f"{tag}t={s.get('t_s', 0.0):7.2f}s state={p.state} "
+            f"t={s.get('t_s', 0.0):7.2f}s state={p.state} "
             f"error={s.get('error_deg', float('nan')):7.2f}deg "
             f"[{p.hold_text()}] pwm {pwm} rate={s.get('rate_hz', 0.0):.1f}/s"
             + (
@@ -158,7 +159,7 @@ class StatusView:
                 if s.get("skipped")
                 else ""
             )
-            + f" sent={s.get('sent', 0)} dropped={s.get('dropped', 0)}"
+            + f" sent={s.get('sent', 0)} dropped={s.get('dropped', 0)}{tag}"
         )
 
     def update(self, s: dict[str, Any], force: bool = False) -> None:

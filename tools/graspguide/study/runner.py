@@ -295,8 +295,13 @@ class StudyRunner:
     # mapping. Sent on every run, the identity too, so a device that kept an earlier
     # participant's calibration never renders this one's trials with it.
     calibration: MotorCalibration | None = None
+    # Whether the records say SIMULATED (trial_sources.simulation: the source, or a
+    # simulated device); None: the source's word. The TLX follows the source alone.
+    simulated: bool | None = None
 
     def __post_init__(self) -> None:
+        if self.simulated is None:
+            self.simulated = bool(self.source.simulated)
         self.pipeline_fallbacks = 0
         # None given for ask, progress or err (a caller passing its own default through)
         # means the default.
@@ -446,11 +451,11 @@ class StudyRunner:
                     f"{self.trials_path}: trial {idx} is recorded twice; inspect the file",
                     usage=True,
                 )
-            if bool(rec.get("simulated")) != self.source.simulated:
+            if bool(rec.get("simulated")) != self.simulated:
                 kind = "simulated" if rec.get("simulated") else "human"
                 raise RunnerError(
-                    f"{self.trials_path} holds {kind} trials; this source is "
-                    f"{'simulated' if self.source.simulated else 'a person'}: "
+                    f"{self.trials_path} holds {kind} trials; this run is "
+                    f"{'simulated' if self.simulated else 'a person on a board'}: "
                     "use another --out or --participant, never mix them",
                     usage=True,
                 )
@@ -690,7 +695,7 @@ class StudyRunner:
         completion = round(float(result.completion_s), 6) if success else float(p.timeout_s)
         record = {
             "participant": self.participant,
-            "simulated": self.source.simulated,
+            "simulated": self.simulated,
             **{k: v for k, v in trial.to_dict().items() if k != "participant"},
             "success": success,
             "completion_s": completion,
@@ -868,7 +873,7 @@ class StudyRunner:
             self.tlx_path,
             {
                 "participant": self.participant,
-                "simulated": self.source.simulated,
+                "simulated": self.simulated,
                 "session": session.session,
                 "k": session.k,
                 "modality": session.modality,
@@ -1116,7 +1121,7 @@ def trial_command(
         participant_number,
     )
     from graspguide.study.tlx import load_tlx_file
-    from graspguide.study.trial_sources import open_runner_source
+    from graspguide.study.trial_sources import open_runner_source, simulation
 
     protocol_file, source_spec, tlx_file = protocol, source, tlx
     try:
@@ -1138,6 +1143,11 @@ def trial_command(
         )
     from graspguide.study.operator_console import KEYS_HELP, ConsoleClosed, OperatorConsole
 
+    why_simulated = simulation(source_spec, poses.simulated, port)
+    simulated = why_simulated is not None
+    tag = "SIMULATED " if simulated else ""
+    if simulated:
+        print(f"graspguide trial: SIMULATED: {why_simulated}", file=sys.stderr, flush=True)
     person = operator or not poses.simulated
     console: OperatorConsole | None = None
     if person and OperatorConsole.available():
@@ -1172,7 +1182,7 @@ def trial_command(
                     participant=participant,
                     session="trial",
                     nominal_rate_hz=0.0 if virtual_clock else float(loaded.pose_rate_hz),
-                    simulated=poses.simulated,
+                    simulated=simulated,
                     extra={"protocol": protocol_file, "source": source_spec},
                 )
             )
@@ -1190,8 +1200,13 @@ def trial_command(
     try:
         if console is not None:
             console.__enter__()
+            who = (
+                "operator mode with a SIMULATED source (no person)"
+                if poses.simulated
+                else "a run with a person" + (" on a SIMULATED device" if simulated else "")
+            )
             print(
-                f"{participant}: a run with a person; {KEYS_HELP} (during a trial), "
+                f"{participant}: {who}; {KEYS_HELP} (during a trial), "
                 "Ctrl-C ends the run (resume by running the same command again)",
                 flush=True,
             )
@@ -1211,11 +1226,12 @@ def trial_command(
             rest_s=rest_s,
             observers=observers,
             calibration=calibration,
+            simulated=simulated,
         )
         result = runner.run()
         skipped = len(runner.skipped_by_operator)
         print(
-            f"{participant}: all {result['planned']} trials done ({result['ran']} "
+            f"{tag}{participant}: all {result['planned']} trials done ({result['ran']} "
             f"run now, {result['skipped']} from earlier runs"
             + (f", {skipped} skipped by the operator" if skipped else "")
             + f"); {os.path.join(out, participant)}"

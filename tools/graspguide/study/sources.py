@@ -173,10 +173,13 @@ TRACKER_PRESETS: dict[str, TrackerConvention] = {
 # Sources
 # --------------------------------------------------------------------------------------
 class Source:
-    """Iterable of samples; ``rate_hz`` is the nominal rate (None if unknown)."""
+    """Iterable of samples; ``rate_hz`` is the nominal rate (None if unknown);
+    ``simulated``: the poses do not come from a live person (a scripted hand, a replayed
+    file), see :func:`graspguide.study.trial_sources.simulation`."""
 
     name = "source"
     rate_hz: float | None = None
+    simulated = True
 
     def __iter__(self) -> Iterator[Sample]:  # pragma: no cover - interface
         raise NotImplementedError
@@ -300,6 +303,12 @@ class TrackerAdapter(Source):
 
     name = "tracker"
     convention: TrackerConvention = WORLD
+    #: A live tracker follows a person; a subclass that plays a simulated hand sets it True.
+    SIMULATED = False
+
+    @property
+    def simulated(self) -> bool:  # type: ignore[override]
+        return bool(self.SIMULATED)
 
     def raw_samples(self) -> Iterator[Sample]:  # pragma: no cover - interface
         raise NotImplementedError

@@ -321,6 +321,7 @@ def stream_command(
     from graspguide.study.records import SessionLog
     from graspguide.study.scene_file import SceneError, config_hash, load_scene
     from graspguide.study.sources import SourceError, SyntheticSource, open_source
+    from graspguide.study.trial_sources import simulation
 
     scene_file, source_spec, log_dir = scene, source, log
     try:
@@ -345,15 +346,10 @@ def stream_command(
     except (SceneError, SourceError) as e:
         report("stream", e)
         return EXIT_USAGE
-    closed = bool(getattr(poses, "closed_loop", False))
-    simulated = closed and bool(poses.simulated)
+    why_simulated = simulation(source_spec, bool(poses.simulated), port)
+    simulated = why_simulated is not None
     if simulated:
-        print(
-            f"graspguide stream: source {source_spec}: SIMULATED (the virtual participant, "
-            "not a person)",
-            file=sys.stderr,
-            flush=True,
-        )
+        print(f"graspguide stream: SIMULATED: {why_simulated}", file=sys.stderr, flush=True)
     streams = None
     if lsl:
         try:

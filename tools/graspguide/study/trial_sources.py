@@ -12,6 +12,41 @@ from typing import Any
 from graspguide.study.errors import RunnerError
 from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
 
+#: What a source kind is when it is simulated (the words of the SIMULATED label).
+_SIMULATED_SOURCES = {
+    "participant": "the virtual participant, not a person",
+    "synthetic": "a scripted hand (synthetic), not a person",
+    "replay": "a recorded pose stream replayed, not a live person",
+    "plugin": "the plugin's source is SIMULATED, not a person",
+}
+
+
+def simulated_device(port: str | None) -> str | None:
+    """What the device at ``port`` is when it is a simulation of one, else None."""
+    from graspguide.link.promini_sim import PROMINI_SIM_PORT
+    from graspguide.link.qemu_firmware import QEMU_PORT
+    from graspguide.link.sim import SIM_PORT
+
+    return {
+        SIM_PORT: "the simulated device (--port sim), not a board",
+        PROMINI_SIM_PORT: "the Pro Mini sketch under simavr (--port promini-sim), not a board",
+        QEMU_PORT: "the firmware under QEMU (--port qemu), not a board",
+    }.get(port or "")
+
+
+def simulation(spec: str, source_simulated: bool, port: str | None) -> str | None:
+    """The one rule of SIMULATED, for `stream` and `trial`, their records and their
+    terminal output: why a run with the source ``spec`` (simulated or not, as the source
+    says) on the device ``port`` is simulated, or None for a live person on a board."""
+    why = []
+    if source_simulated:
+        kind = spec.partition(":")[0]
+        why.append(_SIMULATED_SOURCES.get(kind, "a simulated source, not a person"))
+    device = simulated_device(port)
+    if device is not None:
+        why.append(device)
+    return "; ".join(why) if why else None
+
 
 def participant_keys(seed: bool) -> list[str]:
     """The keys of ``participant:KEY=VALUE,...``: the virtual participant's parameters
@@ -173,7 +208,7 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
                 spec,
                 lambda trial: adapter,
                 adapter.rate_hz or 100.0,
-                simulated=bool(getattr(adapter, "SIMULATED", False)),
+                simulated=adapter.simulated,
                 live=True,
                 info=adapter.describe(),
             )
@@ -209,12 +244,12 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
                     list(protocol.y_axis),
                 )
 
-            return OpenLoopSource(spec, make, rate, True, False, base.describe())
+            return OpenLoopSource(spec, make, rate, base.simulated, False, base.describe())
         return OpenLoopSource(
             spec,
             lambda trial: base,
             base.rate_hz or protocol.pose_rate_hz,
-            True,
+            base.simulated,
             False,
             base.describe(),
         )
@@ -229,5 +264,7 @@ __all__ = [
     "OpenLoopSource",
     "open_runner_source",
     "participant_keys",
+    "simulation",
+    "simulated_device",
     "check_participant_keys",
 ]
