@@ -8,6 +8,7 @@ tests are in test/test_hostless; docs/hostless.md says why."""
 from __future__ import annotations
 
 import dataclasses
+import io
 import os
 
 import pytest
@@ -93,3 +94,73 @@ def test_a_sample_stamped_back_aborts_the_trial_with_no_record(tmp_path, plan3):
         assert list(c.trial_results) == []
         assert c.log_info().records == 0
         c.stop()
+
+
+class _OneSampleBack:
+    """A DeviceClient whose IMU sends, once, ``after`` samples into the first trial, a
+    sample stamped 1 us before the last one (a glitch of the IMU's time stamp)."""
+
+    def __init__(self, client, after: int):
+        self._client = client
+        self._after = after
+        self._last_us: int | None = None
+        self.answer: m.Telemetry | None = None
+        self.seen: list = []  # every HOSTLESS_EVENT, before the world takes them
+
+    def __getattr__(self, name):
+        return getattr(self._client, name)
+
+    def sim_imu_sample(self, time_us, accel, gyro, timeout=None):
+        started = any(int(e.event) == m.RunEvent.TRIAL_STARTED for e in self.seen)
+        if started and self.answer is None and self._last_us is not None:
+            self._after -= 1
+            if self._after <= 0:
+                self.answer = self._client.sim_imu_sample(self._last_us - 1, accel, gyro)
+        self._last_us = int(time_us)
+        tel = self._client.sim_imu_sample(time_us, accel, gyro, timeout)
+        self.seen.extend(self._client.hostless_events)
+        return tel
+
+    def sim_button(self, pressed, timeout=None):
+        ack = self._client.sim_button(pressed, timeout)
+        self.seen.extend(self._client.hostless_events)
+        return ack
+
+
+def test_a_study_with_one_sample_stamped_back_runs_that_trial_again_once(tmp_path):
+    """The host-less world on the simulated device: the trial that saw the step back is
+    aborted (no record), runs again, and the study ends with one record per trial."""
+    from test_hostless_study import REST_S as STUDY_REST_S
+    from test_hostless_study import read_lines, short_protocol
+
+    from graspguide.hostless import runner as hr
+    from graspguide.study import study_protocol as sp
+    from graspguide.study.progress import Progress
+    from graspguide.study.trial_sources import open_runner_source
+
+    _, protocol = short_protocol(tmp_path)
+    out = tmp_path / "study"
+    results = []
+    with SimulatedDevice(virtual_clock=True, store=str(tmp_path / "s.bin"), start=True) as dev:
+        client = _OneSampleBack(dv.DeviceClient(dev, timeout=2.0), after=30)
+        model = open_runner_source("participant", protocol, "U1").model
+        done = hr.run_hostless(
+            protocol,
+            "U1",
+            client,
+            str(out),
+            model,
+            rest_s=STUDY_REST_S,
+            on_trial_result=results.append,
+            progress=Progress(out=io.StringIO(), tty=False),
+            err=io.StringIO(),
+        )
+    assert client.answer is not None, "the step back was sent in a trial"
+    assert client.answer.solver_status == m.ErrorCode.TIME_WENT_BACKWARDS
+    planned = [t.trial_index for t in sp.plan(protocol, "U1")]
+    started = [int(e.trial_index) for e in client.seen if int(e.event) == m.RunEvent.TRIAL_STARTED]
+    assert started[:2] == [planned[0], planned[0]], started  # aborted, then run again
+    assert sorted(int(r.trial_id) for r in results) == planned  # one result per trial
+    assert done.completed == done.planned == len(planned)
+    final = read_lines(out / "U1" / "trials.jsonl")
+    assert [r["trial_index"] for r in final] == planned
