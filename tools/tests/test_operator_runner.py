@@ -230,6 +230,8 @@ def test_tlx_anchors_shown_per_scale_with_the_virtual_participant_as_a_person(tm
         )
         child.expect(re.escape(f"{sc} ({TLX_NAMES[sc]}) [1-21]: "))
         child.sendline(str(i + 2))
+    child.expect("save these answers")  # shown for review, saved on Enter
+    child.sendline("")
     assert finish(child) == (0, True)
     with open(os.path.join(out, "U1", "tlx.jsonl")) as f:
         (rec,) = [json.loads(line) for line in f]

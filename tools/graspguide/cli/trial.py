@@ -27,10 +27,14 @@ Run one participant's trials of a study protocol (docs/study.md) on a device: th
 (familiarization, then one session per contact count x modality, in the participant's
 counterbalanced order) is derived from --protocol and --participant; each trial is
 SET_SCENE (when the condition changes), START_TRIAL, poses streamed from --source until
-the TRIAL_RESULT. Progress: trial n of N, the condition and the live error (plain lines
-when stdout is not a terminal). After each session the six NASA-TLX scales (MD, TD, PD,
-PE, EF, FR; integers 1-21) are asked on stdin, or read from --tlx, or -- for a simulated
-source without --tlx -- recorded as absent (null), never invented.
+the TRIAL_RESULT. During each trial the panel of `graspguide stream`: trial n of N and
+the condition, the state, the error against the threshold, the hold progress, each
+finger's cue level, SIMULATED when the run is (plain lines when stdout is not a
+terminal). After each session the six NASA-TLX scales (MD, TD, PD, PE, EF, FR; integers
+1-21) are asked on stdin -- on the operator's terminal they are then shown for review and
+saved once confirmed (Enter; a scale's name or r asks again); answers piped in are saved
+as given -- or read from --tlx, or -- for a simulated source without --tlx -- recorded as
+absent (null), never invented.
 
 Writes OUT/study.json, OUT/PID/trials.jsonl (one fsync'ed line per completed trial),
 OUT/PID/tlx.jsonl, OUT/PID/frames/trial-NNNN.csv, OUT/PID/plan.json, OUT/PID/runs.jsonl.

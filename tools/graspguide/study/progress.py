@@ -42,7 +42,14 @@ class Progress:
             self.out.write(f"\r\x1b[K{self._head} ...")
             self.out.flush()
 
-    def frame(self, t_s: float, error_deg: float, pwm: Sequence[int], real_time: bool) -> None:
+    def frame(
+        self,
+        t_s: float,
+        error_deg: float,
+        pwm: Sequence[int],
+        real_time: bool,
+        solver_ok: bool = True,  # for views that judge the hold (live_view.TrialPanel)
+    ) -> None:
         if self.tty:
             now = time.monotonic()
             if now - self._last >= 0.1:

@@ -612,7 +612,9 @@ class StudyRunner:
             # is one frame in real time, and a few ms of wall time on the virtual clock).
             f.write(_frame_rows(stamped, tels))
             tel = tels[-1]
-            progress_frame(stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time)
+            progress_frame(
+                stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time, tel.solver_status == 0
+            )
 
         def on_frames_observed(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
             f.write(_frame_rows(stamped, tels))
@@ -627,7 +629,13 @@ class StudyRunner:
                     obs.on_telemetry(t_s, err, alpha, pwm, status)
             tel = tels[-1]
             if console is None or not console.typing:  # a note being typed stays visible
-                progress_frame(stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time)
+                progress_frame(
+                    stamped[-1][0],
+                    float(tel.error_deg),
+                    tel.pwm[:k],
+                    real_time,
+                    tel.solver_status == 0,
+                )
 
         wall0 = time.monotonic()
         window = 1 if console is not None else self._window(model is not None)
@@ -867,7 +875,8 @@ class StudyRunner:
         elif self.source.simulated:
             scales, origin = None, "absent: simulated source, no --tlx"
         else:
-            scales = ask_tlx(session, self.ask, self.progress.out)
+            # reviewed before saving when someone is at the terminal (the operator console)
+            scales = ask_tlx(session, self.ask, self.progress.out, review=self.operator is not None)
             origin = "interactive"
         append_line(
             self.tlx_path,
@@ -1141,6 +1150,7 @@ def trial_command(
             f"{describe_calibration(calibration)}",
             flush=True,
         )
+    from graspguide.study.live_view import TrialPanel
     from graspguide.study.operator_console import KEYS_HELP, ConsoleClosed, OperatorConsole
 
     why_simulated = simulation(source_spec, poses.simulated, port)
@@ -1197,6 +1207,13 @@ def trial_command(
         return fail("trial", e)
     code = EXIT_OK
     runner = None
+    panel = TrialPanel(
+        loaded.threshold_deg,
+        loaded.hold_s,
+        loaded.timeout_s,
+        simulated=simulated,
+        keys=KEYS_HELP.removeprefix("keys: ") if console is not None else None,
+    )
     try:
         if console is not None:
             console.__enter__()
@@ -1218,7 +1235,7 @@ def trial_command(
             device.client,
             virtual_clock,
             tlx=runner_tlx,
-            progress=Progress(),
+            progress=panel,
             protocol_file=protocol_file,
             port=port,
             ask=console.read_line if console is not None else input,
@@ -1258,6 +1275,7 @@ def trial_command(
             file=sys.stderr,
         )
     finally:
+        panel.close()
         if console is not None:
             console.restore()
         if not device.close():

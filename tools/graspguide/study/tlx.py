@@ -141,11 +141,55 @@ def load_tlx_file(
     return out
 
 
+def _ask(ask: Callable[[str], str], prompt: str) -> str:
+    try:
+        return ask(prompt).strip()
+    except EOFError:
+        raise RunnerError(
+            "the NASA-TLX answers ended (stdin closed); give them with "
+            "--tlx FILE and run again (completed trials are kept)"
+        ) from None
+
+
+def _ask_scale(sc: str, ask: Callable[[str], str], out: TextIO, attempts: int) -> int:
+    """One scale, asked until the answer is an integer 1..21 (at most ``attempts``)."""
+    for _ in range(attempts):
+        text = _ask(ask, f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
+        try:
+            return check_tlx_value(sc, int(text))
+        except ValueError as e:
+            msg = (
+                str(e)
+                if text.lstrip("+-").isdigit()
+                else f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
+            )
+            print(f"  {msg}; try again", file=out, flush=True)
+    raise RunnerError(f"no valid answer for {sc} after {attempts} attempts")
+
+
+def tlx_answers_text(scales: dict[str, int]) -> str:
+    """``MD 5   TD 3   PD 2   PE 4   EF 6   FR 3``: the answers at a glance."""
+    return "   ".join(f"{sc} {scales[sc]}" for sc in TLX_SCALES)
+
+
+REVIEW_PROMPT = (
+    "  save these answers? Enter saves; a scale's name (such as MD) asks it again; "
+    "r asks all six again: "
+)
+
+
 def ask_tlx(
-    session: Session, ask: Callable[[str], str], out: TextIO, attempts: int = 5
+    session: Session,
+    ask: Callable[[str], str],
+    out: TextIO,
+    attempts: int = 5,
+    review: bool = False,
 ) -> dict[str, int]:
     """The six scales asked one by one (``ask`` is input()); a bad answer is asked again
-    (at most ``attempts`` times); EOF raises RunnerError."""
+    (at most ``attempts`` times); EOF raises RunnerError. With ``review`` (someone at a
+    terminal) the answers are then shown and saved only once confirmed: a scale's name
+    asks it again, ``r`` all six; without it (answers piped in) they are returned as
+    given."""
     print(
         f"NASA-TLX for session {session.session} ({session.modality}, k = {session.k}): "
         f"answer each scale with an integer {TLX_MIN}..{TLX_MAX}",
@@ -153,30 +197,32 @@ def ask_tlx(
         flush=True,
     )
     scales: dict[str, int] = {}
-    for sc in TLX_SCALES:
-        print(f"  {tlx_scale_text(sc)}", file=out, flush=True)
+    todo = list(TLX_SCALES)
+    while True:
+        for sc in todo:
+            print(f"  {tlx_scale_text(sc)}", file=out, flush=True)
+            scales[sc] = _ask_scale(sc, ask, out, attempts)
+        if not review:
+            return scales
+        print(f"  answers: {tlx_answers_text(scales)}", file=out, flush=True)
         for _ in range(attempts):
-            try:
-                text = ask(f"  {sc} ({TLX_NAMES[sc]}) [{TLX_MIN}-{TLX_MAX}]: ")
-            except EOFError:
-                raise RunnerError(
-                    "the NASA-TLX answers ended (stdin closed); give them with "
-                    "--tlx FILE and run again (completed trials are kept)"
-                ) from None
-            text = text.strip()
-            try:
-                scales[sc] = check_tlx_value(sc, int(text))
+            text = _ask(ask, REVIEW_PROMPT)
+            if text.lower() in ("", "y", "yes"):
+                return scales
+            if text.lower() == "r":
+                todo = list(TLX_SCALES)
                 break
-            except ValueError as e:
-                msg = (
-                    str(e)
-                    if text.lstrip("+-").isdigit()
-                    else f"{sc}: {text!r} is not an integer {TLX_MIN}..{TLX_MAX}"
-                )
-                print(f"  {msg}; try again", file=out, flush=True)
+            if text.upper() in TLX_SCALES:
+                todo = [text.upper()]
+                break
+            print(
+                f"  {text!r}: press Enter to save, type a scale ({', '.join(TLX_SCALES)}) "
+                "to answer it again, or r for all six",
+                file=out,
+                flush=True,
+            )
         else:
-            raise RunnerError(f"no valid answer for {sc} after {attempts} attempts")
-    return scales
+            raise RunnerError(f"the NASA-TLX answers were not confirmed after {attempts} tries")
 
 
 __all__ = [
@@ -190,4 +236,5 @@ __all__ = [
     "check_tlx_value",
     "load_tlx_file",
     "ask_tlx",
+    "tlx_answers_text",
 ]
