@@ -73,3 +73,45 @@ def test_stream_to_the_simulated_device_is_not_paced(tmp_path):
     assert end["paced"] is False and end["dropped"] == 0, end
     # a hiccup may skip a pose or two for a newer one, never a steady share
     assert end["skipped"] <= 0.1 * (end["sent"] + end["skipped"]), end
+
+
+def test_a_live_tracker_is_not_read_ahead(tmp_path):
+    """A live tracker's generator gives each frame when it happens: the stream sends the
+    frame it got, never waits for the next one to see whether it is newer."""
+    from graspguide.link.transport import DEFAULT_BAUDRATE
+    from graspguide.study.device_session import DeviceSession
+    from graspguide.study.scene_file import load_scene
+    from graspguide.study.sources import TrackerAdapter
+    from graspguide.study.stream_session import run_stream
+
+    pulled: list[int] = []
+    sent: list[float] = []
+
+    class Tracker(TrackerAdapter):
+        name, rate_hz = "test tracker", 50.0
+
+        def raw_samples(self):
+            for i in range(10):
+                pulled.append(i)
+                yield i / 50.0, (1.0, 0.0, 0.0, 0.0), None
+
+    class Log:
+        def pose(self, t_us, t_s, quat, has_contacts):
+            sent.append(t_s)
+            assert pulled[-1] == round(t_s * 50), (pulled, t_s)  # nothing pulled ahead
+
+        def telemetry(self, tel):
+            pass
+
+        def result(self, result):
+            pass
+
+    device = DeviceSession("stream", "sim", DEFAULT_BAUDRATE, 2.0)
+    try:
+        device.client.hello()
+        summary = run_stream(
+            device.client, load_scene(SCENE3), [0.3, -1.2, -0.8, 0, 0, 0], Tracker(), log=Log()
+        )
+    finally:
+        device.close()
+    assert len(sent) == 10 and summary["skipped"] == 0

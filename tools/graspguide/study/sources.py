@@ -180,6 +180,9 @@ class Source:
     name = "source"
     rate_hz: float | None = None
     simulated = True
+    # A live source yields each sample when it happens (a tracker); the others have
+    # their samples at hand, so a link slower than them can be sent the newest one due.
+    live = False
 
     def __iter__(self) -> Iterator[Sample]:  # pragma: no cover - interface
         raise NotImplementedError
@@ -305,6 +308,7 @@ class TrackerAdapter(Source):
     convention: TrackerConvention = WORLD
     #: A live tracker follows a person; a subclass that plays a simulated hand sets it True.
     SIMULATED = False
+    live = True
 
     @property
     def simulated(self) -> bool:  # type: ignore[override]

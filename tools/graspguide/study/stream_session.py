@@ -181,7 +181,9 @@ def run_stream(
         loop = PoseLoop(
             client,
             virtual_clock,
-            newest=True,
+            # a live tracker's next sample is its newest (looking past it would wait for
+            # the one after): the others are paced to the link here
+            newest=not getattr(source, "live", False),
             on_send=on_send,
             on_frame=on_frame,
             on_skip=on_skip,
