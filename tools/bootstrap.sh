@@ -7,7 +7,7 @@
 #      when that file changes);
 #   4. the Python package in tools/ (if tools/pyproject.toml exists),
 #      re-installed only when its sources (tools/, lib/graspguide/, lib/graspguide_frame/) change;
-#   5. the simulated device (.pio/build/sim/program, `pio run -e sim`) when
+#   5. the simulated device (.pio/build-sim/sim/program, `pio run -e sim`) when
 #      platformio.ini has [env:sim]; pio rebuilds only what changed;
 #   6. arduino-cli (pinned version, built from Go sources into .tools/arduino-cli/,
 #      rebuilt only when the version changes) and its offline config for Debian's AVR core.
@@ -104,13 +104,16 @@ fi
 
 # --- 5. The simulated device ------------------------------------------------------
 # `graspguide ... --port sim` and tools/tests/test_device_e2e.py run it. Offline, like
-# the native tests; pio recompiles only what changed (about 1 s when nothing did).
+# the native tests; pio recompiles only what changed (about 1 s when nothing did). It
+# builds into a folder of its own, where its launcher looks (graspguide.link.device_builds):
+# pio deletes its whole build folder when its project checksum changes, and another env's
+# build must not take the simulated device with it.
 if grep -q '^\[env:sim\]' "$ROOT/platformio.ini" 2>/dev/null; then
     sim_log="$(mktemp "${TMPDIR:-/tmp}/graspguide-sim-build.XXXXXX")"
     if PLATFORMIO_CORE_DIR="$ROOT/.pio-core" PLATFORMIO_DISABLE_UPGRADE_CHECK=true \
-        PLATFORMIO_SETTING_ENABLE_TELEMETRY=No \
+        PLATFORMIO_SETTING_ENABLE_TELEMETRY=No PLATFORMIO_BUILD_DIR="$ROOT/.pio/build-sim" \
         "$ROOT/.venv/bin/pio" run -e sim >"$sim_log" 2>&1; then
-        say "simulated device ready (.pio/build/sim/program)"
+        say "simulated device ready (.pio/build-sim/sim/program)"
         rm -f "$sim_log"
     else
         tail -n 40 "$sim_log" >&2

@@ -215,8 +215,16 @@ else
         arm_why="arm-none-eabi-g++ not on PATH after tools/install-arm.sh"
     fi
 fi
+# The firmware that --port qemu runs builds into a folder of its own
+# (graspguide.link.device_builds), as its launcher looks for it there: pio deletes its whole
+# build folder when its project checksum changes, and the others' builds must not take
+# this one with them.
+DEVICE_ENVS=" m4f_firmware "
 for env in "${ARM_ENVS[@]}"; do
-    if [[ -z $arm_why ]]; then
+    if [[ -z $arm_why && $DEVICE_ENVS == *" $env "* ]]; then
+        run_case "$env build" "$env" env PLATFORMIO_BUILD_DIR="$ROOT/.pio/build-$env" \
+            "$ROOT/.venv/bin/pio" run -e "$env"
+    elif [[ -z $arm_why ]]; then
         run_case "$env build" "$env" "$ROOT/.venv/bin/pio" run -e "$env"
     else
         firmware_unavailable "pio run -e $env" "$arm_why"

@@ -44,7 +44,7 @@ _TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 ELF = os.environ.get("GRASPGUIDE_M4F_FIRMWARE") or os.path.join(
-    _ROOT, ".pio", "build", "m4f_firmware", "firmware.elf"
+    _ROOT, qemu_firmware.FIRMWARE_RELATIVE_PATH
 )
 QEMU = shutil.which("qemu-system-arm")
 BOARD = "qemu-mps2-an386"
@@ -58,8 +58,9 @@ pytestmark = [
     pytest.mark.skipif(
         not os.path.isfile(ELF),
         reason=(
-            f"the QEMU firmware {ELF} is not built: `pio run -e m4f_firmware` (needs "
-            "arm-none-eabi-g++ from tools/install-arm.sh; tools/run-tests.sh does both)"
+            f"the QEMU firmware {ELF} is not built: "
+            f"`{qemu_firmware.firmware_build_command(_ROOT)}` (needs arm-none-eabi-g++ from "
+            "tools/install-arm.sh; tools/run-tests.sh does both)"
         ),
     ),
 ]

@@ -95,10 +95,11 @@ def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
         required=required,
         help="serial port of the device (e.g. /dev/ttyACM0, COM3; "
         "`graspguide ports` lists them), 'sim' to start the simulated "
-        "device (.pio/build/sim/program, or $GRASPGUIDE_SIM), 'promini-sim' for the "
-        "Pro Mini sketch under simavr (build/promini/, python -m graspguide.promini.build), "
-        "or 'qemu' for the firmware on QEMU's mps2-an386 (pio run -e m4f_firmware, or "
-        "$GRASPGUIDE_M4F_FIRMWARE)",
+        "device (.pio/build-sim/sim/program, or $GRASPGUIDE_SIM), 'promini-sim' for the "
+        "Pro Mini sketch under simavr (build/promini/, or $GRASPGUIDE_PROMINI_ELF), "
+        "or 'qemu' for the firmware on QEMU's mps2-an386 "
+        "(.pio/build-m4f_firmware/m4f_firmware/firmware.elf, or $GRASPGUIDE_M4F_FIRMWARE); "
+        "each simulated one is built on first use when it is missing",
     )
     p.add_argument(
         "--baud",

@@ -5,18 +5,21 @@
 the ATmega328P at 8 MHz, UART0 on a pseudo-terminal, the motor PWM read from the timers'
 registers) on the sketch's ELF, and talks to it exactly as :class:`SimulatedDevice` talks
 to the simulated device: it is one, with another command. :func:`build_runner` compiles
-the runner with the system C compiler into ``.pio/build/promini_sim/`` when it is missing
-or older than its source; :func:`find_promini_elf` locates the sketch's ELF.
+the runner with the system C compiler into ``.pio/build-promini_sim/`` when it is missing
+or older than its source; :func:`find_promini_elf` locates the sketch's ELF, and
+:class:`ProMiniSimDevice` builds the sketch (:func:`build_promini_elf`) when it is missing.
 """
 
 from __future__ import annotations
 
 import fcntl
 import os
+import shlex
 import shutil
 import subprocess
+import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from graspguide.link.sim import DEFAULT_SIM_GRACE, DEFAULT_SIM_START_TIMEOUT, SimulatedDevice
 from graspguide.link.sim import find_repo_root as _find_repo_root
@@ -25,7 +28,9 @@ from graspguide.link.transport import DEFAULT_BAUDRATE, DeviceNotFound, LinkErro
 PROMINI_SIM_PORT = "promini-sim"
 PROMINI_ELF_ENV = "GRASPGUIDE_PROMINI_ELF"
 RUNNER_SOURCE = os.path.join("src", "harness", "promini_sim", "runner.c")
-RUNNER_RELATIVE_PATH = os.path.join(".pio", "build", "promini_sim", "runner")
+# Beside pio's build folders, not in one: pio deletes .pio/build whole when its project
+# checksum changes.
+RUNNER_RELATIVE_PATH = os.path.join(".pio", "build-promini_sim", "runner")
 # Where the sketch's arduino-cli build (graspguide.promini.build) leaves its ELF.
 PROMINI_ELF_RELATIVE_PATH = os.path.join("build", "promini", "GraspGuideProMini.ino.elf")
 # The sketch's motor pins 3, 9, 10, 11 (promini/GraspGuideProMini/board_glue.h): the
@@ -96,23 +101,75 @@ def build_runner(root: str | None = None, cc: str | None = None) -> str:
     return binary
 
 
-def find_promini_elf(path: str | None = None) -> str:
+PROMINI_BUILD_COMMAND = ".venv/bin/python -m graspguide.promini.build"
+
+
+def find_promini_elf(path: str | None = None, build: bool = False) -> str:
     """The sketch's ELF: ``path``, else ``$GRASPGUIDE_PROMINI_ELF``, else the sketch build's
-    output in the repository. Raises SimNotBuilt naming the build command when missing."""
+    output in the repository (build/promini/). With ``build``, a missing one of the
+    repository is built first (:func:`build_promini_elf`). Raises SimNotBuilt naming the
+    build command when missing."""
     explicit = path or os.environ.get(PROMINI_ELF_ENV)
     if explicit:
         if os.path.isfile(explicit):
             return explicit
         where = "the path given" if path else f"${PROMINI_ELF_ENV}"
         raise SimNotBuilt(
-            f"Pro Mini firmware {explicit!r} ({where}) does not exist; build the sketch with "
-            f"`python -m graspguide.promini.build` or unset {PROMINI_ELF_ENV}"
+            f"Pro Mini firmware {explicit!r} ({where}) does not exist; unset "
+            f"{PROMINI_ELF_ENV} for the repository's sketch, which `{PROMINI_BUILD_COMMAND}` "
+            "builds"
         )
-    elf = os.path.join(_repo_root(), PROMINI_ELF_RELATIVE_PATH)
+    root = _repo_root()
+    elf = os.path.join(root, PROMINI_ELF_RELATIVE_PATH)
+    if build and not os.path.isfile(elf):
+        return build_promini_elf(root)
     if not os.path.isfile(elf):
         raise SimNotBuilt(
             f"the Pro Mini sketch is not built ({elf} is missing); build it with "
-            f"`python -m graspguide.promini.build` or set {PROMINI_ELF_ENV}=/path/to/sketch.elf"
+            f"`cd {shlex.quote(root)} && {PROMINI_BUILD_COMMAND}` (--port promini-sim builds "
+            f"it when it is missing) or set {PROMINI_ELF_ENV}=/path/to/sketch.elf"
+        )
+    return elf
+
+
+def build_promini_elf(root: str, progress: Callable[[str], None] | None = None) -> str:
+    """Builds the sketch with arduino-cli (graspguide.promini.build) into build/promini/ of
+    ``root`` when its ELF is missing, saying so on ``progress`` (default stderr); returns
+    the ELF. Concurrent callers serialise on a lock file, and the folder appears whole (built
+    beside it, then renamed), so none ever runs a half-written ELF."""
+    from pathlib import Path
+
+    from graspguide.promini.build import ArduinoCliMissing, SketchBuildFailed, build_sketch
+
+    def to_stderr(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    say = progress or to_stderr
+    elf = os.path.join(root, PROMINI_ELF_RELATIVE_PATH)
+    out_dir = os.path.dirname(elf)
+    os.makedirs(os.path.dirname(out_dir), exist_ok=True)
+    with open(out_dir + ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if os.path.isfile(elf):  # another process built it while this one waited
+            return elf
+        say(f"building the Pro Mini sketch (once, about a minute): {PROMINI_BUILD_COMMAND}")
+        tmp = tempfile.mkdtemp(dir=os.path.dirname(out_dir), prefix=".promini-")
+        try:
+            result = build_sketch(Path(root), Path(tmp))
+            if os.path.isdir(out_dir):  # a build without its ELF: replaced whole
+                shutil.rmtree(out_dir)
+            os.replace(tmp, out_dir)
+        except (ArduinoCliMissing, SketchBuildFailed) as e:
+            raise SimNotBuilt(
+                f"cannot build the Pro Mini sketch for --port promini-sim: {e}\nthe command: "
+                f"cd {shlex.quote(root)} && {PROMINI_BUILD_COMMAND}"
+            ) from None
+        finally:
+            if os.path.isdir(tmp):
+                shutil.rmtree(tmp, ignore_errors=True)
+        say(
+            f"built the Pro Mini sketch in {result.seconds:.0f} s: {elf} "
+            f"({result.flash_bytes} B flash, {result.static_ram_bytes} B static RAM)"
         )
     return elf
 
@@ -185,8 +242,9 @@ class ProMiniSimDevice(SimulatedDevice):
     """The Pro Mini sketch running cycle-exact under simavr, on a pseudo-terminal.
 
     ``with ProMiniSimDevice(trace="motors.csv") as dev:`` builds the runner if needed,
-    starts it on ``elf`` (default: :func:`find_promini_elf`) and opens its pty at 115200
-    baud; closing sends SIGTERM (the runner records the motors off and exits).
+    starts it on ``elf`` (default: :func:`find_promini_elf`, the sketch built if needed)
+    and opens its pty at 115200 baud; closing sends SIGTERM (the runner records the motors
+    off and exits).
 
     ``trace``: CSV ``device_time_us,pwm0..pwm3`` in simulated time, on every change of the
     motor channels; ``motors``: the four timer channels (``OC0A`` .. ``OC2B``) wired to
@@ -221,7 +279,7 @@ class ProMiniSimDevice(SimulatedDevice):
                 "--virtual-clock is for --port sim: the Pro Mini under simavr keeps its own "
                 "clock (simulated time, held to real time)"
             )
-        self.elf = find_promini_elf(elf)
+        self.elf = find_promini_elf(elf, build=True)
         runner = runner or build_runner()
         options = runner_options(trace, motors, marks, stats, fast, max_cycles, events)
         super().__init__(
@@ -248,6 +306,7 @@ __all__ = [
     "ProMiniSimDevice",
     "build_runner",
     "find_promini_elf",
+    "build_promini_elf",
     "read_stats",
     "read_events",
     "runner_options",

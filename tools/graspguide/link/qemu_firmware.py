@@ -1,4 +1,5 @@
-"""The cross-compiled firmware (`pio run -e m4f_firmware`) on QEMU's mps2-an386
+"""The cross-compiled firmware (`pio run -e m4f_firmware`, in its own build folder:
+graspguide.link.device_builds) on QEMU's mps2-an386
 (Cortex-M4F) as a device, for ``--port qemu``.
 
 :class:`QemuFirmware` starts ``qemu-system-arm`` on the ELF with UART0 on a host
@@ -41,7 +42,8 @@ QEMU_PORT = "qemu"
 QEMU_FIRMWARE_ENV = "GRASPGUIDE_M4F_FIRMWARE"
 QEMU_MACHINE = "mps2-an386"
 QEMU_BOARD_NAME = "qemu-mps2-an386"  # the firmware's HELLO_REPLY board
-FIRMWARE_RELATIVE_PATH = os.path.join(".pio", "build", "m4f_firmware", "firmware.elf")
+# Its own build folder (graspguide.link.device_builds): no other env's build deletes it.
+FIRMWARE_RELATIVE_PATH = os.path.join(".pio", "build-m4f_firmware", "m4f_firmware", "firmware.elf")
 DEFAULT_START_TIMEOUT = 10.0
 MOTOR_REGISTERS_SYMBOL = "m4f_pwm_ccr"
 DIAGNOSTIC_SYMBOLS = (
@@ -62,17 +64,28 @@ def find_qemu() -> str:
     return qemu
 
 
-def find_firmware_elf(path: str | None = None) -> str:
+def firmware_build_command(root: str) -> str:
+    """The shell command that builds the firmware in the repository ``root``."""
+    from graspguide.link.device_builds import M4F_FIRMWARE
+
+    return M4F_FIRMWARE.command(root)
+
+
+def find_firmware_elf(path: str | None = None, build: bool = False) -> str:
     """The firmware's ELF: ``path``, else ``$GRASPGUIDE_M4F_FIRMWARE``, else the pio build's
-    output in the repository. SimNotBuilt naming the build command when missing."""
+    output in the repository (``.pio/build-m4f_firmware/m4f_firmware/firmware.elf``). With
+    ``build``, a missing one of the repository is built first (pio's progress on stderr;
+    it needs the ARM toolchain). SimNotBuilt naming the exact build command when missing."""
     explicit = path or os.environ.get(QEMU_FIRMWARE_ENV)
     if explicit:
         if os.path.isfile(explicit):
             return explicit
         where = "the path given" if path else f"${QEMU_FIRMWARE_ENV}"
+        root = find_repo_root()
+        how = firmware_build_command(root) if root else "pio run -e m4f_firmware"
         raise SimNotBuilt(
-            f"the QEMU firmware {explicit!r} ({where}) does not exist; build it with "
-            f"`pio run -e m4f_firmware` or unset {QEMU_FIRMWARE_ENV}"
+            f"the QEMU firmware {explicit!r} ({where}) does not exist; unset "
+            f"{QEMU_FIRMWARE_ENV} for the repository's, which this builds:\n    {how}"
         )
     root = find_repo_root()
     if root is None:
@@ -81,10 +94,15 @@ def find_firmware_elf(path: str | None = None) -> str:
             f"or its parents: run from the repository or set {QEMU_FIRMWARE_ENV}"
         )
     elf = os.path.join(root, FIRMWARE_RELATIVE_PATH)
+    if build and not os.path.isfile(elf):
+        from graspguide.link.device_builds import M4F_FIRMWARE, ensure_built
+
+        ensure_built(M4F_FIRMWARE, root)
     if not os.path.isfile(elf):
         raise SimNotBuilt(
-            f"the QEMU firmware is not built ({elf} is missing): `pio run -e m4f_firmware` "
-            f"(needs arm-none-eabi-g++: {_INSTALL_HINT}), or set {QEMU_FIRMWARE_ENV}"
+            f"the QEMU firmware is not built ({elf} is missing; it needs arm-none-eabi-g++: "
+            f"{_INSTALL_HINT}); build it with:\n    {firmware_build_command(root)}\n"
+            f"or set {QEMU_FIRMWARE_ENV}"
         )
     return elf
 
@@ -159,7 +177,7 @@ class QemuFirmware:
         start_timeout: float = DEFAULT_START_TIMEOUT,
         workdir: str | None = None,
     ):
-        self.elf = find_firmware_elf(elf)
+        self.elf = find_firmware_elf(elf, build=True)
         qemu = find_qemu()
         self.start_timeout = start_timeout
         self._tmpdir = None if workdir else tempfile.TemporaryDirectory(prefix="graspguide-qemu-")
@@ -286,7 +304,7 @@ class QemuFirmwareDevice(ChildPtyTransport):
         start_timeout: float = DEFAULT_START_TIMEOUT,
         baudrate: int = DEFAULT_BAUDRATE,
     ):
-        self.elf = find_firmware_elf(elf)
+        self.elf = find_firmware_elf(elf, build=True)
         find_qemu()
         self.start_timeout = start_timeout
         self.baudrate = baudrate
@@ -350,6 +368,7 @@ __all__ = [
     "QemuFirmwareDevice",
     "Qmp",
     "find_firmware_elf",
+    "firmware_build_command",
     "find_qemu",
     "firmware_symbol",
     "QEMU_PORT",

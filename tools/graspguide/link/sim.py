@@ -1,4 +1,5 @@
-"""The simulated device (src/boards/posix_sim, built by ``pio run -e sim``) as a
+"""The simulated device (src/boards/posix_sim, built by ``pio run -e sim`` into its own
+build folder, graspguide.link.device_builds) as a
 :class:`~graspguide.link.transport.Transport`: :class:`SimulatedDevice` starts the
 process, reads the pseudo-terminal path it prints, talks to it through a SerialTransport
 and, on close, stops it (SIGTERM, then SIGKILL). It is a context manager.
@@ -32,7 +33,8 @@ from graspguide.link.transport import (
 
 SIM_PORT = "sim"
 SIM_ENV = "GRASPGUIDE_SIM"
-SIM_RELATIVE_PATH = os.path.join(".pio", "build", "sim", "program")
+# Its own build folder (graspguide.link.device_builds): no other env's build deletes it.
+SIM_RELATIVE_PATH = os.path.join(".pio", "build-sim", "sim", "program")
 SIM_READY_PREFIX = "GRASPGUIDE_SIM_PTY "
 # The simulated device prints its pty path within a few milliseconds of its start
 # (measured: ~3 ms); the limit only guards against a hung process.
@@ -84,33 +86,39 @@ def find_repo_root() -> str | None:
 
 def sim_build_command(root: str) -> str:
     """The shell command that builds the simulated device in the repository ``root``."""
-    return (
-        f"cd {shlex.quote(root)} && PLATFORMIO_CORE_DIR=.pio-core "
-        "PLATFORMIO_DISABLE_UPGRADE_CHECK=true .venv/bin/pio run -e sim"
-    )
+    from graspguide.link.device_builds import SIM
+
+    return SIM.command(root)
 
 
-def find_sim_binary(path: str | None = None) -> str:
+def find_sim_binary(path: str | None = None, build: bool = False) -> str:
     """Path of the simulated device's program: ``path``, else ``$GRASPGUIDE_SIM``, else
-    ``<repo>/.pio/build/sim/program``. Raises SimNotBuilt (with the build command) when it
-    does not exist, DeviceNotFound when no repository can be found. Never builds."""
+    ``<repo>/.pio/build-sim/sim/program``. Raises SimNotBuilt (with the build command) when
+    it does not exist, DeviceNotFound when no repository can be found. With ``build``, a
+    missing program of the repository is built first (pio's progress on stderr)."""
     explicit = path or os.environ.get(SIM_ENV)
     if explicit:
         if os.path.isfile(explicit) and os.access(explicit, os.X_OK):
             return explicit
         where = "the path given" if path else f"${SIM_ENV}"
+        root = find_repo_root()
+        how = sim_build_command(root) if root else "pio run -e sim"
         raise SimNotBuilt(
             f"simulated device {explicit!r} ({where}) does not exist or is not "
-            f"executable; build it with `pio run -e sim` or unset {SIM_ENV}"
+            f"executable; unset {SIM_ENV} for the repository's, which this builds:\n    {how}"
         )
     root = find_repo_root()
     if root is None:
         raise DeviceNotFound(
             "cannot find the simulated device: no GraspGuide repository (platformio.ini and "
             "lib/graspguide_link/) in the working directory or its parents; run from the "
-            f"repository or set {SIM_ENV}=/path/to/.pio/build/sim/program"
+            f"repository or set {SIM_ENV}=/path/to/.pio/build-sim/sim/program"
         )
     binary = os.path.join(root, SIM_RELATIVE_PATH)
+    if build and not os.path.isfile(binary):
+        from graspguide.link.device_builds import SIM, ensure_built
+
+        ensure_built(SIM, root)
     if not (os.path.isfile(binary) and os.access(binary, os.X_OK)):
         raise SimNotBuilt(
             f"the simulated device is not built ({binary} is missing); build "
@@ -164,7 +172,8 @@ class SimulatedDevice(ChildPtyTransport):
     """The simulated device as a process on a pseudo-terminal, and a Transport to it.
 
     ``with SimulatedDevice(virtual_clock=True, trace="motors.csv") as sim:`` starts
-    ``<repo>/.pio/build/sim/program`` (or ``binary``, or ``$GRASPGUIDE_SIM``), waits for
+    ``<repo>/.pio/build-sim/sim/program`` (built first when missing; or ``binary``, or
+    ``$GRASPGUIDE_SIM``), waits for
     the ``GRASPGUIDE_SIM_PTY <path>`` line (at most ``start_timeout`` s), and opens the pty
     with a :class:`SerialTransport`; leaving the block closes the port, sends SIGTERM
     (the device switches its motors off and exits) and SIGKILL after ``grace`` seconds.
@@ -192,7 +201,7 @@ class SimulatedDevice(ChildPtyTransport):
         extra_args: Sequence[str] = (),
         start: bool = False,
     ):
-        self.binary = find_sim_binary(binary)
+        self.binary = find_sim_binary(binary, build=True)
         self.command = [
             self.binary,
             *_sim_options(virtual_clock, trace, stale_ms, store),
@@ -230,8 +239,8 @@ class SimulatedDevice(ChildPtyTransport):
             )
         except OSError as e:
             raise DeviceNotFound(
-                f"cannot start the simulated device {self.binary}: {e}; "
-                "rebuild it with `pio run -e sim`"
+                f"cannot start the simulated device {self.binary}: {e}; rebuild it:\n    "
+                f"{sim_build_command(find_repo_root() or '.')}"
             ) from e
         try:
             self.pty_path = self._read_pty_line(t0)
