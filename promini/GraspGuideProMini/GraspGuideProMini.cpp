@@ -4,6 +4,12 @@
 #include <graspguide_frame_device.h>
 #include "board_glue.h"
 
+// The first 8 hex digits of the commit it was built from, stamped by the build
+// (graspguide.promini.build, `pio run -e promini`); 0 from a build that does not stamp it.
+#ifndef GRASPGUIDE_BUILD_ID
+#define GRASPGUIDE_BUILD_ID 0u
+#endif
+
 namespace {
 
 graspguide::promini::SerialStream g_stream;
@@ -17,9 +23,10 @@ void setup() {
   // Motors off before anything else can fail or wait.
   g_motors.begin();
   Serial.begin(graspguide::promini::kBaud);
+  graspguide_frame_device::DeviceInfo info;
+  info.build_id = GRASPGUIDE_BUILD_ID;
   // Built here, not as a global, so its first motor write finds the pins already set up.
-  static graspguide_frame_device::FrameDevice device(g_stream, g_motors, g_clock,
-                                                     graspguide_frame_device::DeviceInfo{});
+  static graspguide_frame_device::FrameDevice device(g_stream, g_motors, g_clock, info);
   g_device = &device;
 }
 

@@ -12,7 +12,8 @@ from graspguide.link.transport import LinkError
 HELP = "identify a device: HELLO_REPLY and STATUS"
 DESCRIPTION = (
     "Ask a device who it is (HELLO -> HELLO_REPLY: protocol and firmware "
-    "version, board, scalar, contacts, build id) and how it is (GET_STATUS "
+    "version, board, scalar, contacts, build id, capabilities: full_solve, per_frame, "
+    "hostless, sim_messages) and how it is (GET_STATUS "
     "-> STATUS: state, frames received, bad frames, stale events, last "
     "error)."
 )
@@ -22,6 +23,19 @@ EPILOG = "examples:\n  graspguide info --port sim\n  graspguide info --port /dev
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_port_arguments(p, required=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def capability_names(bits: int) -> list[str]:
+    """The names of HELLO_REPLY.capabilities' bits (CAPABILITY_* of the protocol, lower
+    case), lowest bit first; a bit the host does not know as ``bit0xNN``."""
+    from graspguide.link import messages
+
+    known = {
+        int(getattr(messages, name)): name[len("CAPABILITY_") :].lower()
+        for name in dir(messages)
+        if name.startswith("CAPABILITY_")
+    }
+    return [known.get(1 << i, f"bit0x{1 << i:02x}") for i in range(8) if bits & (1 << i)]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         "scalar_bytes": hello.scalar,
         "max_contacts": hello.max_contacts,
         "build_id": f"{hello.build_id:08x}",
+        "capabilities": capability_names(hello.capabilities),
+        "capabilities_bits": hello.capabilities,
         "state": status.state.name.lower(),
         "frames_received": status.frames_received,
         "bad_frames": status.bad_frames,
@@ -67,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
         ("scalar", f"{scalar} ({hello.scalar} bytes)"),
         ("max contacts", str(hello.max_contacts)),
         ("build id", data["build_id"]),
+        (
+            "capabilities",
+            f"{', '.join(data['capabilities']) or 'none'} (0x{hello.capabilities:02x})",
+        ),
         ("state", data["state"]),
         ("frames received", str(status.frames_received)),
         ("bad frames", f"{status.bad_frames} (device), {client.host_bad_frames} (host)"),

@@ -28,6 +28,9 @@ BUILD_PROPERTIES = (
     "runtime.tools.ctags.path=/usr/bin",
     "compiler.cpp.extra_flags=-DDECIMAL_DIG=__DECIMAL_DIG__ -std=gnu++14",
 )
+#: The macro that stamps the sketch with its build id (HELLO_REPLY.build_id), as
+#: tools/pio/scripts/build_id.py stamps the other boards.
+BUILD_ID_MACRO = "GRASPGUIDE_BUILD_ID"
 #: The project's Arduino libraries the sketch uses, relative to the repository.
 LIBRARIES = ("lib/graspguide_frame", "lib/graspguide_frame_device")
 #: Issue 15's budget: flash (the 32 KB less the 2 KB bootloader is 30 KB), and static RAM
@@ -100,11 +103,37 @@ def parse_sizes(output: str) -> tuple[int, int, int, int]:
     return int(flash[1]), int(flash[2]), int(ram[1]), int(ram[2])
 
 
+def build_id(root: Path) -> int:
+    """The first 8 hex digits of the commit ``root`` is at, as the other boards' builds
+    stamp theirs (tools/pio/scripts/build_id.py); 0 outside a git checkout."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short=8", "HEAD"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+        return int(out[:8], 16)
+    except (OSError, subprocess.CalledProcessError, ValueError):
+        return 0
+
+
+def build_properties(root: Path) -> list[str]:
+    """BUILD_PROPERTIES with the build id: arduino-cli has one property for extra C++
+    flags, so the id joins the flags there."""
+    props = []
+    for prop in BUILD_PROPERTIES:
+        if prop.startswith("compiler.cpp.extra_flags="):
+            prop += f" -D{BUILD_ID_MACRO}=0x{build_id(root):08x}u"
+        props.append(prop)
+    return props
+
+
 def compile_command(root: Path, out_dir: Path) -> list[str]:
     exe, config = arduino_cli_paths(root)
     cmd = [str(exe), "--config-file", str(config), "--no-color", "compile", "--fqbn", FQBN]
     cmd += ["--warnings", "all"]
-    for prop in BUILD_PROPERTIES:
+    for prop in build_properties(root):
         cmd += ["--build-property", prop]
     for lib in LIBRARIES:
         cmd += ["--library", str(root / lib)]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
 
 Import("env")  # type: ignore[name-defined]
 
@@ -21,7 +22,7 @@ CPU = "8MHzatmega328"
 
 project_dir = env.subst("$PROJECT_DIR")  # type: ignore[name-defined]
 sys.path.insert(0, os.path.join(project_dir, "tools"))
-from graspguide.promini.build import LIBRARIES, SKETCH_NAME  # noqa: E402
+from graspguide.promini.build import BUILD_ID_MACRO, LIBRARIES, SKETCH_NAME, build_id  # noqa: E402
 
 
 def board_facts() -> dict[str, str]:
@@ -88,4 +89,9 @@ core_libs = [
     core_env.BuildLibrary(os.path.join("$BUILD_DIR", "arduino_core_S"), core_dir, "-<*> +<*.S>"),
 ]
 env.Prepend(LIBS=core_libs)  # type: ignore[name-defined]
+# The build id (HELLO_REPLY.build_id) as arduino-cli's build gives it; only the sketch and
+# the libraries get it, so a new commit does not recompile the core.
+env.Append(  # type: ignore[name-defined]
+    CPPDEFINES=[(BUILD_ID_MACRO, "0x%08xu" % build_id(Path(project_dir)))]
+)
 env.BuildSources(os.path.join("$BUILD_DIR", "sketch"), sketch_dir)  # type: ignore[name-defined]
