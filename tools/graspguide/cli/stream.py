@@ -35,8 +35,10 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.study.sources.TrackerAdapter
          subclass that reads the lab's tracker SDK),
          participant[:seed=N,PARAMS] (the virtual participant as a closed loop: it feels
-         the motors and turns the hand, as in `graspguide trial`; SIMULATED, and labelled
-         so in the output, the log and the LSL streams).
+         the motors and turns the hand, as in `graspguide trial`).
+A run is SIMULATED -- said at the start, on the result line, in the panel, the log and
+the LSL streams, by the rule `graspguide trial` follows -- when its source is (the
+participant, synthetic, a replayed file) or its device is (--port sim, promini-sim, qemu).
 
 The panel names the motors after the fingers (thumb, index, middle, palm) and shows the
 trial's state (waiting, running, holding, success, timeout, stopped) and the hold
