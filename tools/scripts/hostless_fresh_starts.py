@@ -6,6 +6,8 @@ is young, as on a slow disk). Counts the runs that pass and says how each failed
     python tools/scripts/hostless_fresh_starts.py --runs 20
     python tools/scripts/hostless_fresh_starts.py --runs 20 --slow-fsync-s 0.3
     python tools/scripts/hostless_fresh_starts.py --runs 20 --short   # 5 trials each
+    python tools/scripts/hostless_fresh_starts.py --runs 20 --short --timeout-s 10 \
+        --slow-fsync-s 0.3
 
 --short runs protocols/paper.toml cut to its first trials (1 wrench, 3 contacts, one
 familiarization trial: 5 trials per participant instead of 100; a full demo of 8 took
@@ -62,11 +64,13 @@ SHORT_KEYS = (
 )
 
 
-def short_protocol(paper: str, path: str) -> None:
-    """``paper`` (paper.toml) with SHORT_KEYS changed, written to ``path``."""
+def short_protocol(paper: str, path: str, timeout_s: float | None = None) -> None:
+    """``paper`` (paper.toml) with SHORT_KEYS changed (and its timeout_s, when given),
+    written to ``path``."""
     with open(paper, encoding="utf-8") as f:
         text = f.read()
-    for key, value in SHORT_KEYS:
+    keys = list(SHORT_KEYS) + ([("timeout_s", repr(float(timeout_s)))] if timeout_s else [])
+    for key, value in keys:
         text, n = re.subn(rf"^{key}\s*=\s*[^#\n]*", f"{key} = {value}  ", text, flags=re.M)
         if n != 1:
             raise SystemExit(f"--short: {paper} has {n} lines '{key} = ...', expected one")
@@ -109,6 +113,12 @@ def main(argv: list[str] | None = None) -> int:
         help="protocols/paper.toml cut to 5 trials per participant (see above)",
     )
     p.add_argument(
+        "--timeout-s",
+        type=float,
+        help="with --short: the trials' timeout [s] instead of the protocol's 90 s (a "
+        "shorter run; the start, where a slowed host failed, is the same)",
+    )
+    p.add_argument(
         "--slow-fsync-s",
         type=float,
         default=0.0,
@@ -138,7 +148,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.short:
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         protocol = os.path.join(tempfile.mkdtemp(prefix="hostless-fresh-p-"), "first.toml")
-        short_protocol(args.protocol or os.path.join(root, "protocols", "paper.toml"), protocol)
+        short_protocol(
+            args.protocol or os.path.join(root, "protocols", "paper.toml"),
+            protocol,
+            args.timeout_s,
+        )
+    elif args.timeout_s:
+        p.error("--timeout-s goes with --short")
     try:
         for n in range(1, args.runs + 1):
             out = tempfile.mkdtemp(prefix="hostless-fresh-")
