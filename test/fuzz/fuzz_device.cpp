@@ -1,14 +1,20 @@
-// libFuzzer target: the device's message handling (LinkDevice + Application) on fake
+// libFuzzer target: the device's message handling (LinkDevice + Application, and the
+// host-less runner with its plan store and results log in an in-memory store) on fake
 // hardware, driven by a host whose requests, field values and timing come from the input.
 // Built and run by tools/scripts/fuzz.sh (not by pio: this folder is no test_*).
 //
-// Input: one configuration byte, then operations until the input ends. An operation sends
-// a well-formed request (HELLO, SET_SCENE, START_TRIAL, POSE, STOP, SET_MOTORS, GET_STATUS)
-// built from a plausible template with some fields replaced by values from the input (any
-// float bit pattern, NaN, inf, huge, tiny; any u32 timestamp or jump), and encoded by the
-// project's write_frame so the CRC passes. Other operations advance the device clock, send
-// a frame with any header and payload (right CRC, e.g. a bad enum), or raw garbage. So the
-// fuzzer spends its time in Application, not in the parser (fuzz_frame_parser does that).
+// Input: one configuration byte (bit 0 virtual clock, bit 1 start near the u32 wrap, bit 2
+// a board without the host-less runner), then operations until the input ends. An
+// operation sends a well-formed request (HELLO, SET_SCENE, START_TRIAL, POSE, STOP,
+// SET_MOTORS, GET_STATUS; PLAN_BEGIN, PLAN_TRIAL, PLAN_COMMIT or a whole plan upload,
+// HOSTLESS_RUN, LOG_INFO_GET, LOG_READ, LOG_ERASE, SIM_IMU_SAMPLE alone or in bursts,
+// SIM_BUTTON) built from a plausible template with some fields replaced by values from the
+// input (any float bit pattern, NaN, inf, huge, tiny; any u32 timestamp or jump), and
+// encoded by the project's write_frame so the CRC passes. Other operations advance the
+// device clock, send a frame with any header and payload (right CRC, e.g. a bad enum), raw
+// garbage, or hurt the store: a power cut after n bytes (a torn write), reads that fail,
+// a flipped bit (flash wear), a reboot. So the fuzzer spends its time in the device, not
+// in the parser (fuzz_frame_parser does that).
 //
 // The device reads one frame per poll(), so every answer can be tied to its request.
 // Invariants (a violation prints "invariant violated: ..." and traps, a crash to libFuzzer):
@@ -19,6 +25,14 @@
 //  4. a running trial ends (TRIAL_RESULT, ERROR or STOP) once the device clock has run
 //     more than timeout_s + 1 s past its first POSE, whatever the POSE timestamps did
 //     (real-time clock only: a virtual clock is the POSE timestamps);
+//  6. the host-less runner and its store: no store write ever happens with a motor on (a
+//     write blocks the loop); PLAN_* and LOG_ERASE are acknowledged only when no trial ran,
+//     no motor was on and no run went on; an ERROR or a dropped frame ends a run and leaves
+//     the motors off; a host-less trial without a sample for the IMU's stale time has its
+//     motors off; an acknowledged commit leaves a stored plan, an acknowledged erase an
+//     empty log; LOG_INFO tells the runner's state; LOG_RECORD echoes its index; a
+//     host-less TRIAL_RESULT's completion is within [0, the plan's timeout_s]; a reboot
+//     (on any store) leaves the motors off;
 //  5. the protocol as docs/protocol.md states it: every frame the device writes parses;
 //     each request with a trustworthy header gets exactly one answer of its kind with its
 //     seq; TELEMETRY shows the PWM the motors got, a solver failure means motors off, and
@@ -41,6 +55,7 @@
 
 #include "common/hand_scenes.h"
 #include "graspguide_device/fake_hal.h"
+#include "graspguide_device/fake_storage.h"
 #include "graspguide_device/link_device.h"
 
 namespace gg = graspguide;
@@ -61,6 +76,15 @@ namespace {
 
 constexpr uint32_t kStaleUs = gd::kDefaultStaleTimeoutUs;
 constexpr uint64_t kTrialGraceUs = 1000000;  // invariant 4's margin past timeout_s
+constexpr uint32_t kImuStaleUs = uint32_t(GRASPGUIDE_IMU_STALE_MS) * 1000u;
+// The simulated device's IMU ranges (src/boards/posix_sim/main.cpp).
+constexpr float kG = 9.80665f;
+constexpr float kAccelFs = 8.0f * kG;
+constexpr float kGyroFs = 2000.0f * 3.14159265f / 180.0f;
+// The plan region and room for 12 records: small, so a full log is reached too.
+constexpr uint32_t kStoreBytes = gd::kPlanRegionBytes + 12 * gd::kLogSlotBytes;
+// Trials one plan-upload operation sends at most (a plan may say it has more).
+constexpr uint16_t kUploadTrialsMax = 8;
 
 // ---- reading the input ---------------------------------------------------------------------
 
@@ -233,7 +257,45 @@ struct DeviceFrame {
   }
 };
 
-bool is_answer(uint8_t id) { return id != uint8_t(gl::MsgId::kTrialResult); }
+// TRIAL_RESULT and HOSTLESS_EVENT come unasked; every other frame answers a request.
+bool is_answer(uint8_t id) {
+  return id != uint8_t(gl::MsgId::kTrialResult) && id != uint8_t(gl::MsgId::kHostlessEvent);
+}
+
+// The device's store: RAM with its faults (fake_storage.h), and invariant 6's first rule
+// checked at every write.
+class WatchedStore final : public gd::NvStorage {
+ public:
+  explicit WatchedStore(const gd::RecordingMotors& motors) : motors_(motors) {}
+  uint32_t size_bytes() const override { return ram_.size_bytes(); }
+  bool read(uint32_t offset, uint8_t* out, uint32_t n) override {
+    return ram_.read(offset, out, n);
+  }
+  bool write(uint32_t offset, const uint8_t* data, uint32_t n) override {
+    REQUIRE(motors_.all_off(), "no store write happens with a motor on (it blocks the loop)");
+    return ram_.write(offset, data, n);
+  }
+  gd::RamStorage<kStoreBytes>& ram() { return ram_; }
+
+ private:
+  gd::RamStorage<kStoreBytes> ram_;
+  const gd::RecordingMotors& motors_;
+};
+
+// What a power cycle rebuilds: the application, the runner (boot() mounts the store) and
+// the link.
+struct Board {
+  Board(gd::ByteStream& line, gd::RecordingMotors& motors, gd::FakeClock& clock,
+        gd::NvStorage& store, const gd::DeviceInfo& info, gd::PoseTimeListener* time, bool hostless)
+      : app(motors, clock),
+        runner(motors, clock, store, gd::ImuOutput::kSixAxis, kAccelFs, kGyroFs),
+        boot(runner.boot()),
+        device(line, app, info, time, hostless ? &runner : nullptr) {}
+  gd::Application app;
+  gd::HostlessRunner runner;
+  gd::StoreStatus boot;
+  gd::LinkDevice device;
+};
 
 // ---- operations ---------------------------------------------------------------------------------
 
@@ -247,14 +309,31 @@ enum class Op : uint8_t {
   kGetStatus,
   kAdvance,
   kRawFrame,
-  kGarbage
+  kGarbage,
+  kPlanBegin,
+  kPlanTrial,
+  kPlanCommit,
+  kPlanUpload,
+  kHostlessRun,
+  kLogInfo,
+  kLogRead,
+  kLogErase,
+  kSimSample,
+  kSimSamples,
+  kSimButton,
+  kStore,
 };
-// An op byte: the low 4 bits pick the operation (POSE is most of a real session), the high 4
-// are flags; flag 0x1 sends a delimiter first (what a host does to end a partial frame).
-constexpr Op kOpOfSlot[16] = {Op::kHello,     Op::kSetScene,  Op::kStartTrial, Op::kPose,
-                              Op::kPose,      Op::kPose,      Op::kPose,       Op::kStop,
-                              Op::kSetMotors, Op::kGetStatus, Op::kAdvance,    Op::kAdvance,
-                              Op::kRawFrame,  Op::kGarbage,   Op::kSetScene,   Op::kStartTrial};
+// An op byte: the low 5 bits pick the operation (POSE is most of a tracker session, IMU
+// samples of a host-less one), the high 3 are flags; flag 0x1 sends a delimiter first (what
+// a host does to end a partial frame).
+constexpr Op kOpOfSlot[32] = {Op::kHello,       Op::kSetScene,  Op::kStartTrial, Op::kPose,
+                              Op::kPose,        Op::kPose,      Op::kPose,       Op::kStop,
+                              Op::kSetMotors,   Op::kGetStatus, Op::kAdvance,    Op::kAdvance,
+                              Op::kRawFrame,    Op::kGarbage,   Op::kSetScene,   Op::kStartTrial,
+                              Op::kPlanBegin,   Op::kPlanTrial, Op::kPlanCommit, Op::kPlanUpload,
+                              Op::kHostlessRun, Op::kLogInfo,   Op::kLogRead,    Op::kLogErase,
+                              Op::kSimSample,   Op::kSimSample, Op::kSimSamples, Op::kSimSamples,
+                              Op::kSimButton,   Op::kStore,     Op::kAdvance,    Op::kPose};
 constexpr uint8_t kFlagDelimiterFirst = 0x1;
 
 constexpr float kTimeoutsS[4] = {90.0f, 2.0f, 0.25f, 1800.0f};
@@ -293,6 +372,56 @@ gl::Pose pose_template(uint8_t t) {
       for (int j = 0; j < 3; ++j) m.contacts[i][j] = float(c(j, i));
   }
   return m;
+}
+
+// A host-less plan: 1..4 trials, a rest of 0 to 2 s, the scene templates' timeouts.
+gl::PlanBegin plan_begin_template(uint8_t t) {
+  gl::PlanBegin m;
+  m.participant[0] = 'U';
+  m.participant[1] = '1';
+  m.simulated = true;
+  m.trial_count = uint16_t(1 + (t & 3));
+  m.constraints = gl::EnumInfo<gl::ConstraintModel>::kValues[((t >> 2) & 3) % 3];
+  static const float kRestS[4] = {0.0f, 0.01f, 0.3f, 2.0f};
+  m.rest_s = kRestS[(t >> 4) & 3];
+  m.timeout_s = kTimeoutsS[(t >> 6) & 3];
+  m.hold_s = std::fmin(0.5f, m.timeout_s / 2);
+  const auto c = graspguide_test::nominal_hand();
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 3; ++j) {
+      if (i < 3) m.hand_k3[i][j] = float(c(j, i));
+      m.hand_k4[i][j] = float(c(j, i));
+    }
+  return m;
+}
+
+gl::PlanTrial plan_trial_template(uint8_t t, uint16_t position) {
+  gl::PlanTrial m;
+  m.position = position;
+  // Flag 0x80: every such trial is trial_index 1 (a plan that repeats one).
+  m.trial_index = (t & 0x80) ? 1 : uint16_t(position + 1);
+  m.session = 1;
+  m.session_trial = uint8_t(position + 1);
+  m.k = (t & 1) ? 4 : 3;
+  m.policy = gl::EnumInfo<gl::Policy>::kValues[(t >> 1) & 1];
+  m.mode = gl::EnumInfo<gl::Mode>::kValues[(t >> 2) & 1];
+  std::memcpy(m.wrench, kWrenches[(t >> 3) & 3], sizeof m.wrench);
+  m.wrench_number = uint8_t(1 + ((t >> 3) & 3));
+  m.familiarization = (t >> 5) & 1;
+  return m;
+}
+
+// The world's IMU: gravity 0..180 deg from the IMU's -z about x, y or z (a specific force
+// pointing up), the hand still or turning.
+void sample_template(uint8_t t, gl::SimImuSample& m) {
+  static const float kAnglesDeg[8] = {0, 1, 5, 30, 90, 150, 179, 180};
+  const float a = kAnglesDeg[t & 7] * kPi / 180.0f;
+  const int axis = (t >> 3) % 3;
+  float up[3] = {0, 0, std::cos(a)};
+  up[axis == 2 ? 0 : (axis == 0 ? 1 : 0)] = std::sin(a);
+  for (int i = 0; i < 3; ++i) m.accel_mps2[i] = kG * up[i];
+  for (int i = 0; i < 3; ++i) m.gyro_radps[i] = 0;
+  if (t & 0x40) m.gyro_radps[axis] = 0.5f;
 }
 
 // The next POSE timestamp, and how far the device clock moves before it is sent.
@@ -372,19 +501,21 @@ uint32_t clock_step(Input& in) {
 class Rig {
  public:
   explicit Rig(uint8_t config)
-      : virtual_clock_(config & 1),
-        app_(motors_, clock_),
-        virtual_time_(clock_),
-        device_(line_, app_, info_, virtual_clock_ ? &virtual_time_ : nullptr) {
+      : virtual_clock_(config & 1), hostless_(!(config & 4)), virtual_time_(clock_) {
     // Near the u32 wrap, so trials and the watchdog cross it.
     if (config & 2) clock_.set_us(0xFFFFFFFFu - 1000000u);
+    // The simulated device's capabilities: with the runner, the host-less and sim messages.
+    if (hostless_)
+      info_.capabilities =
+          uint8_t(info_.capabilities | gl::kCapabilityHostless | gl::kCapabilitySimMessages);
+    boot();
   }
 
   void run(Input& in) {
     while (!in.done()) {
       const uint8_t b = in.u8();
-      const Op op = kOpOfSlot[b & 15];
-      const uint8_t flags = b >> 4;
+      const Op op = kOpOfSlot[b & 31];
+      const uint8_t flags = b >> 5;
       const bool delimiter = flags & kFlagDelimiterFirst;
       switch (op) {
         case Op::kHello: {
@@ -434,6 +565,63 @@ class Rig {
           deliver();
           break;
         }
+        case Op::kPlanBegin:
+          send(plan_begin(in), delimiter);
+          break;
+        case Op::kPlanTrial: {
+          const uint16_t position = (flags & 2) ? in.u16() : upload_next_;
+          send(plan_trial(in, position), delimiter);
+          break;
+        }
+        case Op::kPlanCommit: {
+          gl::PlanCommit m;
+          m.trial_count = (flags & 2) ? in.u16() : upload_count_;
+          send(m, delimiter);
+          break;
+        }
+        case Op::kPlanUpload: {
+          const gl::PlanBegin b = plan_begin(in);
+          send(b, delimiter);
+          const uint16_t n = b.trial_count < kUploadTrialsMax ? b.trial_count : kUploadTrialsMax;
+          for (uint16_t i = 0; i < n; ++i) send(plan_trial(in, i), false);
+          gl::PlanCommit m;
+          m.trial_count = (flags & 2) ? in.u16() : b.trial_count;
+          send(m, false);
+          break;
+        }
+        case Op::kHostlessRun:
+          send(gl::HostlessRun{}, delimiter);
+          break;
+        case Op::kLogInfo:
+          send(gl::LogInfoGet{}, delimiter);
+          break;
+        case Op::kLogRead: {
+          gl::LogRead m;
+          m.index = (flags & 2) ? in.u16() : uint16_t(in.u8() % 16);
+          send(m, delimiter);
+          break;
+        }
+        case Op::kLogErase: {
+          gl::LogErase m;
+          m.key = (flags & 2) ? in.u32() : gl::kLogEraseKey;
+          send(m, delimiter);
+          break;
+        }
+        case Op::kSimSample:
+          sim_sample(in, in.u8(), delimiter);
+          break;
+        case Op::kSimSamples:
+          sim_samples(in, flags);
+          break;
+        case Op::kSimButton: {
+          gl::SimButton m;
+          m.pressed = in.u8() & 1;
+          send(m, delimiter);
+          break;
+        }
+        case Op::kStore:
+          hurt_store(in);
+          break;
       }
     }
   }
@@ -471,6 +659,172 @@ class Rig {
     }
     return m;
   }
+
+  gl::PlanBegin plan_begin(Input& in) {
+    gl::PlanBegin m = plan_begin_template(in.u8());
+    for (int n = in.u8() % 6; n > 0; --n) {
+      const uint8_t f = in.u8() % 42;
+      if (f < 3)
+        m.y_axis[f] = value(in, m.y_axis[f]);
+      else if (f == 3)
+        m.threshold_deg = value(in, m.threshold_deg);
+      else if (f == 4)
+        m.hold_s = value(in, m.hold_s);
+      else if (f == 5)
+        m.timeout_s = value(in, m.timeout_s);
+      else if (f == 6)
+        m.rest_s = value(in, m.rest_s);
+      else if (f < 16)
+        m.hand_k3[(f - 7) / 3][(f - 7) % 3] = value(in, m.hand_k3[(f - 7) / 3][(f - 7) % 3]);
+      else if (f < 28)
+        m.hand_k4[(f - 16) / 3][(f - 16) % 3] = value(in, m.hand_k4[(f - 16) / 3][(f - 16) % 3]);
+      else if (f < 32)
+        m.imu_to_hand_wxyz[f - 28] = value(in, m.imu_to_hand_wxyz[f - 28]);
+      else if (f < 36)
+        m.gain[f - 32] = value(in, m.gain[f - 32]);
+      else if (f == 36)
+        m.trial_count = in.u16();
+      else if (f < 41)
+        m.pwm_floor[f - 37] = in.u8();
+      else  // any printable id of 0..8 characters (anything else does not encode: raw frames)
+        for (size_t i = 0, n = in.u8() % (sizeof m.participant + 1); i < sizeof m.participant; ++i)
+          m.participant[i] = i < n ? char(0x20 + in.u8() % 95) : '\0';
+    }
+    upload_next_ = 0;
+    upload_count_ = m.trial_count;
+    return m;
+  }
+
+  gl::PlanTrial plan_trial(Input& in, uint16_t position) {
+    gl::PlanTrial m = plan_trial_template(in.u8(), position);
+    for (int n = in.u8() % 4; n > 0; --n) {
+      const uint8_t f = in.u8() % 10;
+      if (f < 6)
+        m.wrench[f] = value(in, m.wrench[f]);
+      else if (f == 6)
+        m.k = in.u8();
+      else if (f == 7)
+        m.trial_index = in.u16();
+      else if (f == 8)
+        m.session = in.u8();
+      else
+        m.wrench_number = in.u8();
+    }
+    upload_next_ = uint16_t(position + 1);
+    return m;
+  }
+
+  // One sample of the world, timed as a POSE is (any step, jump or step back).
+  void sim_sample(Input& in, uint8_t t, bool delimiter) {
+    gl::SimImuSample m;
+    sample_template(t, m);
+    for (int n = in.u8() % 3; n > 0; --n) {
+      const uint8_t f = in.u8() % 6;
+      float& v = f < 3 ? m.accel_mps2[f] : m.gyro_radps[f - 3];
+      v = value(in, v);
+    }
+    const PoseTime pt = pose_time(in, last_sample_host_us_);
+    send_sample(m, pt, delimiter);
+  }
+
+  // A steady 100 Hz stream of one template (a held hand), up to 64 samples. Flag 0x2 holds
+  // the hand aligned with the running trial's force (so trials succeed); flag 0x4 presses
+  // the button whenever the device waits for it (a wearer who is ready).
+  void sim_samples(Input& in, uint8_t flags) {
+    const uint8_t t = in.u8();
+    const int n = 1 + in.u8() % 64;
+    gl::SimImuSample m;
+    sample_template(t, m);
+    for (int i = 0; i < n; ++i) {
+      if (flags & 2) aligned(m);
+      const float dither = (++dither_ % 2) ? 0.002f : -0.002f;
+      gl::SimImuSample d = m;
+      for (int j = 0; j < 3; ++j) {
+        d.accel_mps2[j] += dither;
+        d.gyro_radps[j] += dither;
+      }
+      send_sample(d, PoseTime{last_sample_host_us_ + 10000u, 10000u}, false);
+      if ((flags & 4) && hostless_ && board_->runner.phase() == gd::RunPhase::kWaitButton) {
+        gl::SimButton press;
+        press.pressed = true;
+        send(press, false);
+        press.pressed = false;
+        send(press, false);
+      }
+    }
+  }
+
+  void send_sample(gl::SimImuSample& m, const PoseTime& t, bool delimiter) {
+    m.time_us = last_sample_host_us_ = t.host_us;
+    advance(t.clock_step_us);
+    send(m, delimiter);
+  }
+
+  // The specific force of a hand whose gravity lies along the running trial's force (the
+  // plan's mounting taken as the identity): its guidance error is near zero.
+  void aligned(gl::SimImuSample& m) {
+    if (!hostless_ || !board_->runner.running()) return;
+    const gd::StudyPlan& plan = board_->runner.plan();
+    const uint16_t p = board_->runner.position();
+    if (p >= plan.header.trial_count || p >= gd::kMaxPlanTrials) return;
+    const gd::PlanTrial& t = plan.trials[p];
+    if (t.k != 3 && t.k != 4) return;
+    gg::Scene<gg::Real> scene;
+    scene.k = t.k;
+    scene.contacts.setZero();
+    for (int i = 0; i < t.k; ++i)
+      for (int j = 0; j < 3; ++j)
+        scene.contacts(j, i) = t.k == 3 ? plan.header.hand_k3[i][j] : plan.header.hand_k4[i][j];
+    gg::Guidance<gg::Real> g;
+    gg::Vec6<gg::Real> w;
+    for (int j = 0; j < 6; ++j) w(j) = t.wrench[j];
+    gg::FrameResult<gg::Real> f;
+    if (g.set_scene(scene) != gg::Status::kOk || g.set_wrench(w) != gg::Status::kOk ||
+        g.update(Eigen::Matrix<gg::Real, 4, 1>(1, 0, 0, 0), f) != gg::Status::kOk)
+      return;
+    for (int i = 0; i < 3; ++i) m.accel_mps2[i] = -kG * float(g.grasp().force_unit(i));
+  }
+
+  // The store's faults (fake_storage.h), a flipped bit, or a power cycle.
+  void hurt_store(Input& in) {
+    gd::RamStorage<kStoreBytes>& ram = store_.ram();
+    switch (in.u8() % 6) {
+      case 0:
+        ram.fail_writes_after_bytes(in.u16() % 2048);
+        break;
+      case 1:
+        ram.fail_reads(true);
+        break;
+      case 2:
+        ram.fail_reads(false);
+        break;
+      case 3:
+        ram.restore_power();
+        break;
+      case 4:
+        boot();
+        break;
+      default: {
+        const uint32_t at = (uint32_t(in.u16()) * 7u) % kStoreBytes;
+        ram.bytes()[at] = uint8_t(ram.bytes()[at] ^ (1u << (in.u8() & 7)));
+        break;
+      }
+    }
+  }
+
+  // Power up (again): a new application, runner and link on the same store and clock.
+  void boot() {
+    board_.reset();
+    board_ = std::make_unique<Board>(line_, motors_, clock_, store_, info_,
+                                     virtual_clock_ ? &virtual_time_ : nullptr, hostless_);
+    line_.mirror_ = gl::FrameParser{gl::Accept::kHostToDevice};
+    first_pose_seen_ = false;
+    REQUIRE(motors_.all_off(), "the motors are off after a reboot, whatever the store holds");
+  }
+
+  gd::Application& app() { return board_->app; }
+  gd::LinkDevice& dev() { return board_->device; }
+  bool run_going() { return hostless_ && board_->runner.running(); }
 
   void override_pose(Input& in, gl::Pose& m) {
     for (int n = in.u8() % 4; n > 0; --n) {
@@ -548,20 +902,24 @@ class Rig {
     clock_.advance_us(dt);
     clock64_ += dt;
     silence_us_ += dt;
+    sample_silence_us_ += dt;
     poll();
   }
 
   // ---- one poll and every invariant on what it did
   void poll() {
-    const gd::DeviceState before = app_.state();
+    const gd::DeviceState before = app().state();
+    const bool motors_on_before = app().motors_on();
+    const bool run_before = run_going();
     line_.events_.clear();
     line_.written_.clear();
-    device_.poll();
-    const gd::DeviceState after = app_.state();
+    dev().poll();
+    const gd::DeviceState after = app().state();
+    const bool run_after = run_going();
     // The device drops a partial frame after a silence; the mirror follows it.
-    if (line_.mirror_.mid_frame() && !device_.parser().mid_frame()) line_.mirror_.discard_partial();
-    REQUIRE(device_.parser().good_frames() == line_.mirror_.good_frames() &&
-                device_.parser().bad_frames() == line_.mirror_.bad_frames(),
+    if (line_.mirror_.mid_frame() && !dev().parser().mid_frame()) line_.mirror_.discard_partial();
+    REQUIRE(dev().parser().good_frames() == line_.mirror_.good_frames() &&
+                dev().parser().bad_frames() == line_.mirror_.bad_frames(),
             "harness: the mirror parser saw what the device's parser saw");
 
     std::vector<DeviceFrame> out;
@@ -583,11 +941,14 @@ class Rig {
 
     // The request this poll handled, if its header can be trusted.
     const Event* req = nullptr;
-    for (const Event& e : line_.events_)
+    bool dropped = false;
+    for (const Event& e : line_.events_) {
+      if (e.event != gl::ParseEvent::kFrame) dropped = true;
       if (gl::has_trusted_header(e.event)) {
         REQUIRE(req == nullptr, "harness: one frame per poll");
         req = &e;
       }
+    }
     gl::LinkStatus decoded = gl::LinkStatus::kOk;
     if (req && req->event == gl::ParseEvent::kFrame)
       decoded = gl::visit_payload(req->header.msg_id, req->payload, req->payload_size,
@@ -650,16 +1011,35 @@ class Rig {
             REQUIRE(a == uint8_t(gl::MsgId::kTelemetry) || a == uint8_t(gl::MsgId::kError),
                     "POSE -> TELEMETRY or ERROR");
             break;
+          case gl::MsgId::kSimImuSample:
+            REQUIRE(a == uint8_t(gl::MsgId::kTelemetry) || is_ack_or_error,
+                    "SIM_IMU_SAMPLE -> TELEMETRY, ACK or ERROR");
+            REQUIRE(a != uint8_t(gl::MsgId::kTelemetry) || run_before,
+                    "SIM_IMU_SAMPLE is answered with TELEMETRY only during a host-less run");
+            break;
+          case gl::MsgId::kLogInfoGet:
+            REQUIRE(a == uint8_t(gl::MsgId::kLogInfo) || a == uint8_t(gl::MsgId::kError),
+                    "LOG_INFO_GET -> LOG_INFO or ERROR");
+            REQUIRE((a == uint8_t(gl::MsgId::kLogInfo)) == hostless_,
+                    "LOG_INFO_GET is answered by a board with a host-less runner only");
+            break;
+          case gl::MsgId::kLogRead:
+            REQUIRE(a == uint8_t(gl::MsgId::kLogRecord) || a == uint8_t(gl::MsgId::kError),
+                    "LOG_READ -> LOG_RECORD or ERROR");
+            break;
           default:
-            REQUIRE(is_ack_or_error, "SET_SCENE, START_TRIAL, SET_MOTORS -> ACK or ERROR");
+            REQUIRE(is_ack_or_error, "every other request -> ACK or ERROR");
             break;
         }
       }
     }
     const bool acked = answer && answer->id == uint8_t(gl::MsgId::kAck);
 
-    // 2. Every ERROR turns the motors off; STOP too.
+    // 2. Every ERROR turns the motors off; STOP too. 6. An ERROR or a dropped frame ends a
+    // host-less run, or its next pattern pulse would turn them on again.
     REQUIRE(!error_sent || motors_.all_off(), "every ERROR leaves the motors off");
+    REQUIRE(!dropped || motors_.all_off(), "every dropped frame leaves the motors off");
+    REQUIRE(!(error_sent || dropped) || !run_after, "an ERROR or a dropped frame ends a run");
     if (is_req(gl::MsgId::kStop)) {
       REQUIRE(motors_.all_off(), "STOP leaves the motors off");
       REQUIRE(after != gd::DeviceState::kTrialRunning, "STOP ends a running trial");
@@ -671,28 +1051,77 @@ class Rig {
       const gl::Telemetry t = d.as<gl::Telemetry>();
       REQUIRE(std::memcmp(t.pwm, motors_.last().duty, sizeof t.pwm) == 0,
               "TELEMETRY.pwm is what the motors got");
-      REQUIRE(t.solver_status == gl::ErrorCode::kOk || motors_.all_off(),
+      const bool flag = t.flags & gl::kTelemetryFlagTrialRunning;
+      // A host-less pattern plays whatever the IMU says; guidance never runs on a failure.
+      REQUIRE(t.solver_status == gl::ErrorCode::kOk || motors_.all_off() ||
+                  (is_req(gl::MsgId::kSimImuSample) && !flag),
               "a TELEMETRY with a solver failure means the motors are off");
+      if (is_req(gl::MsgId::kSimImuSample)) {
+        gl::SimImuSample m;
+        gl::unpack(req->payload, req->payload_size, &m);
+        REQUIRE(t.host_time_us == m.time_us, "TELEMETRY echoes the sample's time_us");
+        REQUIRE(flag == (hostless_ && board_->runner.phase() == gd::RunPhase::kTrial),
+                "a sample's TELEMETRY flag says whether a host-less trial runs");
+        continue;
+      }
       gl::Pose p;
       gl::unpack(req->payload, req->payload_size, &p);
       REQUIRE(t.host_time_us == p.host_time_us, "TELEMETRY echoes the POSE's host_time_us");
       // The host ends its trial loop on a clear flag (tools/graspguide/study/runner.py).
-      REQUIRE(bool(t.flags & gl::kTelemetryFlagTrialRunning) ==
-                  (after == gd::DeviceState::kTrialRunning),
+      REQUIRE(flag == (after == gd::DeviceState::kTrialRunning),
               "TELEMETRY's trial_running flag says whether the trial still runs");
     }
     if (is_req(gl::MsgId::kGetStatus)) {
       const gl::Status s = answer->as<gl::Status>();
-      REQUIRE(uint8_t(s.state) == uint8_t(app_.state()), "STATUS.state is the device's state");
+      REQUIRE(uint8_t(s.state) == uint8_t(app().state()), "STATUS.state is the device's state");
       REQUIRE(s.frames_received == line_.mirror_.good_frames() &&
                   s.bad_frames == line_.mirror_.bad_frames(),
               "STATUS counts the frames the device parsed");
     }
 
-    // 3. The watchdog: a device clock silent for the watchdog's time leaves the motors off.
+    // 3. The watchdog: a device clock silent for the watchdog's time leaves the motors off
+    // (a host-less run drives them with no POSE: invariant 6 watches it).
     if (is_req(gl::MsgId::kPose) || is_req(gl::MsgId::kSetMotors)) silence_us_ = 0;
-    REQUIRE(silence_us_ < kStaleUs || motors_.all_off(),
+    REQUIRE(silence_us_ < kStaleUs || run_after || motors_.all_off(),
             "no POSE or SET_MOTORS for the watchdog's time: the motors are off after poll()");
+
+    // 6. The host-less runner and its store.
+    if (is_req(gl::MsgId::kSimImuSample)) sample_silence_us_ = 0;
+    if (!virtual_clock_ && run_after && board_->runner.phase() == gd::RunPhase::kTrial &&
+        sample_silence_us_ >= kImuStaleUs)
+      REQUIRE(motors_.all_off(),
+              "a host-less trial without a sample for the IMU's stale time "
+              "has its motors off");
+    const bool storage_req = is_req(gl::MsgId::kPlanBegin) || is_req(gl::MsgId::kPlanTrial) ||
+                             is_req(gl::MsgId::kPlanCommit) || is_req(gl::MsgId::kLogErase);
+    if (storage_req && acked)
+      REQUIRE(before != gd::DeviceState::kTrialRunning && !motors_on_before && !run_before,
+              "PLAN_* and LOG_ERASE are taken only with no trial, no motor on and no run");
+    if (is_req(gl::MsgId::kPlanCommit) && acked)
+      REQUIRE(board_->runner.plan_stored(), "an acknowledged PLAN_COMMIT leaves a stored plan");
+    if (is_req(gl::MsgId::kLogErase) && acked)
+      REQUIRE(board_->runner.log().records() == 0 && board_->runner.log().torn() == 0,
+              "an acknowledged LOG_ERASE leaves an empty log");
+    if (is_req(gl::MsgId::kHostlessRun) && acked)
+      REQUIRE(before != gd::DeviceState::kTrialRunning, "HOSTLESS_RUN is refused in a trial");
+    if (answer && answer->id == uint8_t(gl::MsgId::kLogInfo)) {
+      const gl::LogInfo li = answer->as<gl::LogInfo>();
+      gd::ResultsLog& log = board_->runner.log();
+      REQUIRE(li.running == run_after && li.plan_stored == board_->runner.plan_stored(),
+              "LOG_INFO tells whether a plan is stored and a run goes on");
+      REQUIRE(li.records == log.records() && li.capacity == log.capacity() &&
+                  li.torn_records == log.torn() && li.records <= li.capacity,
+              "LOG_INFO counts the log's records");
+    }
+    if (answer && answer->id == uint8_t(gl::MsgId::kLogRecord)) {
+      const gl::LogRecord r = answer->as<gl::LogRecord>();
+      gl::LogRead q;
+      gl::unpack(req->payload, req->payload_size, &q);
+      REQUIRE(r.index == q.index && r.index < board_->runner.log().records(),
+              "LOG_RECORD answers the index asked for, one that is stored");
+      REQUIRE((r.k == 3 || r.k == 4) && r.completion_s >= 0 && std::isfinite(r.completion_s),
+              "a LOG_RECORD holds what a finished trial stored");
+    }
 
     // Scene and trial bookkeeping, for invariant 4 and TRIAL_RESULT.
     if (is_req(gl::MsgId::kSetScene) && acked) {
@@ -722,6 +1151,12 @@ class Rig {
     for (const DeviceFrame& d : out) {
       if (d.id != uint8_t(gl::MsgId::kTrialResult)) continue;
       const gl::TrialResult r = d.as<gl::TrialResult>();
+      if (run_before) {  // a host-less trial's, with the plan's timeout
+        const double timeout_s = board_->runner.plan().header.timeout_s;
+        REQUIRE(r.completion_s >= 0 && r.completion_s <= timeout_s * (1 + 1e-6) + 1e-6,
+                "a host-less TRIAL_RESULT.completion_s is within [0, the plan's timeout_s]");
+        continue;
+      }
       REQUIRE(before == gd::DeviceState::kTrialRunning && r.trial_id == trial_id_,
               "TRIAL_RESULT names the trial that was running");
       REQUIRE(after != gd::DeviceState::kTrialRunning, "TRIAL_RESULT ends the trial");
@@ -768,8 +1203,11 @@ class Rig {
         std::fprintf(stderr, "(%s, detail %u)", gl::enum_name(e.code), e.detail);
       } else if (d.id == uint8_t(gl::MsgId::kTelemetry)) {
         const gl::Telemetry t = d.as<gl::Telemetry>();
-        std::fprintf(stderr, "(%s, err %.2f deg)", gl::enum_name(t.solver_status),
-                     double(t.error_deg));
+        std::fprintf(stderr, "(%s, err %.2f deg, pwm %u,%u,%u,%u)", gl::enum_name(t.solver_status),
+                     double(t.error_deg), t.pwm[0], t.pwm[1], t.pwm[2], t.pwm[3]);
+      } else if (d.id == uint8_t(gl::MsgId::kHostlessEvent)) {
+        const gl::HostlessEvent e = d.as<gl::HostlessEvent>();
+        std::fprintf(stderr, "(%s, position %u)", gl::enum_name(e.event), e.position);
       } else if (d.id == uint8_t(gl::MsgId::kTrialResult)) {
         const gl::TrialResult r = d.as<gl::TrialResult>();
         std::fprintf(stderr, "(id %u, success %d, completion %g s, first entry %g s)", r.trial_id,
@@ -777,25 +1215,31 @@ class Rig {
       }
     }
     const gg::Pwm& m = motors_.last();
-    std::fprintf(stderr, " | state %u motors %u,%u,%u,%u\n", unsigned(after), m.duty[0], m.duty[1],
-                 m.duty[2], m.duty[3]);
+    std::fprintf(stderr, " | state %u run phase %u motors %u,%u,%u,%u\n", unsigned(after),
+                 hostless_ ? unsigned(board_->runner.phase()) : 0u, m.duty[0], m.duty[1], m.duty[2],
+                 m.duty[3]);
   }
 
   const bool trace_ = std::getenv("GRASPGUIDE_FUZZ_TRACE") != nullptr;
   const bool virtual_clock_;
+  const bool hostless_;
   gd::FakeClock clock_;
   gd::RecordingMotors motors_;
   HostLine line_;
-  gd::Application app_;
   VirtualTime virtual_time_;
   gd::DeviceInfo info_;
-  gd::LinkDevice device_;
+  WatchedStore store_{motors_};
+  std::unique_ptr<Board> board_;
   gl::FrameParser host_{gl::Accept::kDeviceToHost};
   gl::SequenceCounter seq_;
 
   uint32_t last_host_us_ = 0;
-  uint64_t clock64_ = 0;     // device time since boot, unwrapped (real-time clock)
-  uint64_t silence_us_ = 0;  // device time since the last POSE or SET_MOTORS
+  uint64_t clock64_ = 0;            // device time since boot, unwrapped (real-time clock)
+  uint64_t silence_us_ = 0;         // device time since the last POSE or SET_MOTORS
+  uint64_t sample_silence_us_ = 0;  // device time since the last SIM_IMU_SAMPLE
+  uint32_t last_sample_host_us_ = 0;
+  uint32_t dither_ = 0;
+  uint16_t upload_next_ = 0, upload_count_ = 0;  // the plan upload under way
   uint16_t trial_ids_ = 0;
   float scene_timeout_s_ = 0;  // of the last acknowledged SET_SCENE
   float trial_timeout_s_ = 0;
@@ -813,7 +1257,7 @@ class SeedWriter {
   SeedWriter& op(Op op, uint8_t flags = 0) {
     uint8_t slot = 0;
     while (kOpOfSlot[slot] != op) ++slot;
-    b_.push_back(uint8_t(slot | flags << 4));
+    b_.push_back(uint8_t(slot | flags << 5));
     return *this;
   }
   SeedWriter& bytes(std::initializer_list<uint8_t> v) {
@@ -829,6 +1273,21 @@ class SeedWriter {
     return *this;
   }
   SeedWriter& advance(uint8_t spec) { return op(Op::kAdvance).bytes({spec}); }
+  // Plan template t (0: one 90 s trial, no rest), its trials from template 0, no overrides.
+  SeedWriter& plan(uint8_t t = 0) {
+    op(Op::kPlanUpload).bytes({t, 0});
+    for (int i = 0; i < 1 + (t & 3); ++i) bytes({0, 0});
+    return *this;
+  }
+  // n samples of a still hand (template t), pressing the button when asked (flag 0x4), held
+  // along the trial's force with flag 0x2.
+  SeedWriter& samples(uint8_t n, uint8_t t = 0, uint8_t flags = 4) {
+    return op(Op::kSimSamples, flags).bytes({t, uint8_t(n - 1)});
+  }
+  SeedWriter& store(uint8_t what, std::initializer_list<uint8_t> args = {}) {
+    op(Op::kStore).bytes({what});
+    return bytes(args);
+  }
   const std::vector<uint8_t>& data() const { return b_; }
 
  private:
@@ -884,6 +1343,85 @@ void write_seeds(const char* dir) {
   seeds.push_back({"virtual_clock_trial",
                    SeedWriter(1).scene().trial().poses(30, kFar).advance(kStaleExactly)});
   seeds.push_back({"clock_wrap_trial", SeedWriter(2).scene().trial().poses(250, kFar)});
+  // The host-less runner and its store. Plan template 0x82: three 0.25 s trials, no rest.
+  const uint8_t kShortPlan = 0x82;
+  seeds.push_back({"hostless_run_to_the_end", SeedWriter(1)
+                                                  .plan(kShortPlan)
+                                                  .op(Op::kHostlessRun)
+                                                  .samples(64)
+                                                  .samples(64)
+                                                  .samples(64)
+                                                  .op(Op::kLogInfo)
+                                                  .op(Op::kLogRead)
+                                                  .bytes({0})
+                                                  .op(Op::kLogRead)
+                                                  .bytes({2})
+                                                  .op(Op::kLogErase)});
+  seeds.push_back({"hostless_success", SeedWriter(1)
+                                           .plan(kShortPlan)
+                                           .op(Op::kHostlessRun)
+                                           .samples(64, 0, 6)
+                                           .samples(64, 0, 6)
+                                           .op(Op::kLogInfo)});
+  seeds.push_back({"hostless_real_clock", SeedWriter(0)
+                                              .plan(kShortPlan)
+                                              .op(Op::kHostlessRun)
+                                              .samples(64)
+                                              .advance(kStaleExactly)
+                                              .samples(64)
+                                              .op(Op::kStop)});
+  seeds.push_back({"error_during_ready_pattern", SeedWriter(1)
+                                                     .plan(kShortPlan)
+                                                     .op(Op::kHostlessRun)
+                                                     .samples(2, 0, 0)
+                                                     .scene()
+                                                     .samples(10, 0, 0)
+                                                     .op(Op::kLogInfo)});
+  seeds.push_back({"garbage_during_end_pattern", SeedWriter(1)
+                                                     .plan(kShortPlan)
+                                                     .op(Op::kHostlessRun)
+                                                     .samples(64)
+                                                     .samples(30)
+                                                     .op(Op::kGarbage)
+                                                     .bytes({4, 0x13, 0x00, 0x37, 0x00})
+                                                     .samples(10)});
+  seeds.push_back({"erase_and_commit_while_motors_run", SeedWriter(0)
+                                                            .plan(kShortPlan)
+                                                            .op(Op::kSetMotors)
+                                                            .bytes({200, 200, 200, 200})
+                                                            .op(Op::kLogErase)
+                                                            .op(Op::kSetMotors)
+                                                            .bytes({200, 200, 200, 200})
+                                                            .plan(kShortPlan)
+                                                            .scene()
+                                                            .trial()
+                                                            .poses(3, kFar)
+                                                            .op(Op::kLogErase)
+                                                            .plan(kShortPlan)});
+  seeds.push_back({"power_cut_during_append", SeedWriter(1)
+                                                  .plan(kShortPlan)
+                                                  .op(Op::kHostlessRun)
+                                                  .store(0, {40, 0})
+                                                  .samples(64)
+                                                  .samples(64)
+                                                  .store(3)
+                                                  .store(4)
+                                                  .op(Op::kLogInfo)
+                                                  .op(Op::kHostlessRun)
+                                                  .samples(64)});
+  seeds.push_back({"flipped_bit_then_reboot", SeedWriter(1)
+                                                  .plan(kShortPlan)
+                                                  .op(Op::kHostlessRun)
+                                                  .samples(64)
+                                                  .samples(64)
+                                                  .store(5, {0x93, 0x04, 3})
+                                                  .store(4)
+                                                  .op(Op::kLogInfo)
+                                                  .op(Op::kHostlessRun)
+                                                  .samples(64)});
+  seeds.push_back(
+      {"no_hostless_board",
+       SeedWriter(4).plan(kShortPlan).op(Op::kHostlessRun).op(Op::kLogInfo).samples(3)});
   for (const Seed& s : seeds) {
     const std::string path = std::string(dir) + "/" + s.name;
     FILE* f = std::fopen(path.c_str(), "wb");

@@ -402,3 +402,24 @@ TEST(LinkHostless, AnErrorDuringAPatternStopsTheRunAndKeepsTheMotorsOff) {
       EXPECT_TRUE(r.acked());
     }
 }
+
+// The fuzzer found a sample whose TELEMETRY said 0 while the motors showed 200: the rest
+// ended in the sample's own tick, and the ready pattern's first pulse waited for the next.
+TEST(LinkHostless, ASamplesTelemetryShowsThePatternThatBeganWithIt) {
+  Rig r;
+  upload(r, 2, 0.01f);
+  r.send(gl::HostlessRun{});
+  ASSERT_TRUE(r.acked());
+  ASSERT_EQ(r.runner.phase(), gd::RunPhase::kRest);
+  r.clock.advance_us(20 * kMs);  // past the rest, with no poll in between
+  gl::SimImuSample s;
+  s.time_us = r.clock.now_us();
+  s.accel_mps2[2] = kG;
+  r.send(s);
+  const auto tel = r.all<gl::Telemetry>();
+  ASSERT_EQ(tel.size(), 1u);
+  EXPECT_EQ(r.runner.phase(), gd::RunPhase::kReadyPattern);
+  EXPECT_FALSE(r.motors.all_off());
+  for (int i = 0; i < graspguide::kMaxContacts; ++i)
+    EXPECT_EQ(tel[0].pwm[i], r.motors.last().duty[i]) << "motor " << i;
+}

@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # Fuzzes the link and the device with libFuzzer (+ASan, +UBSan), one harness after another:
 #   frame_parser  test/fuzz/fuzz_frame_parser.cpp: any bytes into FrameParser and the decoders
-#   device        test/fuzz/fuzz_device.cpp: requests, field values, garbage and clock jumps
-#                 into LinkDevice/Application, checked against the safety invariants
+#   device        test/fuzz/fuzz_device.cpp: requests (host-less ones too), field values,
+#                 garbage, clock jumps and store faults into LinkDevice, Application and the
+#                 host-less runner on an in-memory store, checked against the safety invariants
 #
 #   bash tools/scripts/fuzz.sh [SECONDS] [HARNESS...]   # SECONDS per harness (default 60),
 #                                                        # every harness by default
 #
 # Builds each harness with clang, seeds it (golden frames; the device harness writes its own
-# seeds: a scene, trials, poses, time jumps), runs it for SECONDS and prints
+# seeds: a scene, trials, poses, time jumps, host-less runs, store faults), runs it for
+# SECONDS and prints
 #   fuzz <name>: N inputs run, M crashes in S s
 # A crash does not end the run (-fork=1 -ignore_crashes=1), so one run shows every finding it
 # reaches; each distinct finding (invariant or sanitizer message) is listed with its smallest

@@ -236,9 +236,10 @@ class HostlessRunner {
       // Elapsed phase time is a signed difference: a "now" from before the phase began
       // (read just before a sample stamped later) is no time, never 2^32 us.
       case RunPhase::kRest:
-        if (int32_t(now_us - phase_start_us_) >= int32_t(rest_us_))
-          start_pattern(RunPhase::kReadyPattern, kReadyPattern, now_us);
-        break;
+        if (int32_t(now_us - phase_start_us_) < int32_t(rest_us_)) break;
+        // The pattern begins in this tick, so what a sample reports is what the motors show.
+        start_pattern(RunPhase::kReadyPattern, kReadyPattern, now_us);
+        [[fallthrough]];
       case RunPhase::kReadyPattern:
       case RunPhase::kEndPattern:
         if (int32_t(now_us - phase_start_us_) < 0) break;
