@@ -720,3 +720,34 @@ def test_pilot_of_one_real_participant_run_is_analysed(tmp_path):
     table1 = (study / "analysis" / "table1.csv").read_text().splitlines()
     assert len(table1) == 1 + 8  # header + 2 contact counts x 4
     assert sum(int(r.split(",")[-2]) for r in table1[1:]) == 96  # 100 - 4 familiarization
+
+
+@pytest.mark.parametrize(
+    "rows",
+    [
+        [[90.0, 90.0, 90.0, 90.0]] * 8,  # every trial timed out
+        [[90.0, 90.0, 10.0, 10.0]] * 8,  # C timed out, V all alike
+        [[x, x, x, x] for x in range(10, 18)],  # only the participants differ
+    ],
+    ids=["all-timed-out", "modalities-alike", "participants-only"],
+)
+def test_no_within_subject_error_gives_descriptive_results_and_says_why(rows):
+    """With no within-subject error the F ratio and the t statistics divide by zero:
+    pingouin returns a table without T (KeyError before) or an F of -9e31. The tests are
+    left out and the report says why."""
+    import pandas as pd
+
+    wide = pd.DataFrame(rows, index=[f"U{i + 1}" for i in range(len(rows))], columns=ORDER)
+    st = A.paper_statistics(wide, remove_outliers=False)
+    assert not st.inferential and st.n == len(rows)
+    assert "no within-subject error" in st.anova_line()
+    assert st.pairwise.empty
+
+
+def test_within_subject_error_keeps_the_tests():
+    import pandas as pd
+
+    rows = [[x, x + 1.0, x + 2.0, x + 3.0 + 0.1 * (x % 3)] for x in range(10, 18)]
+    wide = pd.DataFrame(rows, index=[f"U{i + 1}" for i in range(8)], columns=ORDER)
+    st = A.paper_statistics(wide, remove_outliers=False)
+    assert st.inferential and st.anova["F"] > 0 and len(st.pairwise) == 6

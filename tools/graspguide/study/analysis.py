@@ -573,6 +573,48 @@ def _no_normality():
     )
 
 
+def _no_tests() -> dict[str, Any]:
+    """The tests' fields of a study on which they cannot be computed."""
+    import pandas as pd
+
+    return {
+        "normality": _no_normality(),
+        "sphericity": dict(_NO_SPHERICITY),
+        "anova": None,
+        "anova_statsmodels": None,
+        "pairwise": pd.DataFrame(columns=_PAIRWISE_COLUMNS),
+    }
+
+
+# Below this share of the total sum of squares, the within-subject error is rounding.
+_FLAT_ERROR_SHARE = 1e-12
+
+
+def _no_error_variance(transformed) -> str | None:
+    """Why the RM ANOVA and the paired t-tests are undefined on ``transformed``, or None.
+
+    Both divide by the within-subject error (what neither the participant nor the
+    modality explains). When every participant's times differ across modalities by the
+    same amounts, e.g. every trial timed out, that error is zero: F is 0/0 or x/0 and the
+    libraries return a column-less table or a huge negative F, so no test is reported."""
+
+    y = transformed.to_numpy(dtype=float)
+    if y.shape[0] < 2:
+        return None
+    residual = y - y.mean(axis=1, keepdims=True) - y.mean(axis=0, keepdims=True) + y.mean()
+    ss_error = float((residual**2).sum())
+    ss_total = float(((y - y.mean()) ** 2).sum())
+    if ss_error > _FLAT_ERROR_SHARE * max(ss_total, 1.0):
+        return None
+    return (
+        "the repeated-measures ANOVA and the paired t-tests are undefined: the "
+        f"{y.shape[0]} participants' times differ across the modalities by the same "
+        "amounts (no within-subject error; e.g. every trial timed out or every time is "
+        "equal), so Tables I-III, the participant means and Figure 4 are descriptive only; "
+        "check the trials' timeout and the records"
+    )
+
+
 def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     """The paper's analysis of completion time on a wide participant x modality frame.
 
@@ -582,7 +624,6 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     alongside), Bonferroni-corrected paired t-tests (pingouin ``padjust='bonf'``).
     """
     import numpy as np
-    import pandas as pd
 
     means = means.reindex(columns=list(MODALITIES)).astype(float)
     means.index = means.index.map(str).rename("participant")
@@ -601,8 +642,12 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
     if (retained < 0).any().any():
         raise AnalysisError("negative completion times cannot be square-root transformed")
     transformed = np.sqrt(retained)
-    if len(retained) >= 2:
+    flat = _no_error_variance(transformed)
+    if len(retained) >= 2 and flat is None:
         tests = _repeated_measures_tests(retained, transformed, notes)
+    elif flat is not None:
+        notes = [flat]
+        tests = _no_tests()
     else:
         # A pilot (or outlier removal) leaves one participant: no within-subject variance,
         # so no test; the descriptive results stand on their own.
@@ -621,13 +666,7 @@ def paper_statistics(means, remove_outliers: bool = True) -> Statistics:
                 "participant means and Figure 4 are descriptive only"
             )
         notes = [why]
-        tests = {
-            "normality": _no_normality(),
-            "sphericity": dict(_NO_SPHERICITY),
-            "anova": None,
-            "anova_statsmodels": None,
-            "pairwise": pd.DataFrame(columns=_PAIRWISE_COLUMNS),
-        }
+        tests = _no_tests()
     return Statistics(
         means=means,
         outliers=outliers,
