@@ -450,7 +450,7 @@ class PlanCommit(Message):
 
 @dataclass(frozen=True)
 class HostlessRun(Message):
-    """HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full. STOP ends the run."""
+    """HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full, storage_failed (the log cannot be read), not_allowed_in_state while a trial or a run goes on. STOP ends the run."""
 
     MSG_ID: ClassVar[int] = MsgId.HOSTLESS_RUN
     NAME: ClassVar[str] = "HOSTLESS_RUN"

@@ -856,7 +856,7 @@ void for_each_field(PlanCommit& m, Fn&& fn) {
   fn("trial_count", m.trial_count);
 }
 
-// HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full. STOP ends the run.
+// HOSTLESS_RUN (0x0B, host -> device): Runs the stored plan with no host from its first trial without a record (what a board does at power-up with a plan stored). Answer: ACK, or ERROR no_plan, log_full, storage_failed (the log cannot be read), not_allowed_in_state while a trial or a run goes on. STOP ends the run.
 struct HostlessRun {
   static constexpr MsgId kId = MsgId::kHostlessRun;
   static constexpr const char* kName = "HOSTLESS_RUN";
