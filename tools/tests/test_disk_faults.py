@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import signal
 import subprocess
@@ -123,6 +124,16 @@ def test_full_disk_cuts_no_record(small_disk, kind):
 
 
 # --------------------------------------------------------------------------------------
+def _error_lines(stderr: str) -> list[str]:
+    """stderr's lines but the notice a simulated run starts with ("graspguide X:
+    SIMULATED: ..."), which comes before any error and is not part of it."""
+    return [
+        line
+        for line in stderr.splitlines()
+        if line.strip() and not re.match(r"graspguide \w+: SIMULATED: ", line)
+    ]
+
+
 # `graspguide trial`: one line, exit 1, and the same command completes the study later
 # --------------------------------------------------------------------------------------
 def _quick_protocol(tmp_path, count):
@@ -198,7 +209,7 @@ def test_trial_on_a_size_limit_stops_with_one_line_and_resumes(tmp_path):
     trials.write_bytes(prefix)
     p = _trial(path, out, limit)
     assert p.returncode == 1, (p.stdout, p.stderr)
-    err = p.stderr.strip().splitlines()
+    err = _error_lines(p.stderr)
     assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
     assert err[0].startswith(
         f"graspguide trial: error: cannot write {trials}: the file reached a size limit"
@@ -229,7 +240,7 @@ def test_trial_into_a_read_only_folder_says_so_in_one_line(tmp_path):
         assert r.returncode == 0, r.stderr
         p = _trial(path, ro / "study")
         assert p.returncode == 1, (p.stdout, p.stderr)
-        err = p.stderr.strip().splitlines()
+        err = _error_lines(p.stderr)
         assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
         assert err[0].startswith(f"graspguide trial: error: cannot write {ro / 'study'}"), err
         assert "read-only file system" in err[0] and "use a folder you can write to" in err[0]
@@ -275,7 +286,7 @@ def test_stream_log_on_a_size_limit_stops_with_one_line(tmp_path):
         preexec_fn=limited,
     )
     assert p.returncode == 1, (p.stdout, p.stderr)
-    err = [line for line in p.stderr.splitlines() if line.strip()]
+    err = _error_lines(p.stderr)
     assert len(err) == 1 and "Traceback" not in p.stderr, p.stderr
     assert (
         err[0].startswith("graspguide stream: error: cannot write ") and "size limit" in err[0]

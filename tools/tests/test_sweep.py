@@ -186,7 +186,7 @@ def test_larger_threshold_never_makes_the_same_trajectory_take_longer(tmp_path, 
         (["--modalities", "W"], ["unknown modality", "'W'"]),
         (["--contacts", "5"], ["--contacts"]),
         (["--thresholds", "25"], ["threshold 25", "start error"]),
-        (["--source", "participant:nonsense=1"], ["unknown participant parameter"]),
+        (["--source", "participant:nonsense=1"], ["unknown participant key", '"nonsense"']),
     ],
 )
 def test_bad_arguments_give_a_clear_error(tmp_path, capsys, args, words):
