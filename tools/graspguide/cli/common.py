@@ -87,6 +87,21 @@ def add_jobs_argument(p: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+def add_action(
+    sub: Any, name: str, help_table: dict[str, tuple[str, str, str]]
+) -> argparse.ArgumentParser:
+    """The parser of one action of a command with actions (device, mp): its one-line help,
+    description and examples (``help_table[name]``) in --help."""
+    short, description, examples = help_table[name]
+    return sub.add_parser(
+        name,
+        help=short,
+        description=description,
+        epilog="examples:\n" + examples,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
 def add_port_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument(
         "--port",

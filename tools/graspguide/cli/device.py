@@ -11,6 +11,7 @@ from typing import Any
 
 from graspguide.cli.common import (
     DEFAULT_REST_S,
+    add_action,
     add_port_arguments,
     add_protocol_argument,
     quaternion_arg,
@@ -119,18 +120,6 @@ plan can be run again from its first trial. Needs --yes: download the records fi
 }
 
 
-def _add_action(sub: Any, name: str) -> argparse.ArgumentParser:
-    """The parser of one action, with its description and examples in --help."""
-    short, description, examples = _ACTION_HELP[name]
-    return sub.add_parser(
-        name,
-        help=short,
-        description=description,
-        epilog="examples:\n" + examples,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-
-
 def _add_device_arguments(p: argparse.ArgumentParser) -> None:
     add_port_arguments(p, required=True)
     p.add_argument(
@@ -142,7 +131,7 @@ def _add_device_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    plan = _add_action(sub, "plan")
+    plan = add_action(sub, "plan", _ACTION_HELP)
     _add_device_arguments(plan)
     add_protocol_argument(plan, required=True)
     plan.add_argument("--participant", required=True, metavar="PID", help="U1, U2, ...")
@@ -172,15 +161,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="the participant is simulated (default: a person; the records say which)",
     )
-    run = _add_action(sub, "run")
+    run = add_action(sub, "run", _ACTION_HELP)
     _add_device_arguments(run)
-    log = _add_action(sub, "log")
+    log = add_action(sub, "log", _ACTION_HELP)
     _add_device_arguments(log)
     log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
-    info = _add_action(sub, "info")
+    info = add_action(sub, "info", _ACTION_HELP)
     _add_device_arguments(info)
     info.add_argument("--json", action="store_true", help="print one JSON object")
-    erase = _add_action(sub, "erase")
+    erase = add_action(sub, "erase", _ACTION_HELP)
     _add_device_arguments(erase)
     erase.add_argument(
         "--yes", action="store_true", help="really erase (the records are gone for good)"

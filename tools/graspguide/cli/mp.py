@@ -9,6 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from graspguide.cli.common import add_action
 from graspguide.cli.plan import add_plan_arguments, plan_bytes
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail
 
@@ -100,18 +101,6 @@ device reads the copy), so `graspguide analyze DIR` reads them.""",
 }
 
 
-def _add_action(sub: Any, name: str) -> argparse.ArgumentParser:
-    """The parser of one action, with its description and examples in --help."""
-    short, description, examples = _ACTION_HELP[name]
-    return sub.add_parser(
-        name,
-        help=short,
-        description=description,
-        epilog="examples:\n" + examples,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-
-
 def _add_build_arguments(p: argparse.ArgumentParser) -> None:
     from graspguide.mp.deploy import ARCHES
 
@@ -133,16 +122,16 @@ def _add_build_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    build = _add_action(sub, "build")
+    build = add_action(sub, "build", _ACTION_HELP)
     build.add_argument("--out", required=True, metavar="DIR", help="the staging folder")
     _add_build_arguments(build)
-    deploy = _add_action(sub, "deploy")
+    deploy = add_action(sub, "deploy", _ACTION_HELP)
     deploy.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     deploy.add_argument(
         "--staging", metavar="DIR", help="keep the staged files here (default: a temporary folder)"
     )
     _add_build_arguments(deploy)
-    run = _add_action(sub, "run")
+    run = add_action(sub, "run", _ACTION_HELP)
     run.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     run.add_argument("--src", metavar="DIR", help="the port's folder (default: micropython/)")
     run.add_argument(
@@ -154,7 +143,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _add_log_arguments(sub: Any) -> None:
     from graspguide.mp.deploy import STORE_FILE
 
-    log = _add_action(sub, "log")
+    log = add_action(sub, "log", _ACTION_HELP)
     log.add_argument("--port", required=True, metavar="PORT", help="e.g. /dev/ttyUSB0")
     log.add_argument("--out", required=True, metavar="DIR", help="the study folder")
     log.add_argument(
