@@ -77,3 +77,8 @@ def test_ctrl_c_in_a_terminal_leaves_the_panel_stopped_with_the_motors_off(tmp_p
     assert states and states[-1] == "stopped", states[-5:]
     motors = re.findall(r"motors\s*│?\s*([^│\n]+)", text)
     assert motors and "off" in motors[-1] and "STOP acknowledged" in motors[-1], motors[-3:]
+    # the fingers' rows of that last panel say off, not the last cue as if still felt
+    last_panel = text[[m.start() for m in re.finditer(r"state\s*│?\s*stopped", text)][-1] :]
+    for finger in ("thumb", "index", "middle"):
+        row = re.findall(finger + r"\s*│?\s*([^│\n]+)", last_panel)
+        assert row and row[-1].strip().startswith("0 (off"), (finger, row[-1:])

@@ -148,7 +148,13 @@ class StatusView:
             f"{s.get('error_deg', float('nan')):7.2f} deg (threshold {p.threshold_deg:.1f})",
         )
         table.add_row("hold", p.hold_text())
+        # Once the device confirmed the motors off, a finger's row says so: the last cue
+        # sent is no longer what the wearer feels.
+        off = motors is not None and motors.startswith("off")
         for finger, pwm in zip(self.fingers, s.get("pwm", [0] * self.k)):
+            if off:
+                table.add_row(finger, f"  0 (off; the last cue sent was {pwm})")
+                continue
             bar = "#" * (pwm * 30 // 255)
             table.add_row(finger, f"{pwm:3d} [green]{bar:<30}[/green]")
         if "rate_hz" in s:  # the link's figures, where the caller counts them (stream)
