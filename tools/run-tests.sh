@@ -168,7 +168,7 @@ tally() {
 
 # --- 2. style and generated code ---------------------------------------------------
 # The habits, enforced: each check of tools/scripts/check_style.sh is one case.
-for check in ruff-lint ruff-format mypy clang-format generated; do
+for check in ruff-lint ruff-format mypy clang-format generated import-layers; do
     run_case "style: $check" "style-$check" bash "$ROOT/tools/scripts/check_style.sh" "$check"
 done
 
@@ -216,7 +216,7 @@ else
     fi
 fi
 # The firmware that --port qemu runs builds into a folder of its own
-# (graspguide.link.device_builds), as its launcher looks for it there: pio deletes its whole
+# (graspguide.devices.builds), as its launcher looks for it there: pio deletes its whole
 # build folder when its project checksum changes, and the others' builds must not take
 # this one with them.
 DEVICE_ENVS=" m4f_firmware "

@@ -33,10 +33,10 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from graspguide.analysis.outcome_summary import format_outcome, outcome_summary
+from graspguide.protocol.study_protocol import draw_wrenches, load_protocol
+from graspguide.records.storage import read_jsonl
 from graspguide.study.jobs import TrialJob, default_out, default_protocol, run_trial_jobs
-from graspguide.study.outcome_summary import format_outcome, outcome_summary
-from graspguide.study.records import read_jsonl
-from graspguide.study.study_protocol import draw_wrenches, load_protocol
 
 CONDITIONS = ("uniform", "fingers", "calibrated", "truth")
 CAL_FINGERS = "thumb,index,middle,palm"  # protocols/paper.toml's k = 4 uses the palm

@@ -7,6 +7,9 @@
 #   clang-format   clang-format --dry-run -Werror (.clang-format) on every hand-written
 #                  C/C++ file; the generated ones (.gitattributes) are their generators'
 #   generated      every generator's --check: the checked-in outputs are up to date
+#   import-layers  lint-imports (.importlinter): the host package's rooms import only the
+#                  rooms below them, core imports no other room, and nothing imports in a
+#                  circle; it reads the source tree under tools/, not the installed copy
 #   all            all of the above
 # With --fix, ruff-lint, ruff-format and clang-format rewrite the files instead.
 # Needs the .venv of tools/bootstrap.sh (ruff, mypy and clang-format are pinned there).
@@ -48,6 +51,9 @@ check() {
                 echo "clang-format: ${#files[@]} files formatted"
             fi
             ;;
+        import-layers)
+            PYTHONPATH="$ROOT/tools" "$BIN/lint-imports" --config "$ROOT/.importlinter"
+            ;;
         generated)
             "$BIN/python" tools/codegen --check
             "$BIN/python" tools/scripts/gen_stage_scenes.py --check
@@ -55,7 +61,7 @@ check() {
             ;;
         all)
             local c rc=0
-            for c in ruff-lint ruff-format mypy clang-format generated; do
+            for c in ruff-lint ruff-format mypy clang-format generated import-layers; do
                 echo "== $c"
                 check "$c" || rc=1
             done
@@ -63,7 +69,7 @@ check() {
             ;;
         *)
             echo "check_style.sh: unknown check '$1' (ruff-lint, ruff-format, mypy," \
-                "clang-format, generated, all)" >&2
+                "clang-format, generated, import-layers, all)" >&2
             return 2
             ;;
     esac

@@ -81,7 +81,7 @@ def short_protocol(paper: str, path: str, timeout_s: float | None = None) -> Non
 def trials_complete(out: str, protocol: str | None, participants: int) -> int:
     """How many of U1..U<participants> have every planned trial in OUT/PID/trials.jsonl
     (the host-less runs, whatever the analysis after them did)."""
-    from graspguide.study import study_protocol as pf
+    from graspguide.protocol import study_protocol as pf
 
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     loaded = pf.load_protocol(protocol or os.path.join(root, "protocols", "paper.toml"))

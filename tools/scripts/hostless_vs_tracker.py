@@ -27,11 +27,11 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from graspguide.analysis.outcome_summary import format_outcome, outcome_summary
+from graspguide.protocol.study_protocol import load_protocol
+from graspguide.records.storage import read_jsonl
 from graspguide.study.demo import HostlessTrialJob
 from graspguide.study.jobs import TrialJob, default_out, default_protocol, run_trial_jobs
-from graspguide.study.outcome_summary import format_outcome, outcome_summary
-from graspguide.study.records import read_jsonl
-from graspguide.study.study_protocol import load_protocol
 
 KINDS = ("tracker", "hostless")
 

@@ -16,9 +16,9 @@ import os
 import tempfile
 import time
 
+from graspguide.devices.promini_sim import ProMiniSimDevice, read_stats
 from graspguide.link.client import DeviceClient, encode_pose_fast
 from graspguide.link.messages import Telemetry
-from graspguide.link.promini_sim import ProMiniSimDevice, read_stats
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.04], [-0.01, 0.1, 0.04]]
 WRENCH = [0.4, -1.0, 0.3, 0.0, 0.0, 0.0]

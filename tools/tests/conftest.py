@@ -23,7 +23,8 @@ import pytest
 if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
+TOOLS_DIR = os.path.dirname(TESTS_DIR)
 REPO_ROOT = os.path.dirname(TOOLS_DIR)
 KNOWN_ANSWERS = os.path.join(REPO_ROOT, "test", "data", "known_answers.json")
 EXAMPLES = os.path.join(TOOLS_DIR, "examples", "solve_requests.jsonl")
@@ -125,7 +126,7 @@ def sketch_build(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def sketch_elf(sketch_build) -> str:
-    """Its ELF, for --port promini-sim (graspguide.link.promini_sim: pass it as ``elf=`` or
+    """Its ELF, for --port promini-sim (graspguide.devices.promini_sim: pass it as ``elf=`` or
     in $GRASPGUIDE_PROMINI_ELF to a command)."""
     return str(sketch_build.elf)
 

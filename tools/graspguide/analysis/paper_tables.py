@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from graspguide.core.vocabulary import MODALITIES, shown
-from graspguide.study.records import JsonlDamaged, LeftOutLine, complete_records
+from graspguide.records.storage import JsonlDamaged, LeftOutLine, complete_records
 
 # Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
 TABLE_ORDER: tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")

@@ -179,8 +179,8 @@ def _longest_trial_s() -> float:
 def _open_device(port: str, baud: int, workdir: str):
     """(transport, kind, device-side file): the transport with the device-side recorder
     the kind has."""
-    from graspguide.link import promini_sim, sim
-    from graspguide.link.transport import open_port
+    from graspguide.devices import promini_sim, sim
+    from graspguide.devices.registry import open_port
 
     if port == sim.SIM_PORT:
         trace = os.path.join(workdir, "motors.csv")
@@ -202,8 +202,8 @@ def measure_latency(
     """Run the self-test on ``port`` (see the module's docstring); ``rate_hz``: POSEs a
     second (None: each as soon as the previous one is answered). STOP is sent on every way
     out. Raises LinkError, or ValueError naming a bad argument."""
+    from graspguide.devices.promini_sim import read_events
     from graspguide.link.client import DeviceClient, host_time_us
-    from graspguide.link.promini_sim import read_events
 
     if not isinstance(count, int) or not 1 <= count <= MAX_COUNT:
         raise ValueError(f"count must be an integer in 1..{MAX_COUNT}, got {count!r}")

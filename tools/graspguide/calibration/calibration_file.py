@@ -13,7 +13,7 @@ import os
 from typing import Any
 
 from graspguide.core.motor_calibration import MotorCalibration
-from graspguide.study.records import RecordWriteError
+from graspguide.records.storage import RecordWriteError
 
 SCHEMA = "graspguide-calibration/1"
 FILE_NAME = "calibration.json"

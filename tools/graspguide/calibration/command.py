@@ -150,10 +150,10 @@ def calibrate_command(
     seed: int | None,
     no_headroom: bool = False,
 ) -> int:
+    from graspguide.devices.session import DeviceSession
     from graspguide.link.transport import LinkError
-    from graspguide.study.device_session import DeviceSession
-    from graspguide.study.records import RecordWriteError
-    from graspguide.study.study_protocol import ProtocolFileError, participant_number
+    from graspguide.protocol.study_protocol import ProtocolFileError, participant_number
+    from graspguide.records.storage import RecordWriteError
 
     try:
         participant_number(participant)

@@ -45,7 +45,7 @@ def draw_finger_sensitivities(seed: int) -> dict[str, FingerSensitivity]:
     """The per-finger sensitivities of the simulated person ``seed`` (every finger of
     FINGER_NAMES). Drawn from the seed alone, so the same seed is the same person whatever
     fingers a run calibrates -- and the same fingers the trials' virtual participant feels
-    with (``--source participant:fingers=N``, graspguide.study.participant)."""
+    with (``--source participant:fingers=N``, graspguide.participant.model)."""
     draw = random.Random(f"graspguide-virtual-observer-params:{int(seed)}")
     return {
         name: FingerSensitivity(

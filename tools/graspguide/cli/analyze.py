@@ -1,5 +1,5 @@
 """`graspguide analyze`: the paper's tables, statistics and Figure 4 from study logs
-(graspguide.study.analysis)."""
+(graspguide.analysis.paper_tables)."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.analysis import (
+    from graspguide.analysis.paper_tables import (
         AnalysisError,
         analyze,
         default_out_dir,

@@ -180,7 +180,7 @@ def run_targets(args: argparse.Namespace) -> int:
     the baseline was written), 1 on a regression, a status that differs from the float64
     reference, a missing baseline or a run that failed."""
     from graspguide.bench import targets
-    from graspguide.link.sim import find_repo_root
+    from graspguide.repo_root import find_repo_root
 
     def progress(msg: str) -> None:
         print(f"bench: {msg}", file=sys.stderr, flush=True)

@@ -1,7 +1,7 @@
 """What every command's parser shares: the argument parser that takes negative numbers
 as values, the numeric argument types, the port arguments, connecting to a device,
 SIGTERM/SIGHUP as Ctrl-C, and the call of a command's library function with its options
-(the one-line error report is graspguide.study.device_session's)."""
+(the one-line error report is graspguide.devices.session's)."""
 
 from __future__ import annotations
 
@@ -166,8 +166,8 @@ def call_with_options(fn: Callable[..., int], args: argparse.Namespace) -> int:
 
 def connect(args: argparse.Namespace) -> tuple[Any, Any]:
     """(transport, client) for --port after HELLO, or raise LinkError."""
+    from graspguide.devices.registry import open_port
     from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import open_port
 
     transport = open_port(args.port, baudrate=args.baud)
     try:
@@ -221,7 +221,7 @@ def non_negative_float(text: str) -> float:
 
 
 def add_lsl_arguments(p: argparse.ArgumentParser) -> None:
-    """--lsl [NAME] and --lsl-wait S (graspguide.study.lab_streams)."""
+    """--lsl [NAME] and --lsl-wait S (graspguide.sources.lab_streams)."""
     p.add_argument(
         "--lsl",
         nargs="?",

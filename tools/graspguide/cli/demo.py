@@ -18,7 +18,7 @@ HELP = (
 
 DESCRIPTION = """\
 The paper's user study end to end, SIMULATED: the simulated device (virtual clock) and
-N virtual participants U1..UN (graspguide.study.participant; a model, never human data) run
+N virtual participants U1..UN (graspguide.participant.model; a model, never human data) run
 through a study protocol with `graspguide trial` (--jobs participants at a time, each
 with its own simulated device), then `graspguide analyze`: prints Tables I-II and the
 repeated-measures ANOVA, writes Figure 4 (PNG, SVG), report.md and CSV tables to
@@ -64,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_SOURCE,
         metavar="SPEC",
         help="the virtual participant: participant[:key=value,...] "
-        "(graspguide.study.participant parameters; default: the documented "
+        "(graspguide.participant.model parameters; default: the documented "
         "defaults)",
     )
     p.add_argument(

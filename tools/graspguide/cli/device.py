@@ -182,9 +182,9 @@ class _Usage(Exception):
 
 def _open(args: argparse.Namespace) -> tuple[Any, Any]:
     """(transport, client after HELLO) for --port / --store."""
+    from graspguide.devices.registry import open_port
+    from graspguide.devices.sim import SIM_PORT
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SIM_PORT
-    from graspguide.link.transport import open_port
 
     if args.port == SIM_PORT:
         if not args.store:
@@ -261,7 +261,7 @@ def _act(args: argparse.Namespace, client: Any) -> int:
 def _store_plan(args: argparse.Namespace, client: Any) -> int:
     from graspguide.calibration.calibration_file import describe, read_calibration
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
-    from graspguide.study.study_protocol import load_protocol, participant_number
+    from graspguide.protocol.study_protocol import load_protocol, participant_number
 
     cal = read_calibration(args.calibration) if args.calibration else None
     protocol = load_protocol(args.protocol)
@@ -294,9 +294,9 @@ def _store_plan(args: argparse.Namespace, client: Any) -> int:
 def run(args: argparse.Namespace) -> int:
     from graspguide.hostless.device_log import DeviceLogError
     from graspguide.link.transport import LinkError
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.records import RecordWriteError
-    from graspguide.study.study_protocol import ProtocolFileError
+    from graspguide.protocol.study_protocol import ProtocolFileError
+    from graspguide.records.storage import RecordWriteError
+    from graspguide.run_errors import RunnerError
 
     command = f"device {args.action}"
     if args.action == "erase" and not args.yes:

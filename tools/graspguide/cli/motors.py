@@ -88,11 +88,11 @@ def _trace_line(t_s: float, pwm: tuple[int, ...]) -> str:
 
 @signals_interrupt()  # SIGTERM and SIGHUP switch the motors off like Ctrl-C
 def run(args: argparse.Namespace) -> int:
+    from graspguide.devices.session import DeviceSession
     from graspguide.link.messages import POSE_WATCHDOG_MS
     from graspguide.link.motor_drive import drive_motors
     from graspguide.link.motor_patterns import parse_fingers, parse_pattern
     from graspguide.link.transport import LinkError
-    from graspguide.study.device_session import DeviceSession
 
     parser = args.command_parser
     try:

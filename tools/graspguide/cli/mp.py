@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
     from graspguide.link.transport import LinkError
     from graspguide.mp.deploy import MpToolError
     from graspguide.mp.plan_file import PlanSolveError
-    from graspguide.study.study_protocol import ProtocolFileError
+    from graspguide.protocol.study_protocol import ProtocolFileError
 
     command = f"mp {args.action}"
     try:

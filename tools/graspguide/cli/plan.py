@@ -108,7 +108,7 @@ def plan_bytes(args: argparse.Namespace, protocol: str) -> tuple[bytes, list[Any
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study.study_protocol import ProtocolFileError
+    from graspguide.protocol.study_protocol import ProtocolFileError
 
     for flag, value in (("--protocol", args.protocol), ("--out", args.out)):
         if not value:

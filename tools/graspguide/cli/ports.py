@@ -7,8 +7,8 @@ import argparse
 import json
 import sys
 
+from graspguide.devices.sim import SIM_PORT
 from graspguide.exit_codes import EXIT_OK, fail
-from graspguide.link.sim import SIM_PORT
 from graspguide.link.transport import LinkError
 
 HELP = "list serial ports (and the simulated devices 'sim' and 'promini-sim')"
@@ -25,8 +25,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.link.sim import find_sim_binary
-    from graspguide.link.transport import list_serial_ports
+    from graspguide.devices.registry import list_serial_ports
+    from graspguide.devices.sim import find_sim_binary
 
     try:
         ports = list_serial_ports()
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
             "description": "simulated device (not available)",
             "hwid": str(e).replace("\n", " "),
         }
-    from graspguide.link.promini_sim import PROMINI_SIM_PORT, find_promini_elf
+    from graspguide.devices.promini_sim import PROMINI_SIM_PORT, find_promini_elf
 
     try:
         promini = {

@@ -268,7 +268,7 @@ class MicroPythonEngine:
 
 
 def _micropython_dir() -> str:
-    from graspguide.link.sim import find_repo_root
+    from graspguide.repo_root import find_repo_root
 
     root = find_repo_root()
     if root is None:

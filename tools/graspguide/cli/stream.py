@@ -12,7 +12,7 @@ from graspguide.cli.common import (
     call_with_options,
     signals_interrupt,
 )
-from graspguide.link.sim import SIM_PORT
+from graspguide.devices.sim import SIM_PORT
 
 HELP = "run a trial: stream poses from a source to a device"
 
@@ -32,7 +32,7 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          poses.csv, or its folder as replay:DIR, replays the poses it sent),
          synthetic[:rate=240,duration=10,seed=0] (a scripted hand that turns to align the
          scene's force with gravity),
-         plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.study.sources.TrackerAdapter
+         plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.sources.poses.TrackerAdapter
          subclass that reads the lab's tracker SDK),
          participant[:seed=N,PARAMS] (the virtual participant as a closed loop: it feels
          the motors and turns the hand, as in `graspguide trial`).

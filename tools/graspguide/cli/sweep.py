@@ -1,4 +1,4 @@
-"""`graspguide sweep`: the speed-accuracy trade, simulated (graspguide.study.sweep)."""
+"""`graspguide sweep`: the speed-accuracy trade, simulated (graspguide.planning.sweep)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ Exit status: 0 done, 1 a run failed (its log is named), 2 usage error, 130 inter
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from graspguide.study.sweep import DEFAULT_RATES, DEFAULT_SOURCE, DEFAULT_THRESHOLDS
+    from graspguide.planning.sweep import DEFAULT_RATES, DEFAULT_SOURCE, DEFAULT_THRESHOLDS
 
     add_protocol_argument(p, required=False)
     for name, values, help in (
@@ -95,6 +95,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.study import sweep
+    from graspguide.planning import sweep
 
     return call_with_options(sweep.run, args)

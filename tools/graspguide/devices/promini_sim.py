@@ -21,9 +21,9 @@ import sys
 import tempfile
 from collections.abc import Callable, Sequence
 
-from graspguide.link.sim import DEFAULT_SIM_GRACE, DEFAULT_SIM_START_TIMEOUT, SimulatedDevice
-from graspguide.link.sim import find_repo_root as _find_repo_root
+from graspguide.devices.sim import DEFAULT_SIM_GRACE, DEFAULT_SIM_START_TIMEOUT, SimulatedDevice
 from graspguide.link.transport import DEFAULT_BAUDRATE, DeviceNotFound, LinkError, SimNotBuilt
+from graspguide.repo_root import find_repo_root as _find_repo_root
 
 PROMINI_SIM_PORT = "promini-sim"
 PROMINI_ELF_ENV = "GRASPGUIDE_PROMINI_ELF"

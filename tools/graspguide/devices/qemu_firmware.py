@@ -1,5 +1,5 @@
 """The cross-compiled firmware (`pio run -e m4f_firmware`, in its own build folder:
-graspguide.link.device_builds) on QEMU's mps2-an386
+graspguide.devices.builds) on QEMU's mps2-an386
 (Cortex-M4F) as a device, for ``--port qemu``.
 
 :class:`QemuFirmware` starts ``qemu-system-arm`` on the ELF with UART0 on a host
@@ -26,7 +26,7 @@ import tempfile
 import time
 from typing import IO, Any
 
-from graspguide.link.sim import die_with_parent, find_repo_root
+from graspguide.devices.sim import die_with_parent
 from graspguide.link.transport import (
     DEFAULT_BAUDRATE,
     ChildPtyTransport,
@@ -37,12 +37,13 @@ from graspguide.link.transport import (
     SerialTransport,
     SimNotBuilt,
 )
+from graspguide.repo_root import find_repo_root
 
 QEMU_PORT = "qemu"
 QEMU_FIRMWARE_ENV = "GRASPGUIDE_M4F_FIRMWARE"
 QEMU_MACHINE = "mps2-an386"
 QEMU_BOARD_NAME = "qemu-mps2-an386"  # the firmware's HELLO_REPLY board
-# Its own build folder (graspguide.link.device_builds): no other env's build deletes it.
+# Its own build folder (graspguide.devices.builds): no other env's build deletes it.
 FIRMWARE_RELATIVE_PATH = os.path.join(".pio", "build-m4f_firmware", "m4f_firmware", "firmware.elf")
 DEFAULT_START_TIMEOUT = 10.0
 MOTOR_REGISTERS_SYMBOL = "m4f_pwm_ccr"
@@ -66,7 +67,7 @@ def find_qemu() -> str:
 
 def firmware_build_command(root: str) -> str:
     """The shell command that builds the firmware in the repository ``root``."""
-    from graspguide.link.device_builds import M4F_FIRMWARE
+    from graspguide.devices.builds import M4F_FIRMWARE
 
     return M4F_FIRMWARE.command(root)
 
@@ -95,7 +96,7 @@ def find_firmware_elf(path: str | None = None, build: bool = False) -> str:
         )
     elf = os.path.join(root, FIRMWARE_RELATIVE_PATH)
     if build and not os.path.isfile(elf):
-        from graspguide.link.device_builds import M4F_FIRMWARE, ensure_built
+        from graspguide.devices.builds import M4F_FIRMWARE, ensure_built
 
         ensure_built(M4F_FIRMWARE, root)
     if not os.path.isfile(elf):

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import sys
 
+from graspguide.devices.registry import open_port
 from graspguide.link.client import DeviceClient
 from graspguide.link.messages import DeviceState
-from graspguide.link.transport import LinkError, open_port
+from graspguide.link.transport import LinkError
 
 # How long the device's state is awaited after STOP: a confirmation, not worth a long wait.
 STATE_TIMEOUT_S = 1.0

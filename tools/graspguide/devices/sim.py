@@ -1,5 +1,5 @@
 """The simulated device (src/boards/posix_sim, built by ``pio run -e sim`` into its own
-build folder, graspguide.link.device_builds) as a
+build folder, graspguide.devices.builds) as a
 :class:`~graspguide.link.transport.Transport`: :class:`SimulatedDevice` starts the
 process, reads the pseudo-terminal path it prints, talks to it through a SerialTransport
 and, on close, stops it (SIGTERM, then SIGKILL). It is a context manager.
@@ -30,10 +30,11 @@ from graspguide.link.transport import (
     SerialTransport,
     SimNotBuilt,
 )
+from graspguide.repo_root import find_repo_root
 
 SIM_PORT = "sim"
 SIM_ENV = "GRASPGUIDE_SIM"
-# Its own build folder (graspguide.link.device_builds): no other env's build deletes it.
+# Its own build folder (graspguide.devices.builds): no other env's build deletes it.
 SIM_RELATIVE_PATH = os.path.join(".pio", "build-sim", "sim", "program")
 SIM_READY_PREFIX = "GRASPGUIDE_SIM_PTY "
 # The simulated device prints its pty path within a few milliseconds of its start
@@ -48,45 +49,9 @@ PR_SET_PDEATHSIG = 1  # <sys/prctl.h>
 # --------------------------------------------------------------------------------------
 # Simulated device
 # --------------------------------------------------------------------------------------
-def _candidate_roots() -> list[str]:
-    """Directories that may be the repository: the working directory and its parents,
-    the parent of the virtual environment (the repo keeps .venv at its top), and the
-    package's own parents (a source checkout)."""
-    roots: list[str] = []
-
-    def walk(start: str) -> None:
-        d = os.path.abspath(start)
-        while True:
-            if d not in roots:
-                roots.append(d)
-            parent = os.path.dirname(d)
-            if parent == d:
-                return
-            d = parent
-
-    try:
-        walk(os.getcwd())
-    except OSError:  # pragma: no cover - cwd deleted
-        pass
-    roots.append(os.path.dirname(os.path.abspath(sys.prefix)))
-    walk(os.path.dirname(os.path.abspath(__file__)))
-    return roots
-
-
-def find_repo_root() -> str | None:
-    """The GraspGuide repository (a directory with platformio.ini and lib/graspguide_link),
-    or None."""
-    for root in _candidate_roots():
-        if os.path.isfile(os.path.join(root, "platformio.ini")) and os.path.isdir(
-            os.path.join(root, "lib", "graspguide_link")
-        ):
-            return root
-    return None
-
-
 def sim_build_command(root: str) -> str:
     """The shell command that builds the simulated device in the repository ``root``."""
-    from graspguide.link.device_builds import SIM
+    from graspguide.devices.builds import SIM
 
     return SIM.command(root)
 
@@ -116,7 +81,7 @@ def find_sim_binary(path: str | None = None, build: bool = False) -> str:
         )
     binary = os.path.join(root, SIM_RELATIVE_PATH)
     if build and not os.path.isfile(binary):
-        from graspguide.link.device_builds import SIM, ensure_built
+        from graspguide.devices.builds import SIM, ensure_built
 
         ensure_built(SIM, root)
     if not (os.path.isfile(binary) and os.access(binary, os.X_OK)):
@@ -353,7 +318,6 @@ class SimulatedDevice(ChildPtyTransport):
 __all__ = [
     "SimulatedDevice",
     "find_sim_binary",
-    "find_repo_root",
     "sim_build_command",
     "die_with_parent",
     "SIM_PORT",

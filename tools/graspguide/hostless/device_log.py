@@ -40,7 +40,7 @@ from typing import Any, TextIO
 
 from graspguide.link.client import to_f32
 from graspguide.link.messages import CAPABILITY_HOSTLESS, LogInfo, LogRecord, WrenchClass
-from graspguide.study.records import (
+from graspguide.records.storage import (
     JsonlDamaged,
     RecordWriteError,
     dumps_record,

@@ -23,7 +23,7 @@ from graspguide.link.messages import (
     PlanTrial,
     WrenchClass,
 )
-from graspguide.study.study_protocol import (
+from graspguide.protocol.study_protocol import (
     PlannedTrial,
     Protocol,
     draw_familiarization_wrenches,

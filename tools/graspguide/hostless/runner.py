@@ -46,10 +46,10 @@ import numpy as np
 from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.hostless.imu_world import ImuWorld, unit_quaternion
 from graspguide.imu.synthetic import ImuNoise
-from graspguide.study.errors import RunnerError
+from graspguide.protocol.study_protocol import PlannedTrial, Protocol, derive_seed
+from graspguide.run_errors import RunnerError
 from graspguide.study.progress import Progress
 from graspguide.study.runner import RESULT_MARGIN_S, StudyRunner, append_line, read_run_jsonl
-from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
 
 #: Rest before each trial's ready pattern [s] (the plan's rest_s; the schema allows 0..600).
 DEFAULT_REST_S = 2.0
@@ -772,6 +772,8 @@ def hostless_trial_command(
     from graspguide.calibration.calibration_file import (
         describe as describe_calibration,
     )
+    from graspguide.devices.registry import open_port
+    from graspguide.devices.sim import SIM_PORT
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -781,11 +783,14 @@ def hostless_trial_command(
         report,
     )
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SIM_PORT
-    from graspguide.link.transport import LinkError, open_port
+    from graspguide.link.transport import LinkError
+    from graspguide.protocol.study_protocol import (
+        ProtocolFileError,
+        load_protocol,
+        participant_number,
+    )
+    from graspguide.sources.trial_sources import open_runner_source
     from graspguide.study.runner import summary_lines
-    from graspguide.study.study_protocol import ProtocolFileError, load_protocol, participant_number
-    from graspguide.study.trial_sources import open_runner_source
 
     try:
         if port != SIM_PORT:

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graspguide.core import _core
-from graspguide.study.participant import VirtualParticipant
-from graspguide.study.study_protocol import Protocol, draw_wrenches, load_protocol
+from graspguide.participant.model import VirtualParticipant
+from graspguide.protocol.study_protocol import Protocol, draw_wrenches, load_protocol
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 #: Noise densities of a common low-cost 6-axis part (InvenSense MPU-6050 datasheet:

@@ -1,7 +1,7 @@
 """Talk to a GraspGuide device (a board or the simulated device) over the serial protocol
 of docs/protocol.md.
 
->>> from graspguide.link.transport import open_port
+>>> from graspguide.devices.registry import open_port
 >>> from graspguide.link.client import DeviceClient
 >>> with DeviceClient(open_port("sim")) as dev:
 ...     info = dev.hello()

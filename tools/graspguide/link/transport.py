@@ -6,12 +6,11 @@ device behind it. Two implementations:
 
 * :class:`SerialTransport` -- any serial port pyserial opens (``/dev/ttyACM0``, ``COM3``,
   a pseudo-terminal), 115200 baud by default;
-* :class:`graspguide.link.sim.SimulatedDevice` -- the simulated device's process, talked
+* :class:`graspguide.devices.sim.SimulatedDevice` -- the simulated device's process, talked
   to through a SerialTransport (its own module: launching and reaping a process).
 
-:func:`open_port` opens one from a ``--port`` value: ``"sim"``, ``"promini-sim"`` (the Pro
-Mini sketch under simavr, :mod:`graspguide.link.promini_sim`), ``"qemu"`` (the firmware on
-QEMU, :mod:`graspguide.link.qemu_firmware`) or a port path.
+:func:`graspguide.devices.registry.open_port` opens one from a ``--port`` value; this
+module knows none of the devices behind it.
 
 Every failure is a :class:`LinkError` subclass that says what to do about it:
 :class:`DeviceNotFound` (no such port, simulated device not built), :class:`LinkTimeout`,
@@ -87,7 +86,7 @@ class Transport(abc.ABC):
 # --------------------------------------------------------------------------------------
 # Serial port
 # --------------------------------------------------------------------------------------
-def _import_serial():
+def import_serial():
     try:
         import serial  # noqa: F401
     except ImportError as e:  # pragma: no cover - pyserial is a dependency
@@ -112,7 +111,7 @@ class SerialTransport(Transport):
         flush_on_open: bool = True,
         exclusive: bool | None = None,
     ):
-        serial = _import_serial()
+        serial = import_serial()
         self.name = port
         self.port = port
         self.baudrate = baudrate
@@ -167,7 +166,7 @@ class SerialTransport(Transport):
         return self._ser
 
     def write(self, data: bytes) -> None:
-        serial = _import_serial()
+        serial = import_serial()
         if not data:
             return
         try:
@@ -201,7 +200,7 @@ class SerialTransport(Transport):
         self.bytes_written += len(data)
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
-        serial = _import_serial()
+        serial = import_serial()
         if max_bytes <= 0:
             return b""
         timeout = max(0.0, float(timeout))
@@ -278,46 +277,11 @@ class ChildPtyTransport(Transport):
             raise self._gone("reading", e) from e
 
 
-def open_port(port: str, baudrate: int = DEFAULT_BAUDRATE, **kwargs) -> Transport:
-    """A started Transport for a ``--port`` value: ``"sim"`` starts the simulated device
-    (keyword arguments go to :class:`SimulatedDevice`: virtual_clock, trace, stale_ms,
-    binary, start_timeout, store), ``"promini-sim"`` the Pro Mini sketch under simavr
-    (keyword arguments go to :class:`ProMiniSimDevice`: elf, trace, motors, marks, stats,
-    fast), ``"qemu"`` the m4f firmware on QEMU (keyword arguments go to
-    :class:`QemuFirmwareDevice`: elf, start_timeout), anything else opens that serial port
-    (keyword arguments go to :class:`SerialTransport`). Close it (or use ``with``) when
-    done."""
-    if not port:
-        raise DeviceNotFound(
-            "no port given: use --port PATH (see `graspguide ports`) or --port sim"
-        )
-    from graspguide.link import promini_sim, qemu_firmware, sim  # they import this module
-
-    if port == sim.SIM_PORT:
-        return sim.SimulatedDevice(baudrate=baudrate, **kwargs).start()
-    if port == promini_sim.PROMINI_SIM_PORT:
-        return promini_sim.ProMiniSimDevice(baudrate=baudrate, **kwargs).start()
-    if port == qemu_firmware.QEMU_PORT:
-        return qemu_firmware.QemuFirmwareDevice(baudrate=baudrate, **kwargs).start()
-    return SerialTransport(port, baudrate=baudrate, **kwargs)
-
-
-def list_serial_ports() -> list[dict]:
-    """The serial ports pyserial finds: dicts with device, description, hwid."""
-    _import_serial()
-    from serial.tools import list_ports
-
-    out = []
-    for p in sorted(list_ports.comports(), key=lambda p: p.device):
-        out.append({"device": p.device, "description": p.description or "", "hwid": p.hwid or ""})
-    return out
-
-
 __all__ = [
     "Transport",
     "SerialTransport",
-    "open_port",
-    "list_serial_ports",
+    "ChildPtyTransport",
+    "import_serial",
     "LinkError",
     "DeviceNotFound",
     "SimNotBuilt",

@@ -82,7 +82,7 @@ def find_port_dir(src: str | None = None) -> Path:
     if src is not None:
         d = Path(src)
     else:
-        from graspguide.link.sim import find_repo_root
+        from graspguide.repo_root import find_repo_root
 
         root = find_repo_root()
         if root is None:
@@ -203,7 +203,7 @@ def check_port(port: str) -> None:
 
 def _serial_ports() -> list[dict[str, str]]:
     try:
-        from graspguide.link.transport import list_serial_ports
+        from graspguide.devices.registry import list_serial_ports
 
         return list_serial_ports()
     except Exception:  # pyserial missing or failing: the message does without the list

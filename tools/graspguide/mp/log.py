@@ -24,9 +24,9 @@ def download_board_log(
     """Copies the store from the board on ``port`` and writes its records into
     ``out_dir/<participant>/`` (graspguide.hostless.device_log). Returns the download's
     summary; MpToolError when mpremote fails, DeviceLogError/LinkError as device log."""
+    from graspguide.devices.registry import open_port
     from graspguide.hostless.device_log import download_log
     from graspguide.link.client import DeviceClient
-    from graspguide.link.transport import open_port
 
     with tempfile.TemporaryDirectory(prefix="graspguide-mp-log-") as tmp:
         local = Path(tmp) / "store.bin"

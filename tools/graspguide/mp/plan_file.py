@@ -200,7 +200,7 @@ def plan_file_for(
     ``calibration`` (the identity when None): the same plan ``graspguide device plan``
     uploads (graspguide.hostless.plan_upload)."""
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
-    from graspguide.study.study_protocol import load_protocol, participant_number
+    from graspguide.protocol.study_protocol import load_protocol, participant_number
 
     protocol = load_protocol(protocol_path)
     participant_number(participant)

@@ -2,7 +2,7 @@
 
 For every modality of the protocol (F+C, Fperp+C, F+V, Fperp+V by default) it runs the
 study protocol (default ``protocols/paper.toml``) again at other alignment thresholds and
-other pose rates, with the virtual participant (:mod:`graspguide.study.participant`, a model,
+other pose rates, with the virtual participant (:mod:`graspguide.participant.model`, a model,
 never human data) on the simulated device (virtual clock), and reports success rate and
 completion time against each.
 
@@ -62,7 +62,7 @@ DEFAULT_THRESHOLDS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0)
 DEFAULT_RATES = (30.0, 60.0, 100.0, 240.0)
 DEFAULT_SOURCE = "participant"
 SIMULATED_NOTE = (
-    "SIMULATED: virtual participants (graspguide.study.participant, a model of a "
+    "SIMULATED: virtual participants (graspguide.participant.model, a model of a "
     "person) on the simulated device; not human data"
 )
 
@@ -176,7 +176,7 @@ def derive_protocol(
 ):
     """The protocol of one point: ``base`` with the threshold and pose rate changed,
     ``wrenches`` wrenches (single-motor share scaled), no familiarization trials."""
-    from graspguide.study.study_protocol import ProtocolFileError
+    from graspguide.protocol.study_protocol import ProtocolFileError
 
     if threshold_deg >= base.start_error_deg[0]:
         raise SweepError(
@@ -299,7 +299,7 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def read_point_trials(study_dir: str, participants: Sequence[str]) -> list[dict[str, Any]]:
-    from graspguide.study.records import read_jsonl
+    from graspguide.records.storage import read_jsonl
 
     out: list[dict[str, Any]] = []
     for pid in participants:
@@ -588,9 +588,9 @@ def run_sweep(
     err=None,
 ) -> tuple[int, dict[str, Any] | None]:
     """Run (or resume) the sweep into ``out``; returns (exit status, result dict)."""
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.study_protocol import load_protocol, plan
-    from graspguide.study.trial_sources import open_runner_source
+    from graspguide.protocol.study_protocol import load_protocol, plan
+    from graspguide.run_errors import RunnerError
+    from graspguide.sources.trial_sources import open_runner_source
 
     err = err or sys.stderr
     t0 = time.monotonic()
@@ -786,8 +786,8 @@ def run(
     """`graspguide sweep` with its options as given on the command line (lists as
     comma-separated text); writes OUT/sweep.json, OUT/sweep.png and prints the table.
     Returns the exit code."""
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.study_protocol import POSE_RATE_HZ, ProtocolFileError
+    from graspguide.protocol.study_protocol import POSE_RATE_HZ, ProtocolFileError
+    from graspguide.run_errors import RunnerError
 
     command = command_line(
         protocol, thresholds, rates, grid, modalities, contacts, participants, wrenches, source, out

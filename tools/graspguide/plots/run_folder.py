@@ -2,7 +2,7 @@
 ``PID/trials.jsonl``, ``PID/frames/trial-NNNN.csv``; a participant folder alone is read
 with its parent's ``study.json``) or a session folder written by `graspguide stream --log`
 (``config.json``, ``telemetry.csv``, ``poses.csv``, ``results.jsonl``). The formats are in
-docs/study.md and :mod:`graspguide.study.records`.
+docs/study.md and :mod:`graspguide.records.storage`.
 
 Every problem is a :class:`PlotInputError` whose message names the file (and line) and
 says what to do; ``usage`` ones (no such folder, trial or participant) exit 2, damaged
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from graspguide.core.vocabulary import FINGERS, MODALITIES, modality
-from graspguide.study.records import JsonlDamaged, LeftOutLine, complete_records
+from graspguide.records.storage import JsonlDamaged, LeftOutLine, complete_records
 
 STUDY_FILE = "study.json"
 TRIALS_FILE = "trials.jsonl"

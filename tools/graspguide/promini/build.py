@@ -65,7 +65,7 @@ class SketchBuild:
 
 
 def repo_root() -> Path:
-    from graspguide.link.sim import find_repo_root
+    from graspguide.repo_root import find_repo_root
 
     root = find_repo_root()
     if root is None:

@@ -43,7 +43,7 @@ from typing import Any
 
 from graspguide.core.units import UNITS, hand_span_problem
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, FINGERS, MODES, POLICIES
-from graspguide.study.toml_file import load_toml
+from graspguide.protocol.toml_file import load_toml
 
 TRIAL_DEFAULTS = {"threshold_deg": 3.0, "hold_s": 0.5, "timeout_s": 90.0}
 

@@ -37,14 +37,14 @@ from typing import Any
 
 from graspguide.core.units import UNITS, hand_span_problem, moment_unit_problem
 from graspguide.core.vocabulary import CONSTRAINT_MODELS, FINGERS, MODALITIES
-from graspguide.study.scene_file import (
+from graspguide.protocol.scene_file import (
     TRIAL_DEFAULTS,
     canonical_json,
     check_trial_fields,
     config_hash,
     file_unit_fix,
 )
-from graspguide.study.toml_file import load_toml
+from graspguide.protocol.toml_file import load_toml
 
 MODALITY_ORDERS = ("balanced_latin_square", "random", "fixed")
 CONTACT_ORDERS = ("alternate", "fixed")

@@ -7,8 +7,8 @@ import json
 from collections.abc import Callable, Sequence
 from typing import Any, TextIO
 
-from graspguide.study.errors import RunnerError
-from graspguide.study.study_protocol import Session
+from graspguide.protocol.study_protocol import Session
+from graspguide.run_errors import RunnerError
 
 TLX_SCALES = ("MD", "TD", "PD", "PE", "EF", "FR")
 TLX_NAMES = {

@@ -11,7 +11,7 @@ loss too):
 * ``scene.json`` -- the normalised scene (metres, defaults filled in);
 * ``device.json`` -- the device's HELLO_REPLY;
 * ``config.json`` -- scene, wrench, source, port, trial id and ``config_hash`` (sha256 of
-  the canonical JSON of scene + wrench, see :mod:`graspguide.study.scene_file`);
+  the canonical JSON of scene + wrench, see :mod:`graspguide.protocol.scene_file`);
 * ``poses.csv`` -- POSEs sent: ``send_time_s,host_time_us,t_s,qw,qx,qy,qz,has_contacts``;
 * ``telemetry.csv`` -- TELEMETRY received: ``recv_time_s,host_time_us,error_deg,alpha,
   pwm0..pwm3,constraints_used,solver_status,iterations,flags,compute_time_us``;

@@ -2,7 +2,7 @@
 float32 sample per TELEMETRY) and a marker stream (one string per trial event), so EEG,
 EMG and eye-tracking recordings (LabRecorder) can be aligned with the guidance.
 
-:class:`LabStreams` is a :class:`graspguide.study.trial_events.TrialObserver`: `stream`
+:class:`LabStreams` is a :class:`graspguide.records.events.TrialObserver`: `stream`
 and `trial` hand it their events and TELEMETRY and do not know LSL otherwise.
 """
 

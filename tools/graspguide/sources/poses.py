@@ -175,7 +175,7 @@ TRACKER_PRESETS: dict[str, TrackerConvention] = {
 class Source:
     """Iterable of samples; ``rate_hz`` is the nominal rate (None if unknown);
     ``simulated``: the poses do not come from a live person (a scripted hand, a replayed
-    file), see :func:`graspguide.study.trial_sources.simulation`."""
+    file), see :func:`graspguide.sources.trial_sources.simulation`."""
 
     name = "source"
     rate_hz: float | None = None
@@ -352,7 +352,7 @@ def _replay_columns(path: str, header: list[str]) -> _Columns:
     """Where a replay file's columns are, by name (see :class:`ReplaySource`): t_s, qw,
     qx, qy, qz, the contact columns of 3 or 4 fingers in order, and a session log's own
     columns (records.POSE_COLUMNS), which are read past; any other name is refused."""
-    from graspguide.study.records import POSE_COLUMNS
+    from graspguide.records.storage import POSE_COLUMNS
 
     log_only = [c for c in POSE_COLUMNS if c not in QUAT_COLUMNS]
     names = {}
@@ -549,7 +549,7 @@ def _open_plugin(rest: str) -> Source:
     if not (isinstance(cls, type) and issubclass(cls, TrackerAdapter)):
         raise SourceError(
             f"plugin: {module_name}.{class_name} must be a "
-            "graspguide.study.sources.TrackerAdapter subclass"
+            "graspguide.sources.poses.TrackerAdapter subclass"
         )
     return cls(arg) if arg else cls()
 

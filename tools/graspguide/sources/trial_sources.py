@@ -9,8 +9,8 @@ import importlib
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from graspguide.study.errors import RunnerError
-from graspguide.study.study_protocol import PlannedTrial, Protocol, derive_seed
+from graspguide.protocol.study_protocol import PlannedTrial, Protocol, derive_seed
+from graspguide.run_errors import RunnerError
 
 #: What a source kind is when it is simulated (the words of the SIMULATED label).
 _SIMULATED_SOURCES = {
@@ -23,9 +23,9 @@ _SIMULATED_SOURCES = {
 
 def simulated_device(port: str | None) -> str | None:
     """What the device at ``port`` is when it is a simulation of one, else None."""
-    from graspguide.link.promini_sim import PROMINI_SIM_PORT
-    from graspguide.link.qemu_firmware import QEMU_PORT
-    from graspguide.link.sim import SIM_PORT
+    from graspguide.devices.promini_sim import PROMINI_SIM_PORT
+    from graspguide.devices.qemu_firmware import QEMU_PORT
+    from graspguide.devices.sim import SIM_PORT
 
     return {
         SIM_PORT: "the simulated device (--port sim), not a board",
@@ -54,7 +54,7 @@ def participant_keys(seed: bool) -> list[str]:
     one (`stream`; `trial` derives it from the protocol and the participant)."""
     from dataclasses import fields
 
-    from graspguide.study.participant import ParticipantParams
+    from graspguide.participant.model import ParticipantParams
 
     keys = [f.name for f in fields(ParticipantParams)] + ["fingers"]
     return ["seed", *keys] if seed else keys
@@ -163,23 +163,17 @@ class OpenLoopSource(RunnerSource):
 
 def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
     """The source of ``--source SPEC`` for this protocol and participant."""
-    from graspguide.study.sources import (
-        SourceError,
-        SyntheticSource,
-        TrackerAdapter,
-        open_source,
-    )
+    from graspguide.sources.poses import SourceError, SyntheticSource, TrackerAdapter, open_source
 
     kind, _, rest = spec.partition(":")
     seed = derive_seed(protocol.seed, "source", participant) % 2**32
     if kind == "participant":
         try:
-            mod = importlib.import_module(".participant", __package__)
-            cls = mod.VirtualParticipant
-        except (ImportError, AttributeError) as e:
+            from graspguide.participant.model import VirtualParticipant as cls
+        except ImportError as e:
             raise RunnerError(
                 f"--source {spec}: the virtual participant "
-                f"(graspguide.study.participant.VirtualParticipant) is not available: "
+                f"(graspguide.participant.model.VirtualParticipant) is not available: "
                 f"{e}",
                 usage=True,
             ) from None
@@ -253,7 +247,7 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             False,
             base.describe(),
         )
-    from graspguide.study.sources import unknown_source
+    from graspguide.sources.poses import unknown_source
 
     raise RunnerError(f"--source: {unknown_source(spec)}", usage=True)
 

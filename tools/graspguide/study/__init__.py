@@ -1,2 +1,2 @@
-"""Studies: scene and study-protocol files, pose sources, the virtual participant, the
-session loop and its records, the runner, demo, sweep and analysis."""
+"""Running a study: the trial runner, the stream session, the pose loop, the demo, the
+dry run, the operator console and the live view, and the job pool they share."""

@@ -1,8 +1,8 @@
 """`graspguide demo`: the paper's user study end to end, SIMULATED.
 
 One command runs the simulated device (virtual clock) and N virtual participants (U1..UN,
-:class:`graspguide.study.participant.VirtualParticipant`) through a study protocol (default
-``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.study.analysis`): it
+:class:`graspguide.participant.model.VirtualParticipant`) through a study protocol (default
+``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.analysis.paper_tables`): it
 prints Tables I-II and the repeated-measures ANOVA line and writes Figure 4 (PNG, SVG),
 the Markdown report and the CSV tables to ``OUT/analysis/``.
 
@@ -55,8 +55,8 @@ class HostlessTrialJob(TrialJob):
 
 def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
     """(completed trials, planned trials, complete incl. TLX) of a participant."""
-    from graspguide.study.records import read_jsonl
-    from graspguide.study.study_protocol import plan, session_order
+    from graspguide.protocol.study_protocol import plan, session_order
+    from graspguide.records.storage import read_jsonl
 
     planned = len(plan(protocol, pid))
     pdir = os.path.join(out, pid)
@@ -85,9 +85,9 @@ def run(
     logs/demo-study, logs/demo-hostless with ``hostless``), ``jobs`` at a time (default
     the CPU count), host-less on the simulated device with ``hostless``, then the
     analysis. Returns the exit code."""
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.study_protocol import ProtocolFileError, load_protocol
-    from graspguide.study.trial_sources import open_runner_source
+    from graspguide.protocol.study_protocol import ProtocolFileError, load_protocol
+    from graspguide.run_errors import RunnerError
+    from graspguide.sources.trial_sources import open_runner_source
 
     t0 = time.monotonic()
     protocol_path = protocol or default_protocol()
@@ -196,7 +196,7 @@ def _run_participants(
 
 
 def _analyse(out: str, run_s: float, t0: float) -> int:
-    from graspguide.study.analysis import AnalysisError, analyze, summary_text, write_outputs
+    from graspguide.analysis.paper_tables import AnalysisError, analyze, summary_text, write_outputs
 
     target = os.path.join(out, "analysis")
     try:

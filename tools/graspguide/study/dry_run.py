@@ -6,8 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from graspguide.study.progress import format_duration
-from graspguide.study.study_protocol import (
+from graspguide.protocol.study_protocol import (
     PlannedTrial,
     Protocol,
     draw_familiarization_wrenches,
@@ -15,7 +14,8 @@ from graspguide.study.study_protocol import (
     plan,
     session_order,
 )
-from graspguide.study.tlx import TLX_SCALES, tlx_scale_text
+from graspguide.protocol.tlx import TLX_SCALES, tlx_scale_text
+from graspguide.study.progress import format_duration
 
 
 def estimate_s(
@@ -72,12 +72,12 @@ def dry_run_lines(protocol: Protocol, participant: str, rest_s: float) -> list[s
 def dry_run_command(*, protocol: str, participant: str, rest_s: float | None) -> int:
     """Print the dry run; the exit code (2 for a bad protocol or participant)."""
     from graspguide.exit_codes import EXIT_OK, EXIT_USAGE, report
-    from graspguide.study.runner import PERSON_REST_S
-    from graspguide.study.study_protocol import (
+    from graspguide.protocol.study_protocol import (
         ProtocolFileError,
         load_protocol,
         participant_number,
     )
+    from graspguide.study.runner import PERSON_REST_S
 
     try:
         loaded = load_protocol(protocol)

@@ -47,7 +47,7 @@ class TrialJob:
 
 def repo_root() -> str | None:
     try:
-        from graspguide.link.sim import find_repo_root
+        from graspguide.repo_root import find_repo_root
 
         return find_repo_root()
     except Exception:  # pragma: no cover - informational default only
@@ -87,7 +87,7 @@ def run_trial_jobs(
     def _interrupt(signum, frame):
         raise KeyboardInterrupt
 
-    from graspguide.link.sim import die_with_parent
+    from graspguide.devices.sim import die_with_parent
 
     # A pool killed with SIGKILL leaves no runner holding a participant's folder.
     preexec = die_with_parent()

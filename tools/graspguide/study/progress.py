@@ -8,7 +8,7 @@ import time
 from collections.abc import Sequence
 from typing import Any, TextIO
 
-from graspguide.study.study_protocol import PlannedTrial
+from graspguide.protocol.study_protocol import PlannedTrial
 
 
 class Progress:

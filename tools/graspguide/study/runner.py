@@ -1,4 +1,4 @@
-"""`graspguide trial`: run a participant's planned trials (graspguide.study.study_protocol) through
+"""`graspguide trial`: run a participant's planned trials (protocol.study_protocol) through
 a device, log every trial and frame, ask the NASA-TLX after each session, and resume after
 a crash or Ctrl-C without repeating or losing a completed trial.
 
@@ -27,7 +27,7 @@ ready prompt before each, and the operator's keys during a trial (p pause: STOP,
 trial restarts from scratch on Enter; r redo and s skip with a typed reason; n a note);
 the closed loop then always runs in lockstep. Without a console nothing of this runs and
 the fast path is the one described below (``rest_s``, 0 by default, still sleeps between
-trials). :class:`graspguide.study.trial_events.TrialObserver` objects get the run's events
+trials). :class:`graspguide.records.events.TrialObserver` objects get the run's events
 and every TELEMETRY.
 
 Resume: completed ``trial_index`` values in trials.jsonl are skipped. A last line without
@@ -38,8 +38,8 @@ one stops the run (it needs a person to look).
 Sources (``--source``): ``synthetic[:...]`` and ``replay:FILE`` (open loop: the hand moves
 whatever the motors do; after the source ends its last pose is held until the device
 ends the trial), ``participant[:PARAMS]`` (the virtual participant,
-``graspguide.study.participant.VirtualParticipant.from_spec(PARAMS, seed)``), and
-``plugin:MODULE:CLASS[:ARG]``: a :class:`graspguide.study.sources.TrackerAdapter` (a live
+``graspguide.participant.model.VirtualParticipant.from_spec(PARAMS, seed)``), and
+``plugin:MODULE:CLASS[:ARG]``: a :class:`graspguide.sources.poses.TrackerAdapter` (a live
 tracker, a person: real time, TLX asked) or a closed-loop class. A closed-loop source has
 ``rate_hz``, ``SIMULATED``, ``begin_trial(*, contacts, y_axis, wrench, policy, mode,
 start_quat)`` and ``step(t_s, pwm) -> quat (w, x, y, z)``; it runs in lockstep with the
@@ -74,7 +74,39 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TextIO
 
 from graspguide.core.motor_calibration import MotorCalibration
-from graspguide.study.errors import RunnerError
+from graspguide.protocol.study_protocol import (
+    PlannedTrial,
+    Protocol,
+    Session,
+    draw_familiarization_wrenches,
+    draw_wrenches,
+    plan,
+    session_order,
+)
+from graspguide.protocol.tlx import TLX_SCALES, ask_tlx
+from graspguide.records.events import (
+    NOTE,
+    PAUSE,
+    REDO,
+    RESUME,
+    SESSION_START,
+    SKIP,
+    STUDY_END,
+    TRIAL_END,
+    TRIAL_START,
+    TrialObserver,
+)
+from graspguide.records.storage import (
+    GUIDANCE_COLUMNS,
+    JsonlDamaged,
+    RecordWriteError,
+    append_json_line,
+    read_jsonl,
+    set_aside_damaged_tail,
+    write_json_file,
+)
+from graspguide.run_errors import RunnerError
+from graspguide.sources.trial_sources import RunnerSource
 from graspguide.study.pose_loop import (
     Diverged,
     LockstepPoses,
@@ -87,38 +119,6 @@ from graspguide.study.pose_loop import (
     pipeline_window,
 )
 from graspguide.study.progress import Progress, format_duration, time_left_s
-from graspguide.study.records import (
-    GUIDANCE_COLUMNS,
-    JsonlDamaged,
-    RecordWriteError,
-    append_json_line,
-    read_jsonl,
-    set_aside_damaged_tail,
-    write_json_file,
-)
-from graspguide.study.study_protocol import (
-    PlannedTrial,
-    Protocol,
-    Session,
-    draw_familiarization_wrenches,
-    draw_wrenches,
-    plan,
-    session_order,
-)
-from graspguide.study.tlx import TLX_SCALES, ask_tlx
-from graspguide.study.trial_events import (
-    NOTE,
-    PAUSE,
-    REDO,
-    RESUME,
-    SESSION_START,
-    SKIP,
-    STUDY_END,
-    TRIAL_END,
-    TRIAL_START,
-    TrialObserver,
-)
-from graspguide.study.trial_sources import RunnerSource
 
 FRAME_COLUMNS = [
     "t_s",
@@ -1062,7 +1062,7 @@ def _frame_rows(stamped: Sequence[Stamped], tels: Sequence[Any]) -> str:
 
 def _feel_lag_error() -> Any:
     try:
-        from graspguide.study.participant import FeelLagError
+        from graspguide.participant.model import FeelLagError
     except ImportError:  # pragma: no cover
         return RuntimeError
     return FeelLagError
@@ -1102,7 +1102,7 @@ def trial_command(
     the device at ``port`` into ``out``, poses from the source spec ``source``, the
     NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
     stopped; STOP on every way out. ``lsl``: publish the run as the LSL streams
-    LSL-Telemetry and LSL-Markers (graspguide.study.lab_streams), after waiting up to
+    LSL-Telemetry and LSL-Markers (graspguide.sources.lab_streams), after waiting up to
     ``lsl_wait`` s for a recorder. With a person (a source not SIMULATED, or
     ``operator``) and a terminal on stdin: the ready prompt, the rest (``rest_s``, default
     PERSON_REST_S; 0 for a simulated source) and the operator's keys. Returns the exit
@@ -1113,6 +1113,8 @@ def trial_command(
         load_participant_calibration,
     )
     from graspguide.calibration.calibration_file import describe as describe_calibration
+    from graspguide.devices.session import DeviceSession
+    from graspguide.devices.sim import SIM_PORT
     from graspguide.exit_codes import (
         EXIT_FAILURE,
         EXIT_INTERRUPTED,
@@ -1121,16 +1123,14 @@ def trial_command(
         fail,
         report,
     )
-    from graspguide.link.sim import SIM_PORT
     from graspguide.link.transport import LinkError
-    from graspguide.study.device_session import DeviceSession
-    from graspguide.study.study_protocol import (
+    from graspguide.protocol.study_protocol import (
         ProtocolFileError,
         load_protocol,
         participant_number,
     )
-    from graspguide.study.tlx import load_tlx_file
-    from graspguide.study.trial_sources import open_runner_source, simulation
+    from graspguide.protocol.tlx import load_tlx_file
+    from graspguide.sources.trial_sources import open_runner_source, simulation
 
     protocol_file, source_spec, tlx_file = protocol, source, tlx
     try:
@@ -1177,7 +1177,7 @@ def trial_command(
     virtual_clock = port == SIM_PORT and poses.simulated and not poses.live
     observers: list[TrialObserver] = []
     if lsl is not None:
-        from graspguide.study.lab_streams import (
+        from graspguide.sources.lab_streams import (
             LabStreamsError,
             LabStreamsUsageError,
             open_lab_streams,

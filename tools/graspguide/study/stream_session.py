@@ -1,6 +1,6 @@
 """One `graspguide stream` trial: SET_SCENE, START_TRIAL, the source's poses through the
 pose loop (:mod:`graspguide.study.pose_loop`) into the session log, the live view and the
-observers (:mod:`graspguide.study.trial_events`: the LSL streams), until the TRIAL_RESULT
+observers (:mod:`graspguide.records.events`: the LSL streams), until the TRIAL_RESULT
 or the end of the source; :func:`stream_command` is the whole command (scene, source,
 device, log, LSL, STOP on every way out, the result line).
 
@@ -16,11 +16,11 @@ import time
 from collections.abc import Sequence
 from typing import Any, TextIO
 
+from graspguide.devices.session import DeviceSession
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail, report
 from graspguide.link.messages import ErrorCode
 from graspguide.link.transport import LinkError
-from graspguide.study import trial_events as ev
-from graspguide.study.device_session import DeviceSession
+from graspguide.records import events as ev
 from graspguide.study.pose_loop import (
     Frame,
     LockstepPoses,
@@ -44,12 +44,12 @@ PACED_SHARE = 0.1
 
 def open_participant(spec: str) -> Any:
     """The virtual participant of ``participant[:seed=N,key=val,...]`` as a closed-loop
-    source (:class:`graspguide.study.trial_sources.ClosedLoopSource`); ``seed`` (default
+    source (:class:`graspguide.sources.trial_sources.ClosedLoopSource`); ``seed`` (default
     0) seeds it, the other keys are its parameters. Raises SourceError."""
-    from graspguide.study.errors import RunnerError
-    from graspguide.study.participant import VirtualParticipant
-    from graspguide.study.sources import SourceError
-    from graspguide.study.trial_sources import ClosedLoopSource, check_participant_keys
+    from graspguide.participant.model import VirtualParticipant
+    from graspguide.run_errors import RunnerError
+    from graspguide.sources.poses import SourceError
+    from graspguide.sources.trial_sources import ClosedLoopSource, check_participant_keys
 
     _, _, rest = spec.partition(":")
     try:
@@ -238,11 +238,11 @@ def link_capacity(port: str, transport: Any) -> dict[str, Any] | None:
     """What the wire carries one POSE at a time: its baud rate, the POSE's and the
     TELEMETRY's frame sizes and the POSEs per second they allow (10 bits a byte). None
     for a port whose pseudo-terminal models no wire (the simulated device, QEMU)."""
+    from graspguide.devices.qemu_firmware import QEMU_PORT
+    from graspguide.devices.sim import SIM_PORT
     from graspguide.link.client import encode_pose_fast
     from graspguide.link.codec import encode_message
     from graspguide.link.messages import Telemetry
-    from graspguide.link.qemu_firmware import QEMU_PORT
-    from graspguide.link.sim import SIM_PORT
 
     baud = getattr(transport, "baudrate", None)
     if port in (SIM_PORT, QEMU_PORT) or not baud:
@@ -288,7 +288,7 @@ def pacing_notice(source_rate_hz: float, link: dict[str, Any] | None) -> str:
 
 
 def _feel_lag_error() -> Any:
-    from graspguide.study.participant import FeelLagError
+    from graspguide.participant.model import FeelLagError
 
     return FeelLagError
 
@@ -314,16 +314,16 @@ def stream_command(
     recorder). STOP is sent and the log's end record written on every way out; returns
     the exit code."""
     from graspguide.core.units import moment_unit_problem
-    from graspguide.study.lab_streams import (
+    from graspguide.protocol.scene_file import SceneError, config_hash, load_scene
+    from graspguide.records.storage import SessionLog
+    from graspguide.sources.lab_streams import (
         LabStreamsError,
         LabStreamsUsageError,
         open_lab_streams,
     )
+    from graspguide.sources.poses import SourceError, SyntheticSource, open_source
+    from graspguide.sources.trial_sources import simulation
     from graspguide.study.live_view import StatusView, TrialProgress
-    from graspguide.study.records import SessionLog
-    from graspguide.study.scene_file import SceneError, config_hash, load_scene
-    from graspguide.study.sources import SourceError, SyntheticSource, open_source
-    from graspguide.study.trial_sources import simulation
 
     scene_file, source_spec, log_dir = scene, source, log
     try:

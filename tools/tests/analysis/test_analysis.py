@@ -1,4 +1,4 @@
-"""graspguide.study.analysis: Tables I-III, the paper's statistics, Figure 4, the report, errors.
+"""graspguide.analysis.paper_tables: Tables I-III, the statistics, Figure 4, the report, errors.
 
 Synthetic study folders are written in tmp_path by a seeded generator: 8 participants,
 4 modalities x 2 contact counts x 12 wrenches, plus familiarization trials (which the
@@ -19,7 +19,7 @@ import pytest
 import scipy.stats
 
 from graspguide import cli
-from graspguide.study import analysis as A
+from graspguide.analysis import paper_tables as A
 
 PIDS = [f"U{i}" for i in range(1, 9)]
 ORDER = ["F+C", "Fperp+C", "F+V", "Fperp+V"]

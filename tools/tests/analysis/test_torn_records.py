@@ -1,6 +1,6 @@
 """A run killed mid-write leaves a damaged last line in trials.jsonl: `graspguide analyze`
 and `graspguide plot` read every complete record, leave that line out, say so and how to
-record it again, and change no file (graspguide.study.records.complete_records)."""
+record it again, and change no file (graspguide.records.storage.complete_records)."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ import pytest
 from conftest import subprocess_env
 from test_analysis import make_study
 
-from graspguide.study.analysis import analyze
-from graspguide.study.records import complete_records
+from graspguide.analysis.paper_tables import analyze
+from graspguide.records.storage import complete_records
 
 CLI = [sys.executable, "-m", "graspguide"]
-PLOT_STUDY = Path(__file__).parent / "data" / "plot_structure" / "study"
+PLOT_STUDY = Path(__file__).parents[1] / "data" / "plot_structure" / "study"
 
 
 def run_cli(*args) -> subprocess.CompletedProcess:

@@ -16,12 +16,13 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 
 from graspguide.bench import host_bench as bench
 from graspguide.core import reference
-from graspguide.study.scene_file import load_scene
+from graspguide.protocol.scene_file import load_scene
 
-TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TOOLS_DIR = TOOLS_DIR
 
 
 def subprocess_env() -> dict:

@@ -22,7 +22,7 @@ from graspguide.bench.latency import (
     pwm_latencies_trace,
     summarize,
 )
-from graspguide.link.promini_sim import PROMINI_ELF_ENV
+from graspguide.devices.promini_sim import PROMINI_ELF_ENV
 
 CLI = [sys.executable, "-m", "graspguide"]
 
@@ -133,7 +133,7 @@ def test_latency_on_promini_sim(tmp_path, report_figure, sketch_elf):
 
 
 def test_latency_on_qemu(tmp_path):
-    from graspguide.link import qemu_firmware
+    from graspguide.devices import qemu_firmware
     from graspguide.link.transport import DeviceNotFound
 
     try:

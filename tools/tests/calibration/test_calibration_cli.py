@@ -19,9 +19,9 @@ from graspguide.calibration.calibration_file import read_calibration_file
 from graspguide.calibration.session import CalibrationSettings, run_procedure
 from graspguide.calibration.virtual_observer import VirtualObserver
 from graspguide.core import reference
+from graspguide.devices.sim import SimulatedDevice
 from graspguide.link import messages as m
 from graspguide.link.client import DeviceClient
-from graspguide.link.sim import SimulatedDevice
 
 CLI = [sys.executable, "-m", "graspguide", "calibrate"]
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]

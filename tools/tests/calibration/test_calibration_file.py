@@ -20,7 +20,7 @@ from graspguide.calibration.command import _file_data
 from graspguide.calibration.session import CalibrationSettings, run_procedure
 from graspguide.calibration.virtual_observer import VirtualObserver
 from graspguide.core.motor_calibration import MotorCalibration
-from graspguide.study.records import RecordWriteError
+from graspguide.records.storage import RecordWriteError
 
 
 class _NoDevice:

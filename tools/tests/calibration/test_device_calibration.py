@@ -30,11 +30,11 @@ from conftest import REPO_ROOT
 
 from graspguide.core import reference, solver
 from graspguide.core.motor_calibration import MotorCalibration
+from graspguide.devices import promini_sim as pms
+from graspguide.devices import qemu_firmware
+from graspguide.devices import sim as gsim
 from graspguide.link import client as gd
 from graspguide.link import messages as m
-from graspguide.link import promini_sim as pms
-from graspguide.link import qemu_firmware
-from graspguide.link import sim as gsim
 
 ROOT = Path(REPO_ROOT)
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]

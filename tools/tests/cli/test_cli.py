@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 from known_answer_requests import KNOWN_ANSWERS
 from known_answer_requests import decode_numbers as _decode_numbers
 from known_answer_requests import load_cases as _load_known_answers
@@ -22,7 +23,7 @@ from known_answer_requests import request_lines as _known_answer_lines
 
 from graspguide.core import solver
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 _ROOT = os.path.dirname(_TOOLS)
 
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")

@@ -11,11 +11,12 @@ import subprocess
 import sys
 
 import pytest
+from conftest import TOOLS_DIR
 
 from graspguide.core import solver
 from graspguide.core.suggest import closest, did_you_mean, unknown_name
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 _ROOT = os.path.dirname(_TOOLS)
 CLI = [sys.executable, "-m", "graspguide"]
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
@@ -121,9 +122,9 @@ def test_stream_into_a_closed_pipe_stops_the_motors(tmp_path):
     host's STOP can leave it STOPPED with every motor off."""
     import csv
 
+    from graspguide.devices import sim as link_sim
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import sim as link_sim
 
     trace = tmp_path / "motors.csv"
     folder = tmp_path / "log"
@@ -173,9 +174,9 @@ def test_trial_into_a_closed_pipe_stops_the_motors_and_keeps_the_records(tmp_pat
     motor off, and trials.jsonl holds only whole records."""
     import csv
 
+    from graspguide.devices import sim as link_sim
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import sim as link_sim
 
     trace = tmp_path / "motors.csv"
     out = tmp_path / "study"

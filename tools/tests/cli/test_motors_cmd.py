@@ -16,12 +16,12 @@ import time
 import pytest
 from conftest import subprocess_env
 
+from graspguide.devices.promini_sim import ProMiniSimDevice
+from graspguide.devices.sim import SimulatedDevice
 from graspguide.link import messages as m
 from graspguide.link.client import DeviceClient
 from graspguide.link.motor_drive import MOTORS_OFF, drive_motors
 from graspguide.link.motor_patterns import HOSTLESS_PATTERNS, parse_fingers, parse_pattern
-from graspguide.link.promini_sim import ProMiniSimDevice
-from graspguide.link.sim import SimulatedDevice
 from graspguide.link.transport import SerialTransport
 
 
@@ -322,7 +322,7 @@ def test_bad_arguments_are_usage_errors_naming_the_option(extra, option):
 
 
 def _qemu_or_skip():
-    from graspguide.link import qemu_firmware
+    from graspguide.devices import qemu_firmware
     from graspguide.link.transport import DeviceNotFound
 
     try:
@@ -333,7 +333,7 @@ def _qemu_or_skip():
 
 
 def test_ctrl_c_leaves_the_qemu_firmwares_motor_registers_off(tmp_path):
-    from graspguide.link.qemu_firmware import QemuFirmware
+    from graspguide.devices.qemu_firmware import QemuFirmware
 
     elf = _qemu_or_skip()
     board = QemuFirmware(elf, workdir=str(tmp_path))

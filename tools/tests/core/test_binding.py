@@ -13,12 +13,15 @@ import types
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 
 from graspguide.core import _core, solver
 from graspguide.core import scene_generators as scenes
 
 EXAMPLES = os.path.join(
-    os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "solve_requests.jsonl"
+    TOOLS_DIR,
+    "examples",
+    "solve_requests.jsonl",
 )
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]

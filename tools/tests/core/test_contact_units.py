@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from graspguide.study import sources as src
+from graspguide.sources import poses as src
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HEAD = "t_s,qw,qx,qy,qz," + ",".join(

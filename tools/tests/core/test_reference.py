@@ -11,8 +11,9 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 _ROOT = os.path.dirname(_TOOLS)
 if _TOOLS not in sys.path:
     sys.path.insert(0, _TOOLS)

@@ -1,7 +1,7 @@
 """Each simulated device kind keeps its build: PlatformIO deletes its whole build folder when
 its project checksum changes (another core_dir, a source file added), so a build of one
 env must not take another kind's program with it; a missing one is built on first use
-(graspguide.link.device_builds). On scratch copies of the repository (symlinks to its
+(graspguide.devices.builds). On scratch copies of the repository (symlinks to its
 sources, their own .pio), with the real pio and the real simulated device."""
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import sys
 import pytest
 from conftest import REPO_ROOT, subprocess_env
 
+from graspguide.devices import qemu_firmware as gq
+from graspguide.devices import sim as gsim
 from graspguide.link import client as dv
-from graspguide.link import qemu_firmware as gq
-from graspguide.link import sim as gsim
 from graspguide.link.transport import SimNotBuilt
 
 VENV_BIN = os.path.join(REPO_ROOT, ".venv", "bin")
@@ -152,7 +152,7 @@ def test_a_missing_simulated_device_is_built_on_first_use_showing_progress(
 
 
 def test_without_pio_the_error_names_the_exact_command(tmp_path, monkeypatch):
-    from graspguide.link import device_builds as db
+    from graspguide.devices import builds as db
 
     root = tmp_path / "bare"
     (root / "lib" / "graspguide_link").mkdir(parents=True)
@@ -168,7 +168,7 @@ def test_without_pio_the_error_names_the_exact_command(tmp_path, monkeypatch):
 
 
 def test_every_device_kind_builds_into_a_folder_no_other_kind_cleans():
-    from graspguide.link import device_builds as db
+    from graspguide.devices import builds as db
 
     dirs = {env: b.relative_build_dir() for env, b in db.BUILDS.items()}
     assert len(set(dirs.values())) == len(dirs)

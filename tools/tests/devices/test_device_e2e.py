@@ -26,17 +26,20 @@ import time
 
 import numpy as np
 import pytest
+from conftest import TESTS_DIR as CONFTEST_DIR
+from conftest import TOOLS_DIR
 from known_answer_requests import load_cases, request_lines
 
 from graspguide.core import scene_generators as scenes
 from graspguide.core import solver
+from graspguide.devices import registry
+from graspguide.devices import sim as gsim
 from graspguide.link import client as gd
 from graspguide.link import codec as framing
 from graspguide.link import messages as m
-from graspguide.link import sim as gsim
 from graspguide.link import transport as gt
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 CLI = [sys.executable, "-m", "graspguide"]
@@ -173,7 +176,7 @@ def test_hello_identity(client):
 
 
 def test_open_port_sim_is_a_transport():
-    with gt.open_port("sim") as t:
+    with registry.open_port("sim") as t:
         assert isinstance(t, gt.Transport) and t.alive()
         assert gd.DeviceClient(t).hello().board == "sim-posix"
     assert not t.alive()
@@ -631,7 +634,7 @@ def test_cli_device_engine_agrees_on_the_known_answers(report_figure):
 def test_cli_device_engine_answers_bad_requests_like_the_core():
     """Every bad-input case of test_cli.py (one fault each): the same code and message
     from the device engine as from the core, and the stream goes on."""
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    sys.path.insert(0, os.path.join(CONFTEST_DIR, "cli"))
     try:
         from test_cli import BAD_CASES, GOOD_LINE
     finally:
@@ -744,7 +747,7 @@ def test_cli_link_failure_mid_stream_keeps_earlier_answers():
 def board(request, hardware_port):
     """A client on the --port board (the hardware_port fixture of conftest.py skips the
     test, saying why, when no --port was given)."""
-    with gt.open_port(hardware_port, baudrate=request.config.getoption("--baud")) as t:
+    with registry.open_port(hardware_port, baudrate=request.config.getoption("--baud")) as t:
         c = gd.DeviceClient(t, timeout=2.0)
         c.hello()
         yield c

@@ -22,13 +22,14 @@ from pathlib import Path
 
 import pytest
 from conftest import REPO_ROOT
-from test_device_client import HAND3, WRENCH, FakeDevice, good_device
+from fake_device import HAND3, WRENCH, FakeDevice, good_device
 
 from graspguide.core import solver
+from graspguide.devices import promini_sim as pms
+from graspguide.devices import registry
+from graspguide.devices import sim as gsim
 from graspguide.link import client as gd
 from graspguide.link import messages as m
-from graspguide.link import promini_sim as pms
-from graspguide.link import sim as gsim
 from graspguide.link import transport as gt
 
 ROOT = Path(REPO_ROOT)
@@ -216,7 +217,7 @@ def test_runner_errors_are_clear(runner, echo_elf, tmp_path):
 
 
 def test_open_port_starts_promini_sim(runner, echo_elf):
-    with gt.open_port("promini-sim", elf=echo_elf, runner=runner, fast=True) as dev:
+    with registry.open_port("promini-sim", elf=echo_elf, runner=runner, fast=True) as dev:
         assert isinstance(dev, pms.ProMiniSimDevice) and dev.alive()
         dev.write(b"\x2a")
         assert _read_exactly(dev, 1) == b"\x2a"

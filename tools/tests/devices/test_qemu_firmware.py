@@ -30,17 +30,18 @@ import time
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 from issue17_script import issue17
 from known_answer_requests import load_cases, request_lines
 
 from graspguide.core import _core, solver
 from graspguide.core import scene_generators as scenes
+from graspguide.devices import qemu_firmware
 from graspguide.link import client as gd
 from graspguide.link import messages as m
-from graspguide.link import qemu_firmware
 from graspguide.link import transport as gt
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 _ROOT = os.path.dirname(_TOOLS)
 EXAMPLES = os.path.join(_TOOLS, "examples", "solve_requests.jsonl")
 ELF = os.environ.get("GRASPGUIDE_M4F_FIRMWARE") or os.path.join(

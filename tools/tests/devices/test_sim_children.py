@@ -18,7 +18,7 @@ import time
 import pytest
 from conftest import REPO_ROOT, subprocess_env
 
-from graspguide.link import sim as gsim
+from graspguide.devices import sim as gsim
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 
@@ -73,7 +73,7 @@ while True:
 
 HOST = textwrap.dedent("""
     import sys
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
     sim = SimulatedDevice(binary=sys.argv[1] or None).start()
     print(sim.process.pid, flush=True)
     sys.stdin.read()

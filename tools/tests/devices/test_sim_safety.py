@@ -18,11 +18,11 @@ import time
 import pytest
 from conftest import REPO_ROOT
 
+from graspguide.devices import sim as gsim
 from graspguide.hostless import plan_upload as pu
 from graspguide.link import client as gd
 from graspguide.link import messages as m
-from graspguide.link import sim as gsim
-from graspguide.study.study_protocol import load_protocol
+from graspguide.protocol.study_protocol import load_protocol
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]

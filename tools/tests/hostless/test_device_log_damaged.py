@@ -16,7 +16,7 @@ from test_hostless_client import PAPER, REST_S, HostlessFake, hostless_client, o
 
 from graspguide.hostless import device_log as dl
 from graspguide.hostless import plan_upload as pu
-from graspguide.study.study_protocol import load_protocol
+from graspguide.protocol.study_protocol import load_protocol
 
 
 @pytest.fixture(scope="module")
@@ -108,13 +108,13 @@ def test_on_the_simulated_device_a_damaged_record_is_run_again_once_and_named(tm
     from test_hostless_study import REST_S as STUDY_REST_S
     from test_hostless_study import _KillAfter, read_lines, short_protocol
 
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.hostless import runner as hr
     from graspguide.link import client as dv
-    from graspguide.link.sim import SimulatedDevice
     from graspguide.link.transport import LinkError
-    from graspguide.study import study_protocol as sp
+    from graspguide.protocol import study_protocol as sp
+    from graspguide.sources.trial_sources import open_runner_source
     from graspguide.study.progress import Progress
-    from graspguide.study.trial_sources import open_runner_source
 
     _, protocol = short_protocol(tmp_path)
     out = tmp_path / "study"

@@ -1,6 +1,6 @@
 """The host's side of the host-less messages: DeviceClient's plan upload, results log,
 host-less run and simulation-only requests against a scripted fake device
-(test_device_client.FakeDevice); plan_upload.plan_messages from the paper's protocol;
+(fake_device.FakeDevice); plan_upload.plan_messages from the paper's protocol;
 device_log.download_log into the runner's folder format (read back by the analysis);
 `graspguide device`. The end-to-end tests at the bottom run the real simulated device."""
 
@@ -14,17 +14,17 @@ import sys
 
 import pytest
 from conftest import REPO_ROOT, subprocess_env
-from test_device_client import FakeDevice, good_device
+from fake_device import FakeDevice, good_device
 
+from graspguide.analysis import paper_tables as analysis
 from graspguide.cli import main as cli_main
 from graspguide.hostless import device_log as dl
 from graspguide.hostless import plan_upload as pu
 from graspguide.link import client as gd
 from graspguide.link import codec
 from graspguide.link import messages as m
-from graspguide.study import analysis
+from graspguide.protocol.study_protocol import load_protocol
 from graspguide.study.runner import TRIAL_FIELDS
-from graspguide.study.study_protocol import load_protocol
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 HOSTLESS_CAPS = m.CAPABILITY_FULL_SOLVE | m.CAPABILITY_HOSTLESS | m.CAPABILITY_SIM_MESSAGES
@@ -525,7 +525,7 @@ def fake_port(monkeypatch, paper):
         opened.append(port)
         return FakeDevice(fake)
 
-    monkeypatch.setattr("graspguide.link.transport.open_port", open_port)
+    monkeypatch.setattr("graspguide.devices.registry.open_port", open_port)
     return fake
 
 
@@ -573,7 +573,7 @@ def test_device_command_is_registered():
 # The real simulated device (--store FILE: its non-volatile memory)
 # --------------------------------------------------------------------------------------
 def sim_client(store) -> gd.DeviceClient:
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     device = SimulatedDevice(virtual_clock=True, extra_args=["--store", str(store)]).start()
     c = gd.DeviceClient(device, timeout=2.0)

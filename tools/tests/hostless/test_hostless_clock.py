@@ -17,9 +17,9 @@ from conftest import small_protocol_toml
 from graspguide.hostless import runner as hr
 from graspguide.link import client as dv
 from graspguide.link.messages import RunEvent
-from graspguide.study import study_protocol as pf
+from graspguide.protocol import study_protocol as pf
+from graspguide.sources.trial_sources import open_runner_source
 from graspguide.study.progress import Progress
-from graspguide.study.trial_sources import open_runner_source
 
 U32 = 1 << 32
 # Longer than the simulated device's stale time (200 ms): its clock then follows real time.
@@ -114,7 +114,7 @@ def test_a_host_slowed_at_start_finds_the_device_ahead_and_runs_the_plan(tmp_pat
     whose disk takes 300 ms per fsync): the device's first event is stamped ahead of the
     world's clock. The world goes on from the device's time, so the device's clock never
     goes back and every rest lasts its full time."""
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     proto = protocol(tmp_path)
     events = _record_events(monkeypatch)
@@ -135,7 +135,7 @@ def test_a_host_paused_mid_run_finds_the_device_ahead_and_runs_the_plan(tmp_path
     success pattern: the device's rest begins while the host is away, stamped ahead of the
     world's clock. The world moves on by the real time it was away, so no sample turns the
     device's clock back (which would cut the rest short)."""
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     proto = protocol(tmp_path)
     events = _record_events(monkeypatch)

@@ -14,11 +14,11 @@ import os
 import pytest
 from conftest import REPO_ROOT
 
+from graspguide.devices.sim import SimulatedDevice
 from graspguide.hostless import plan_upload as pu
 from graspguide.link import client as dv
 from graspguide.link import messages as m
-from graspguide.link.sim import SimulatedDevice
-from graspguide.study.study_protocol import load_protocol
+from graspguide.protocol.study_protocol import load_protocol
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 G = 9.80665
@@ -134,9 +134,9 @@ def test_a_study_with_one_sample_stamped_back_runs_that_trial_again_once(tmp_pat
     from test_hostless_study import read_lines, short_protocol
 
     from graspguide.hostless import runner as hr
-    from graspguide.study import study_protocol as sp
+    from graspguide.protocol import study_protocol as sp
+    from graspguide.sources.trial_sources import open_runner_source
     from graspguide.study.progress import Progress
-    from graspguide.study.trial_sources import open_runner_source
 
     _, protocol = short_protocol(tmp_path)
     out = tmp_path / "study"

@@ -21,9 +21,9 @@ from graspguide.hostless.imu_world import IDEAL_IMU, ImuWorld
 from graspguide.imu.synthetic import STANDARD_GRAVITY_MPS2, ImuNoise
 from graspguide.link import client as dv
 from graspguide.link.transport import LinkError
-from graspguide.study import study_protocol as pf
+from graspguide.protocol import study_protocol as pf
+from graspguide.sources.trial_sources import open_runner_source
 from graspguide.study.progress import Progress
-from graspguide.study.trial_sources import open_runner_source
 
 RATE_HZ = 100.0
 
@@ -275,8 +275,8 @@ def _f32(x):
 
 
 def test_a_sigkill_mid_study_loses_no_completed_trial_record(tmp_path, report_figure):
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.hostless.device_log import download_log
-    from graspguide.link.sim import SimulatedDevice
 
     _, protocol = short_protocol(tmp_path)
     out = tmp_path / "study"
@@ -360,8 +360,8 @@ ONE_EACH = small_protocol_toml(
 def _device_vs_true_error(tmp_path, core, monkeypatch, declare_mount):
     """|device error - true error| at every sample of the ONE_EACH trials, the IMU under
     MOUNT; the plan declares MOUNT, or (declare_mount False) the identity."""
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
-    from graspguide.link.sim import SimulatedDevice
 
     tmp_path.mkdir()
     path = tmp_path / "one_each.toml"
@@ -446,7 +446,7 @@ def test_demo_hostless_runs_each_participant_hostless_into_its_own_folder():
 
 
 def test_ctrl_c_stops_the_run_and_the_same_device_resumes_it(tmp_path):
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     _, protocol = short_protocol(tmp_path)
     out = str(tmp_path / "study")
@@ -497,7 +497,7 @@ def test_ctrl_c_stops_the_run_and_the_same_device_resumes_it(tmp_path):
 def test_an_imu_fault_mid_trial_is_reported_counted_and_the_study_goes_on(tmp_path, monkeypatch):
     """A frozen IMU for 40 samples in the first trial: the device turns the motors off and
     sends imu_fault; the host says so, the trial's record counts it, the study finishes."""
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     _, protocol = short_protocol(tmp_path)
     real_sample = ImuWorld.sample
@@ -562,8 +562,8 @@ def test_the_plans_calibration_shapes_every_telemetry_pwm(tmp_path, core, report
     C++ core's levels of the plan's (float32) posture and the device's own alpha."""
     from graspguide.core import reference
     from graspguide.core.motor_calibration import MotorCalibration
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.messages import TELEMETRY_FLAG_TRIAL_RUNNING
-    from graspguide.link.sim import SimulatedDevice
 
     path = tmp_path / "one_each.toml"
     path.write_text(ONE_EACH)
@@ -619,8 +619,8 @@ def test_resuming_under_another_calibration_is_refused_naming_both(tmp_path):
     folder under another one is refused before anything runs (LOG_INFO cannot show it; the
     folder's runs.jsonl says which one was uploaded)."""
     from graspguide.core.motor_calibration import MotorCalibration
-    from graspguide.link.sim import SimulatedDevice
-    from graspguide.study.errors import RunnerError
+    from graspguide.devices.sim import SimulatedDevice
+    from graspguide.run_errors import RunnerError
 
     path = tmp_path / "one_each.toml"
     path.write_text(ONE_EACH)

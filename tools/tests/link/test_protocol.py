@@ -16,6 +16,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import TOOLS_DIR
 
 from graspguide import link as gp
 from graspguide.link import messages as M
@@ -37,7 +38,7 @@ from graspguide.link.codec import (
 )
 from graspguide.link.message_base import INT_RANGES
 
-TOOLS_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TOOLS_DIR = TOOLS_DIR
 REPO_ROOT = os.path.dirname(TOOLS_DIR)
 GOLDEN = os.path.join(REPO_ROOT, "test", "data", "golden_frames.json")
 GENERATOR = os.path.join(TOOLS_DIR, "codegen")

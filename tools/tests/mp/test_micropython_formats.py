@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from conftest import small_protocol_toml, subprocess_env
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PORT = ROOT / "micropython"
 REGION_BYTES = 8192  # plan_store.h kPlanRegionBytes; the port's plan_file.REGION_BYTES
 

@@ -15,11 +15,12 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 from known_answer_requests import decode_numbers, load_cases, request_lines
 
 from graspguide.core import solver
 
-_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_ROOT = os.path.dirname(TOOLS_DIR)
 _PORT = os.path.join(_ROOT, "micropython")
 CLI = [sys.executable, "-m", "graspguide"]
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]

@@ -12,7 +12,7 @@ import pytest
 from graspguide.cli import main
 from graspguide.mp.deploy import MpToolError, check_port
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PROTOCOL = str(ROOT / "protocols" / "paper.toml")
 MISSING = "/dev/ttyUSB-graspguide-missing"
 

@@ -33,7 +33,7 @@ from graspguide.link.messages import PlanBegin, PlanTrial
 from graspguide.mp.deploy import MpToolError, build
 from graspguide.mp.plan_file import PlanSolveError, encode_plan_file
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PROTOCOL = str(ROOT / "protocols" / "paper.toml")
 MICROPYTHON = Path(sys.executable).parent / "micropython"
 # The layout as docs (graspguide/mp/plan_file.py) state it, written out independently.
@@ -174,7 +174,7 @@ def test_new_store_is_the_cpp_devices_store_after_storing_the_plan(tmp_path: Pat
 def test_levels_text_holds_each_trials_float32_levels(tmp_path: Path) -> None:
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
     from graspguide.mp.plan_file import levels_text
-    from graspguide.study.study_protocol import load_protocol
+    from graspguide.protocol.study_protocol import load_protocol
 
     protocol = load_protocol(PROTOCOL)
     begin, trials = plan_messages(protocol, "U1", planned_trials(protocol, "U1"), False, 2.0)
@@ -193,7 +193,7 @@ def test_levels_text_holds_each_trials_float32_levels(tmp_path: Path) -> None:
 
 def test_plan_refuses_a_trial_the_core_cannot_solve() -> None:
     from graspguide.hostless.plan_upload import plan_messages, planned_trials
-    from graspguide.study.study_protocol import load_protocol
+    from graspguide.protocol.study_protocol import load_protocol
 
     protocol = load_protocol(PROTOCOL)
     begin, trials = plan_messages(protocol, "U1", planned_trials(protocol, "U1"), False, 2.0)

@@ -1,4 +1,4 @@
-"""The virtual participant (graspguide.study.participant): determinism, ERM lag, reaction delay,
+"""The virtual participant (graspguide.participant.model): determinism, ERM lag, reaction delay,
 speed bound, mode C vs V, input errors, and the closed loop against the C++ core.
 
 Everything the participant produces is SIMULATED (never human data).
@@ -13,11 +13,10 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import subprocess_env
+from conftest import TOOLS_DIR, subprocess_env
 
 from graspguide.core import _core
-from graspguide.study import scene_file as gs
-from graspguide.study.participant import (
+from graspguide.participant.model import (
     PWM_FLOOR,
     FeelLagError,
     ParticipantParams,
@@ -25,8 +24,9 @@ from graspguide.study.participant import (
     parse_spec,
     quaternion_angle_deg,
 )
+from graspguide.protocol import scene_file as gs
 
-EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
+EXAMPLES = os.path.join(TOOLS_DIR, "examples")
 SCENE4 = gs.load_scene(os.path.join(EXAMPLES, "scene_paper_4.toml"))
 CONTACTS4 = [list(c) for c in SCENE4.contacts]
 Y_AXIS = list(SCENE4.y_axis)

@@ -15,7 +15,7 @@ from graspguide.calibration.virtual_observer import VirtualObserver
 from graspguide.core import _core
 from graspguide.core.motor_calibration import FINGER_NAMES, MotorCalibration
 from graspguide.core.reference import pwm_from_levels
-from graspguide.study.participant import (
+from graspguide.participant.model import (
     PWM_FLOOR,
     PWM_RANGE,
     VirtualParticipant,

@@ -1,4 +1,4 @@
-"""`graspguide sweep` (graspguide.study.sweep): the speed-accuracy trade, SIMULATED.
+"""`graspguide sweep` (graspguide.planning.sweep): the speed-accuracy trade, SIMULATED.
 
 A tiny sweep end to end against the simulated device with the virtual participant (the
 JSON has every point with sane fields, the PNG is a PNG, a second run resumes without
@@ -17,8 +17,8 @@ import pytest
 
 from graspguide import cli
 from graspguide.cli import sweep as sweep_command
-from graspguide.study import study_protocol as pf
-from graspguide.study import sweep as sw
+from graspguide.planning import sweep as sw
+from graspguide.protocol import study_protocol as pf
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(TESTS_DIR))

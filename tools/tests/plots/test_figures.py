@@ -17,13 +17,13 @@ matplotlib.use("Agg", force=True)
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from graspguide.planning import sweep  # noqa: E402
 from graspguide.plots.figures import overview_figure, pyplot, trial_figure  # noqa: E402
 from graspguide.plots.run_folder import load_frames, open_run  # noqa: E402
-from graspguide.study import sweep  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SWEEP_RESULT = ROOT / "docs" / "perf" / "guidance_sweep.json"
-DATA = Path(__file__).parent / "data" / "plot_structure"
+DATA = Path(__file__).parents[1] / "data" / "plot_structure"
 
 
 def _texts(fig) -> list[str]:
@@ -186,7 +186,7 @@ def test_a_stream_log_plot_says_simulated_when_the_log_does(tmp_path, simulated)
 def test_figure4_spells_f_perp_one_way(tmp_path):
     from test_analysis import make_study
 
-    from graspguide.study import analysis
+    from graspguide.analysis import paper_tables as analysis
 
     make_study(tmp_path / "S", n=3)
     res = analysis.analyze([tmp_path / "S"])

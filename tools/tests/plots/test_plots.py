@@ -25,7 +25,7 @@ from graspguide.plots.figures import FINGER_COLOURS, overview_figure, pyplot, tr
 from graspguide.plots.run_folder import load_frames, open_run
 from graspguide.plots.structure import figure_structure, svg_texts
 
-DATA = Path(__file__).parent / "data" / "plot_structure"
+DATA = Path(__file__).parents[1] / "data" / "plot_structure"
 STUDY = DATA / "study"
 SESSION = DATA / "session"
 CLI = [sys.executable, "-m", "graspguide"]
@@ -328,7 +328,7 @@ def test_a_fresh_simulated_run_plots(tmp_path):
         "sim",
         "--virtual-clock",
         "--scene",
-        Path(__file__).parents[2] / "tools" / "examples" / "scene_paper_3.toml",
+        Path(__file__).parents[3] / "tools" / "examples" / "scene_paper_3.toml",
         "--wrench",
         "0.3,-1.2,-0.8",
         "--source",

@@ -1,4 +1,4 @@
-"""The study protocol file (graspguide.study.study_protocol, protocols/paper.toml, docs/study.md):
+"""The study protocol file (protocol.study_protocol, protocols/paper.toml, docs/study.md):
 validation messages, the seeded wrench draw with the paper's 5/7 split, deterministic
 per-participant plans and their counterbalancing."""
 
@@ -12,7 +12,7 @@ import pytest
 from conftest import REPO_ROOT
 
 from graspguide.core import _core
-from graspguide.study import study_protocol as pf
+from graspguide.protocol import study_protocol as pf
 
 
 def loads_protocol(text, source="<string>"):
@@ -54,7 +54,7 @@ def test_paper_protocol_values(paper):
     assert paper.wrench_count == 12 and paper.single_motor == 5
     assert paper.familiarization_s == 120.0
     # the example scenes' contacts
-    from graspguide.study.scene_file import load_scene
+    from graspguide.protocol.scene_file import load_scene
 
     for k in (3, 4):
         scene = load_scene(os.path.join(REPO_ROOT, "tools", "examples", f"scene_paper_{k}.toml"))
@@ -303,7 +303,7 @@ def test_values_that_overflowed_the_trial_clock_are_refused(key, value):
 def test_trial_ranges_are_the_cores_not_a_copy(monkeypatch):
     """The reader takes threshold_deg, hold_s and timeout_s limits from the compiled core:
     narrowing the core's table narrows what the file may say."""
-    from graspguide.study import scene_file as scene
+    from graspguide.protocol import scene_file as scene
 
     narrow = {k: dict(v) for k, v in _core.TRIAL_LIMITS.items()}
     narrow["timeout_s"]["max"] = 60.0

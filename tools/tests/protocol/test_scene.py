@@ -1,4 +1,4 @@
-"""scene.toml loader (graspguide.study.scene_file): examples, units, defaults, errors,
+"""scene.toml loader (graspguide.protocol.scene_file): examples, units, defaults, errors,
 stable hash."""
 
 from __future__ import annotations
@@ -7,9 +7,10 @@ import os
 import tomllib
 
 import pytest
+from conftest import TOOLS_DIR
 
 from graspguide.core import _core, units
-from graspguide.study import scene_file as gs
+from graspguide.protocol import scene_file as gs
 
 
 def loads_scene(text, source="<string>"):
@@ -17,7 +18,7 @@ def loads_scene(text, source="<string>"):
     return gs.parse_scene(tomllib.loads(text), source)
 
 
-EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
+EXAMPLES = os.path.join(TOOLS_DIR, "examples")
 MIN3 = """
 [scene]
 units = "m"

@@ -1,4 +1,4 @@
-"""Session folder writer (graspguide.study.records): files, formats, and nothing lost when the
+"""Session folder writer (graspguide.records.storage): files, formats, and nothing lost when the
 writer is killed (SIGKILL) mid-stream."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import sys
 import textwrap
 
 from graspguide.link import messages as m
-from graspguide.study import records as sl
+from graspguide.records import storage as sl
 
 
 def test_files_and_formats(tmp_path):
@@ -50,7 +50,7 @@ def test_files_and_formats(tmp_path):
 
 WRITER = textwrap.dedent("""
     import sys
-    from graspguide.study import records as sl
+    from graspguide.records import storage as sl
     from graspguide.link import messages as m
     log = sl.SessionLog(sys.argv[1])
     i = 0

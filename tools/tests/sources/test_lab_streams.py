@@ -1,4 +1,4 @@
-"""The LSL outlets (graspguide.study.lab_streams) received by a REAL LSL inlet on the
+"""The LSL outlets (graspguide.sources.lab_streams) received by a REAL LSL inlet on the
 loopback interface: `graspguide stream --lsl` against the simulated device, compared with
 its own session log, and the streams' metadata.
 
@@ -19,8 +19,9 @@ import uuid
 
 import numpy as np
 import pytest
+from conftest import TOOLS_DIR
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
 WRENCH = "0.3,-1.2,-0.8"
 LSL_CONFIG = """\
@@ -86,7 +87,7 @@ def _pull_until_closed(lsl, inlets, deadline_s: float):
 
 def test_stream_lsl_matches_the_session_log(lsl, tmp_path):
     from graspguide.link.messages import ErrorCode
-    from graspguide.study.lab_streams import TELEMETRY_CHANNELS
+    from graspguide.sources.lab_streams import TELEMETRY_CHANNELS
 
     name = _name()
     folder = tmp_path / "session"
@@ -164,7 +165,7 @@ def test_stream_lsl_matches_the_session_log(lsl, tmp_path):
 
 
 def test_outlets_describe_channels_and_keep_source_id(lsl):
-    from graspguide.study.lab_streams import TELEMETRY_CHANNELS, LabStreams, source_id
+    from graspguide.sources.lab_streams import TELEMETRY_CHANNELS, LabStreams, source_id
 
     name = _name()
     with LabStreams(name, participant="U3", session="s2", nominal_rate_hz=100.0, simulated=True):
@@ -189,8 +190,8 @@ def test_outlets_describe_channels_and_keep_source_id(lsl):
 
 
 def test_observer_interface_pushes_in_order(lsl):
-    from graspguide.study.lab_streams import LabStreams
-    from graspguide.study.trial_events import TrialObserver
+    from graspguide.records.events import TrialObserver
+    from graspguide.sources.lab_streams import LabStreams
 
     name = _name()
     with LabStreams(name) as streams:
@@ -243,7 +244,7 @@ def test_missing_liblsl_is_a_clear_error(tmp_path):
 
 
 def test_bad_stream_name_is_refused():
-    from graspguide.study.lab_streams import LabStreams, LabStreamsUsageError
+    from graspguide.sources.lab_streams import LabStreams, LabStreamsUsageError
 
     with pytest.raises(LabStreamsUsageError, match="--lsl name"):
         LabStreams("a/b")
@@ -251,7 +252,7 @@ def test_bad_stream_name_is_refused():
 
 def test_interfaces_up_here():
     # this machine reaches its own streams (the tests above): the loopback is up
-    from graspguide.study.lab_streams import interfaces_up, network_problem
+    from graspguide.sources.lab_streams import interfaces_up, network_problem
 
     assert "lo" in (interfaces_up() or []) and network_problem() is None
 
@@ -262,7 +263,7 @@ def test_interfaces_up_here():
 )
 def test_no_interface_up_is_a_clear_error(flags, up):
     # the flags an unshared network namespace shows (lo down), without needing one
-    from graspguide.study.lab_streams import interfaces_up, network_problem
+    from graspguide.sources.lab_streams import interfaces_up, network_problem
 
     assert interfaces_up(list(flags), flags.__getitem__) == up
     problem = network_problem(list(flags), flags.__getitem__)

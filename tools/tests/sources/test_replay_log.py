@@ -13,7 +13,7 @@ import sys
 import pytest
 from conftest import REPO_ROOT
 
-from graspguide.study import sources
+from graspguide.sources import poses as sources
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 

@@ -13,8 +13,9 @@ import sys
 import pytest
 from conftest import REPO_ROOT
 
-from graspguide.study import sources, trial_sources
-from graspguide.study.participant import ParticipantParams, VirtualParticipant
+from graspguide.participant.model import ParticipantParams, VirtualParticipant
+from graspguide.sources import poses as sources
+from graspguide.sources import trial_sources
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 PROTOCOL = os.path.join(REPO_ROOT, "protocols", "paper.toml")

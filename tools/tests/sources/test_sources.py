@@ -1,4 +1,4 @@
-"""Pose sources (graspguide.study.sources): replay CSV, synthetic hand, tracker conventions."""
+"""Pose sources (graspguide.sources.poses): replay CSV, synthetic hand, tracker conventions."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from graspguide.core import rotations as rot
 from graspguide.core import solver
-from graspguide.study import sources as src
+from graspguide.sources import poses as src
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]

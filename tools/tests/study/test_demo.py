@@ -20,11 +20,11 @@ from conftest import subprocess_env
 from graspguide.link import client as dv
 from graspguide.link import codec
 from graspguide.link import messages as m
+from graspguide.protocol import study_protocol as pf
+from graspguide.sources.trial_sources import open_runner_source
 from graspguide.study import runner as rn
-from graspguide.study import study_protocol as pf
 from graspguide.study.pose_loop import PipelinedPoses, PoseLoop, TrialOverrun, pipeline_window
 from graspguide.study.progress import Progress
-from graspguide.study.trial_sources import open_runner_source
 
 TINY = """
 [study]
@@ -231,7 +231,7 @@ def test_demo_usage_errors(tmp_path):
 # Pipelined closed loop == lockstep
 # --------------------------------------------------------------------------------------
 def _run(protocol, out, pid, pipeline):
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)
@@ -278,7 +278,7 @@ def test_pipelined_and_lockstep_runs_give_identical_trials(tmp_path):
 
 
 def test_pipeline_window_only_for_the_virtual_participant():
-    from graspguide.study.participant import VirtualParticipant
+    from graspguide.participant.model import VirtualParticipant
 
     vp = VirtualParticipant.from_spec("", 1)
     assert pipeline_window(vp, 100.0) == 20

@@ -34,7 +34,7 @@ WRITER = textwrap.dedent("""
         from graspguide.study.runner import append_line
         write = lambda rec: append_line(target, rec)
     else:
-        from graspguide.study.records import SessionLog
+        from graspguide.records.storage import SessionLog
         log = SessionLog(target)
         write = log.result if kind == "results" else \\
             lambda rec: log.pose(rec["i"], 0.5, (1.0, 0.0, 0.0, 0.0), False)
@@ -257,7 +257,9 @@ def test_stream_log_on_a_size_limit_stops_with_one_line(tmp_path):
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, resource.RLIM_INFINITY))
 
-    scene = os.path.join(os.path.dirname(TESTS_DIR), "examples", "scene_paper_3.toml")
+    scene = os.path.join(
+        os.path.dirname(os.path.dirname(TESTS_DIR)), "examples", "scene_paper_3.toml"
+    )
     env = subprocess_env()
     env["PYTHONDONTWRITEBYTECODE"] = "1"
     folder = tmp_path / "session"

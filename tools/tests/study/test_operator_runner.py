@@ -21,17 +21,19 @@ import pytest
 from conftest import small_protocol_toml, subprocess_env
 
 from graspguide import cli
+from graspguide.participant.model import VirtualParticipant
+from graspguide.protocol import study_protocol as pf
+from graspguide.protocol.tlx import TLX_NAMES, TLX_SCALES
+from graspguide.records.events import EVENT_NAMES, TrialObserver
+from graspguide.sources.trial_sources import ClosedLoopSource
 from graspguide.study import runner as rn
-from graspguide.study import study_protocol as pf
 from graspguide.study.operator_console import OperatorConsole
-from graspguide.study.participant import VirtualParticipant
 from graspguide.study.progress import Progress, time_left_s
-from graspguide.study.tlx import TLX_NAMES, TLX_SCALES
-from graspguide.study.trial_events import EVENT_NAMES, TrialObserver
-from graspguide.study.trial_sources import ClosedLoopSource
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(os.path.dirname(TESTS_DIR))  # where --port sim finds the device
+ROOT = os.path.dirname(
+    os.path.dirname(os.path.dirname(TESTS_DIR))
+)  # where --port sim finds the device
 
 
 class PersonParticipant(VirtualParticipant):
@@ -306,8 +308,8 @@ class Recorder:
 def test_observers_receive_the_events_in_order_and_every_telemetry(tmp_path):
     from test_runner import AligningHand
 
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SimulatedDevice
 
     path = protocol_file(tmp_path)
     protocol = pf.load_protocol(path)
@@ -399,8 +401,8 @@ def test_observers_get_the_operators_events_between_the_trials_own(tmp_path):
     trial_start events, in order, and events.jsonl holds the same."""
     from test_runner import AligningHand
 
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SimulatedDevice
 
     path = protocol_file(tmp_path, modalities=("F+V",), wrenches=1)
     protocol = pf.load_protocol(path)

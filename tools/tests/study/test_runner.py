@@ -21,14 +21,14 @@ from conftest import subprocess_env
 from graspguide import cli
 from graspguide.core.rotations import quat_angle_deg, slerp
 from graspguide.exit_codes import EXIT_USAGE
+from graspguide.protocol import study_protocol as pf
+from graspguide.protocol.tlx import load_tlx_file
+from graspguide.run_errors import RunnerError
+from graspguide.sources.poses import aligned_quaternion
+from graspguide.sources.trial_sources import ClosedLoopSource, open_runner_source
 from graspguide.study import runner as rn
-from graspguide.study import study_protocol as pf
-from graspguide.study.errors import RunnerError
 from graspguide.study.jobs import TrialJob
 from graspguide.study.progress import Progress
-from graspguide.study.sources import aligned_quaternion
-from graspguide.study.tlx import load_tlx_file
-from graspguide.study.trial_sources import ClosedLoopSource, open_runner_source
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 
@@ -146,7 +146,7 @@ class RecordingClient:
 
 @pytest.fixture
 def sim():
-    from graspguide.link.sim import SimulatedDevice
+    from graspguide.devices.sim import SimulatedDevice
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         yield dev
@@ -641,8 +641,8 @@ def test_cli_usage_errors(tmp_path, capsys):
 def test_real_time_run_on_the_device_clock(tmp_path):
     """Without the virtual clock (a board, or a person): poses paced by the host clock,
     host_time_us from it, a progress line every period."""
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SimulatedDevice
 
     path = tmp_path / "rt.toml"
     path.write_text(
@@ -706,8 +706,8 @@ def test_terminal_progress_line():
 def test_device_lost_mid_trial_keeps_the_link_error(tmp_path):
     """The simulated device dies in trial 2: the run ends with the link error (not the
     failed STOP's), trial 1 is kept, the end of the run is logged."""
+    from graspguide.devices.sim import SimulatedDevice
     from graspguide.link.client import DeviceClient
-    from graspguide.link.sim import SimulatedDevice
     from graspguide.link.transport import LinkError
 
     path, protocol = small_protocol(tmp_path, fam=0, count=1)

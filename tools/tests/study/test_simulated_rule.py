@@ -15,7 +15,8 @@ import pexpect
 import pytest
 from conftest import REPO_ROOT, small_protocol_toml, subprocess_env
 
-from graspguide.study import sources, trial_sources
+from graspguide.sources import poses as sources
+from graspguide.sources import trial_sources
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 

@@ -10,10 +10,11 @@ import subprocess
 import sys
 
 import pytest
+from conftest import TOOLS_DIR
 
-from graspguide.study import scene_file as gs
+from graspguide.protocol import scene_file as gs
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
 SCENE4 = os.path.join(_TOOLS, "examples", "scene_paper_4.toml")
 CLI = [sys.executable, "-m", "graspguide", "stream"]
@@ -129,7 +130,7 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     """The synthetic hand written as an OptiTrack export (y up, x,y,z,w): streamed with
     --tracker optitrack it succeeds; streamed as if it were world data it cannot."""
     from graspguide.core import rotations
-    from graspguide.study import sources
+    from graspguide.sources import poses as sources
 
     scene = gs.load_scene(SCENE3)
     hand = sources.open_source("synthetic:rate=100,duration=6,seed=3")
@@ -179,10 +180,10 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
 
 
 def test_run_stream_then_stop_leaves_device_idle():
+    from graspguide.devices import sim as link_sim
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import sim as link_sim
-    from graspguide.study import sources
+    from graspguide.sources import poses as sources
     from graspguide.study.stream_session import run_stream
 
     scene = gs.load_scene(SCENE3)
@@ -430,9 +431,9 @@ def test_sigterm_stop_reaches_the_device(tmp_path):
     and its motor trace ends with every motor off, which only STOP can do."""
     import signal
 
+    from graspguide.devices import sim as link_sim
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.link import sim as link_sim
 
     trace = tmp_path / "motors.csv"
     with link_sim.SimulatedDevice(trace=str(trace), stale_ms=60000, start=True) as dev:

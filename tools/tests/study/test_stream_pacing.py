@@ -15,7 +15,7 @@ import sys
 
 from conftest import REPO_ROOT
 
-from graspguide.link import promini_sim as pms
+from graspguide.devices import promini_sim as pms
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 SOURCE_RATE = 240.0
@@ -78,10 +78,10 @@ def test_stream_to_the_simulated_device_is_not_paced(tmp_path):
 def test_a_live_tracker_is_not_read_ahead(tmp_path):
     """A live tracker's generator gives each frame when it happens: the stream sends the
     frame it got, never waits for the next one to see whether it is newer."""
+    from graspguide.devices.session import DeviceSession
     from graspguide.link.transport import DEFAULT_BAUDRATE
-    from graspguide.study.device_session import DeviceSession
-    from graspguide.study.scene_file import load_scene
-    from graspguide.study.sources import TrackerAdapter
+    from graspguide.protocol.scene_file import load_scene
+    from graspguide.sources.poses import TrackerAdapter
     from graspguide.study.stream_session import run_stream
 
     pulled: list[int] = []

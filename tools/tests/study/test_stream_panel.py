@@ -14,10 +14,11 @@ import sys
 
 import pexpect
 import pytest
+from conftest import TOOLS_DIR
 
-from graspguide.study import scene_file as gs
+from graspguide.protocol import scene_file as gs
 
-_TOOLS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = TOOLS_DIR
 SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
 WRENCH = "0.3,-1.2,-0.8"
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")

@@ -16,7 +16,7 @@ import sys
 import pexpect
 from conftest import REPO_ROOT, small_protocol_toml, subprocess_env
 
-from graspguide.study.tlx import TLX_NAMES, TLX_SCALES
+from graspguide.protocol.tlx import TLX_NAMES, TLX_SCALES
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")

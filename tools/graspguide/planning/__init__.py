@@ -1,0 +1,1 @@
+"""Planning a study by simulation: sweeps of virtual participants over the conditions."""
