@@ -105,7 +105,7 @@ fi
 # --- 5. The simulated device ------------------------------------------------------
 # `graspguide ... --port sim` and tools/tests/test_device_e2e.py run it. Offline, like
 # the native tests; pio recompiles only what changed (about 1 s when nothing did). It
-# builds into a folder of its own, where its launcher looks (graspguide.link.device_builds):
+# builds into a folder of its own, where its launcher looks (graspguide.devices.builds):
 # pio deletes its whole build folder when its project checksum changes, and another env's
 # build must not take the simulated device with it.
 if grep -q '^\[env:sim\]' "$ROOT/platformio.ini" 2>/dev/null; then
