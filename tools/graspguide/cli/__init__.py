@@ -3,7 +3,8 @@
 Each command module (``graspguide.cli.<name>``) has ``HELP``, ``DESCRIPTION``, optionally
 ``EPILOG`` and ``RAW_DESCRIPTION = False`` (argparse's own wrapping), an
 ``add_arguments(parser)`` that only declares its options, and ``run(args) -> exit
-status`` that calls the library. The arguments they share are in
+status`` that calls its library function by name, each option passed as an explicit
+keyword argument. The arguments they share are in
 :mod:`graspguide.cli.common`, the exit statuses in :mod:`graspguide.exit_codes`. See
 ``graspguide COMMAND --help``.
 """

@@ -7,7 +7,6 @@ import argparse
 
 from graspguide.cli.common import (
     add_port_arguments,
-    call_with_options,
     int_arg,
     positive_float,
     signals_interrupt,
@@ -175,4 +174,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from graspguide.calibration.command import calibrate_command
 
-    return call_with_options(calibrate_command, args)
+    return calibrate_command(
+        participant=args.participant,
+        port=args.port,
+        baud=args.baud,
+        timeout=args.timeout,
+        out=args.out,
+        fingers=args.fingers,
+        reference=args.reference,
+        source=args.source,
+        apply=args.apply,
+        force=args.force,
+        operator=args.operator,
+        stimulus_s=args.stimulus_s,
+        gap_s=args.gap_s,
+        reference_pwm=args.reference_pwm,
+        min_floor=args.min_floor,
+        rule=args.rule,
+        reversals=args.reversals,
+        catch_rate=args.catch_rate,
+        seed=args.seed,
+        no_headroom=args.no_headroom,
+    )

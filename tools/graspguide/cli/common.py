@@ -1,13 +1,12 @@
 """What every command's parser shares: the argument parser that takes negative numbers
 as values, the numeric argument types, the port arguments, connecting to a device,
-SIGTERM/SIGHUP as Ctrl-C, and the call of a command's library function with its options
-(the one-line error report is graspguide.devices.session's)."""
+and SIGTERM/SIGHUP as Ctrl-C (the one-line error report is graspguide.devices.session's).
+Each command module calls its library function by name with explicit keyword arguments."""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import inspect
 import math
 import re
 import signal
@@ -151,17 +150,6 @@ def signals_interrupt() -> Iterator[None]:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-
-
-def call_with_options(fn: Callable[..., int], args: argparse.Namespace) -> int:
-    """``fn(name=args.name, ...)`` for every keyword-only parameter of ``fn``: the library
-    functions of the commands name their parameters as the options' dests."""
-    names = [
-        p.name
-        for p in inspect.signature(fn).parameters.values()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY
-    ]
-    return fn(**{name: getattr(args, name) for name in names})
 
 
 def connect(args: argparse.Namespace) -> tuple[Any, Any]:

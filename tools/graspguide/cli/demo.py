@@ -7,7 +7,6 @@ import argparse
 from graspguide.cli.common import (
     add_jobs_argument,
     add_protocol_argument,
-    call_with_options,
     int_arg,
 )
 
@@ -79,4 +78,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from graspguide.study import demo
 
-    return call_with_options(demo.run, args)
+    return demo.run(
+        participants=args.participants,
+        protocol=args.protocol,
+        out=args.out,
+        jobs=args.jobs,
+        source=args.source,
+        hostless=args.hostless,
+    )

@@ -89,7 +89,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.cli.common import call_with_options
     from graspguide.plots.command import plot_command
 
-    return call_with_options(plot_command, args)
+    return plot_command(
+        run_dir=args.run_dir,
+        trial=args.trial,
+        participant=args.participant,
+        out=args.out,
+        formats=args.formats,
+    )

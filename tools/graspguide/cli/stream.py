@@ -9,7 +9,6 @@ import math
 from graspguide.cli.common import (
     add_lsl_arguments,
     add_port_arguments,
-    call_with_options,
     signals_interrupt,
 )
 from graspguide.devices.sim import SIM_PORT
@@ -148,4 +147,17 @@ def run(args: argparse.Namespace) -> int:
         parser.error("--lsl-wait is for --lsl (add --lsl [NAME])")
     if not 0 <= args.trial_id <= 0xFFFF:
         parser.error(f"--trial-id must be in 0..65535, got {args.trial_id}")
-    return call_with_options(stream_command, args)
+    return stream_command(
+        scene=args.scene,
+        wrench=args.wrench,
+        source=args.source,
+        tracker=args.tracker,
+        port=args.port,
+        baud=args.baud,
+        timeout=args.timeout,
+        log=args.log,
+        trial_id=args.trial_id,
+        virtual_clock=args.virtual_clock,
+        lsl=args.lsl,
+        lsl_wait=args.lsl_wait,
+    )

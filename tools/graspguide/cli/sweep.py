@@ -7,7 +7,6 @@ import argparse
 from graspguide.cli.common import (
     add_jobs_argument,
     add_protocol_argument,
-    call_with_options,
     int_arg,
 )
 
@@ -97,4 +96,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from graspguide.planning import sweep
 
-    return call_with_options(sweep.run, args)
+    return sweep.run(
+        thresholds=args.thresholds,
+        rates=args.rates,
+        protocol=args.protocol,
+        grid=args.grid,
+        modalities=args.modalities,
+        contacts=args.contacts,
+        participants=args.participants,
+        wrenches=args.wrenches,
+        source=args.source,
+        out=args.out,
+        jobs=args.jobs,
+        quiet=args.quiet,
+    )

@@ -10,7 +10,6 @@ from graspguide.cli.common import (
     add_lsl_arguments,
     add_port_arguments,
     add_protocol_argument,
-    call_with_options,
     quaternion_arg,
     rest_s_arg,
     signals_interrupt,
@@ -175,7 +174,9 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_USAGE
         from graspguide.study.dry_run import dry_run_command
 
-        return call_with_options(dry_run_command, args)
+        return dry_run_command(
+            protocol=args.protocol, participant=args.participant, rest_s=args.rest_s
+        )
     missing = [o for o, v in (("--port", args.port), ("--source", args.source)) if v is None]
     if missing:
         report("trial", f"{' and '.join(missing)} required (or --dry-run to walk the plan)")
@@ -193,12 +194,35 @@ def run(args: argparse.Namespace) -> int:
     if args.hostless:
         from graspguide.hostless.runner import hostless_trial_command
 
-        if args.rest_s is None:
-            args.rest_s = DEFAULT_REST_S
-        return call_with_options(hostless_trial_command, args)
+        return hostless_trial_command(
+            protocol=args.protocol,
+            participant=args.participant,
+            source=args.source,
+            port=args.port,
+            baud=args.baud,
+            timeout=args.timeout,
+            out=args.out,
+            store=args.store,
+            rest_s=DEFAULT_REST_S if args.rest_s is None else args.rest_s,
+            imu_to_hand=args.imu_to_hand,
+            tlx=args.tlx,
+        )
     if args.store is not None or args.imu_to_hand is not None:
         report("trial", "--store and --imu-to-hand go with --hostless only")
         return EXIT_USAGE
     from graspguide.study.runner import trial_command
 
-    return call_with_options(trial_command, args)
+    return trial_command(
+        protocol=args.protocol,
+        participant=args.participant,
+        source=args.source,
+        port=args.port,
+        baud=args.baud,
+        timeout=args.timeout,
+        out=args.out,
+        tlx=args.tlx,
+        rest_s=args.rest_s,
+        operator=args.operator,
+        lsl=args.lsl,
+        lsl_wait=args.lsl_wait,
+    )

@@ -107,7 +107,7 @@ def test_dry_run_into_a_closed_pipe_ends_quietly():
 
 
 def test_analyze_into_a_closed_pipe_ends_quietly(tmp_path):
-    from test_analysis import make_study
+    from analysis.test_analysis import make_study
 
     make_study(tmp_path / "S", n=3)
     proc = _into_closed_pipe(["analyze", str(tmp_path / "S"), "--out", str(tmp_path / "out")])
