@@ -72,7 +72,7 @@ from graspguide.exit_codes import EXIT_USAGE, fail
 
 SCHEMA = "graspguide-bench/1"
 
-# Issue 12: a whole k=4 double frame within 0.6 of DAQP's QP alone on the same instances.
+# The goal: a whole k=4 double frame within 0.6 of DAQP's QP alone on the same instances.
 GOAL_RATIO = 0.6
 
 # Noise rule (module docstring): a series is repeated while its pass medians differ by
@@ -1249,7 +1249,7 @@ def machine_info(peers: dict[str, Any]) -> dict[str, Any]:
 def goal(results: list[dict[str, Any]]) -> dict[str, Any] | None:
     """Host, k=4, double: this project's median full frame (the shipped settings: the
     structured route, default iteration cap) vs DAQP's median internal solve_time for the
-    QP alone on the same instances (issue 12's goal: ratio <= GOAL_RATIO). Also: the
+    QP alone on the same instances (the goal: ratio <= GOAL_RATIO). Also: the
     fastest double frame variant, and DAQP's setup + solve."""
     frame = next(
         (r for r in results if r["k"] == 4 and r["name"] == "frame double structured"), None
@@ -1579,50 +1579,76 @@ def write_json(report: dict[str, Any], path: str) -> None:
     os.replace(tmp, path)
 
 
-def options_from_args(args) -> Options:
-    """Options from `graspguide bench`'s arguments (parsed in cli.py); BenchError says
-    which value is wrong."""
-    quick = bool(args.quick)
-    ks = {"3": (3,), "4": (4,), "both": (3, 4)}.get(str(args.k))
+def make_options(
+    *,
+    instances: int | None,
+    seed: int,
+    k: str,
+    quick: bool,
+    solvers: str,
+    max_passes: int | None,
+    accuracy_scenes: int,
+) -> Options:
+    """Options from `graspguide bench`'s values (None: the default of --quick or not);
+    BenchError says which value is wrong."""
+    ks = {"3": (3,), "4": (4,), "both": (3, 4)}.get(str(k))
     if ks is None:
-        raise BenchError(f"--k must be 3, 4 or both, got {args.k!r}")
-    instances = args.instances if args.instances is not None else (20 if quick else 200)
+        raise BenchError(f"--k must be 3, 4 or both, got {k!r}")
+    if instances is None:
+        instances = 20 if quick else 200
     if not 0 <= instances <= 100_000:
         raise BenchError(f"--instances must be between 0 and 100000, got {instances}")
-    if args.seed < 0:
-        raise BenchError(f"--seed must be >= 0, got {args.seed}")
-    max_passes = args.max_passes if args.max_passes is not None else (4 if quick else 8)
+    if seed < 0:
+        raise BenchError(f"--seed must be >= 0, got {seed}")
+    if max_passes is None:
+        max_passes = 4 if quick else 8
     if max_passes < 1:
         raise BenchError(f"--max-passes must be >= 1, got {max_passes}")
-    solvers = tuple(s.strip() for s in args.solvers.split(",") if s.strip())
-    accuracy_scenes = args.accuracy_scenes
     if not 0 <= accuracy_scenes <= 100_000:
         raise BenchError(f"--accuracy-scenes must be between 0 and 100000, got {accuracy_scenes}")
     return Options(
         instances=instances,
-        seed=args.seed,
+        seed=seed,
         ks=ks,
         quick=quick,
         min_passes=min(2 if quick else 3, max_passes),
         max_passes=max_passes,
-        solvers=solvers,
+        solvers=tuple(s.strip() for s in solvers.split(",") if s.strip()),
         accuracy_scenes=accuracy_scenes,
     )
 
 
-def main_args(args) -> int:
+def bench_command(
+    *,
+    instances: int | None,
+    seed: int,
+    k: str,
+    quick: bool,
+    solvers: str,
+    max_passes: int | None,
+    accuracy_scenes: int,
+    json_path: str | None,
+) -> int:
     """`graspguide bench`: 0 on success, 2 for bad options or a missing solver."""
 
     def progress(msg: str) -> None:
         print(f"bench: {msg}", file=sys.stderr, flush=True)
 
     try:
-        opts = options_from_args(args)
+        opts = make_options(
+            instances=instances,
+            seed=seed,
+            k=k,
+            quick=quick,
+            solvers=solvers,
+            max_passes=max_passes,
+            accuracy_scenes=accuracy_scenes,
+        )
         report = run_bench(opts, progress)
     except BenchError as e:
         return fail("bench", e, EXIT_USAGE)
     print(format_table(report), flush=True)
-    if args.json:
-        write_json(report, args.json)
-        progress(f"wrote {args.json}")
+    if json_path:
+        write_json(report, json_path)
+        progress(f"wrote {json_path}")
     return 0

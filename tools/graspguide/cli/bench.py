@@ -1,15 +1,18 @@
 """`graspguide bench`: the host benchmark (graspguide.bench.host_bench), or with
 --target the instruction counts on a microcontroller (graspguide.bench.targets) or the
-cycles of the per-frame layer on the ATmega328P (graspguide.bench.avr_target)."""
+cycles of the per-frame layer on the ATmega328P (graspguide.bench.avr_target);
+`graspguide bench agreement MODE`: the float core against the float64 reference on paper
+scenes (graspguide.bench.float_agreement)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 from pathlib import Path
 
-from graspguide.cli.common import positive_float
+from graspguide.cli.common import int_arg, positive_float
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, report
 
 HELP = (
@@ -29,7 +32,10 @@ DESCRIPTION = (
     "maximum grew more than 10 % or a status differs from the float64 reference. "
     "With --target avr: the per-frame layer's cycles on the ATmega328P at 8 MHz "
     "under simavr (frame, trial, watchdog), its flash and RAM, against "
-    "tools/perf/avr_baseline.json."
+    "tools/perf/avr_baseline.json. "
+    "`graspguide bench agreement MODE`: does the float core give the float64 reference's "
+    "constraint model and PWM (within 1 count) on paper scenes, on the host or on the "
+    "Cortex-M4F under QEMU (`graspguide bench agreement --help`)."
 )
 RAW_DESCRIPTION = False
 
@@ -148,6 +154,96 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="S",
         help="seconds QEMU may run one image before it is killed (default 300)",
     )
+    _add_agreement(p)
+
+
+AGREEMENT_DESCRIPTION = """\
+Does the float core give the float64 reference's constraint model and PWM (within 1
+count) on `paper` scenes: hand-like contacts (the nominal hand, each coordinate moved by
+up to scene_generators.PERTURBATION_M), a unit force in a uniform direction, no moment,
+k = 3 and 4, policies F and Fperp, mode C (seed 17; scene pNNNNNN is the NNNNNN-th of its
+set); plus the hard hands of test/data/hard_hands.json. The test
+tools/tests/core/test_float_paper_agreement.py checks the same scenes and band.
+
+modes:
+  reference  the float64 reference on the hard and --count random scenes, saved to --out
+             (about 10 ms a scene and job)
+  host       the float core this interpreter imports against a saved reference
+  layered    the test's layered check (float and double cores on every scene, the
+             reference where they differ) on --count scenes, no saved reference
+  m4f        for each WORKTREE (made by `git worktree add`, never the main checkout: its
+             stage_scenes.h is overwritten), the scenes in float with the reference's
+             status and PWM, built with `pio run -e m4f_stages` and run on
+             qemu-system-arm; agreement there is the status and PWM within 1 count"""
+
+AGREEMENT_EPILOG = """\
+examples:
+  graspguide bench agreement reference --count 100000 --jobs 2 --out /tmp/float_ref.npz
+  graspguide bench agreement host --reference /tmp/float_ref.npz
+  graspguide bench agreement layered --count 1000000
+  graspguide bench agreement m4f --count 1300 --retry-scenes /tmp/wt_after /tmp/wt_before
+
+exit status: 0 measured, 1 a build, QEMU or file error, 2 a usage error."""
+
+
+def _add_agreement(p: argparse.ArgumentParser) -> None:
+    """`graspguide bench agreement MODE` (graspguide.bench.float_agreement)."""
+    sub = p.add_subparsers(dest="measurement", metavar="MEASUREMENT")
+    a = sub.add_parser(
+        "agreement",
+        help="the float core against the float64 reference on paper scenes (host or M4F)",
+        description=AGREEMENT_DESCRIPTION,
+        epilog=AGREEMENT_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    modes = a.add_subparsers(dest="agreement_mode", metavar="MODE", required=True)
+    count = int_arg(0, 100_000_000)
+    jobs = int_arg(1, 256)
+    r = modes.add_parser("reference", help="save the float64 reference's answers")
+    r.add_argument("--count", type=count, default=100_000, help="random scenes (100000)")
+    r.add_argument("--jobs", type=jobs, default=1, help="processes (default 1)")
+    r.add_argument("--out", dest="reference_out", required=True, metavar="FILE.npz")
+    h = modes.add_parser("host", help="the imported float core against a saved reference")
+    h.add_argument("--reference", dest="reference_in", required=True, metavar="FILE.npz")
+    h.add_argument(
+        "--json",
+        dest="agreement_json",
+        default=None,
+        metavar="FILE",
+        help="also write the figures and every disagreement",
+    )
+    lay = modes.add_parser("layered", help="the test's layered check on --count scenes")
+    lay.add_argument("--count", type=count, default=1_000_000, help="random scenes (1000000)")
+    m = modes.add_parser("m4f", help="the M4F image of each worktree under QEMU")
+    m.add_argument("--count", type=count, default=1300, help="random scenes (default 1300)")
+    m.add_argument("--jobs", type=jobs, default=2, help="reference processes (default 2)")
+    m.add_argument(
+        "--scene",
+        dest="scene_names",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="also run this random scene (e.g. p049778), whatever --count; repeatable",
+    )
+    m.add_argument(
+        "--scene-set",
+        type=count,
+        default=100_000,
+        metavar="N",
+        help="the size of the set the --scene names come from (100000: the test's; "
+        "1000000: `layered`'s default)",
+    )
+    m.add_argument(
+        "--large-set-scenes",
+        action="store_true",
+        help="also run the hands found on larger sets (large_set in the hard hands)",
+    )
+    m.add_argument(
+        "--retry-scenes",
+        action="store_true",
+        help="also run the hands the float core retries in double (retry in the hard hands)",
+    )
+    m.add_argument("worktrees", nargs="+", metavar="WORKTREE")
 
 
 def _misplaced(args: argparse.Namespace, options: dict[str, str]) -> list[str]:
@@ -158,6 +254,14 @@ def _misplaced(args: argparse.Namespace, options: dict[str, str]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.measurement == "agreement":
+        wrong = _misplaced(
+            args, {**HOST_ONLY, **TARGET_ONLY, "targets": "--target", "json": "--json"}
+        )
+        if wrong:
+            report("bench", f"{', '.join(wrong)}: not for `bench agreement`")
+            return EXIT_USAGE
+        return run_agreement(args)
     if args.targets:
         wrong = _misplaced(args, HOST_ONLY)
         if wrong:
@@ -172,7 +276,41 @@ def run(args: argparse.Namespace) -> int:
     # the other commands do not pay for it at start-up.
     from graspguide.bench import host_bench
 
-    return host_bench.main_args(args)
+    return host_bench.bench_command(
+        instances=args.instances,
+        seed=args.seed,
+        k=args.k,
+        quick=args.quick,
+        solvers=args.solvers,
+        max_passes=args.max_passes,
+        accuracy_scenes=args.accuracy_scenes,
+        json_path=args.json,
+    )
+
+
+def run_agreement(args: argparse.Namespace) -> int:
+    """`graspguide bench agreement MODE`: 0 when measured, 1 on a build, QEMU or file
+    error."""
+    from graspguide.bench import float_agreement as fa
+
+    try:
+        if args.agreement_mode == "reference":
+            return fa.reference_command(count=args.count, jobs=args.jobs, out=args.reference_out)
+        if args.agreement_mode == "host":
+            return fa.host_command(reference_path=args.reference_in, json_path=args.agreement_json)
+        if args.agreement_mode == "layered":
+            return fa.layered_command(count=args.count)
+        return fa.m4f_command(
+            worktrees=args.worktrees,
+            count=args.count,
+            jobs=args.jobs,
+            scene_names=args.scene_names,
+            scene_set_size=args.scene_set,
+            with_large_set=args.large_set_scenes,
+            with_retry=args.retry_scenes,
+        )
+    except (OSError, ValueError, RuntimeError, subprocess.SubprocessError) as e:
+        return fail("bench", e)
 
 
 def run_targets(args: argparse.Namespace) -> int:

@@ -17,7 +17,7 @@ from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, repor
 HELP = "write a participant's host-less plan file for a MicroPython board (plan.bin)"
 
 DESCRIPTION = """\
-Writes one participant's plan of --protocol to --out in issue 13's byte layout: the plan
+Writes one participant's plan of --protocol to --out in the byte layout of the plan
 region a C++ device stores at offset 0 (preamble, header, trials; docs/hostless.md). With
 --levels a block follows with each trial's motor levels and force direction, solved once
 here by the C++ core, for boards too slow to solve a posture themselves (README:
@@ -95,15 +95,14 @@ def plan_bytes(args: argparse.Namespace, protocol: str) -> tuple[bytes, list[Any
 
     if not args.participant:
         raise ValueError("--participant is required with a protocol: whose plan (U1, U2, ...)")
-    calibration = getattr(args, "calibration", None)
     return plan_file_for(
-        protocol,
-        args.participant,
-        args.levels,
-        args.rest_s,
-        args.imu_to_hand,
-        args.simulated,
-        read_calibration(calibration) if calibration else None,
+        protocol_path=protocol,
+        participant=args.participant,
+        with_levels=args.levels,
+        rest_s=args.rest_s,
+        imu_to_hand_wxyz=args.imu_to_hand,
+        simulated=args.simulated,
+        calibration=read_calibration(args.calibration) if args.calibration else None,
     )
 
 

@@ -31,9 +31,9 @@ import time
 import numpy as np
 import pytest
 from conftest import TOOLS_DIR
-from issue17_script import issue17
 from known_answer_requests import load_cases, request_lines
 
+from graspguide.bench import float_agreement as fa
 from graspguide.core import _core, solver
 from graspguide.core import scene_generators as scenes
 from graspguide.devices import qemu_firmware
@@ -276,16 +276,16 @@ def test_watchdog_turns_the_motors_off_when_poses_stop(client, board, report_fig
 
 
 def test_hands_float_cannot_vouch_for_get_float64s_answer_on_the_target(client, report_figure):
-    """The six hands four million scenes found the float core getting wrong (issue 17):
-    the firmware's float solve finds it cannot vouch for each, retries the posture in
+    """The six hands of four million scenes that the float core cannot vouch for: the
+    firmware's float solve finds it cannot vouch for each, retries the posture in
     software double on the Cortex-M4F, and answers with the float64 reference's model and
     PWM (within 1) on the same float-rounded inputs. Before the stack test, so that its
     high-water mark includes a retry's frames."""
     identity = [1.0, 0.0, 0.0, 0.0]
     agreed = []
-    for sc in issue17.RETRY_SCENES:
+    for sc in fa.retry_scenes():
         k = len(sc["contacts"])
-        rounded = issue17.as_float32(sc)
+        rounded = fa.as_float32(sc)
         client.set_scene(
             rounded["contacts"],
             timeout_s=LONGEST_TRIAL_S,
@@ -293,16 +293,16 @@ def test_hands_float_cannot_vouch_for_get_float64s_answer_on_the_target(client, 
             mode="C",
             constraints="paper",
         )
-        client.start_trial(k, issue17.wrench(rounded))
+        client.start_trial(k, fa.wrench(rounded))
         tel = client.pose(0, identity)
         client.stop()
-        ref = issue17.reference_answer(rounded)
+        ref = fa.reference_answer(rounded)
         got = (tel.solver_status.name.lower(), tel.constraints_used.name.lower(), list(tel.pwm[:k]))
-        assert issue17.agrees(got, ref), (sc["name"], got, ref)
+        assert fa.agrees(got, ref), (sc["name"], got, ref)
         agreed.append(sc["name"])
     report_figure(
-        "QEMU firmware: hands retried in double (issue 17)",
-        f"float64's model and PWM within 1 on {len(agreed)} / {len(issue17.RETRY_SCENES)}",
+        "QEMU firmware: hands retried in double",
+        f"float64's model and PWM within 1 on {len(agreed)} / {len(fa.retry_scenes())}",
     )
 
 

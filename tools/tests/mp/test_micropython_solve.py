@@ -227,30 +227,30 @@ def test_emulated_float32_against_the_cores_float(cases):
     assert within_ref >= 0.999 * n_ok, (within_ref, n_ok)
 
 
-def test_emulated_float32_on_the_issue17_paper_scenes():
-    """Issue 17 in the port: its single-precision QP gives the float64 reference's model
-    and PWM (within 1) on the issue's 8 scenes and on the 3 hands that need internal
-    forces of 45,000 |lambda0| or more, and on the 4 hands that larger sets found, the last
-    the C++ float core got wrong."""
-    from issue17_script import issue17
+def test_emulated_float32_on_the_hard_paper_scenes():
+    """The port's single-precision QP gives the float64 reference's model and PWM (within
+    1) on the 8 hard scenes, on the 3 hands that need internal forces of 45,000 |lambda0|
+    or more, and on the 4 hands that larger sets found, the last the C++ float core got
+    wrong."""
+    from graspguide.bench import float_agreement as fa
 
     port, port_status = _port_solver()
-    scenes = issue17.scene_set(0) + issue17.named_scenes(["p049778", "p054288", "p072575"])
-    scenes += issue17.LARGE_SET_SCENES
+    scenes = fa.scene_set(0) + fa.named_scenes(["p049778", "p054288", "p072575"])
+    scenes += fa.large_set_scenes()
     problems = []
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         for scene in scenes:
             res = port.solve(
                 _f32(scene["contacts"]),
-                _f32(issue17.wrench(scene)),
+                _f32(fa.wrench(scene)),
                 scene["policy"],
                 "C",
                 "paper",
                 precision="single",
             )
             got = (port_status.name(res.status), res.used, [int(v) for v in res.pwm])
-            ref = issue17.reference_answer(issue17.as_float32(scene))
-            if not issue17.agrees(got, ref):
+            ref = fa.reference_answer(fa.as_float32(scene))
+            if not fa.agrees(got, ref):
                 problems.append(f"{scene['name']}: port {got}, float64 reference {ref}")
     assert len(scenes) == 15
     assert not problems, "\n".join(problems)
