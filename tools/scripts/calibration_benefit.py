@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """What a per-finger calibration does for a virtual participant whose fingers differ
-(issue 16). SIMULATED: virtual participants, never human data.
+(docs/calibration.md). SIMULATED: virtual participants, never human data.
 
 Three conditions, the same protocol and participants U1..UP on --port sim:
 

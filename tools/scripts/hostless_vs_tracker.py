@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Success rates and mean completion times of the host-less simulated study beside the
-tracker-driven one (issue 13): the same protocol, virtual participants U1..Un and seeds,
+tracker-driven one (docs/hostless.md): the same protocol, virtual participants U1..Un and seeds,
 each run both ways on its own simulated device. SIMULATED: virtual participants.
 
 * tracker-driven: `graspguide trial --port sim --source participant` (the device gets the

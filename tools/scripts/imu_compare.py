@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Print the gravity-estimation comparison of issue 13 (SIMULATED streams): the device's
+"""Print the gravity-estimation comparison (SIMULATED streams): the device's
 estimator (lib/graspguide_frame/.../gravity_estimator.h through _core), VQF and x-io Fusion,
 error RMS and max in degrees during guidance motion, per stream.
 

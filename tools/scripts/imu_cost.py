@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""Instructions per gravity-estimator update on the Cortex-M4F (issue 13): builds the
+"""Instructions per gravity-estimator update on the Cortex-M4F (docs/hostless.md): builds the
 `m4f_imu` image (src/harness/imu_cost/) and runs it under QEMU mps2-an386 with
 -icount shift=0, as `graspguide bench --target m4f` runs the stage counts. The image
 times each of 2,000 updates alone (median and maximum, to one 40-instruction SysTick
 tick) and the whole stream together (the mean, to the instruction), and checks that the
-estimate ends within 3 degrees (issue 13's maximum) of the stream's own gravity.
+estimate ends within 3 degrees (the estimator's goal) of the stream's own gravity.
 
     python tools/scripts/imu_cost.py [--no-build] [--json FILE]
 """
@@ -20,7 +20,7 @@ from graspguide.bench import targets
 
 ROOT = Path(__file__).resolve().parents[2]
 IMAGE = targets.Target("m4f-imu", "cortex-m4f-imu", "m4f_imu", "mps2-an386")
-MAX_FINAL_ERROR_DEG = 3.0  # issue 13's max: the estimate must have tracked the stream, not only run
+MAX_FINAL_ERROR_DEG = 3.0  # the goal's max: the estimate must have tracked the stream, not only run
 
 
 def parse(lines: list[str]) -> dict[str, float]:

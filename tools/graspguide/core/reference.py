@@ -360,7 +360,7 @@ def feasibility_margin(
 
 
 def paper_margin_x_fixed(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> float:
-    """The paper model's margin with every x component fixed to 0 (issue 17):
+    """The paper model's margin with every x component fixed to 0:
     max t s.t. G lam = -w_L, lam_ix = 0, lam_iy, lam_iz >= t ||lam0||, t <= 1.
 
     Without a moment about y_O, equilibrium forces sum c_i lam_ix = 0, so the paper
@@ -375,8 +375,8 @@ def paper_margin_x_fixed(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> fl
 
 
 def x_fixed_equilibrium_gap(G: np.ndarray, w_l: np.ndarray, lam0_norm: float) -> float:
-    """How far the paper model with every x component fixed to 0 must leave equilibrium
-    (issue 17): min s s.t. |G lam + w_L|_inf <= s ||lam0||, lam_ix = 0, lam_iy, lam_iz >= 0
+    """How far the paper model with every x component fixed to 0 must leave equilibrium:
+    min s s.t. |G lam + w_L|_inf <= s ||lam0||, lam_ix = 0, lam_iy, lam_iz >= 0
     (HiGHS LP, in units of ||lam0||). 0 (to HiGHS's tolerance) when
     :func:`paper_margin_x_fixed` has an answer; where that LP is infeasible, because the
     x-fixed equalities contradict the load or their y/z forces cannot hold it, -gap is the

@@ -18,7 +18,7 @@ import numpy as np
 from graspguide.core import _core
 from graspguide.imu.synthetic import STANDARD_GRAVITY_MPS2, ImuStream
 
-#: The goal of issue 13 during guidance motion [deg].
+#: The estimator's goal during guidance motion [deg].
 GOAL_RMS_DEG = 1.0
 GOAL_MAX_DEG = 3.0
 

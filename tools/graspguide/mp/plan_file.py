@@ -1,5 +1,5 @@
 """The plan file a MicroPython board reads (``plan.bin``; ``graspguide plan``, ``graspguide mp
-deploy``): issue 13's plan region, optionally followed by each trial's motor levels
+deploy``): the host-less plan region, optionally followed by each trial's motor levels
 precomputed by the C++ core, for boards too slow to solve a posture themselves.
 
 Layout, little-endian throughout:

@@ -1,4 +1,4 @@
-"""SET_CALIBRATION on the devices (issue 16: a participant's per-motor PWM floor and gain):
+"""SET_CALIBRATION on the devices (a participant's per-motor PWM floor and gain):
 the simulated device (`--port sim`), the Pro Mini sketch under simavr (`--port
 promini-sim`, its posture solved on the host) and the m4f firmware on QEMU (`--port qemu`).
 

@@ -319,7 +319,7 @@ def test_known_answers_reproduce():
 
 
 # --------------------------------------------------------------------------------------
-# paper_margin_x_fixed (issue 17's margin)
+# paper_margin_x_fixed (the float core's band is measured in it)
 # --------------------------------------------------------------------------------------
 def _x_fixed_by_vertices(G, w_l, lam0_norm):
     """The same LP solved without HiGHS: x = 0 leaves lam_yz = p + N z (least squares and

@@ -1,5 +1,5 @@
 """The Pro Mini sketch (promini/GraspGuideProMini) built with arduino-cli, offline, against
-Debian's AVR core (graspguide.promini.build): it builds, fits issue 15's flash and static
+Debian's AVR core (graspguide.promini.build): it builds, fits the Pro Mini's flash and static
 RAM budget, arduino-cli's size report agrees with avr-size and with the board's limits in
 the core's boards.txt, it has no warning, and it uses the per-frame layer and the
 per-frame-only device from lib/ as Arduino libraries. A missing arduino-cli is a failure
@@ -27,8 +27,8 @@ def sketch(tmp_path_factory):
         result = build.build_sketch(ROOT, tmp_path_factory.mktemp("promini"))
     except build.ArduinoCliMissing as e:
         pytest.fail(str(e))
-    # The stack is measured under simavr (issue 15 part 4); until then the figures printed
-    # here are the static ones.
+    # The stack is measured under simavr (`graspguide bench --target avr`); the figures
+    # printed here are the static ones.
     print(
         f"\nPro Mini sketch: flash {result.flash_bytes} B of {result.flash_max_bytes} B, "
         f"static RAM {result.static_ram_bytes} B of {result.ram_max_bytes} B "

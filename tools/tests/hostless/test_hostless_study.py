@@ -1,4 +1,4 @@
-"""The simulated host-less study (issue 13, item 5): the IMU world's signals, and whole
+"""The simulated host-less study: the IMU world's signals, and whole
 host-less runs on the real simulated device (`pio run -e sim`): a participant's study
 finishes and analyses; a SIGKILL of the device mid-study loses no completed trial record;
 the run resumes. SIMULATED throughout."""

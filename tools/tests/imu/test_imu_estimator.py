@@ -1,5 +1,5 @@
 """The device's gravity estimator (graspguide_frame/gravity_estimator.h through _core) on the
-virtual participant's IMU streams (SIMULATED): it meets issue 13's goal during guidance
+virtual participant's IMU streams (SIMULATED): it meets its goal during guidance
 motion, beside VQF and x-io Fusion run on the same samples, and misses it without bias
 estimation."""
 
