@@ -1,4 +1,4 @@
-"""Success rate and mean completion of a set of trial records (trials.jsonl lines), for
+"""Success rate and mean completion of a set of trial records (graspguide.records.trial), for
 the comparison scripts (tools/scripts/hostless_vs_tracker.py, calibration_benefit.py)."""
 
 from __future__ import annotations

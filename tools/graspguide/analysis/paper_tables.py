@@ -1,13 +1,9 @@
 """``graspguide analyze``: the paper's tables, statistics and Figure 4 from a study's logs.
 
 Input: one or more study folders ``STUDY/`` (one folder per participant ``STUDY/<PID>/``)
-or participant folders, each with
-
-* ``trials.jsonl`` -- one JSON object per completed trial (participant, simulated,
-  trial_index, session, k, policy, mode, modality, wrench_id, wrench, single_motor,
-  success, completion_s, familiarization); familiarization trials are not analysed;
-* ``tlx.jsonl`` -- one JSON object per session (participant, simulated, session, k,
-  modality, mode, scales {MD, TD, PD, PE, EF, FR}, each 1..21).
+or participant folders, each with its trial records and its TLX records
+(:mod:`graspguide.records.files` names them; :mod:`graspguide.records.trial` gives their
+fields and checks every line); familiarization trials are not analysed.
 
 What it computes (Section IV of the paper):
 
@@ -33,7 +29,6 @@ subcommand costs nothing at start-up.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
@@ -43,53 +38,29 @@ from pathlib import Path
 from typing import Any
 
 from graspguide.core.vocabulary import MODALITIES, shown
+from graspguide.protocol.tlx import TLX_MAX, TLX_MIN, TLX_NAMES
+from graspguide.records.files import TLX_FILE, TRIALS_FILE, ParticipantFiles
 from graspguide.records.storage import JsonlDamaged, LeftOutLine, complete_records
+from graspguide.records.trial import (
+    CONTACT_COUNTS,
+    TLX_READ_FIELDS,
+    TRIAL_READ_FIELDS,
+    RecordError,
+    check_tlx_record,
+    check_trial_record,
+)
 
-# Statistics and Figure 4 order (the issue's), and the paper's Tables I-II order.
+# Statistics and Figure 4 order, and the paper's Tables I-II order.
 TABLE_ORDER: tuple[str, ...] = ("F+V", "Fperp+V", "F+C", "Fperp+C")
-CONTACT_COUNTS: tuple[int, ...] = (3, 4)
 # Table III column order of the paper.
 TLX_SCALES: tuple[str, ...] = ("MD", "PD", "TD", "PE", "EF", "FR")
-TLX_NAMES = {
-    "MD": "Mental Demand",
-    "PD": "Physical Demand",
-    "TD": "Temporal Demand",
-    "PE": "Performance",
-    "EF": "Effort",
-    "FR": "Frustration",
-}
 MODE_NAMES = {"C": "Constant intensity (C)", "V": "Varying intensity (V)"}
 IQR_FACTOR = 1.5
 SIMULATED_BANNER = "SIMULATED DATA — not human results"
-TRIALS_FILE = "trials.jsonl"
-TLX_FILE = "tlx.jsonl"
-# Columns of the frames load() returns.
-TRIAL_COLUMNS = (
-    "participant",
-    "simulated",
-    "trial_index",
-    "session",
-    "k",
-    "policy",
-    "mode",
-    "modality",
-    "wrench_id",
-    "single_motor",
-    "success",
-    "completion_s",
-    "familiarization",
-    "source",
-)
-TLX_COLUMNS = (
-    "participant",
-    "simulated",
-    "session",
-    "k",
-    "modality",
-    "mode",
-    *TLX_SCALES,
-    "source",
-)
+# Columns of the frames load() returns: the checked fields of each record
+# (records.trial), then ``source``, the record's FILE:LINE.
+TRIAL_COLUMNS = (*TRIAL_READ_FIELDS, "source")
+TLX_COLUMNS = (*TLX_READ_FIELDS, *TLX_SCALES, "source")
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -103,29 +74,6 @@ class AnalysisError(Exception):
 # ======================================================================================
 # Loading
 # ======================================================================================
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _need(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
-    if key not in rec:
-        raise AnalysisError(f"{where}: missing field '{key}' ({what})")
-    value = rec[key]
-    if not check(value):
-        raise AnalysisError(f"{where}: field '{key}' must be {what}, got {json.dumps(value)}")
-    return value
-
-
-def _maybe(rec: dict[str, Any], key: str, where: str, check, what: str) -> Any:
-    if key not in rec or rec[key] is None:
-        return None
-    return _need(rec, key, where, check, what)
 
 
 def _read_jsonl(path: Path, left_out: list[LeftOutLine]) -> list[tuple[str, dict[str, Any]]]:
@@ -143,122 +91,28 @@ def _read_jsonl(path: Path, left_out: list[LeftOutLine]) -> list[tuple[str, dict
     return records
 
 
-def _record_identity(where: str, rec: dict[str, Any]) -> dict[str, Any]:
-    """The fields every trial and TLX record carries."""
-    return {
-        "participant": _need(
-            rec,
-            "participant",
-            where,
-            lambda v: isinstance(v, str) and v.strip() != "",
-            "a non-empty string",
-        ),
-        "simulated": _need(rec, "simulated", where, lambda v: isinstance(v, bool), "true or false"),
-        "session": _need(rec, "session", where, _is_int, "an integer"),
-    }
-
-
 def _trial_row(where: str, rec: dict[str, Any]) -> dict[str, Any]:
-    row = {
-        **_record_identity(where, rec),
-        "trial_index": _need(rec, "trial_index", where, _is_int, "an integer"),
-        "k": _need(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
-        "modality": _need(
-            rec, "modality", where, lambda v: v in MODALITIES, "one of " + ", ".join(MODALITIES)
-        ),
-        "success": _need(rec, "success", where, lambda v: isinstance(v, bool), "true or false"),
-        "completion_s": float(
-            _need(
-                rec,
-                "completion_s",
-                where,
-                lambda v: _is_number(v) and v >= 0,
-                "a finite number of seconds >= 0",
-            )
-        ),
-        "familiarization": _need(
-            rec, "familiarization", where, lambda v: isinstance(v, bool), "true or false"
-        ),
-    }
-    policy, mode = row["modality"].split("+")
-    got_policy = _maybe(rec, "policy", where, lambda v: v in ("F", "Fperp"), "'F' or 'Fperp'")
-    got_mode = _maybe(rec, "mode", where, lambda v: v in ("C", "V"), "'C' or 'V'")
-    if (got_policy or policy) != policy or (got_mode or mode) != mode:
-        raise AnalysisError(
-            f"{where}: modality {row['modality']!r} contradicts policy "
-            f"{got_policy!r} and mode {got_mode!r}"
-        )
-    row["policy"], row["mode"] = policy, mode
-    # An integer, or the protocol's name of the wrench ("W01"; "F01" in familiarization).
-    row["wrench_id"] = _maybe(
-        rec,
-        "wrench_id",
-        where,
-        lambda v: _is_int(v) or (isinstance(v, str) and v != ""),
-        "an integer or a wrench name",
-    )
-    _maybe(
-        rec,
-        "wrench",
-        where,
-        lambda v: isinstance(v, list) and len(v) == 6 and all(_is_number(x) for x in v),
-        "a list of 6 finite numbers",
-    )
-    row["single_motor"] = _maybe(
-        rec, "single_motor", where, lambda v: isinstance(v, bool), "true or false"
-    )
-    row["source"] = where
-    return row
+    try:
+        return {**check_trial_record(where, rec), "source": where}
+    except RecordError as e:
+        raise AnalysisError(str(e)) from None
 
 
 def _tlx_row(where: str, rec: dict[str, Any]) -> dict[str, Any]:
-    row = {
-        **_record_identity(where, rec),
-        "mode": _need(rec, "mode", where, lambda v: v in ("C", "V"), "'C' or 'V'"),
-        "k": _maybe(rec, "k", where, lambda v: _is_int(v) and v in CONTACT_COUNTS, "3 or 4"),
-        "modality": _maybe(
-            rec, "modality", where, lambda v: v in MODALITIES, "one of " + ", ".join(MODALITIES)
-        ),
-    }
-    if row["modality"] is not None and row["modality"].split("+")[1] != row["mode"]:
-        raise AnalysisError(
-            f"{where}: modality {row['modality']!r} contradicts mode {row['mode']!r}"
-        )
-    scales = _need(
-        rec,
-        "scales",
-        where,
-        lambda v: v is None or isinstance(v, dict),
-        "an object {MD, TD, PD, PE, EF, FR} (or null: no questionnaire)",
-    )
-    if scales is None:
-        # The runner logs a session of a simulated source without a --tlx file with
-        # scales null: no answers were invented. Table III leaves it out and says so.
-        for s in TLX_SCALES:
-            row[s] = None
-        row["source"] = where
-        return row
-    for s in TLX_SCALES:
-        if s not in scales:
-            raise AnalysisError(
-                f"{where}: scales has no '{s}' ({TLX_NAMES[s]}); all six of "
-                f"{', '.join(TLX_SCALES)} are needed"
-            )
-        v = scales[s]
-        if not (_is_int(v) or (_is_number(v) and float(v).is_integer())) or not 1 <= v <= 21:
-            raise AnalysisError(
-                f"{where}: scales.{s} must be an integer 1..21, got {json.dumps(v)}"
-            )
-        row[s] = int(v)
-    row["source"] = where
-    return row
+    # A session logged with scales null (a simulated source without a --tlx file, a
+    # host-less run) has no answers: Table III leaves it out and says so.
+    scales = {s: TLX_NAMES[s] for s in TLX_SCALES}
+    try:
+        return {**check_tlx_record(where, rec, scales, TLX_MIN, TLX_MAX), "source": where}
+    except RecordError as e:
+        raise AnalysisError(str(e)) from None
 
 
 def participant_dirs(paths: Iterable[str | os.PathLike]) -> list[Path]:
     """The participant folders under the given study or participant folders, in order.
 
-    A folder holding ``trials.jsonl`` or ``tlx.jsonl`` is a participant folder; otherwise
-    its subfolders that hold either file are (others, such as ``analysis/``, are skipped).
+    A folder holding trial or TLX records is a participant folder; otherwise its
+    subfolders that hold either file are (others, such as ``analysis/``, are skipped).
     """
     found: list[Path] = []
     seen = set()
@@ -271,13 +125,11 @@ def participant_dirs(paths: Iterable[str | os.PathLike]) -> list[Path]:
                 f"{path}: not a folder (give a study folder or a participant "
                 f"folder holding {TRIALS_FILE} and {TLX_FILE})"
             )
-        if (path / TRIALS_FILE).exists() or (path / TLX_FILE).exists():
+        if ParticipantFiles(str(path)).holds_records():
             candidates = [path]
         else:
             candidates = sorted(
-                c
-                for c in path.iterdir()
-                if c.is_dir() and ((c / TRIALS_FILE).exists() or (c / TLX_FILE).exists())
+                c for c in path.iterdir() if c.is_dir() and ParticipantFiles(str(c)).holds_records()
             )
             if not candidates:
                 raise AnalysisError(
@@ -1196,7 +1048,7 @@ def analyze(paths: Iterable[str | os.PathLike], remove_outliers: bool = True) ->
 def default_out_dir(paths: Sequence[str | os.PathLike]) -> Path:
     """``analysis/`` in the first study folder (the parent of a participant folder)."""
     first = Path(paths[0])
-    if (first / TRIALS_FILE).exists() or (first / TLX_FILE).exists():
+    if ParticipantFiles(str(first)).holds_records():
         first = first.resolve().parent
     return first / "analysis"
 

@@ -13,10 +13,11 @@ import os
 from typing import Any
 
 from graspguide.core.motor_calibration import MotorCalibration
-from graspguide.records.storage import RecordWriteError
+from graspguide.records.files import CALIBRATION_FILE, ParticipantFiles
+from graspguide.records.storage import RecordWriteError, write_json_file
 
 SCHEMA = "graspguide-calibration/1"
-FILE_NAME = "calibration.json"
+FILE_NAME = CALIBRATION_FILE
 
 
 class CalibrationFileError(ValueError):
@@ -37,42 +38,25 @@ class CalibrationRecord:
 
 
 def calibration_path(out_dir: str, participant: str) -> str:
-    return os.path.join(out_dir, participant, FILE_NAME)
+    return ParticipantFiles.of(out_dir, participant).calibration
 
 
 def write_calibration_file(path: str, data: dict[str, Any], force: bool = False) -> None:
-    """Write ``data`` to ``path`` atomically (a temporary file, fsync, then a rename, or
-    a hard link when not ``force`` so an existing file is never replaced). FileExistsError
-    when the file exists and not ``force``; RecordWriteError when the disk refuses."""
+    """Write ``data`` to ``path`` atomically (records.storage.write_json_file: a temporary
+    file, fsync, then a rename, or a hard link when not ``force`` so an existing file is
+    never replaced). FileExistsError when the file exists and not ``force``;
+    RecordWriteError when the disk refuses."""
     folder = os.path.dirname(path) or "."
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError as e:
         raise RecordWriteError(folder, e) from e
-    tmp = f"{path}.tmp.{os.getpid()}"
     try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, sort_keys=True, allow_nan=False)
-            f.write("\n")
-            f.flush()
-            os.fsync(f.fileno())
-        if force:
-            os.replace(tmp, path)
-        else:
-            os.link(tmp, path)  # fails with EEXIST instead of replacing
-    except OSError as e:
-        if e.errno == errno.EEXIST:
-            raise FileExistsError(
-                errno.EEXIST, f"{path} exists: add --force to replace it", path
-            ) from None
-        raise RecordWriteError(path, e) from e
-    finally:
-        # Whatever happened (a disk error, data JSON cannot hold, Ctrl-C): no
-        # temporary file stays behind.
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        write_json_file(path, data, replace=force, indent=1, sort_keys=True, allow_nan=False)
+    except FileExistsError:
+        raise FileExistsError(
+            errno.EEXIST, f"{path} exists: add --force to replace it", path
+        ) from None
 
 
 def _need(cond: bool, path: str, field: str, what: str, value: Any = None) -> None:

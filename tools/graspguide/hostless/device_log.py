@@ -1,15 +1,16 @@
 """Download a host-less device's results log into the runner's folder format, so
 `graspguide analyze OUT` reads a host-less study as it reads a host-driven one.
 
-``OUT/<participant>/``:
+``OUT/<participant>/`` (names in :mod:`graspguide.records.files`):
 
-* ``trials.jsonl`` -- one line per record, every key of runner.TRIAL_FIELDS (``poses`` =
-  the IMU samples the trial used, ``wall_s`` null: the device has no wall clock,
-  ``source`` "hostless", ``recorded_at`` the download time) plus ``"hostless": true`` and
-  ``imu_faults``; written whole (temporary file, fsync, rename);
-* ``tlx.jsonl`` -- one line per session with records, ``scales`` null (the device asks
+* the trial records -- one :class:`graspguide.records.trial.TrialRecord` per device
+  record (``poses`` = the IMU samples the trial used, ``wall_s`` null: the device has no
+  wall clock, ``source`` "hostless", ``recorded_at`` the download time, and the host-less
+  fields ``hostless`` true and ``imu_faults``); written whole (temporary file, fsync,
+  rename);
+* the TLX records -- one line per session with records, ``scales`` null (the device asks
   no questionnaire); lines already there (answers typed in later) are kept;
-* ``device_log.json`` -- the LOG_INFO, the device's HELLO_REPLY and the download time.
+* the device log file -- the LOG_INFO, the device's HELLO_REPLY and the download time.
 
 Downloading again into the same folder gives the same records (a record already there
 keeps its ``recorded_at``); records the folder holds and the device no longer does (its
@@ -40,22 +41,18 @@ from typing import Any, TextIO
 
 from graspguide.link.client import to_f32
 from graspguide.link.messages import CAPABILITY_HOSTLESS, LogInfo, LogRecord, WrenchClass
+from graspguide.records.files import ParticipantFiles, study_file
 from graspguide.records.storage import (
     JsonlDamaged,
     RecordWriteError,
-    dumps_record,
     read_jsonl,
     write_json_file,
+    write_json_lines,
 )
-from graspguide.study.runner import TRIAL_FIELDS
+from graspguide.records.trial import HOSTLESS_FIELDS, TlxRecord, TrialRecord
 
 SOURCE = "hostless"
 DEVICE_LOG_FORMAT = "graspguide-device-log/1"
-TRIALS_FILE = "trials.jsonl"
-TLX_FILE = "tlx.jsonl"
-DEVICE_LOG_FILE = "device_log.json"
-# Keys a record carries beside TRIAL_FIELDS.
-HOSTLESS_FIELDS = ("hostless", "imu_faults")
 # Keys that may differ between two downloads of the same record.
 DOWNLOAD_KEYS = ("recorded_at",)
 # A participant id becomes a folder name: only these characters (the runner's ids).
@@ -88,7 +85,7 @@ class DownloadSummary:
     plan_trials: int
     records: int  # records the device holds (downloaded now)
     new: int  # of them, not in the folder before
-    total: int  # lines of trials.jsonl now
+    total: int  # trial records in the folder now
     capacity: int
     torn_records: int  # records the device found torn by a power loss and skipped
     running: bool  # a host-less run went on during the download
@@ -137,7 +134,7 @@ def _hello_dict(hello: Any) -> dict[str, Any]:
 
 
 def trial_record(info: LogInfo, rec: LogRecord, recorded_at: str) -> dict[str, Any]:
-    """One LOG_RECORD as a trials.jsonl line; DeviceLogError for a value the analysis
+    """One LOG_RECORD as a trial record's line; DeviceLogError for a value the analysis
     could not take (the record is then not trusted)."""
     where = f"device log record {rec.index} (trial_index {rec.trial_index})"
     if rec.k not in CONTACT_COUNTS:
@@ -150,35 +147,33 @@ def trial_record(info: LogInfo, rec: LogRecord, recorded_at: str) -> dict[str, A
     policy = POLICY_TEXT[rec.policy.name]
     mode = MODE_TEXT[rec.mode.name]
     prefix = "F" if rec.familiarization else "W"
-    record = {
-        "participant": info.participant,
-        "simulated": bool(info.simulated),
-        "trial_index": rec.trial_index,
-        "session": rec.session,
-        "session_trial": rec.session_trial,
-        "k": rec.k,
-        "policy": policy,
-        "mode": mode,
-        "modality": f"{policy}+{mode}",
-        "wrench_id": f"{prefix}{rec.wrench_number:02d}",
-        "wrench": [f32_value(v) for v in rec.wrench],
-        "single_motor": bool(rec.single_motor),
-        "wrench_class": CLASS_TEXT[rec.wrench_class],
-        "success": bool(rec.success),
-        "completion_s": f32_value(rec.completion_s),
-        "familiarization": bool(rec.familiarization),
-        "first_entry_s": f32_value(rec.first_entry_s),
-        "final_error_deg": f32_value(rec.final_error_deg),
-        "poses": rec.samples,
-        "wall_s": None,
-        "config_hash": bytes(info.config_hash).hex(),
-        "source": SOURCE,
-        "recorded_at": recorded_at,
-        "hostless": True,
-        "imu_faults": rec.imu_faults,
-    }
-    assert set(TRIAL_FIELDS) <= set(record)  # the runner's format, whole
-    return record
+    return TrialRecord(
+        participant=info.participant,
+        simulated=bool(info.simulated),
+        trial_index=rec.trial_index,
+        session=rec.session,
+        session_trial=rec.session_trial,
+        k=rec.k,
+        policy=policy,
+        mode=mode,
+        modality=f"{policy}+{mode}",
+        wrench_id=f"{prefix}{rec.wrench_number:02d}",
+        wrench=tuple(f32_value(v) for v in rec.wrench),
+        single_motor=bool(rec.single_motor),
+        wrench_class=CLASS_TEXT[rec.wrench_class],
+        success=bool(rec.success),
+        completion_s=f32_value(rec.completion_s),
+        familiarization=bool(rec.familiarization),
+        first_entry_s=f32_value(rec.first_entry_s),
+        final_error_deg=f32_value(rec.final_error_deg),
+        poses=rec.samples,
+        wall_s=None,
+        config_hash=bytes(info.config_hash).hex(),
+        source=SOURCE,
+        recorded_at=recorded_at,
+        hostless=True,
+        imu_faults=rec.imu_faults,
+    ).to_dict()
 
 
 def _same_record(a: dict[str, Any], b: dict[str, Any]) -> bool:
@@ -211,7 +206,7 @@ def _check_folder(
 ) -> None:
     """Refuse a folder that holds another study: nothing in it is overwritten."""
     config = bytes(info.config_hash).hex()
-    study_path = os.path.join(out_dir, "study.json")
+    study_path = study_file(out_dir)
     if os.path.exists(study_path):
         try:
             with open(study_path, encoding="utf-8") as f:
@@ -254,24 +249,6 @@ def _check_folder(
             )
 
 
-def _write_lines(path: str, records: Sequence[dict[str, Any]]) -> None:
-    """``path`` as JSON Lines, written whole (temporary file, fsync, rename) or left as
-    it was."""
-    tmp = f"{path}.tmp.{os.getpid()}"
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.writelines(dumps_record(r) + "\n" for r in records)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise RecordWriteError(path, e, _HINT) from e
-
-
 def _tlx_lines(
     existing: list[dict[str, Any]], trials: Sequence[dict[str, Any]], config: str, now: str
 ) -> list[dict[str, Any]]:
@@ -284,19 +261,19 @@ def _tlx_lines(
         if s >= 1 and s not in have:
             have.add(s)
             out.append(
-                {
-                    "participant": t["participant"],
-                    "simulated": t["simulated"],
-                    "session": s,
-                    "k": t["k"],
-                    "modality": t["modality"],
-                    "policy": t["policy"],
-                    "mode": t["mode"],
-                    "scales": None,
-                    "origin": "absent: host-less run, the device asks no questionnaire",
-                    "config_hash": config,
-                    "recorded_at": now,
-                }
+                TlxRecord(
+                    participant=t["participant"],
+                    simulated=t["simulated"],
+                    session=s,
+                    k=t["k"],
+                    modality=t["modality"],
+                    policy=t["policy"],
+                    mode=t["mode"],
+                    scales=None,
+                    origin="absent: host-less run, the device asks no questionnaire",
+                    config_hash=config,
+                    recorded_at=now,
+                ).to_dict()
             )
     return sorted(out, key=lambda r: r.get("session", 0))
 
@@ -362,9 +339,10 @@ def download_log(
             rerun[rec.trial_index] = index
         highest = max(highest, rec.trial_index)
 
-    pdir = os.path.join(out_dir, participant)
-    trials_path = os.path.join(pdir, TRIALS_FILE)
-    tlx_path = os.path.join(pdir, TLX_FILE)
+    files = ParticipantFiles.of(out_dir, participant)
+    pdir = files.folder
+    trials_path = files.trials
+    tlx_path = files.tlx
     existing = _read_existing(trials_path)
     _check_folder(out_dir, trials_path, existing, info)
     merged: dict[int, dict[str, Any]] = {}
@@ -399,10 +377,10 @@ def download_log(
         os.makedirs(pdir, exist_ok=True)
     except OSError as e:
         raise RecordWriteError(pdir, e, _HINT) from e
-    _write_lines(trials_path, trials)
-    _write_lines(tlx_path, tlx)
+    write_json_lines(trials_path, trials, _HINT)
+    write_json_lines(tlx_path, tlx, _HINT)
     write_json_file(
-        os.path.join(pdir, DEVICE_LOG_FILE),
+        files.device_log,
         {
             "format": DEVICE_LOG_FORMAT,
             "downloaded_at": now,

@@ -44,6 +44,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from graspguide.records.files import ParticipantFiles
+from graspguide.records.storage import write_file_whole, write_json_file
 from graspguide.study.jobs import (
     TrialJob,
     count_lines,
@@ -303,7 +305,7 @@ def read_point_trials(study_dir: str, participants: Sequence[str]) -> list[dict[
 
     out: list[dict[str, Any]] = []
     for pid in participants:
-        path = os.path.join(study_dir, pid, "trials.jsonl")
+        path = ParticipantFiles.of(study_dir, pid).trials
         if os.path.exists(path):
             out += [r for r in read_jsonl(path).records if not r.get("familiarization")]
     return out
@@ -622,16 +624,14 @@ def run_sweep(
         ppath = os.path.join(study_dir, "protocol.toml")
         text = protocol_toml(proto)
         if not os.path.exists(ppath) or open(ppath, encoding="utf-8").read() != text:
-            with open(ppath + ".tmp", "w", encoding="utf-8") as f:
-                f.write(text)
-            os.replace(ppath + ".tmp", ppath)
+            write_file_whole(ppath, lambda f, text=text: f.write(text))
         check = load_protocol(ppath)
         if check.config_hash != proto.config_hash:  # pragma: no cover - writer bug
             raise SweepError(f"{ppath}: does not load back to the derived protocol")
         planned = len(plan(check, "U1"))
         plan_info.append((pt, check, study_dir, spec))
         for pid in pids:
-            if count_lines(os.path.join(study_dir, pid, "trials.jsonl")) >= planned:
+            if count_lines(ParticipantFiles.of(study_dir, pid).trials) >= planned:
                 continue
             tasks.append(
                 TrialJob(
@@ -841,10 +841,7 @@ def run(
     os.makedirs(out, exist_ok=True)
     json_path = os.path.join(out, "sweep.json")
     png_path = os.path.join(out, "sweep.png")
-    with open(json_path + ".tmp", "w", encoding="utf-8") as f:
-        json.dump(result, f, indent=1)
-        f.write("\n")
-    os.replace(json_path + ".tmp", json_path)
+    write_json_file(json_path, result, indent=1)
     plot(result, png_path)
     print()
     for line in table_lines(result):

@@ -1,8 +1,9 @@
-"""What `graspguide plot` reads: a study folder written by `graspguide trial` (``study.json``,
-``PID/trials.jsonl``, ``PID/frames/trial-NNNN.csv``; a participant folder alone is read
-with its parent's ``study.json``) or a session folder written by `graspguide stream --log`
-(``config.json``, ``telemetry.csv``, ``poses.csv``, ``results.jsonl``). The formats are in
-docs/study.md and :mod:`graspguide.records.storage`.
+"""What `graspguide plot` reads: a study folder written by `graspguide trial` (the study
+file, each participant's trial records and frames; a participant folder alone is read
+with its parent's study file) or a session folder written by `graspguide stream --log`
+(its config, telemetry, poses and results). The names are in
+:mod:`graspguide.records.files`, the formats in docs/study.md,
+:mod:`graspguide.records.trial` and :mod:`graspguide.records.storage`.
 
 Every problem is a :class:`PlotInputError` whose message names the file (and line) and
 says what to do; ``usage`` ones (no such folder, trial or participant) exit 2, damaged
@@ -19,13 +20,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from graspguide.core.vocabulary import FINGERS, MODALITIES, modality
+from graspguide.core.vocabulary import FINGERS, modality
+from graspguide.records import files
+from graspguide.records.files import STUDY_FILE, TRIALS_FILE, ParticipantFiles
 from graspguide.records.storage import JsonlDamaged, LeftOutLine, complete_records
-
-STUDY_FILE = "study.json"
-TRIALS_FILE = "trials.jsonl"
-FRAMES_DIR = "frames"
-SESSION_FILES = ("telemetry.csv", "results.jsonl")
+from graspguide.records.trial import RecordError, check_trial_record
 
 
 class PlotInputError(Exception):
@@ -248,13 +247,13 @@ def _session_frames(folder: str) -> TrialFrames:
     """A session's TELEMETRY against the trial time of the POSE each one answers
     (poses.csv maps the echoed host_time_us to t_s; without it, host time since the
     first TELEMETRY)."""
-    tel_path = os.path.join(folder, "telemetry.csv")
+    tel_path = os.path.join(folder, files.SESSION_TELEMETRY_FILE)
     cols, n = read_csv_columns(tel_path, ["host_time_us", "error_deg", *_PWM])
     if n == 0:
         raise PlotInputError(f"{tel_path}: no TELEMETRY recorded (only the header)")
     host_us = _numbers(tel_path, "host_time_us", cols["host_time_us"], int)
     pose_time: dict[int, float] = {}
-    poses_path = os.path.join(folder, "poses.csv")
+    poses_path = os.path.join(folder, files.SESSION_POSES_FILE)
     if os.path.exists(poses_path):
         pcols, _ = read_csv_columns(poses_path, ["host_time_us", "t_s"])
         for us, t in zip(
@@ -278,36 +277,32 @@ def load_frames(trial: TrialInfo) -> TrialFrames:
 # The folders
 # --------------------------------------------------------------------------------------
 def _study_trial(pdir: str, where: str, rec: dict[str, Any]) -> TrialInfo:
-    index = _field(rec, "trial_index", where, lambda v: _is_int(v) and v >= 1, "an integer >= 1")
-    mod = _field(
-        rec, "modality", where, lambda v: v in MODALITIES, "one of " + ", ".join(MODALITIES)
-    )
-    policy, mode = mod.split("+")
-    success = _field(rec, "success", where, lambda v: isinstance(v, bool), "true or false")
+    try:
+        row = check_trial_record(where, rec)
+    except RecordError as e:
+        raise PlotInputError(f"{e.where}: {e.problem}; {_REDO_HINT}") from None
+    # A figure draws the target wrench: the plots need it, the analysis does not.
+    wrench = _field(rec, "wrench", where, _is_wrench, "3 or 6 numbers")
     return TrialInfo(
-        participant=_field(
-            rec, "participant", where, lambda v: isinstance(v, str) and v, "a participant id"
-        ),
-        trial=index,
-        k=_field(rec, "k", where, lambda v: v in (3, 4), "3 or 4"),
-        policy=policy,
-        mode=mode,
-        wrench=[float(x) for x in _field(rec, "wrench", where, _is_wrench, "3 or 6 numbers")],
-        success=success,
-        completion_s=float(
-            _field(rec, "completion_s", where, lambda v: _is_number(v) and v >= 0, "seconds >= 0")
-        ),
-        frames_path=os.path.join(pdir, FRAMES_DIR, f"trial-{index:04d}.csv"),
+        participant=row["participant"],
+        trial=row["trial_index"],
+        k=row["k"],
+        policy=row["policy"],
+        mode=row["mode"],
+        wrench=[float(x) for x in wrench],
+        success=row["success"],
+        completion_s=row["completion_s"],
+        frames_path=ParticipantFiles(pdir).frames(row["trial_index"]),
         source=str(rec.get("source", "")),
-        simulated=rec.get("simulated") is True,
-        session=rec.get("session") if _is_int(rec.get("session")) else None,
+        simulated=row["simulated"],
+        session=row["session"],
         wrench_id=str(rec.get("wrench_id", "")),
-        familiarization=rec.get("familiarization") is True,
+        familiarization=row["familiarization"],
     )
 
 
 def _participant(pdir: str, left_out: list[LeftOutLine]) -> Participant:
-    path = os.path.join(pdir, TRIALS_FILE)
+    path = ParticipantFiles(pdir).trials
     trials = [_study_trial(pdir, where, rec) for where, rec in _records(path, left_out)]
     trials.sort(key=lambda t: t.trial)
     return Participant(os.path.basename(os.path.normpath(pdir)), trials)
@@ -321,7 +316,7 @@ def _study_criteria(study_json: str) -> Criteria:
 
 
 def _session(folder: str, left_out: list[LeftOutLine]) -> RunFolder:
-    config_path = os.path.join(folder, "config.json")
+    config_path = os.path.join(folder, files.SESSION_CONFIG_FILE)
     if not os.path.exists(config_path):
         raise PlotInputError(
             f"{config_path}: missing; the session's scene (threshold, hold, k, policy, mode) "
@@ -340,7 +335,7 @@ def _session(folder: str, left_out: list[LeftOutLine]) -> RunFolder:
     wrench = _field(config, "wrench", config_path, _is_wrench, "3 or 6 numbers")
     trial_id = config.get("trial_id", 1)
     success = completion = None
-    for rec_where, rec in _records(os.path.join(folder, "results.jsonl"), left_out):
+    for rec_where, rec in _records(os.path.join(folder, files.SESSION_RESULTS_FILE), left_out):
         if "success" in rec:  # a TRIAL_RESULT (the end record has "event")
             success = _field(rec, "success", rec_where, lambda v: isinstance(v, bool), "bool")
             completion = float(
@@ -378,11 +373,12 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
         )
     if not os.path.isdir(path):
         raise PlotInputError(
-            f"{path}: not a folder; give the folder that holds study.json "
-            "(graspguide trial --out) or telemetry.csv (graspguide stream --log)",
+            f"{path}: not a folder; give the folder that holds {STUDY_FILE} "
+            f"(graspguide trial --out) or {files.SESSION_TELEMETRY_FILE} (graspguide stream "
+            "--log)",
             usage=True,
         )
-    if all(os.path.exists(os.path.join(path, f)) for f in SESSION_FILES):
+    if all(os.path.exists(os.path.join(path, f)) for f in files.SESSION_MARKERS):
         if participant:
             raise PlotInputError(
                 f"{path} is a session folder (graspguide stream --log): it has no "
@@ -395,7 +391,7 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
         if not os.path.exists(study_json):
             raise PlotInputError(
                 f"{study_json}: missing; the threshold and hold of the trials come from the "
-                "study's protocol: plot the study folder (the one with study.json)",
+                f"study's protocol: plot the study folder (the one with {STUDY_FILE})",
                 usage=True,
             )
         p = _participant(path, left_out)
@@ -407,8 +403,10 @@ def open_run(path: str, participant: str | None = None) -> RunFolder:
     study_json = os.path.join(path, STUDY_FILE)
     if not os.path.exists(study_json):
         raise PlotInputError(
-            f"{path}: neither a study folder (no study.json; `graspguide trial --out` writes "
-            "one) nor a session folder (no telemetry.csv and results.jsonl; `graspguide "
+            f"{path}: neither a study folder (no {STUDY_FILE}; `graspguide trial --out` writes "
+            "one) nor a session folder (no "
+            + " and ".join(files.SESSION_MARKERS)
+            + "; `graspguide "
             "stream --log` writes them)",
             usage=True,
         )

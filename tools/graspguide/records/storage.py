@@ -33,9 +33,11 @@ import io
 import json
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TextIO
+
+from graspguide.records import files
 
 POSE_COLUMNS = ["send_time_s", "host_time_us", "t_s", "qw", "qx", "qy", "qz", "has_contacts"]
 # What a TELEMETRY says of the guidance, in the session log and the runner's frames.
@@ -140,23 +142,46 @@ def open_append(path: str, hint: str = "") -> int:
         raise RecordWriteError(path, e, hint) from e
 
 
-def write_json_file(path: str, data: Any, hint: str = "", **dump_args: Any) -> None:
-    """``path`` written whole (temporary file, fsync, rename) or left as it was;
-    RecordWriteError (and no temporary file left) if the disk refuses."""
+def write_file_whole(
+    path: str, write: Callable[[TextIO], object], hint: str = "", replace: bool = True
+) -> None:
+    """``path`` written whole by ``write(f)`` (a temporary file, fsync, then a rename)
+    or left as it was: the one atomic write of the records. ``replace`` False: an
+    existing ``path`` is never replaced (a hard link instead of the rename; FileExistsError
+    if it exists). RecordWriteError when the disk refuses; no temporary file is left,
+    whatever happens (a disk error, data JSON cannot hold, Ctrl-C)."""
     tmp = f"{path}.tmp.{os.getpid()}"
     try:
         with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(data, f, **dump_args)
-            f.write("\n")
+            write(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        if replace:
+            os.replace(tmp, path)
+        else:
+            os.link(tmp, path)  # fails with EEXIST instead of replacing
     except OSError as e:
+        if e.errno == errno.EEXIST and not replace:
+            raise FileExistsError(errno.EEXIST, f"{path} exists", path) from None
+        raise RecordWriteError(path, e, hint) from e
+    finally:
         try:
             os.unlink(tmp)
         except OSError:
             pass
-        raise RecordWriteError(path, e, hint) from e
+
+
+def write_json_file(
+    path: str, data: Any, hint: str = "", replace: bool = True, **dump_args: Any
+) -> None:
+    """``path`` holding ``data`` as JSON (``json.dump`` with ``dump_args``, then a
+    newline), written whole or left as it was (:func:`write_file_whole`)."""
+
+    def write(f: TextIO) -> None:
+        json.dump(data, f, **dump_args)
+        f.write("\n")
+
+    write_file_whole(path, write, hint, replace)
 
 
 # --------------------------------------------------------------------------------------
@@ -177,6 +202,12 @@ def append_json_line(path: str, obj: Any, hint: str = "") -> None:
         append_record(fd, path, data, sync=True, hint=hint)
     finally:
         os.close(fd)
+
+
+def write_json_lines(path: str, records: Sequence[Any], hint: str = "") -> None:
+    """``path`` as JSON Lines (one :func:`dumps_record` line per record), written whole or
+    left as it was (:func:`write_file_whole`)."""
+    write_file_whole(path, lambda f: f.writelines(dumps_record(r) + "\n" for r in records), hint)
 
 
 class JsonlDamaged(ValueError):
@@ -380,9 +411,9 @@ class SessionLog:
         except OSError as e:
             raise RecordWriteError(folder, e, _HINT) from e
         self.t0 = time.monotonic()
-        self.poses = _Lines(self.path("poses.csv"), POSE_COLUMNS)
-        self.telemetry_file = _Lines(self.path("telemetry.csv"), TELEMETRY_COLUMNS)
-        self.results = _Lines(self.path("results.jsonl"), sync=True)
+        self.poses = _Lines(self.path(files.SESSION_POSES_FILE), POSE_COLUMNS)
+        self.telemetry_file = _Lines(self.path(files.SESSION_TELEMETRY_FILE), TELEMETRY_COLUMNS)
+        self.results = _Lines(self.path(files.SESSION_RESULTS_FILE), sync=True)
 
     def path(self, name: str) -> str:
         return os.path.join(self.folder, name)
@@ -394,13 +425,13 @@ class SessionLog:
         write_json_file(self.path(name), data, _HINT, indent=2, sort_keys=True, default=_default)
 
     def scene(self, data: dict[str, Any]) -> None:
-        self.write_json("scene.json", data)
+        self.write_json(files.SESSION_SCENE_FILE, data)
 
     def device(self, hello: Any) -> None:
-        self.write_json("device.json", hello)
+        self.write_json(files.SESSION_DEVICE_FILE, hello)
 
     def config(self, data: dict[str, Any]) -> None:
-        self.write_json("config.json", data)
+        self.write_json(files.SESSION_CONFIG_FILE, data)
 
     def pose(
         self, host_time_us: int, t_s: float, quat: Sequence[float], has_contacts: bool
@@ -466,6 +497,8 @@ __all__ = [
     "append_record",
     "open_append",
     "write_json_file",
+    "write_json_lines",
+    "write_file_whole",
     "POSE_COLUMNS",
     "TELEMETRY_COLUMNS",
 ]

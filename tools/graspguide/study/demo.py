@@ -16,8 +16,8 @@ the device from a simulated IMU and button, the log downloaded; default study fo
 ``logs/demo-hostless``.
 
 Resume: the study folder ``OUT`` (default ``logs/demo-study`` in the repository) is the
-runner's (docs/study.md): completed trials are fsync'ed to ``OUT/PID/trials.jsonl`` one
-line each, so killing the demo at any point and running the same command again completes
+runner's (docs/study.md): completed trials are fsync'ed to the participant's trial
+records one line each, so killing the demo at any point and running the same command again completes
 the study with every trial exactly once; a completed study run again is only analysed
 again. Everything here is labelled SIMULATED: no human took part.
 """
@@ -30,6 +30,7 @@ import sys
 import time
 
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, fail
+from graspguide.records.files import ParticipantFiles
 from graspguide.study.jobs import (
     TrialJob,
     count_lines,
@@ -59,12 +60,10 @@ def _status(protocol, out: str, pid: str) -> tuple[int, int, bool]:
     from graspguide.records.storage import read_jsonl
 
     planned = len(plan(protocol, pid))
-    pdir = os.path.join(out, pid)
+    files = ParticipantFiles.of(out, pid)
     try:
-        done = {
-            r.get("trial_index") for r in read_jsonl(os.path.join(pdir, "trials.jsonl")).records
-        }
-        tlx = {r.get("session") for r in read_jsonl(os.path.join(pdir, "tlx.jsonl")).records}
+        done = {r.get("trial_index") for r in read_jsonl(files.trials).records}
+        tlx = {r.get("session") for r in read_jsonl(files.tlx).records}
     except Exception:
         return 0, planned, False  # let the runner report what is wrong
     sessions = {s.session for s in session_order(protocol, pid)}
@@ -150,7 +149,7 @@ def _run_participants(
     next_report = [time.monotonic() + 5.0]
 
     def done_trials() -> int:
-        return sum(count_lines(os.path.join(out, pid, "trials.jsonl")) for pid in status)
+        return sum(count_lines(ParticipantFiles.of(out, pid).trials) for pid in status)
 
     def on_exit(job: TrialJob, rc: int) -> None:
         if rc == 0:

@@ -2,25 +2,27 @@
 a device, log every trial and frame, ask the NASA-TLX after each session, and resume after
 a crash or Ctrl-C without repeating or losing a completed trial.
 
-Output (``OUT`` = ``--out``; the analysis reads exactly this, docs/study.md describes it):
+Output: the study folder ``OUT`` (``--out``) as :mod:`graspguide.records.files` lays it
+out (the analysis reads exactly this, docs/study.md describes it):
 
-* ``OUT/study.json`` -- the normalised protocol, its ``config_hash`` and the drawn wrenches
+* the study file -- the normalised protocol, its ``config_hash`` and the drawn wrenches
   (written once; a later run with another protocol into the same OUT is refused);
-* ``OUT/<PID>/trials.jsonl`` -- one JSON object per completed trial, appended and fsync'ed
-  as one line when its TRIAL_RESULT arrived (fields in :data:`TRIAL_FIELDS` and
-  docs/study.md);
-* ``OUT/<PID>/tlx.jsonl`` -- one object per finished session (``scales`` null when the
-  source is simulated and no --tlx file was given: never invented);
-* ``OUT/<PID>/frames/trial-NNNN.csv`` -- every POSE and its TELEMETRY (:data:`FRAME_COLUMNS`),
-  written to ``.tmp`` and renamed before the trial's line is appended;
-* ``OUT/<PID>/plan.json`` (the participant's plan), ``OUT/<PID>/runs.jsonl`` (one line per
-  run start and end: device, source, resumed trials, damaged lines found, exit);
-* ``OUT/<PID>/events.jsonl`` -- the operator's pauses, resumes, redos, skips and notes,
-  one fsync'ed line each (``time``, ``participant``, ``trial_index``, ``kind``,
-  ``reason`` or ``text``); a skipped trial is recorded only here (never in trials.jsonl,
-  so the analysis cannot count it as a failure), and a resumed run does not run it;
-* ``OUT/<PID>/frames/aside/trial-NNNN-attempt-A.csv`` -- the frames of an attempt the
-  operator ended with a redo or a skip (a paused attempt's frames are discarded).
+* per participant, the trial records -- one :class:`graspguide.records.trial.TrialRecord`
+  per completed trial, appended and fsync'ed as one line when its TRIAL_RESULT arrived;
+* the TLX records -- one :class:`graspguide.records.trial.TlxRecord` per finished session
+  (``scales`` null when the source is simulated and no --tlx file was given: never
+  invented);
+* the frames of each trial -- every POSE and its TELEMETRY
+  (:data:`graspguide.records.frames.FRAME_COLUMNS`), written to a temporary file and
+  renamed before the trial's line is appended;
+* the participant's plan, and the runs file (one line per run start and end: device,
+  source, resumed trials, damaged lines found, exit);
+* the events file -- the operator's pauses, resumes, redos, skips and notes, one fsync'ed
+  line each (``time``, ``participant``, ``trial_index``, ``kind``, ``reason`` or
+  ``text``); a skipped trial is recorded only there (never as a trial record, so the
+  analysis cannot count it as a failure), and a resumed run does not run it;
+* the frames set aside -- those of an attempt the operator ended with a redo or a skip
+  (a paused attempt's frames are discarded).
 
 With a person (:class:`OperatorConsole` given): a rest of ``rest_s`` between trials, a
 ready prompt before each, and the operator's keys during a trial (p pause: STOP, the
@@ -30,9 +32,9 @@ the fast path is the one described below (``rest_s``, 0 by default, still sleeps
 trials). :class:`graspguide.records.events.TrialObserver` objects get the run's events
 and every TELEMETRY.
 
-Resume: completed ``trial_index`` values in trials.jsonl are skipped. A last line without
-its newline or not valid JSON (a write cut by a power loss) is reported, moved to
-``trials.jsonl.damaged-<time>`` and its trial run again; a damaged line before the last
+Resume: completed ``trial_index`` values in the trial records are skipped. A last line
+without its newline or not valid JSON (a write cut by a power loss) is reported, moved to
+``<file>.damaged-<time>`` and its trial run again; a damaged line before the last
 one stops the run (it needs a person to look).
 
 Sources (``--source``): ``synthetic[:...]`` and ``replay:FILE`` (open loop: the hand moves
@@ -56,7 +58,7 @@ arrives: one model step per pose, no copy, no speculation. The model guarantees 
 checks: FeelLagError) that act(t) depends only on PWM felt a reaction time before t, so
 the poses are bit for bit the lockstep ones (graspguide.study.pose_loop.PipelinedPoses); a
 FeelLagError reruns the trial in lockstep. Trials, frames and resume are those of
-lockstep (tools/tests/test_demo.py compares them frame for frame);
+lockstep (tools/tests/study/test_demo.py compares them frame for frame);
 ``StudyRunner(pipeline=1)`` forces lockstep, and a source without feel/act always runs in
 lockstep.
 """
@@ -96,8 +98,9 @@ from graspguide.records.events import (
     TRIAL_START,
     TrialObserver,
 )
+from graspguide.records.files import ParticipantFiles, study_file
+from graspguide.records.frames import FramesFile, frame_rows
 from graspguide.records.storage import (
-    GUIDANCE_COLUMNS,
     JsonlDamaged,
     RecordWriteError,
     append_json_line,
@@ -105,6 +108,7 @@ from graspguide.records.storage import (
     set_aside_damaged_tail,
     write_json_file,
 )
+from graspguide.records.trial import TlxRecord, TrialRecord
 from graspguide.run_errors import RunnerError
 from graspguide.sources.trial_sources import RunnerSource
 from graspguide.study.pose_loop import (
@@ -120,42 +124,6 @@ from graspguide.study.pose_loop import (
 )
 from graspguide.study.progress import Progress, format_duration, time_left_s
 
-FRAME_COLUMNS = [
-    "t_s",
-    "host_time_us",
-    "qw",
-    "qx",
-    "qy",
-    "qz",
-    *GUIDANCE_COLUMNS,
-    "solver_status",
-    "flags",
-]
-TRIAL_FIELDS = (
-    "participant",
-    "simulated",
-    "trial_index",
-    "session",
-    "session_trial",
-    "k",
-    "policy",
-    "mode",
-    "modality",
-    "wrench_id",
-    "wrench",
-    "single_motor",
-    "wrench_class",
-    "success",
-    "completion_s",
-    "familiarization",
-    "first_entry_s",
-    "final_error_deg",
-    "poses",
-    "wall_s",
-    "config_hash",
-    "source",
-    "recorded_at",
-)
 STUDY_FORMAT = "graspguide-study/1"
 # A trial whose device clock passed timeout_s by this much without a TRIAL_RESULT is an
 # error (the device should have ended it).
@@ -217,56 +185,6 @@ def write_json_atomic(path: str, data: Any) -> None:
     write_json_file(path, data, _RESUME_HINT, indent=2, sort_keys=True)
 
 
-class _FramesFile:
-    """A trial's frames CSV (a temporary file until the trial is recorded): a write
-    error becomes RecordWriteError naming it, and the partial file is removed on close
-    (it holds no record, and on a full disk its space is wanted)."""
-
-    def __init__(self, path: str):
-        self.path = path
-        self.failed = False
-        try:
-            self.f = open(path, "w", encoding="utf-8", newline="", buffering=1 << 20)
-        except OSError as e:
-            raise RecordWriteError(path, e, _RESUME_HINT) from e
-
-    def _fault(self, e: OSError) -> RecordWriteError:
-        self.failed = True
-        return RecordWriteError(self.path, e, _RESUME_HINT)
-
-    def write(self, text: str) -> None:
-        try:
-            self.f.write(text)
-        except OSError as e:
-            raise self._fault(e) from e
-
-    def restart(self) -> None:
-        try:
-            self.f.seek(0)
-            self.f.truncate()
-        except OSError as e:
-            raise self._fault(e) from e
-        self.write(_FRAME_HEADER)
-
-    def sync(self) -> None:
-        try:
-            self.f.flush()
-            os.fsync(self.f.fileno())
-        except OSError as e:
-            raise self._fault(e) from e
-
-    def close(self) -> None:
-        try:
-            self.f.close()
-        except OSError:
-            self.failed = True  # the buffer's rest did not fit either
-        if self.failed:
-            try:
-                os.unlink(self.path)
-            except OSError:
-                pass
-
-
 @dataclasses.dataclass(eq=False)
 class StudyRunner:
     """One participant's run into ``out_dir``. :meth:`run` goes through the plan; the
@@ -309,13 +227,14 @@ class StudyRunner:
             self.ask = input
         self.progress = self.progress or Progress()
         self.err = self.err or sys.stderr
-        self.pdir = os.path.join(self.out_dir, self.participant)
-        self.trials_path = os.path.join(self.pdir, "trials.jsonl")
-        self.tlx_path = os.path.join(self.pdir, "tlx.jsonl")
-        self.frames_dir = os.path.join(self.pdir, "frames")
-        self.runs_path = os.path.join(self.pdir, "runs.jsonl")
-        self.events_path = os.path.join(self.pdir, "events.jsonl")
-        self.aside_dir = os.path.join(self.frames_dir, "aside")
+        self.files = ParticipantFiles.of(self.out_dir, self.participant)
+        self.pdir = self.files.folder
+        self.trials_path = self.files.trials
+        self.tlx_path = self.files.tlx
+        self.frames_dir = self.files.frames_dir
+        self.runs_path = self.files.runs
+        self.events_path = self.files.events
+        self.aside_dir = self.files.aside_dir
         self.durations_s: list[float] = []  # wall time of each recorded trial
         self.wrenches = draw_wrenches(self.protocol)
         self.fam_wrenches = draw_familiarization_wrenches(self.protocol)
@@ -348,7 +267,7 @@ class StudyRunner:
 
     def prepare(self) -> tuple[set, set]:
         """Create/check the folders; returns (completed trial indices, sessions with TLX)."""
-        study_path = os.path.join(self.out_dir, "study.json")
+        study_path = study_file(self.out_dir)
         study = self._study_dict()
         if os.path.exists(study_path):
             try:
@@ -375,7 +294,7 @@ class StudyRunner:
         else:
             write_json_atomic(study_path, study)
         write_json_atomic(
-            os.path.join(self.pdir, "plan.json"),
+            self.files.plan,
             {
                 "participant": self.participant,
                 "config_hash": self.config_hash,
@@ -391,7 +310,7 @@ class StudyRunner:
         return done, tlx_done
 
     def _lock(self) -> None:
-        path = os.path.join(self.pdir, ".lock")
+        path = self.files.lock
         try:
             os.makedirs(self.frames_dir, exist_ok=True)
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -465,7 +384,7 @@ class StudyRunner:
         return done
 
     def _skipped_trials(self) -> set:
-        """The trials the operator skipped (events.jsonl), which a resumed run honours."""
+        """The trials the operator skipped (the events file), which a resumed run honours."""
         if not os.path.exists(self.events_path):
             return set()
         return {
@@ -480,7 +399,7 @@ class StudyRunner:
             obs.on_event(name, **fields)
 
     def _event(self, kind: str, trial_index: int | None, **fields: Any) -> None:
-        """One operator event: a line in events.jsonl (fsync'ed), then the observers."""
+        """One operator event: a line in the events file (fsync'ed), then the observers."""
         append_line(
             self.events_path,
             {
@@ -597,10 +516,9 @@ class StudyRunner:
         contacts = [list(c) for c in p.hands[trial.k]]
         model = self.source.model if self.source.closed_loop else None  # type: ignore[attr-defined]
         self._start_trial(trial, model, contacts)
-        frames_tmp = os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
-        frames_path = frames_tmp[:-4]
-        f = _FramesFile(frames_tmp)
-        f.write(_FRAME_HEADER)
+        frames_tmp = self.files.partial_frames(trial.trial_index)
+        frames_path = self.files.frames(trial.trial_index)
+        f = FramesFile(frames_tmp, _RESUME_HINT)
         k = trial.k
         real_time = not self.virtual_clock
         progress_frame = self.progress.frame
@@ -610,14 +528,14 @@ class StudyRunner:
         def on_frames(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
             # One write per batch; the live line shows the batch's last frame (a batch
             # is one frame in real time, and a few ms of wall time on the virtual clock).
-            f.write(_frame_rows(stamped, tels))
+            f.write(frame_rows(stamped, tels))
             tel = tels[-1]
             progress_frame(
                 stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time, tel.solver_status == 0
             )
 
         def on_frames_observed(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
-            f.write(_frame_rows(stamped, tels))
+            f.write(frame_rows(stamped, tels))
             for (t_s, _, _, _), tel in zip(stamped, tels):
                 err, alpha, pwm, status = (
                     float(tel.error_deg),
@@ -701,21 +619,19 @@ class StudyRunner:
         self._vt_base_us += int(round((t_s + 1.0) * 1e6))
         success = bool(result.success)
         completion = round(float(result.completion_s), 6) if success else float(p.timeout_s)
-        record = {
-            "participant": self.participant,
-            "simulated": self.simulated,
-            **{k: v for k, v in trial.to_dict().items() if k != "participant"},
-            "success": success,
-            "completion_s": completion,
-            "first_entry_s": round(float(result.first_entry_s), 6),
-            "final_error_deg": round(float(result.final_error_deg), 6),
-            "poses": poses,
-            "wall_s": round(time.monotonic() - wall0, 4),
-            "config_hash": self.config_hash,
-            "source": self.source.describe()["source"],
-            "recorded_at": _now_iso(),
-        }
-        return record
+        return TrialRecord.of_planned(
+            {**trial.to_dict(), "participant": self.participant},
+            simulated=bool(self.simulated),
+            success=success,
+            completion_s=completion,
+            first_entry_s=round(float(result.first_entry_s), 6),
+            final_error_deg=round(float(result.final_error_deg), 6),
+            poses=poses,
+            wall_s=round(time.monotonic() - wall0, 4),
+            config_hash=self.config_hash,
+            source=self.source.describe()["source"],
+            recorded_at=_now_iso(),
+        ).to_dict()
 
     # ---- a person's run: rest, ready prompt, the operator's keys
     def _left_s(self, done: set) -> float | None:
@@ -791,10 +707,10 @@ class StudyRunner:
                 self._note_key(trial)
 
     def _frames_tmp(self, trial: PlannedTrial) -> str:
-        return os.path.join(self.frames_dir, f"trial-{trial.trial_index:04d}.csv.tmp")
+        return self.files.partial_frames(trial.trial_index)
 
     def _set_aside(self, trial: PlannedTrial) -> str | None:
-        """An ended attempt's frames moved to frames/aside/ (path relative to OUT/PID)."""
+        """An ended attempt's frames moved aside (path relative to the participant's folder)."""
         tmp = self._frames_tmp(trial)
         if not os.path.exists(tmp):
             return None
@@ -802,8 +718,7 @@ class StudyRunner:
             os.makedirs(self.aside_dir, exist_ok=True)
             attempt = 1
             while True:
-                name = f"trial-{trial.trial_index:04d}-attempt-{attempt}.csv"
-                path = os.path.join(self.aside_dir, name)
+                path = self.files.aside(trial.trial_index, attempt)
                 if not os.path.exists(path):
                     break
                 attempt += 1
@@ -880,19 +795,19 @@ class StudyRunner:
             origin = "interactive"
         append_line(
             self.tlx_path,
-            {
-                "participant": self.participant,
-                "simulated": self.simulated,
-                "session": session.session,
-                "k": session.k,
-                "modality": session.modality,
-                "policy": session.policy,
-                "mode": session.mode,
-                "scales": scales,
-                "origin": origin,
-                "config_hash": self.config_hash,
-                "recorded_at": _now_iso(),
-            },
+            TlxRecord(
+                participant=self.participant,
+                simulated=bool(self.simulated),
+                session=session.session,
+                k=session.k,
+                modality=session.modality,
+                policy=session.policy,
+                mode=session.mode,
+                scales=scales,
+                origin=origin,
+                config_hash=self.config_hash,
+                recorded_at=_now_iso(),
+            ).to_dict(),
         )
 
     # ---- all
@@ -969,7 +884,7 @@ class StudyRunner:
                         record = self._person_trial(trial, done)
                     else:
                         record = None
-                    if record is None:  # skipped by the operator (events.jsonl)
+                    if record is None:  # skipped by the operator (the events file)
                         self.skipped_by_operator.add(trial.trial_index)
                         continue
                     append_line(self.trials_path, record)
@@ -1031,35 +946,6 @@ class StudyRunner:
         }
 
 
-#: One FRAME_COLUMNS row as csv.writer writes it for these fields (floats by repr, none
-#: needs quoting); the pipelined loop formats its rows with it.
-_FRAME_ROW = "%r,%d,%r,%r,%r,%r,%r,%r,%d,%d,%d,%d,%d,%d\n"
-_FRAME_HEADER = ",".join(FRAME_COLUMNS) + "\n"
-
-
-def _frame_rows(stamped: Sequence[Stamped], tels: Sequence[Any]) -> str:
-    """The FRAME_COLUMNS rows of poses sent (t_s, t_us, quat, contacts) and their
-    TELEMETRY, as csv.writer writes them: floats by repr (a Telemetry holds its f32
-    fields as floats), %d takes the enums' values."""
-    row = _FRAME_ROW
-    return "".join(
-        [
-            row
-            % (
-                round(t_s, 6),
-                t_us,
-                *quat,
-                tel.error_deg,
-                tel.alpha,
-                *tel.pwm,
-                tel.solver_status,
-                tel.flags,
-            )
-            for (t_s, t_us, quat, _), tel in zip(stamped, tels)
-        ]
-    )
-
-
 def _feel_lag_error() -> Any:
     try:
         from graspguide.participant.model import FeelLagError
@@ -1070,7 +956,7 @@ def _feel_lag_error() -> Any:
 
 def summary_lines(out_dir: str, participant: str) -> list[str]:
     """Per-modality successes and mean completion time of a participant (main trials)."""
-    recs = read_run_jsonl(os.path.join(out_dir, participant, "trials.jsonl")).records
+    recs = read_run_jsonl(ParticipantFiles.of(out_dir, participant).trials).records
     rows: dict[tuple[int, str], list[dict[str, Any]]] = {}
     for r in recs:
         if not r.get("familiarization"):
@@ -1288,8 +1174,6 @@ def trial_command(
 __all__ = [
     "StudyRunner",
     "trial_command",
-    "FRAME_COLUMNS",
-    "TRIAL_FIELDS",
     "read_run_jsonl",
     "summary_lines",
 ]

@@ -4,7 +4,6 @@ record it again, and change no file (graspguide.records.storage.complete_records
 
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
 import sys
@@ -15,7 +14,6 @@ from conftest import subprocess_env
 from test_analysis import make_study
 
 from graspguide.analysis.paper_tables import analyze
-from graspguide.records.storage import complete_records
 
 CLI = [sys.executable, "-m", "graspguide"]
 PLOT_STUDY = Path(__file__).parents[1] / "data" / "plot_structure" / "study"
@@ -68,13 +66,6 @@ def test_a_damaged_line_before_the_last_is_still_an_error(tmp_path):
     proc = run_cli("analyze", tmp_path / "S", "--out", tmp_path / "out")
     assert proc.returncode == 1
     assert f"{trials}:4: malformed JSON" in proc.stderr
-
-
-def test_complete_records_keeps_a_whole_last_record_without_newline(tmp_path):
-    f = tmp_path / "t.jsonl"
-    f.write_text(json.dumps({"a": 1}) + "\n" + json.dumps({"a": 2}))
-    records, left_out = complete_records(f)
-    assert [r for _, r in records] == [{"a": 1}, {"a": 2}] and left_out is None
 
 
 def test_plot_draws_the_complete_trials_and_says_what_was_left_out(tmp_path):

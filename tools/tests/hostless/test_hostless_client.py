@@ -24,7 +24,7 @@ from graspguide.link import client as gd
 from graspguide.link import codec
 from graspguide.link import messages as m
 from graspguide.protocol.study_protocol import load_protocol
-from graspguide.study.runner import TRIAL_FIELDS
+from graspguide.records.trial import HOSTLESS_FIELDS, TRIAL_FIELDS
 
 PAPER = os.path.join(REPO_ROOT, "protocols", "paper.toml")
 HOSTLESS_CAPS = m.CAPABILITY_FULL_SOLVE | m.CAPABILITY_HOSTLESS | m.CAPABILITY_SIM_MESSAGES
@@ -411,7 +411,7 @@ def test_download_writes_the_runners_format(paper, tmp_path, capsys):
     recs = _lines(tmp_path / "U1" / "trials.jsonl")
     assert len(recs) == done
     for rec, p, t, stored in zip(recs, planned, trials, fake.records):
-        assert set(rec) == set(TRIAL_FIELDS) | set(dl.HOSTLESS_FIELDS)
+        assert set(rec) == set(TRIAL_FIELDS) | set(HOSTLESS_FIELDS)
         for key in ("trial_index", "session", "session_trial", "k", "policy", "mode"):
             assert rec[key] == getattr(p, key), key
         for key in ("modality", "wrench_id", "single_motor", "wrench_class", "familiarization"):

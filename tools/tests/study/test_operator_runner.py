@@ -25,6 +25,7 @@ from graspguide.participant.model import VirtualParticipant
 from graspguide.protocol import study_protocol as pf
 from graspguide.protocol.tlx import TLX_NAMES, TLX_SCALES
 from graspguide.records.events import EVENT_NAMES, TrialObserver
+from graspguide.records.frames import FRAME_COLUMNS
 from graspguide.sources.trial_sources import ClosedLoopSource
 from graspguide.study import runner as rn
 from graspguide.study.operator_console import OperatorConsole
@@ -167,7 +168,7 @@ def test_ready_prompt_rest_and_every_key_logged_against_its_trial(tmp_path):
     aside = os.path.join(out, "U1", redo["frames"])
     assert os.path.dirname(aside).endswith(os.path.join("frames", "aside"))
     with open(aside) as f:
-        assert f.readline().strip() == ",".join(rn.FRAME_COLUMNS) and f.readline()
+        assert f.readline().strip() == ",".join(FRAME_COLUMNS) and f.readline()
     # the paused attempt's frames are gone, the recorded trials' frames are whole
     frames = sorted(os.listdir(os.path.join(out, "U1", "frames")))
     assert frames == ["aside", "trial-0001.csv", "trial-0002.csv", "trial-0004.csv"]

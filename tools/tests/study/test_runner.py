@@ -23,6 +23,8 @@ from graspguide.core.rotations import quat_angle_deg, slerp
 from graspguide.exit_codes import EXIT_USAGE
 from graspguide.protocol import study_protocol as pf
 from graspguide.protocol.tlx import load_tlx_file
+from graspguide.records.frames import FRAME_COLUMNS
+from graspguide.records.trial import TRIAL_FIELDS
 from graspguide.run_errors import RunnerError
 from graspguide.sources.poses import aligned_quaternion
 from graspguide.sources.trial_sources import ClosedLoopSource, open_runner_source
@@ -198,7 +200,7 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
     recs = lines(out / "U1" / "trials.jsonl")
     assert [r["trial_index"] for r in recs] == list(range(1, 10))
     for r, t in zip(recs, plan):
-        for key in rn.TRIAL_FIELDS:
+        for key in TRIAL_FIELDS:
             assert key in r, key
         assert r["participant"] == "U1" and r["simulated"] is True
         assert (
@@ -228,11 +230,11 @@ def test_full_small_run_and_output_layout(tmp_path, sim):
         frames = out / "U1" / "frames" / f"trial-{r['trial_index']:04d}.csv"
         with open(frames) as f:
             rows = f.read().splitlines()
-        assert rows[0] == ",".join(rn.FRAME_COLUMNS)
+        assert rows[0] == ",".join(FRAME_COLUMNS)
         assert len(rows) - 1 == r["poses"]
         assert [float(row.split(",")[0]) for row in rows[1:4]] == [0.0, 0.01, 0.02]
         last = rows[-1].split(",")
-        assert float(last[rn.FRAME_COLUMNS.index("error_deg")]) < 3.0
+        assert float(last[FRAME_COLUMNS.index("error_deg")]) < 3.0
     assert not [n for n in os.listdir(out / "U1" / "frames") if n.endswith(".tmp")]
     # one SET_SCENE per condition change (the familiarization trial has session 1's)
     assert client.calls.count("set_scene") == 4
