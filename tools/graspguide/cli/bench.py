@@ -188,7 +188,11 @@ exit status: 0 measured, 1 a build, QEMU or file error, 2 a usage error."""
 
 def _add_agreement(p: argparse.ArgumentParser) -> None:
     """`graspguide bench agreement MODE` (graspguide.bench.float_agreement)."""
-    sub = p.add_subparsers(dest="measurement", metavar="MEASUREMENT")
+    sub = p.add_subparsers(
+        dest="measurement",
+        metavar="[agreement MODE]",
+        help="without one: the host benchmark, or --target's counts",
+    )
     a = sub.add_parser(
         "agreement",
         help="the float core against the float64 reference on paper scenes (host or M4F)",
@@ -200,8 +204,10 @@ def _add_agreement(p: argparse.ArgumentParser) -> None:
     count = int_arg(0, 100_000_000)
     jobs = int_arg(1, 256)
     r = modes.add_parser("reference", help="save the float64 reference's answers")
-    r.add_argument("--count", type=count, default=100_000, help="random scenes (100000)")
-    r.add_argument("--jobs", type=jobs, default=1, help="processes (default 1)")
+    r.add_argument(
+        "--count", type=count, default=100_000, metavar="N", help="random scenes (default 100000)"
+    )
+    r.add_argument("--jobs", type=jobs, default=1, metavar="N", help="processes (default 1)")
     r.add_argument("--out", dest="reference_out", required=True, metavar="FILE.npz")
     h = modes.add_parser("host", help="the imported float core against a saved reference")
     h.add_argument("--reference", dest="reference_in", required=True, metavar="FILE.npz")
@@ -213,10 +219,20 @@ def _add_agreement(p: argparse.ArgumentParser) -> None:
         help="also write the figures and every disagreement",
     )
     lay = modes.add_parser("layered", help="the test's layered check on --count scenes")
-    lay.add_argument("--count", type=count, default=1_000_000, help="random scenes (1000000)")
+    lay.add_argument(
+        "--count",
+        type=count,
+        default=1_000_000,
+        metavar="N",
+        help="random scenes (default 1000000)",
+    )
     m = modes.add_parser("m4f", help="the M4F image of each worktree under QEMU")
-    m.add_argument("--count", type=count, default=1300, help="random scenes (default 1300)")
-    m.add_argument("--jobs", type=jobs, default=2, help="reference processes (default 2)")
+    m.add_argument(
+        "--count", type=count, default=1300, metavar="N", help="random scenes (default 1300)"
+    )
+    m.add_argument(
+        "--jobs", type=jobs, default=2, metavar="N", help="reference processes (default 2)"
+    )
     m.add_argument(
         "--scene",
         dest="scene_names",
