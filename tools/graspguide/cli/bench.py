@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -186,6 +187,13 @@ examples:
 exit status: 0 measured, 1 a build, QEMU or file error, 2 a usage error."""
 
 
+def _scene_name(text: str) -> str:
+    """--scene: a random scene's name, p and at least 6 digits (p049778)."""
+    if not re.fullmatch(r"p\d{6,}", text):
+        raise argparse.ArgumentTypeError(f"want p followed by 6 digits, e.g. p049778; got {text!r}")
+    return text
+
+
 def _add_agreement(p: argparse.ArgumentParser) -> None:
     """`graspguide bench agreement MODE` (graspguide.bench.float_agreement)."""
     sub = p.add_subparsers(
@@ -236,6 +244,7 @@ def _add_agreement(p: argparse.ArgumentParser) -> None:
     m.add_argument(
         "--scene",
         dest="scene_names",
+        type=_scene_name,
         action="append",
         default=[],
         metavar="NAME",

@@ -131,6 +131,7 @@ def test_m4f_refuses_a_main_checkout_and_leaves_its_scenes_alone(tmp_path):
         (["agreement"], "required: MODE"),
         (["agreement", "host"], "--reference"),
         (["agreement", "layered", "--count", "-1"], "must be between 0 and"),
+        (["agreement", "m4f", "--scene", "hard_0", "wt"], "want p followed by 6 digits"),
     ],
 )
 def test_usage_errors_exit_2(args, message):
