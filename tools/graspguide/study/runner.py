@@ -114,6 +114,7 @@ from graspguide.sources.trial_sources import RunnerSource
 from graspguide.study.pose_loop import (
     Diverged,
     LockstepPoses,
+    LoopResult,
     OpenLoopPoses,
     PipelinedPoses,
     PoseLoop,
@@ -421,61 +422,26 @@ class StudyRunner:
             {"event": event, "time": _now_iso(), "participant": self.participant, **extra},
         )
 
-    # ---- one trial
-    def _scene(self, trial: PlannedTrial) -> None:
-        key = (trial.k, trial.policy, trial.mode)
-        if key == self._scene_key:
-            return
-        p = self.protocol
-        self.client.set_scene(
-            [list(c) for c in p.hands[trial.k]],
-            y_axis=list(p.y_axis),
-            constraints=p.constraints,
-            policy=trial.policy,
-            mode=trial.mode,
-            threshold_deg=p.threshold_deg,
-            hold_s=p.hold_s,
-            timeout_s=p.timeout_s,
-        )
-        self._scene_key = key
-
-    def _poses(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
-        """Open loop: the source's samples, then its last pose held at its rate."""
-        period = 1.0 / self.source.rate_hz
-        last = None
-        for sample in self.source.samples(trial):  # type: ignore[attr-defined]
-            last = sample
-            yield sample
-        if last is None:
-            raise RunnerError(f"--source {self.source.describe()['source']} gave no pose")
-        t, q, c = last
-        while True:
-            t += period
-            yield (t, q, c)
-
-    # ---- pipelining (closed loop, virtual clock)
-    def _window(self, closed: bool) -> int:
-        """POSEs in flight: 1 (lockstep) unless the source is a closed loop on the virtual
-        clock whose :func:`pipeline_window` allows more (and --pipeline did not say 1)."""
-        if not closed or not self.virtual_clock or self.pipeline == 1:
-            return 1
-        limit = pipeline_window(self.source.model, self.protocol.pose_rate_hz)  # type: ignore
-        if self.pipeline is not None:
-            limit = min(limit, int(self.pipeline))
-        return max(1, limit)
-
-    def _restart_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
-        p = self.protocol
-        try:
-            self.client.stop()
-        except Exception:
-            pass
-        self.client.drain(0.05)
-        self.client.trial_results.clear()
-        self.client.unmatched.clear()
-        self._vt_base_us += int(round((p.timeout_s + 2 * RESULT_MARGIN_S) * 1e6))
-        self._scene_key = None
+    # ---- one trial, top-down: run_trial, then each of its steps in the order they run
+    def run_trial(self, trial: PlannedTrial) -> dict[str, Any]:
+        """One trial: the device and the model told it, its frames written while the poses
+        go out until the device ends it, its TRIAL_RESULT checked, its frames kept; returns
+        its record (the caller appends it). RunnerError, RecordWriteError, LinkError;
+        _OperatorStop when the operator pressed p, r or s."""
+        contacts = [list(c) for c in self.protocol.hands[trial.k]]
+        model = self.source.model if self.source.closed_loop else None  # type: ignore[attr-defined]
         self._start_trial(trial, model, contacts)
+        frames = FramesFile(self.files.partial_frames(trial.trial_index), _RESUME_HINT)
+        wall0 = time.monotonic()
+        try:
+            done = self._drive(trial, model, contacts, frames)
+            frames.sync()
+        finally:
+            frames.close()
+        result = self._checked_result(trial, done)
+        self._keep_frames(trial)
+        self._vt_base_us += int(round((done.t_s + 1.0) * 1e6))
+        return self._record(trial, result, done.frames, wall0)
 
     def _start_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
         """SET_SCENE when the condition changed, START_TRIAL, and the closed-loop model
@@ -494,31 +460,88 @@ class StudyRunner:
                 start_quat=list(p.start_quat),
             )
 
-    def _no_result_error(self, trial: PlannedTrial, t_s: float) -> RunnerError:
-        return RunnerError(
-            f"trial {trial.trial_index}: no TRIAL_RESULT {t_s:.1f} s into a "
-            f"{self.protocol.timeout_s:g} s trial; is the device's clock "
-            "following the poses?"
-        )
-
-    def _trial_poses(self, trial: PlannedTrial, model: Any, window: int) -> Any:
-        """Where the trial's poses come from (pose_loop): the open-loop samples, the
-        closed loop in lockstep, or pipelined ``window`` deep."""
-        rate = self.protocol.pose_rate_hz  # the study's pose rate (the tracker's)
-        if model is None:
-            return OpenLoopPoses(self._poses(trial))
-        if window > 1:
-            return PipelinedPoses(model, rate, trial.k, window, _feel_lag_error())
-        return LockstepPoses(model.step, rate, trial.k)
-
-    def run_trial(self, trial: PlannedTrial) -> dict[str, Any]:
+    def _scene(self, trial: PlannedTrial) -> None:
+        key = (trial.k, trial.policy, trial.mode)
+        if key == self._scene_key:
+            return
         p = self.protocol
-        contacts = [list(c) for c in p.hands[trial.k]]
-        model = self.source.model if self.source.closed_loop else None  # type: ignore[attr-defined]
-        self._start_trial(trial, model, contacts)
-        frames_tmp = self.files.partial_frames(trial.trial_index)
-        frames_path = self.files.frames(trial.trial_index)
-        f = FramesFile(frames_tmp, _RESUME_HINT)
+        self.client.set_scene(
+            [list(c) for c in p.hands[trial.k]],
+            y_axis=list(p.y_axis),
+            constraints=p.constraints,
+            policy=trial.policy,
+            mode=trial.mode,
+            threshold_deg=p.threshold_deg,
+            hold_s=p.hold_s,
+            timeout_s=p.timeout_s,
+        )
+        self._scene_key = key
+
+    def _drive(
+        self, trial: PlannedTrial, model: Any, contacts: list[list[float]], frames: FramesFile
+    ) -> LoopResult:
+        """The poses out and their TELEMETRY into ``frames`` (pose_loop.PoseLoop) until
+        the device ends the trial; pipelined when the source allows it, and the whole trial
+        again in lockstep should the pipelined poses diverge."""
+        p = self.protocol
+        console = self.operator
+        window = 1 if console is not None else self._window(model is not None)
+        on_frames = self._frames_sink(trial, frames)
+        while True:
+            loop = PoseLoop(
+                self.client,
+                self.virtual_clock,
+                base_us=self._vt_base_us,
+                limit_s=p.timeout_s + RESULT_MARGIN_S,
+                wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
+                on_frames=on_frames,
+            )
+            poses = self._trial_poses(trial, model, window)
+            if console is not None:
+                poses = _Keyed(poses, lambda: self._poll_keys(trial))
+            try:
+                return loop.run(poses)
+            except Diverged as e:
+                # Never expected (see pose_loop.PipelinedPoses); the poses the device
+                # got are not the lockstep ones: run the whole trial again in lockstep.
+                self.pipeline_fallbacks += 1
+                print(
+                    f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
+                    "running it again in lockstep",
+                    file=self.err,
+                    flush=True,
+                )
+                frames.restart()
+                self._restart_trial(trial, model, contacts)
+                window = 1
+            except TrialOverrun as e:
+                if e.real_time:
+                    raise RunnerError(
+                        f"trial {trial.trial_index}: no TRIAL_RESULT after {e.wall_s:.1f} s"
+                    ) from None
+                raise RunnerError(
+                    f"trial {trial.trial_index}: no TRIAL_RESULT {e.t_s:.1f} s into a "
+                    f"{p.timeout_s:g} s trial; is the device's clock following the poses?"
+                ) from None
+            except PoseLoopError as e:
+                raise RunnerError(f"trial {trial.trial_index}: {e}") from None
+
+    def _window(self, closed: bool) -> int:
+        """POSEs in flight: 1 (lockstep) unless the source is a closed loop on the virtual
+        clock whose :func:`pipeline_window` allows more (and --pipeline did not say 1)."""
+        if not closed or not self.virtual_clock or self.pipeline == 1:
+            return 1
+        limit = pipeline_window(self.source.model, self.protocol.pose_rate_hz)  # type: ignore
+        if self.pipeline is not None:
+            limit = min(limit, int(self.pipeline))
+        return max(1, limit)
+
+    def _frames_sink(
+        self, trial: PlannedTrial, frames: FramesFile
+    ) -> Callable[[int, list[Stamped], list[Any]], None]:
+        """What the pose loop does with each batch of frames: the rows into ``frames``,
+        the live line, and with observers or a person the TELEMETRY to the observers
+        (a note being typed stays visible)."""
         k = trial.k
         real_time = not self.virtual_clock
         progress_frame = self.progress.frame
@@ -528,14 +551,14 @@ class StudyRunner:
         def on_frames(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
             # One write per batch; the live line shows the batch's last frame (a batch
             # is one frame in real time, and a few ms of wall time on the virtual clock).
-            f.write(frame_rows(stamped, tels))
+            frames.write(frame_rows(stamped, tels))
             tel = tels[-1]
             progress_frame(
                 stamped[-1][0], float(tel.error_deg), tel.pwm[:k], real_time, tel.solver_status == 0
             )
 
         def on_frames_observed(first: int, stamped: list[Stamped], tels: list[Any]) -> None:
-            f.write(frame_rows(stamped, tels))
+            frames.write(frame_rows(stamped, tels))
             for (t_s, _, _, _), tel in zip(stamped, tels):
                 err, alpha, pwm, status = (
                     float(tel.error_deg),
@@ -546,7 +569,7 @@ class StudyRunner:
                 for obs in observers:
                     obs.on_telemetry(t_s, err, alpha, pwm, status)
             tel = tels[-1]
-            if console is None or not console.typing:  # a note being typed stays visible
+            if console is None or not console.typing:
                 progress_frame(
                     stamped[-1][0],
                     float(tel.error_deg),
@@ -555,53 +578,50 @@ class StudyRunner:
                     tel.solver_status == 0,
                 )
 
-        wall0 = time.monotonic()
-        window = 1 if console is not None else self._window(model is not None)
+        return on_frames if console is None and not observers else on_frames_observed
+
+    def _trial_poses(self, trial: PlannedTrial, model: Any, window: int) -> Any:
+        """Where the trial's poses come from (pose_loop): the open-loop samples, the
+        closed loop in lockstep, or pipelined ``window`` deep."""
+        rate = self.protocol.pose_rate_hz  # the study's pose rate (the tracker's)
+        if model is None:
+            return OpenLoopPoses(self._held_samples(trial))
+        if window > 1:
+            from graspguide.participant.model import FeelLagError
+
+            return PipelinedPoses(model, rate, trial.k, window, FeelLagError)
+        return LockstepPoses(model.step, rate, trial.k)
+
+    def _held_samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
+        """Open loop: the source's samples, then its last pose held at its rate."""
+        period = 1.0 / self.source.rate_hz
+        last = None
+        for sample in self.source.samples(trial):  # type: ignore[attr-defined]
+            last = sample
+            yield sample
+        if last is None:
+            raise RunnerError(f"--source {self.source.describe()['source']} gave no pose")
+        t, q, c = last
+        while True:
+            t += period
+            yield (t, q, c)
+
+    def _restart_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
+        """The trial from its start again: STOP, the device drained, a fresh virtual time."""
         try:
-            while True:
-                loop = PoseLoop(
-                    self.client,
-                    self.virtual_clock,
-                    base_us=self._vt_base_us,
-                    limit_s=p.timeout_s + RESULT_MARGIN_S,
-                    wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
-                    on_frames=on_frames
-                    if console is None and not observers
-                    else on_frames_observed,
-                )
-                poses = self._trial_poses(trial, model, window)
-                if console is not None:
-                    poses = _Keyed(poses, lambda: self._poll_keys(trial))
-                try:
-                    done = loop.run(poses)
-                    break
-                except Diverged as e:
-                    # Never expected (see pose_loop.PipelinedPoses); the poses the device
-                    # got are not the lockstep ones: run the whole trial again in lockstep.
-                    self.pipeline_fallbacks += 1
-                    print(
-                        f"graspguide trial: warning: trial {trial.trial_index}: {e}; "
-                        "running it again in lockstep",
-                        file=self.err,
-                        flush=True,
-                    )
-                    f.restart()
-                    self._restart_trial(trial, model, contacts)
-                    window = 1
-                except TrialOverrun as e:
-                    if e.real_time:
-                        raise RunnerError(
-                            f"trial {trial.trial_index}: no TRIAL_RESULT after {e.wall_s:.1f} s"
-                        ) from None
-                    raise self._no_result_error(trial, e.t_s) from None
-                except PoseLoopError as e:
-                    raise RunnerError(f"trial {trial.trial_index}: {e}") from None
-            f.sync()
-        finally:
-            f.close()
+            self.client.stop()
+        except Exception:
+            pass
+        self.client.drain(0.05)
+        self.client.trial_results.clear()
+        self.client.unmatched.clear()
+        self._vt_base_us += int(round((self.protocol.timeout_s + 2 * RESULT_MARGIN_S) * 1e6))
+        self._scene_key = None
+        self._start_trial(trial, model, contacts)
+
+    def _checked_result(self, trial: PlannedTrial, done: LoopResult) -> Any:
+        """The trial's TRIAL_RESULT; RunnerError when none came or another trial's did."""
         result = done.trial_result
-        t_s = done.t_s
-        poses = done.frames
         if result is None:
             raise RunnerError(
                 f"trial {trial.trial_index}: the device ended the trial but no TRIAL_RESULT arrived"
@@ -612,13 +632,23 @@ class StudyRunner:
                 f"TRIAL_RESULT of trial id {result.trial_id}; run again (this "
                 "trial was not recorded)"
             )
+        return result
+
+    def _keep_frames(self, trial: PlannedTrial) -> None:
+        """The trial's frames file renamed to its final name (before its record goes in)."""
+        path = self.files.frames(trial.trial_index)
         try:
-            os.replace(frames_tmp, frames_path)
+            os.replace(self.files.partial_frames(trial.trial_index), path)
         except OSError as e:
-            raise RecordWriteError(frames_path, e, _RESUME_HINT) from e
-        self._vt_base_us += int(round((t_s + 1.0) * 1e6))
+            raise RecordWriteError(path, e, _RESUME_HINT) from e
+
+    def _record(self, trial: PlannedTrial, result: Any, poses: int, wall0: float) -> dict[str, Any]:
+        """The trial's record: its plan, the TRIAL_RESULT (a failure takes the timeout as
+        its completion time) and how it ran."""
         success = bool(result.success)
-        completion = round(float(result.completion_s), 6) if success else float(p.timeout_s)
+        completion = (
+            round(float(result.completion_s), 6) if success else float(self.protocol.timeout_s)
+        )
         return TrialRecord.of_planned(
             {**trial.to_dict(), "participant": self.participant},
             simulated=bool(self.simulated),
@@ -944,14 +974,6 @@ class StudyRunner:
             "skipped": self.skipped,
             "completed": len(done),
         }
-
-
-def _feel_lag_error() -> Any:
-    try:
-        from graspguide.participant.model import FeelLagError
-    except ImportError:  # pragma: no cover
-        return RuntimeError
-    return FeelLagError
 
 
 def summary_lines(out_dir: str, participant: str) -> list[str]:
