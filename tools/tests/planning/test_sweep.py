@@ -14,6 +14,7 @@ import json
 import os
 
 import pytest
+from conftest import REPO_ROOT
 
 from graspguide import cli
 from graspguide.cli import sweep as sweep_command
@@ -21,7 +22,7 @@ from graspguide.planning import sweep as sw
 from graspguide.protocol import study_protocol as pf
 
 TESTS_DIR = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(os.path.dirname(TESTS_DIR))
+REPO = REPO_ROOT
 PAPER = os.path.join(REPO, "protocols", "paper.toml")
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -20,6 +20,7 @@ import sys
 import textwrap
 
 import pytest
+from conftest import TESTS_DIR as CONFTEST_DIR
 from conftest import subprocess_env
 from test_runner import TESTS_DIR, small_protocol
 
@@ -153,7 +154,9 @@ def _trial(path, out, limit=0):
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
 
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR  # the test source (test_runner.AligningHand)
+    env["PYTHONPATH"] = os.pathsep.join(
+        [TESTS_DIR, CONFTEST_DIR]
+    )  # the test source (test_runner.AligningHand)
     env["PYTHONDONTWRITEBYTECODE"] = "1"  # no .pyc write against the limit
     cmd = [
         sys.executable,

@@ -18,6 +18,7 @@ import tomllib
 
 import pexpect
 import pytest
+from conftest import TESTS_DIR as CONFTEST_DIR
 from conftest import small_protocol_toml, subprocess_env
 
 from graspguide import cli
@@ -73,7 +74,9 @@ def tlx_file(tmp_path, sessions):
 
 def spawn(args):
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR  # the test sources; graspguide stays the installed one
+    env["PYTHONPATH"] = os.pathsep.join(
+        [TESTS_DIR, CONFTEST_DIR]
+    )  # the test sources; graspguide stays the installed one
     return pexpect.spawn(
         sys.executable,
         ["-m", "graspguide", "trial", *args],

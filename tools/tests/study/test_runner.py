@@ -16,6 +16,7 @@ import tomllib
 
 import numpy as np
 import pytest
+from conftest import TESTS_DIR as CONFTEST_DIR
 from conftest import subprocess_env
 
 from graspguide import cli
@@ -304,7 +305,9 @@ def _trial_cmd(path, out, extra=(), delay=0.002):
 
 def _env():
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR  # the test source; graspguide stays the installed one
+    env["PYTHONPATH"] = os.pathsep.join(
+        [TESTS_DIR, CONFTEST_DIR]
+    )  # the test source; graspguide stays the installed one
     return env
 
 

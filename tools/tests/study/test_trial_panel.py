@@ -15,6 +15,7 @@ import sys
 
 import pexpect
 from conftest import REPO_ROOT, small_protocol_toml, subprocess_env
+from conftest import TESTS_DIR as CONFTEST_DIR
 
 from graspguide.protocol.tlx import TLX_NAMES, TLX_SCALES
 
@@ -35,7 +36,9 @@ def _protocol(tmp_path, wrenches=2, timeout_s=20.0) -> str:
 
 def _spawn(args) -> pexpect.spawn:
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR  # the test sources; graspguide stays the installed one
+    env["PYTHONPATH"] = os.pathsep.join(
+        [TESTS_DIR, CONFTEST_DIR]
+    )  # the test sources; graspguide stays the installed one
     env.update(TERM="xterm-256color", COLUMNS="120", LINES="40")
     return pexpect.spawn(
         sys.executable,
@@ -117,7 +120,7 @@ def test_the_tlx_answers_are_reviewed_before_they_are_saved(tmp_path):
 def test_tlx_answers_from_input_that_is_not_a_terminal_are_saved_as_given(tmp_path):
     out = tmp_path / "out"
     env = subprocess_env()
-    env["PYTHONPATH"] = TESTS_DIR
+    env["PYTHONPATH"] = os.pathsep.join([TESTS_DIR, CONFTEST_DIR])
     done = subprocess.run(
         [sys.executable, "-m", "graspguide", "trial", "--protocol"]
         + [_protocol(tmp_path, wrenches=1, timeout_s=5.0), "--participant", "U1"]
