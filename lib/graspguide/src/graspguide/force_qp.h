@@ -10,8 +10,7 @@
 // model are the common case, not an accident. Such a dependent row's value on the current
 // face is taken from equilibrium alone (lambda0 and its coefficients on the active rows),
 // not from the iterate, whose large steps carry rounding that float would otherwise read
-// as a violation and turn into a false infeasibility (issue 17). No null-space basis is
-// ever formed.
+// as a violation and turn into a false infeasibility. No null-space basis is ever formed.
 //
 // The paper model and the x-components: the moment about y_O is sum_i c_i lambda_ix with
 // c_i = |s_i x y_O| > 0 (docs/algorithm.md, step 5), so with no such moment every
@@ -20,7 +19,7 @@
 // the wrong sign decides infeasibility in closed form. The equalities are then
 // orthonormalised from the rows themselves: projecting e_x through I - G_hat^T G_hat and
 // stepping along it would square the conditioning of a hand whose x components
-// equilibrium nearly fixes, which float cannot resolve (issue 17).
+// equilibrium nearly fixes, which float cannot resolve.
 #pragma once
 
 #include <cmath>
@@ -141,8 +140,7 @@ struct ActiveRows {
 // rows, already orthonormal. With fixed rows (the paper model's x components) they come
 // from the rows themselves by Gram-Schmidt, not from projecting e_j through
 // I - G_hat^T G_hat: a component that equilibrium nearly fixes has |P e_j| ~ 1e-4, and
-// stepping along it squares that into a 1e7 amplification, all rounding in float
-// (issue 17).
+// stepping along it squares that into a 1e7 amplification, all rounding in float.
 template <typename T, int K>
 struct EqualityRows {
   WhitenedGrasp<T, K> own;                 // the fixed path's q as rows, zero beyond n
@@ -223,8 +221,7 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
       // Beyond the tolerance, the right-hand side carries the rounding of its own
       // cancellations, and the dropped left-over row (norm) sees the solution, whose
       // shared part the c so far hold: a hand whose x components equilibrium nearly fixes
-      // holds forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0|
-      // (issue 17).
+      // holds forces 1e4 |lambda0| there, and in float that alone is 1e-3 |lambda0|.
       const T bound = consistency_tol + T(kBasisNoiseUlps) * eps * size + norm * eq.c.norm();
       ++dependent;
       if (!(std::abs(rhs) <= bound)) {
@@ -243,7 +240,279 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
   return consistent || dependent <= known ? Status::kOk : Status::kQpInfeasible;
 }
 
+// The steps of DualActiveSet are named for the reader, not called by the CPU: each is
+// inlined into project_forces's loop, so the solver's state stays in registers and the
+// stage counts are those of one function.
+#define GRASPGUIDE_QP_STEP __attribute__((always_inline)) inline
+
+// One dual active-set solve (project_forces) and its steps. The equalities are always
+// held (eq); rows holds the active inequality rows as an orthonormal basis, w their
+// indices and u their multipliers. Each candidate row is added by steps along
+// z = (I - Q Q^T) P e_cand in the primal and -coeff = -r^-1 Q^T P e_cand in the dual.
+template <typename T, int K>
+struct DualActiveSet {
+  using Rows = ActiveRows<T, K>;
+  using Vec = ForceVec<T, K>;
+  static constexpr int kMax = Rows::kMax;
+  // A row's projection is known to a few ulps absolute, so a step t along it is off by
+  // ~2 eps |t|. Two ulps, not four: a bound of four ulps per step grows past violations
+  // that float computes to 3e-7 (a bound of 7e-5), and hides them.
+  static constexpr T kStepUlps = T(2) * std::numeric_limits<T>::epsilon();
+
+  DualActiveSet(const Vec& start_, Vec& lambda_, uint16_t constrained_, T violation_tol_,
+                T rel_tol_)
+      : start(start_),
+        lambda(lambda_),
+        constrained(constrained_),
+        violation_tol(violation_tol_),
+        rel_tol(rel_tol_) {}
+
+  const Vec& start;
+  Vec& lambda;
+  const uint16_t constrained;
+  const T violation_tol;
+  const T rel_tol;
+
+  EqualityRows<T, K> eq;
+  Rows rows;
+  int w[kMax];  // constraint index of each active row
+  T u[kMax];    // its multiplier
+  T dep_tol = T(0);
+  int limit = 0;        // the most independent inequality rows beside the equalities
+  uint16_t active = 0;  // fixed rows are held by eq, never by `rows`
+  // Rows found to hold at the current vertex although rounding shows them violated;
+  // cleared whenever the active set changes.
+  uint16_t settled = 0;
+  // A running bound on the rounding error the steps have put into lambda. A step along a
+  // row 1e-4 long (a near-degenerate vertex) is large, and so is its error; violations
+  // below the bound are rounding, not a reason to move again.
+  T step_error = T(0);
+  Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
+  bool have_shared = false;
+
+  // The candidate's steps: v = P e_cand, z its part the active rows cannot reach, d its
+  // part they can (Q^T v) and coeff = r^-1 d.
+  Vec v, z;
+  T d[kMax], coeff[kMax];
+  T z_norm = T(0);
+  bool dependent = false;  // no primal step: the active rows determine the candidate
+
+  // The equalities: equilibrium, and the fixed rows held at zero (kQpInfeasible if
+  // equilibrium contradicts them). lambda starts at the unconstrained optimum on them:
+  // their shared part plus the free part of start.
+  GRASPGUIDE_QP_STEP Status hold_equalities(const GraspStructure<T, K>& st, uint16_t fixed,
+                                            T dependent_tol, int known_dependences, QpInfo& info) {
+    if (fixed == 0) {
+      whitened_rows<T, K>(st, eq);
+      lambda = start;
+    } else {
+      const Status s =
+          fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol, known_dependences, eq);
+      if (s != Status::kOk) {
+        info.firm = eq.firm;
+        return s;
+      }
+      // The shared part plus the free part of start (start less its parts along the q and
+      // its fixed components).
+      const Vec6<T> along = eq.c - eq.own * start;
+      lambda = start;
+      lambda.noalias() += eq.own.transpose() * along;
+      for (int j = 0; j < 3 * K; ++j)
+        if (fixed & (1u << j)) lambda(j) = T(0);
+    }
+    // The basis is as accurate as its shortest kept row allows: Gram-Schmidt divided that
+    // row's rounding (a few eps) by its length, so a column shorter than that is noise.
+    const T basis_noise = T(kBasisNoiseUlps) * std::numeric_limits<T>::epsilon() / eq.smallest;
+    dep_tol = dependent_tol > basis_noise ? dependent_tol : basis_noise;
+    // At most this many independent inequality rows fit beside the equalities, and never
+    // more than the active-row arrays hold, whatever a degenerate hand's rank.
+    limit = 3 * K - eq.rank() < kMax ? 3 * K - eq.rank() : kMax;
+    active = fixed;
+    return Status::kOk;
+  }
+
+  // The iterate's rounding: a few ulps of |lambda|, which a paper-model optimum can hold
+  // at 1000 times |lambda0|, or the steps' running bound, but that bound only up to
+  // violation_tol. The bound adds every step's worst case, and past the tolerance it
+  // would hide violations float computes to 0.2 %; a row examined needlessly costs one
+  // harmless step, or for a dependent row dependent_value, free of the steps' rounding.
+  // violation_tol itself is no reason to stop moving: it judges infeasibility, and a float
+  // iterate stopped at a violation it allows is one dual step short of double's optimum,
+  // a motor off instead of on.
+  GRASPGUIDE_QP_STEP T iterate_rounding() const {
+    T tol = rel_tol * lambda.norm();
+    const T hidden = step_error < violation_tol ? step_error : violation_tol;
+    if (hidden > tol) tol = hidden;
+    return tol;
+  }
+
+  // The most violated inactive constraint beyond tol (lowest index on ties), or -1.
+  GRASPGUIDE_QP_STEP int most_violated_row(T tol) const {
+    int cand = -1;
+    T worst = -tol;
+    for (int j = 0; j < 3 * K; ++j) {
+      if (!(constrained & (1u << j)) || ((active | settled) & (1u << j))) continue;
+      if (lambda(j) < worst) {
+        worst = lambda(j);
+        cand = j;
+      }
+    }
+    return cand;
+  }
+
+  // Splits the candidate's column against the active rows. With as many active rows as
+  // null(G) has dimensions, nothing is left to move along, whatever rounding says.
+  GRASPGUIDE_QP_STEP void split_candidate() {
+    z_norm = rows.split(v, d, z, coeff);
+    dependent = !(z_norm > dep_tol) || rows.n >= limit;
+  }
+
+  // A row the active ones determine: on this face its value follows from equilibrium
+  // alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of the rounding the
+  // iterate carries from large steps. `size` is what its sum's cancellations started from.
+  GRASPGUIDE_QP_STEP T dependent_value(int cand, T& size) {
+    if (!have_shared) {
+      eq.shared_part(start, shared);
+      have_shared = true;
+    }
+    T value = shared(cand);
+    size = std::abs(shared(cand));
+    for (int i = 0; i < rows.n; ++i) {
+      value -= coeff[i] * shared(w[i]);
+      size += std::abs(coeff[i] * shared(w[i]));
+    }
+    return value;
+  }
+
+  // A degenerate vertex (the paper model's common case) holds a dependent row at zero;
+  // only a value below zero beyond its formula's own rounding is a real violation. A real
+  // violation takes the dual step like any other, unless no active row can leave: then
+  // the row holds when the tolerance allows it, and otherwise certifies infeasibility.
+  GRASPGUIDE_QP_STEP bool dependent_row_holds(int cand, T tol) {
+    T size;
+    const T value = dependent_value(cand, size);
+    bool can_leave = false;
+    for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
+    const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
+    return value >= -rounding || (!can_leave && value >= -(violation_tol + kStepUlps * size));
+  }
+
+  // Dual step limit: the first inequality multiplier to reach zero, and its row (or -1).
+  GRASPGUIDE_QP_STEP T dual_step_limit(int& drop) const {
+    T t_dual = std::numeric_limits<T>::infinity();
+    drop = -1;
+    for (int i = 0; i < rows.n; ++i) {
+      if (!(coeff[i] > T(0))) continue;
+      const T ratio = u[i] / coeff[i];
+      if (ratio < t_dual) {
+        t_dual = ratio;
+        drop = i;
+      }
+    }
+    return t_dual;
+  }
+
+  // Whether a dependent row that no active row can make room for proves infeasibility
+  // firmly: only when it is clearly dependent and its violation clears the tolerance by a
+  // margin over its formula's rounding.
+  // - Clearly dependent: 99.6 % of dependent rows are left under 0.1 dep_tol long; rows
+  //   left 0.11 and 0.5 dep_tol long are real ones, along which float64 holds hands with
+  //   5e6 and 4e5 |lambda0|.
+  // - The rounding is the terms' and the shared part's. The equality basis divided the
+  //   shared part by its shortest row, and coeff = r^-1 d divides by the active rows'
+  //   shortest: a basis row 3e-3 long makes it 1e-4 |lambda0|, far above two ulps of the
+  //   terms.
+  GRASPGUIDE_QP_STEP bool infeasibility_is_firm(int cand) {
+    T size;
+    const T value = dependent_value(cand, size);
+    T r_min = T(1), spread = T(1);
+    for (int i = 0; i < rows.n; ++i) {
+      if (std::abs(rows.r[i][i]) < r_min) r_min = std::abs(rows.r[i][i]);
+      spread += std::abs(coeff[i]);
+    }
+    const T noise = kStepUlps * (size + spread * start.norm() / eq.smallest) / r_min;
+    return (rows.n >= limit || z_norm <= T(kFirmDependentShare) * dep_tol) &&
+           -value >= violation_tol + T(kFirmVerdictFactor) * noise;
+  }
+
+  // Moves t along the candidate's steps: lambda along z (unless dependent), the active
+  // multipliers along -coeff, the candidate's own multiplier u_cand up.
+  GRASPGUIDE_QP_STEP void take_step(T t, T& u_cand) {
+    if (!dependent) {
+      lambda.noalias() += t * z;
+      step_error += kStepUlps * std::abs(t);
+    }
+    for (int i = 0; i < rows.n; ++i) u[i] -= t * coeff[i];
+    u_cand += t;
+  }
+
+  // A full step: the candidate reaches zero and becomes active with multiplier u_cand.
+  GRASPGUIDE_QP_STEP void add_active_row(int cand, T u_cand) {
+    lambda(cand) = T(0);
+    w[rows.n] = cand;
+    u[rows.n] = u_cand;
+    active = static_cast<uint16_t>(active | (1u << cand));
+    rows.add(d, z, z_norm);
+    settled = 0;
+  }
+
+  // A partial step: the blocking active row i leaves, the candidate stays violated.
+  GRASPGUIDE_QP_STEP void drop_active_row(int i) {
+    active = static_cast<uint16_t>(active & ~(1u << w[i]));
+    settled = 0;
+    for (int k = i; k + 1 < rows.n; ++k) {
+      w[k] = w[k + 1];
+      u[k] = u[k + 1];
+    }
+    rows.drop(i);
+  }
+
+  // Makes the violated row cand hold: dual and primal steps until it is active, or is
+  // found to hold as a dependent row. kQpInfeasible when it depends on active rows none of
+  // which can leave; kQpIterationLimit past max_iterations.
+  GRASPGUIDE_QP_STEP Status add_violated_row(int cand, T tol, int max_iterations, QpInfo& info) {
+    eq.column(cand, v);
+    T u_cand = T(0);
+    for (;;) {
+      if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
+      split_candidate();
+      if (dependent && u_cand == T(0) && dependent_row_holds(cand, tol)) {
+        settled = static_cast<uint16_t>(settled | (1u << cand));
+        return Status::kOk;
+      }
+      int drop;
+      const T t_dual = dual_step_limit(drop);
+      if (dependent && drop < 0) {
+        info.firm = infeasibility_is_firm(cand);
+        return Status::kQpInfeasible;
+      }
+      const T t_primal =
+          dependent ? std::numeric_limits<T>::infinity() : -lambda(cand) / (z_norm * z_norm);
+      take_step(t_primal <= t_dual ? t_primal : t_dual, u_cand);
+      if (t_primal <= t_dual) {
+        add_active_row(cand, u_cand);
+        return Status::kOk;
+      }
+      drop_active_row(drop);
+    }
+  }
+
+  // Rows held at the optimum are zero there by definition: what the later steps left in
+  // them is rounding, and a motor whose forces are all held must be off, not at the 1e-3
+  // level that turns it on (float at internal forces 1000 times |lambda0|). A dependent row
+  // found to hold is zeroed too when it sits within the tolerance.
+  GRASPGUIDE_QP_STEP void zero_held_rows() {
+    T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
+    if (step_error > tol) tol = step_error;
+    for (int j = 0; j < 3 * K; ++j)
+      if ((active & (1u << j)) || ((settled & (1u << j)) && std::abs(lambda(j)) <= tol))
+        lambda(j) = T(0);
+  }
+};
+
 }  // namespace detail
+
+#undef GRASPGUIDE_QP_STEP
 
 // From start (on the equilibrium set), holds the rows in `fixed` at zero as equalities
 // (kQpInfeasible if equilibrium contradicts that), then projects onto
@@ -258,195 +527,19 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
                       uint16_t constrained, uint16_t fixed, T violation_tol, T rel_tol,
                       T dependent_tol, int max_iterations, ForceVec<T, K>& lambda, QpInfo& info,
                       int known_dependences = 0) {
-  using Rows = detail::ActiveRows<T, K>;
-  using Vec = ForceVec<T, K>;
-  constexpr int kMax = Rows::kMax;
-  const T inf = std::numeric_limits<T>::infinity();
-
-  Rows rows;
-  int w[kMax];  // constraint index of each active row
-  T u[kMax];    // its multiplier
   info = QpInfo{};
-  Vec v, z;
-  // The equalities: equilibrium, and the fixed rows held at zero. lambda starts at the
-  // unconstrained optimum on them: their shared part plus the free part of start.
-  detail::EqualityRows<T, K> eq;
-  if (fixed == 0) {
-    detail::whitened_rows<T, K>(st, eq);
-    lambda = start;
-  } else {
-    const Status s = detail::fixed_rows<T, K>(st, start, fixed, dependent_tol, violation_tol,
-                                              known_dependences, eq);
-    if (s != Status::kOk) {
-      info.firm = eq.firm;
-      return s;
-    }
-    // The shared part plus the free part of start (start less its parts along the q and
-    // its fixed components).
-    const Vec6<T> along = eq.c - eq.own * start;
-    lambda = start;
-    lambda.noalias() += eq.own.transpose() * along;
-    for (int j = 0; j < 3 * K; ++j)
-      if (fixed & (1u << j)) lambda(j) = T(0);
-  }
-  // The basis is as accurate as its shortest kept row allows: Gram-Schmidt divided that
-  // row's rounding (a few eps) by its length, so a column shorter than that is noise.
-  const T basis_noise = T(kBasisNoiseUlps) * std::numeric_limits<T>::epsilon() / eq.smallest;
-  const T dep_tol = dependent_tol > basis_noise ? dependent_tol : basis_noise;
-  // At most this many independent inequality rows fit beside the equalities, and never
-  // more than the active-row arrays hold, whatever a degenerate hand's rank.
-  const int limit = 3 * K - eq.rank() < kMax ? 3 * K - eq.rank() : kMax;
-  uint16_t active = fixed;  // fixed rows are held by eq, never by `rows`
-  // A running bound on the rounding error the steps have put into lambda: a row's
-  // projection is known to a few ulps absolute, so a step t along it is off by ~2 eps |t|.
-  // A step along a row 1e-4 long (a near-degenerate vertex) is large, and so is its error;
-  // violations below the bound are rounding, not a reason to move again. Two ulps, not
-  // four: at four it hid violations float had computed to 3e-7 behind a bound of 7e-5
-  // (issue 17).
-  T step_error = T(0);
-  const T kStepUlps = T(2) * std::numeric_limits<T>::epsilon();
-  T d[kMax], coeff[kMax];
-  // Rows found to hold at the current vertex although rounding shows them violated;
-  // cleared whenever the active set changes.
-  uint16_t settled = 0;
-  Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
-  bool have_shared = false;
-  // A row the active ones determine: on this face its value follows from equilibrium
-  // alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of the rounding the
-  // iterate carries from large steps. `size` is what its sum's cancellations started from.
-  auto dependent_value = [&](int cand, const T* coeff, T& size) {
-    if (!have_shared) {
-      eq.shared_part(start, shared);
-      have_shared = true;
-    }
-    T value = shared(cand);
-    size = std::abs(shared(cand));
-    for (int i = 0; i < rows.n; ++i) {
-      value -= coeff[i] * shared(w[i]);
-      size += std::abs(coeff[i] * shared(w[i]));
-    }
-    return value;
-  };
-
+  detail::DualActiveSet<T, K> qp(start, lambda, constrained, violation_tol, rel_tol);
+  Status s = qp.hold_equalities(st, fixed, dependent_tol, known_dependences, info);
+  if (s != Status::kOk) return s;
   for (;;) {
-    // The most violated inactive constraint (lowest index on ties). A violation counts
-    // once it exceeds the iterate's rounding: a few ulps of |lambda|, which a paper-model
-    // optimum can hold at 1000 times |lambda0|, or the steps' running bound, but that
-    // bound only up to violation_tol. The bound adds every step's worst case; past the
-    // tolerance it hid violations float had computed to 0.2 % (issue 17), and a row
-    // examined needlessly costs one harmless step, or for a dependent row the formula
-    // below, free of the steps' rounding. violation_tol itself is no reason to stop
-    // moving: it judges infeasibility, and a float iterate that stopped at a violation it
-    // allows was one dual step short of double's optimum, a motor off instead of on.
-    T tol = rel_tol * lambda.norm();
-    const T hidden = step_error < violation_tol ? step_error : violation_tol;
-    if (hidden > tol) tol = hidden;
-    int cand = -1;
-    T worst = -tol;
-    for (int j = 0; j < 3 * K; ++j) {
-      if (!(constrained & (1u << j)) || ((active | settled) & (1u << j))) continue;
-      if (lambda(j) < worst) {
-        worst = lambda(j);
-        cand = j;
-      }
-    }
+    const T tol = qp.iterate_rounding();
+    const int cand = qp.most_violated_row(tol);
     if (cand < 0) break;
-
-    eq.column(cand, v);
-    T u_cand = T(0);
-    for (;;) {
-      if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
-      const T z_norm = rows.split(v, d, z, coeff);
-      // With as many active rows as null(G) has dimensions, nothing is left to move along,
-      // whatever rounding says.
-      const bool dependent = !(z_norm > dep_tol) || rows.n >= limit;
-      if (dependent && u_cand == T(0)) {
-        // A degenerate vertex (the paper model's common case) holds a dependent row at
-        // zero; only a value below zero beyond its formula's own rounding is a real
-        // violation. A real violation takes the dual step like any other, unless no
-        // active row can leave: then it is settled when the tolerance allows it, and
-        // otherwise certifies infeasibility (below).
-        T size;
-        const T value = dependent_value(cand, coeff, size);
-        bool can_leave = false;
-        for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
-        const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
-        if (value >= -rounding || (!can_leave && value >= -(violation_tol + kStepUlps * size))) {
-          settled = static_cast<uint16_t>(settled | (1u << cand));
-          break;
-        }
-      }
-      // Dual step limit: the first inequality multiplier to reach zero.
-      T t_dual = inf;
-      int drop = -1;
-      for (int i = 0; i < rows.n; ++i) {
-        if (!(coeff[i] > T(0))) continue;
-        const T ratio = u[i] / coeff[i];
-        if (ratio < t_dual) {
-          t_dual = ratio;
-          drop = i;
-        }
-      }
-      if (dependent && drop < 0) {
-        // Firm only when the row is clearly dependent and its violation clears the
-        // tolerance by a margin over the formula's rounding (issue 17):
-        // - clearly dependent: 99.6 % of dependent rows are left under 0.1 dep_tol long;
-        //   rows left 0.11 and 0.5 dep_tol long were real ones, along which float64 held
-        //   hands with 5e6 and 4e5 |lambda0|;
-        // - the rounding is the terms' and the shared part's. The equality basis divided
-        //   the shared part by its shortest row, and coeff = r^-1 d divides by the active
-        //   rows' shortest: a basis row 3e-3 long made it 1e-4 |lambda0| where two ulps of
-        //   the terms were assumed, and float gave up a hand float64 holds.
-        T size;
-        const T value = dependent_value(cand, coeff, size);
-        T r_min = T(1), spread = T(1);
-        for (int i = 0; i < rows.n; ++i) {
-          if (std::abs(rows.r[i][i]) < r_min) r_min = std::abs(rows.r[i][i]);
-          spread += std::abs(coeff[i]);
-        }
-        const T noise = kStepUlps * (size + spread * start.norm() / eq.smallest) / r_min;
-        info.firm = (rows.n >= limit || z_norm <= T(kFirmDependentShare) * dep_tol) &&
-                    -value >= violation_tol + T(kFirmVerdictFactor) * noise;
-        return Status::kQpInfeasible;
-      }
-      const T t_primal = dependent ? inf : -lambda(cand) / (z_norm * z_norm);
-      const T t = t_primal <= t_dual ? t_primal : t_dual;
-      if (!dependent) {
-        lambda.noalias() += t * z;
-        step_error += kStepUlps * std::abs(t);
-      }
-      for (int i = 0; i < rows.n; ++i) u[i] -= t * coeff[i];
-      u_cand += t;
-
-      if (t_primal <= t_dual) {  // full step: the candidate becomes active
-        lambda(cand) = T(0);
-        w[rows.n] = cand;
-        u[rows.n] = u_cand;
-        active = static_cast<uint16_t>(active | (1u << cand));
-        rows.add(d, z, z_norm);
-        settled = 0;
-        break;
-      }
-      // A partial step: the blocking row leaves, the candidate stays violated.
-      active = static_cast<uint16_t>(active & ~(1u << w[drop]));
-      settled = 0;
-      for (int i = drop; i + 1 < rows.n; ++i) {
-        w[i] = w[i + 1];
-        u[i] = u[i + 1];
-      }
-      rows.drop(drop);
-    }
+    s = qp.add_violated_row(cand, tol, max_iterations, info);
+    if (s != Status::kOk) return s;
   }
-  // Rows held at the optimum are zero there by definition: what the later steps left in
-  // them is rounding, and a motor whose forces are all held must be off, not at the 1e-3
-  // level that turns it on (float at internal forces 1000 times |lambda0|). A dependent row
-  // found to hold is zeroed too when it sits within the tolerance.
-  T tol = violation_tol > rel_tol * lambda.norm() ? violation_tol : rel_tol * lambda.norm();
-  if (step_error > tol) tol = step_error;
-  for (int j = 0; j < 3 * K; ++j)
-    if ((active & (1u << j)) || ((settled & (1u << j)) && std::abs(lambda(j)) <= tol))
-      lambda(j) = T(0);
-  info.active = active;
+  qp.zero_held_rows();
+  info.active = qp.active;
   return lambda.allFinite() ? Status::kOk : Status::kNonFiniteInput;
 }
 
