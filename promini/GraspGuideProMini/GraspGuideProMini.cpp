@@ -15,7 +15,7 @@ namespace {
 graspguide::promini::SerialStream g_stream;
 graspguide::promini::PwmMotors g_motors;
 graspguide::promini::MicrosClock g_clock;
-graspguide_frame_device::FrameDevice* g_device = nullptr;
+graspguide::frame_device::FrameDevice* g_device = nullptr;
 
 }  // namespace
 
@@ -23,10 +23,10 @@ void setup() {
   // Motors off before anything else can fail or wait.
   g_motors.begin();
   Serial.begin(graspguide::promini::kBaud);
-  graspguide_frame_device::DeviceInfo info;
+  graspguide::frame_device::DeviceInfo info;
   info.build_id = GRASPGUIDE_BUILD_ID;
   // Built here, not as a global, so its first motor write finds the pins already set up.
-  static graspguide_frame_device::FrameDevice device(g_stream, g_motors, g_clock, info);
+  static graspguide::frame_device::FrameDevice device(g_stream, g_motors, g_clock, info);
   g_device = &device;
 }
 

@@ -21,20 +21,20 @@ constexpr uint32_t kBaud = 115200;
 // 255 is a plain low or high pin (analogWrite disconnects the timer there).
 constexpr uint8_t kMotorPins[graspguide::kMaxContacts] = {3, 9, 10, 11};
 
-class SerialStream final : public graspguide_frame_device::ByteStream {
+class SerialStream final : public graspguide::hal::ByteStream {
  public:
   size_t read(uint8_t* buffer, size_t capacity) override;
   size_t write(const uint8_t* data, size_t length) override;
 };
 
-class PwmMotors final : public graspguide_frame_device::Motors {
+class PwmMotors final : public graspguide::hal::MotorOutputs {
  public:
   // Drives every motor pin low and makes it an output.
   void begin();
   void write(const graspguide::Pwm& pwm) override;
 };
 
-class MicrosClock final : public graspguide_frame_device::Clock {
+class MicrosClock final : public graspguide::hal::Clock {
  public:
   uint32_t now_us() override;
 };

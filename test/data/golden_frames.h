@@ -16,7 +16,7 @@ inline constexpr size_t kGoldenFrameCount = 33;
 // Calls fn(name, seq, message, bytes, size) for every golden frame, in schema order.
 template <class Fn>
 void for_each_golden_frame(Fn&& fn) {
-  namespace gl = graspguide_link;
+  namespace gl = graspguide::link;
   {
     static const uint8_t kBytes[9] = {
         0x04, 0x04, 0x01, 0x01, 0x04, 0x04, 0x0A, 0x99, 0x00,

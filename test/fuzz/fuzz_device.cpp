@@ -54,13 +54,14 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/fake_storage.h"
 #include "graspguide_device/link_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
+namespace gh = graspguide::hal;
 
 // A macro, so every invariant traps at its own address and libFuzzer tells them apart.
 #define REQUIRE(cond, what)                                                                 \
@@ -188,7 +189,7 @@ struct Event {
 // What the host sent, handed to the device up to one frame delimiter per poll(). A copy of
 // the device's parser sees the same bytes, so the harness knows which request each poll
 // handled.
-class HostLine final : public gd::ByteStream {
+class HostLine final : public gh::ByteStream {
  public:
   void send(const uint8_t* data, size_t n) { pending_.insert(pending_.end(), data, data + n); }
   bool has_pending() const { return at_ < pending_.size(); }
@@ -238,11 +239,11 @@ class HostLine final : public gd::ByteStream {
 // The simulated device's --virtual-clock: device time is the POSE's host time.
 class VirtualTime final : public gd::PoseTimeListener {
  public:
-  explicit VirtualTime(gd::FakeClock& clock) : clock_(clock) {}
+  explicit VirtualTime(gh::FakeClock& clock) : clock_(clock) {}
   void on_pose_time(uint32_t t) override { clock_.set_us(t); }
 
  private:
-  gd::FakeClock& clock_;
+  gh::FakeClock& clock_;
 };
 
 struct DeviceFrame {
@@ -266,7 +267,7 @@ bool is_answer(uint8_t id) {
 // checked at every write.
 class WatchedStore final : public gd::NvStorage {
  public:
-  explicit WatchedStore(const gd::RecordingMotors& motors) : motors_(motors) {}
+  explicit WatchedStore(const gh::RecordingMotors& motors) : motors_(motors) {}
   uint32_t size_bytes() const override { return ram_.size_bytes(); }
   bool read(uint32_t offset, uint8_t* out, uint32_t n) override {
     return ram_.read(offset, out, n);
@@ -279,16 +280,16 @@ class WatchedStore final : public gd::NvStorage {
 
  private:
   gd::RamStorage<kStoreBytes> ram_;
-  const gd::RecordingMotors& motors_;
+  const gh::RecordingMotors& motors_;
 };
 
 // What a power cycle rebuilds: the application, the runner (boot() mounts the store) and
 // the link.
 struct Board {
-  Board(gd::ByteStream& line, gd::RecordingMotors& motors, gd::FakeClock& clock,
+  Board(gh::ByteStream& line, gh::RecordingMotors& motors, gh::FakeClock& clock,
         gd::NvStorage& store, const gd::DeviceInfo& info, gd::PoseTimeListener* time, bool hostless)
       : app(motors, clock),
-        runner(motors, clock, store, gd::ImuOutput::kSixAxis, kAccelFs, kGyroFs),
+        runner(motors, clock, store, gh::ImuOutput::kSixAxis, kAccelFs, kGyroFs),
         boot(runner.boot()),
         device(line, app, info, time, hostless ? &runner : nullptr) {}
   gd::Application app;
@@ -1223,8 +1224,8 @@ class Rig {
   const bool trace_ = std::getenv("GRASPGUIDE_FUZZ_TRACE") != nullptr;
   const bool virtual_clock_;
   const bool hostless_;
-  gd::FakeClock clock_;
-  gd::RecordingMotors motors_;
+  gh::FakeClock clock_;
+  gh::RecordingMotors motors_;
   HostLine line_;
   VirtualTime virtual_time_;
   gd::DeviceInfo info_;

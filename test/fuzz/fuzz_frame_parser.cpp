@@ -17,7 +17,7 @@
 #include "graspguide_link/parser.h"
 #include "graspguide_link/writer.h"
 
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
 
 namespace {
 

@@ -10,12 +10,13 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/link_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
+namespace gh = graspguide::hal;
 
 namespace {
 
@@ -124,10 +125,10 @@ TEST(Calibration, EachBadValueIsRefusedByName) {
 
 // ---- the full-solve device
 struct Rig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::Application app{motors, clock};
-  gd::MemoryStream stream;
+  gh::MemoryStream stream;
   gd::DeviceInfo info;
   std::unique_ptr<gd::LinkDevice> device;
   gl::FrameParser parser{gl::Accept::kDeviceToHost};

@@ -5,10 +5,11 @@
 
 #include "common/hand_scenes.h"
 #include "graspguide_device/application.h"
-#include "graspguide_device/fake_hal.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
+namespace gh = graspguide::hal;
 using gg::Real;
 
 constexpr uint32_t kMs = 1000;
@@ -40,8 +41,8 @@ gd::PoseIn pose_at(uint32_t t_us, Eigen::Vector4f q = Eigen::Vector4f(1, 0, 0, 0
 }
 
 struct Rig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::Application app{motors, clock};
   gd::Telemetry tel;
   gd::TrialReport report;

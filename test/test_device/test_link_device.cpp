@@ -6,12 +6,13 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/link_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
+namespace gh = graspguide::hal;
 
 struct Received {
   gl::FrameHeader header;
@@ -19,10 +20,10 @@ struct Received {
 };
 
 struct LinkRig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::Application app{motors, clock};
-  gd::MemoryStream stream;
+  gh::MemoryStream stream;
   gd::DeviceInfo info;
   std::unique_ptr<gd::LinkDevice> device;
   gl::FrameParser host_parser{gl::Accept::kDeviceToHost};
@@ -271,7 +272,7 @@ TEST(LinkDevice, ATrialEndsWithATrialResult) {
 // frame half-received on one link must survive traffic on the other.
 TEST(LinkDevice, TwoLinksShareOneApplication) {
   LinkRig usb;
-  gd::MemoryStream bt_stream;
+  gh::MemoryStream bt_stream;
   gd::LinkDevice bt(bt_stream, usb.app, usb.info);
   gl::FrameParser bt_host{gl::Accept::kDeviceToHost};
   auto bt_send = [&](const auto& m, uint16_t s) {

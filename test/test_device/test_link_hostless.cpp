@@ -11,12 +11,13 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/fake_storage.h"
 #include "graspguide_device/link_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
+namespace gh = graspguide::hal;
 
 namespace {
 
@@ -27,7 +28,7 @@ constexpr float kG = 9.80665f;
 // The rig's store: RAM, and a count of the writes made while any motor was on.
 class WatchedStorage final : public gd::NvStorage {
  public:
-  WatchedStorage(gd::NvStorage& inner, const gd::RecordingMotors& motors)
+  WatchedStorage(gd::NvStorage& inner, const gh::RecordingMotors& motors)
       : inner_(inner), motors_(motors) {}
   uint32_t size_bytes() const override { return inner_.size_bytes(); }
   bool read(uint32_t offset, uint8_t* out, uint32_t n) override {
@@ -42,7 +43,7 @@ class WatchedStorage final : public gd::NvStorage {
 
  private:
   gd::NvStorage& inner_;
-  const gd::RecordingMotors& motors_;
+  const gh::RecordingMotors& motors_;
 };
 
 gd::DeviceInfo sim_info() {
@@ -54,14 +55,14 @@ gd::DeviceInfo sim_info() {
 }
 
 struct Rig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   std::unique_ptr<gd::RamStorage<kStoreBytes>> ram =
       std::make_unique<gd::RamStorage<kStoreBytes>>();
   WatchedStorage store{*ram, motors};
   gd::Application app{motors, clock};
-  gd::HostlessRunner runner{motors, clock, store, gd::ImuOutput::kSixAxis, 8 * kG, 34.9f};
-  gd::MemoryStream stream;
+  gd::HostlessRunner runner{motors, clock, store, gh::ImuOutput::kSixAxis, 8 * kG, 34.9f};
+  gh::MemoryStream stream;
   gd::LinkDevice device{stream, app, sim_info(), nullptr, &runner};
   gl::FrameParser host{gl::Accept::kDeviceToHost};
   uint16_t seq = 100;

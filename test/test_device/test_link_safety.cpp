@@ -10,22 +10,23 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/link_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
+namespace gl = graspguide::link;
+namespace gh = graspguide::hal;
 
 namespace {
 
 constexpr uint32_t kMs = 1000;
 
 struct Rig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::Application app{motors, clock};
-  gd::MemoryStream stream;
+  gh::MemoryStream stream;
   gd::LinkDevice device{stream, app, gd::DeviceInfo{}};
   gl::FrameParser host{gl::Accept::kDeviceToHost};
   uint16_t seq = 100;
@@ -370,7 +371,7 @@ TEST(LinkSafety, AStopAfterHalfAFrameGetsThrough) {
     if (leading_delimiter) {
       stop.insert(stop.begin(), 0);  // at once, no pause
     } else {
-      r.clock.advance_us(gd::kPartialFrameTimeoutUs);
+      r.clock.advance_us(gh::kPartialFrameTimeoutUs);
       r.device.poll();
     }
     r.raw(stop);
@@ -386,7 +387,7 @@ TEST(LinkSafety, WithoutAPauseOrDelimiterTheMergedFrameIsDropped) {
   motors_on_in_trial(r);
   const auto half_pose = r.frame_of(pose_at(4096));
   r.raw(std::vector<uint8_t>(half_pose.begin(), half_pose.begin() + half_pose.size() / 2));
-  r.clock.advance_us(gd::kPartialFrameTimeoutUs - 1);
+  r.clock.advance_us(gh::kPartialFrameTimeoutUs - 1);
   r.device.poll();
   r.raw(r.frame_of(gl::Stop{}));
   EXPECT_TRUE(r.all<gl::Ack>().empty());

@@ -191,11 +191,11 @@ TEST(AsinDegRatio, FloatPolynomialIsAsAccurateAsItsDocumentationSays) {
   for (int i = 0; i <= 100000; ++i) {
     const float x = 0.5f * float(i) / 100000.0f;
     const double exact = x > 0 ? std::asin(double(x)) / double(x) * (180 / M_PI) : 180 / M_PI;
-    const double got = gg::frame_math::asin_deg_ratio(x * x);
+    const double got = gg::scalar_math::asin_deg_ratio(x * x);
     worst = std::fmax(worst, std::fabs(got - exact) / exact);
   }
   EXPECT_LT(worst, 2e-7);
-  EXPECT_NEAR(gg::frame_math::asin_deg_ratio(0.0), 180 / M_PI, 1e-15);
+  EXPECT_NEAR(gg::scalar_math::asin_deg_ratio(0.0), 180 / M_PI, 1e-15);
 }
 
 }  // namespace

@@ -12,14 +12,15 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/link_device.h"
 #include "graspguide_frame_device.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
-namespace gl = graspguide_link;
-namespace gfd = graspguide_frame_device;
+namespace gl = graspguide::link;
+namespace gfd = graspguide::frame_device;
+namespace gh = graspguide::hal;
 
 namespace {
 
@@ -28,7 +29,7 @@ struct Received {
   std::vector<uint8_t> payload;
 };
 
-class BoardStream final : public gfd::ByteStream {
+class BoardStream final : public gh::ByteStream {
  public:
   size_t read(uint8_t* buffer, size_t capacity) override {
     size_t n = 0;
@@ -51,27 +52,6 @@ class BoardStream final : public gfd::ByteStream {
  private:
   std::vector<uint8_t> in_, out_;
   size_t at_ = 0;
-};
-
-class BoardMotors final : public gfd::Motors {
- public:
-  void write(const gg::Pwm& pwm) override {
-    last = pwm;
-    ++writes;
-  }
-  bool all_off() const {
-    for (uint8_t d : last.duty)
-      if (d != 0) return false;
-    return true;
-  }
-  gg::Pwm last;
-  uint32_t writes = 0;
-};
-
-class BoardClock final : public gfd::Clock {
- public:
-  uint32_t now_us() override { return now; }
-  uint32_t now = 0;
 };
 
 // What the host sends and reads, written and parsed by graspguide_link: the reference.
@@ -105,8 +85,8 @@ struct Host {
 
 struct BoardRig {
   BoardStream stream;
-  BoardMotors motors;
-  BoardClock clock;
+  gh::RecordingMotors motors;
+  gh::FakeClock clock;
   gfd::FrameDevice device{stream, motors, clock, gfd::DeviceInfo{}};
   Host host;
 
@@ -127,16 +107,16 @@ struct BoardRig {
     return receive();
   }
   void advance_us(uint32_t dt) {
-    clock.now += dt;
+    clock.advance_us(dt);
     device.poll();
   }
 };
 
 struct LinkRig {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::Application app{motors, clock};
-  gd::MemoryStream stream;
+  gh::MemoryStream stream;
   gd::DeviceInfo info;
   std::unique_ptr<gd::LinkDevice> device;
   Host host;
@@ -272,7 +252,7 @@ void for_each_message(gl::MessageList<M...>, Fn&& fn) {
 
 TEST(FrameDevice, MotorsAreOffFromBoot) {
   BoardRig r;
-  EXPECT_GE(r.motors.writes, 1u);
+  EXPECT_GE(r.motors.writes(), 1u);
   EXPECT_TRUE(r.motors.all_off());
 }
 
@@ -354,7 +334,7 @@ TEST(FrameDevice, ThePoseStreamGivesTheFullSolveDevicesPwmWithinOneCount) {
       gl::Pose pose;
       pose.host_time_us = uint32_t(1000000 + p * 4000);
       for (int j = 0; j < 4; ++j) pose.quat_wxyz[j] = float(rs.orientation(j));
-      board.clock.now += 4000;
+      board.clock.advance_us(4000);
       full.clock.advance_us(4000);
       const auto b = board.receive_after(pose);
       const auto f = full.receive_after(pose);
@@ -370,7 +350,7 @@ TEST(FrameDevice, ThePoseStreamGivesTheFullSolveDevicesPwmWithinOneCount) {
       EXPECT_NEAR(tb.alpha, tf.alpha, 0.01) << n << "/" << p;
       for (int i = 0; i < 4; ++i) {
         EXPECT_NEAR(tb.pwm[i], tf.pwm[i], 1) << n << "/" << p << " motor " << i;
-        EXPECT_NEAR(board.motors.last.duty[i], full.motors.last().duty[i], 1);
+        EXPECT_NEAR(board.motors.last().duty[i], full.motors.last().duty[i], 1);
       }
       ++compared;
       driven += tf.pwm[0] + tf.pwm[1] + tf.pwm[2] + tf.pwm[3] > 0;
@@ -623,7 +603,7 @@ TEST(FrameDevice, APartialFrameIsDroppedAfterSilence) {
   uint16_t s = 0;
   const auto f = r.host.frame(gl::Hello{}, &s);
   r.send_raw(std::vector<uint8_t>(f.begin(), f.begin() + 3));
-  r.advance_us(gfd::kPartialFrameTimeoutUs);
+  r.advance_us(gh::kPartialFrameTimeoutUs);
   r.send_raw(r.host.frame(gl::Hello{}, &s));  // no leading delimiter
   EXPECT_EQ(only<gl::HelloReply>(r.receive()).request_seq, s);
 }

@@ -10,12 +10,13 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_device/fake_storage.h"
 #include "graspguide_device/hostless_app.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
+namespace gh = graspguide::hal;
 using gg::Real;
 
 namespace {
@@ -83,10 +84,10 @@ Eigen::Vector3d across(const Eigen::Vector3d& v) {
 
 template <uint32_t StoreBytes>
 struct RigOf {
-  gd::FakeClock clock;
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::RecordingMotors motors;
   gd::RamStorage<StoreBytes> store;
-  gd::HostlessRunner runner{motors, clock, store, gd::ImuOutput::kSixAxis, kAccelFs, kGyroFs};
+  gd::HostlessRunner runner{motors, clock, store, gh::ImuOutput::kSixAxis, kAccelFs, kGyroFs};
   std::vector<gd::RunEvent> events;
   uint32_t noise_step = 0;
 
@@ -110,7 +111,7 @@ struct RigOf {
     g_hand = g_down;
     const Eigen::Vector3d a_imu = imu_to_hand.transpose() * (-g_down * kG);
     const Eigen::Vector3d w_imu = imu_to_hand.transpose() * w_hand;
-    gd::ImuSample s;
+    gh::ImuSample s;
     s.time_us = clock.now_us();
     const float lsb = (++noise_step % 2) ? 0.002f : -0.002f;
     for (int i = 0; i < 3; ++i) {
@@ -312,7 +313,7 @@ TEST(HostlessRunner, AStuckImuHoldsTheMotorsOff) {
   start_guiding(rig);
   if (HasFatalFailure()) return;
   const Eigen::Vector3d off = rig.g_hand;
-  gd::ImuSample frozen;
+  gh::ImuSample frozen;
   for (int i = 0; i < 3; ++i) frozen.accel_mps2[i] = float(-off[i]) * kG;
   int on_after_stuck = 0;
   for (int i = 0; i < 40; ++i) {
@@ -337,7 +338,7 @@ TEST(HostlessRunner, AFaultThatBeganBeforeTheTrialIsInItsRecord) {
   ASSERT_TRUE(rig.upload(header(1), {trial(1, 4, kSideways)}).ok());
   ASSERT_TRUE(rig.runner.start().ok());
   rig.until(gd::RunEventCode::kReady, kRest, 5'000 * kMs);
-  gd::ImuSample frozen;  // frozen from here on: stuck before the press
+  gh::ImuSample frozen;  // frozen from here on: stuck before the press
   frozen.accel_mps2[2] = kG;
   for (int i = 0; i <= GRASPGUIDE_IMU_STUCK_SAMPLES; ++i) {
     rig.clock.advance_us(kSamplePeriodUs);
@@ -413,7 +414,7 @@ TEST(HostlessRunner, CommitRefusesPlansThatCannotGuideAndKeepsTheStoredOne) {
   ASSERT_TRUE(rig.runner.begin_plan(header(2)).ok());
   EXPECT_EQ(rig.runner.add_trial(1, trial(2, 4, kSideways)).refusal, gd::HostlessRefusal::kBadPlan);
   // Without a begin.
-  gd::HostlessRunner fresh(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+  gd::HostlessRunner fresh(rig.motors, rig.clock, rig.store, gh::ImuOutput::kSixAxis, kAccelFs,
                            kGyroFs);
   EXPECT_EQ(fresh.commit_plan(1).refusal, gd::HostlessRefusal::kNoPlan);
 }
@@ -451,8 +452,8 @@ TEST(HostlessRunner, APowerCutLosesOnlyTheTrialThatWasRunning) {
   for (int i = 0; i < 20; ++i) rig.sample(kRest);  // trial 2 under way: the power goes
 
   // Power back: a new runner on the same store resumes at trial 2.
-  gd::RecordingMotors motors;
-  gd::HostlessRunner again(motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+  gh::RecordingMotors motors;
+  gd::HostlessRunner again(motors, rig.clock, rig.store, gh::ImuOutput::kSixAxis, kAccelFs,
                            kGyroFs);
   ASSERT_EQ(again.boot(), gd::StoreStatus::kOk);
   ASSERT_TRUE(again.plan_stored());
@@ -574,7 +575,7 @@ TEST(HostlessRunner, APlanOfAnOlderLayoutIsNotRunAndSaysSo) {
   Rig rig;
   ASSERT_TRUE(rig.upload(header(1), {trial(1, 4, kSideways)}).ok());
   rig.store.bytes()[4] = 1;  // the plan's layout version: an older firmware's
-  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gh::ImuOutput::kSixAxis, kAccelFs,
                               kGyroFs);
   EXPECT_EQ(rebooted.boot(), gd::StoreStatus::kOk);  // the log is fine
   EXPECT_EQ(rebooted.plan_status(), gd::StoreStatus::kOldLayout);
@@ -715,7 +716,7 @@ TEST(HostlessRunner, AnUploadCommitsAfterTheStoredPlanWasAskedFor) {
   EXPECT_EQ(rig.runner.plan().header.trial_count, 2);
   EXPECT_EQ(rig.runner.plan().trials[1].trial_index, 6);
   // What a restart loads is what ran.
-  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gd::ImuOutput::kSixAxis, kAccelFs,
+  gd::HostlessRunner rebooted(rig.motors, rig.clock, rig.store, gh::ImuOutput::kSixAxis, kAccelFs,
                               kGyroFs);
   rebooted.boot();
   EXPECT_EQ(gd::plan_id(rebooted.plan()), gd::plan_id(rig.runner.plan()));
@@ -727,7 +728,7 @@ TEST(HostlessRunner, ASampleOlderThanTheLastAbortsTheTrialWithNoRecord) {
   if (HasFatalFailure()) return;
   rig.drain();
   const size_t seen = rig.events.size();
-  gd::ImuSample back;
+  gh::ImuSample back;
   back.time_us = rig.clock.now_us() - 1;  // 1 us before the last sample
   back.accel_mps2[2] = kG;
   const gd::HostlessFrame f = rig.runner.on_sample(back);

@@ -9,11 +9,11 @@
 #include <limits>
 #include <string>
 
-#include "graspguide_device/fake_hal.h"
 #include "graspguide_frame/imu_watchdog.h"
+#include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
-namespace gd = graspguide::device;
+namespace gh = graspguide::hal;
 
 namespace {
 
@@ -309,9 +309,9 @@ TYPED_TEST(ImuWatchdogTest, RestartKeepsTheCountsAndWaitsForGoodSamplesAgain) {
 TYPED_TEST(ImuWatchdogTest, AFaultTurnsTheMotorsOffWithinTheStaleTimeOfTheLastSample) {
   using T = TypeParam;
   constexpr uint32_t kLoopUs = 1000;
-  gd::FakeClock clock;
-  gd::FakeImu imu(gd::ImuOutput::kSixAxis, float(kAccelFullScaleMps2), float(kGyroFullScaleRadps));
-  gd::RecordingMotors motors;
+  gh::FakeClock clock;
+  gh::FakeImu imu(gh::ImuOutput::kSixAxis, float(kAccelFullScaleMps2), float(kGyroFullScaleRadps));
+  gh::RecordingMotors motors;
   gg::ImuWatchdogConfig<T> c;
   c.accel_full_scale_mps2 = T(imu.accel_full_scale_mps2());
   c.gyro_full_scale_radps = T(imu.gyro_full_scale_radps());
@@ -325,12 +325,12 @@ TYPED_TEST(ImuWatchdogTest, AFaultTurnsTheMotorsOffWithinTheStaleTimeOfTheLastSa
   const auto loop = [&](bool imu_alive) {
     clock.advance_us(kLoopUs);
     if (imu_alive && clock.now_us() - last_sample_us >= kPeriodUs) {
-      gd::ImuSample s;
+      gh::ImuSample s;
       s.time_us = last_sample_us = clock.now_us();
       live.next(s.accel_mps2, s.gyro_radps);
       imu.push(s);
     }
-    gd::ImuSample s;
+    gh::ImuSample s;
     if (imu.read(s)) {
       const T a[3] = {T(s.accel_mps2[0]), T(s.accel_mps2[1]), T(s.accel_mps2[2])};
       const T g[3] = {T(s.gyro_radps[0]), T(s.gyro_radps[1]), T(s.gyro_radps[2])};
@@ -358,11 +358,11 @@ TYPED_TEST(ImuWatchdogTest, AFaultTurnsTheMotorsOffWithinTheStaleTimeOfTheLastSa
   // Every other fault is off too, at once.
   for (int i = 0; i < 200 && !w.motors_allowed(); ++i) loop(true);
   ASSERT_FALSE(motors.all_off());
-  gd::ImuSample s;
+  gh::ImuSample s;
   s.time_us = clock.now_us();
   s.gyro_radps[2] = std::numeric_limits<float>::infinity();
   imu.push(s);
-  gd::ImuSample r;
+  gh::ImuSample r;
   ASSERT_TRUE(imu.read(r));
   const T a[3] = {T(r.accel_mps2[0]), T(r.accel_mps2[1]), T(r.accel_mps2[2])};
   const T g[3] = {T(r.gyro_radps[0]), T(r.gyro_radps[1]), T(r.gyro_radps[2])};
@@ -386,17 +386,17 @@ TEST(ImuStatuses, EachHasItsOwnNameAndSaysWhatToCheck) {
 }
 
 TEST(FakeButton, ReportsEachDebouncedEdgeOnceAndItsState) {
-  gd::FakeButton b;
-  EXPECT_EQ(b.poll(), gd::ButtonEdge::kNone);
+  gh::FakeButton b;
+  EXPECT_EQ(b.poll(), gh::ButtonEdge::kNone);
   EXPECT_FALSE(b.down());
   b.press();
-  EXPECT_EQ(b.poll(), gd::ButtonEdge::kPressed);
+  EXPECT_EQ(b.poll(), gh::ButtonEdge::kPressed);
   EXPECT_TRUE(b.down());
-  EXPECT_EQ(b.poll(), gd::ButtonEdge::kNone);
+  EXPECT_EQ(b.poll(), gh::ButtonEdge::kNone);
   b.press();  // already down: no second press
-  EXPECT_EQ(b.poll(), gd::ButtonEdge::kNone);
+  EXPECT_EQ(b.poll(), gh::ButtonEdge::kNone);
   b.release();
-  EXPECT_EQ(b.poll(), gd::ButtonEdge::kReleased);
+  EXPECT_EQ(b.poll(), gh::ButtonEdge::kReleased);
   EXPECT_FALSE(b.down());
 }
 

@@ -131,7 +131,7 @@ void calibrate(gd::PlanHeader& h) {
 // The region an older firmware wrote: layout 1, whose header had no calibration (the
 // first kPlanHeaderBytes - 20 bytes of this layout's), with its own length and CRC.
 void write_layout1_plan(Store64& store, const gd::StudyPlan& p) {
-  namespace sd = gd::store_detail;
+  namespace sd = gd::detail;
   std::vector<uint8_t> payload(sd::plan_payload_bytes(p.header.trial_count));
   sd::BufferSink sink(payload.data(), uint32_t(payload.size()));
   ASSERT_TRUE(sd::encode_plan(sink, p));
@@ -151,7 +151,7 @@ void write_layout1_plan(Store64& store, const gd::StudyPlan& p) {
 
 // Bytes save_plan writes in all: the zeroed magic, the payload, the preamble.
 uint32_t plan_write_bytes(const gd::StudyPlan& p) {
-  return 4 + gd::store_detail::plan_payload_bytes(p.header.trial_count) + gd::kPlanPreambleBytes;
+  return 4 + gd::detail::plan_payload_bytes(p.header.trial_count) + gd::kPlanPreambleBytes;
 }
 
 gd::LogRecord make_record(uint16_t n) {
@@ -200,14 +200,14 @@ TEST(StorageCrc, MatchesTheStandardCheckValue) {
 }
 
 TEST(StorageLayout, SizesMatchTheEncodedFields) {
-  gd::store_detail::CrcSink h, t;
-  gd::store_detail::encode_header(h, gd::PlanHeader{});
-  gd::store_detail::encode_trial(t, gd::PlanTrial{});
+  gd::detail::CrcSink h, t;
+  gd::detail::encode_header(h, gd::PlanHeader{});
+  gd::detail::encode_trial(t, gd::PlanTrial{});
   EXPECT_EQ(gd::kPlanHeaderBytes, h.size());
   EXPECT_EQ(gd::kPlanTrialBytes, t.size());
   // The region holds the largest plan, and the log starts on a sector.
   EXPECT_GE(gd::kPlanRegionBytes,
-            gd::kPlanPreambleBytes + gd::store_detail::plan_payload_bytes(gd::kMaxPlanTrials));
+            gd::kPlanPreambleBytes + gd::detail::plan_payload_bytes(gd::kMaxPlanTrials));
   EXPECT_EQ(0u, gd::kPlanRegionBytes % gd::kPlanSectorBytes);
   EXPECT_EQ(0u, gd::kLogSlotBytes % gd::kLogSlotAlignBytes);
   std::printf("storage layout: plan region %u B, log slot %u B, 64 KiB store holds %u records\n",
@@ -491,7 +491,7 @@ TEST(PlanStore, AnySingleDamagedByteReadsAsNoPlan) {
   const gd::StudyPlan plan = paper_plan();
   ASSERT_EQ(gd::StoreStatus::kOk, gd::save_plan(*store, plan));
   const uint32_t stored =
-      gd::kPlanPreambleBytes + gd::store_detail::plan_payload_bytes(plan.header.trial_count);
+      gd::kPlanPreambleBytes + gd::detail::plan_payload_bytes(plan.header.trial_count);
   gd::StudyPlan back;
   uint32_t misread = 0;
   for (const uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0xFF)}) {

@@ -155,7 +155,8 @@ def render(schema: Schema) -> str:
         '#include "graspguide_frame/status.h"',
         '#include "graspguide_frame_device/wire.h"',
         "",
-        "namespace graspguide_frame_device {",
+        "namespace graspguide {",
+        "namespace frame_device {",
         "namespace link {",
         "",
         f"constexpr uint8_t kProtocolVersion = {s.version};",
@@ -253,6 +254,7 @@ def render(schema: Schema) -> str:
         "",
     ]
     L.append("}  // namespace link")
-    L.append("}  // namespace graspguide_frame_device")
+    L.append("}  // namespace frame_device")
+    L.append("}  // namespace graspguide")
     L.append("")
     return "\n".join(L)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Any
 
 from codegen.schema import (
@@ -74,7 +75,7 @@ def render(schema: Schema) -> str:
         '#include "graspguide_link/link_status.h"',
         '#include "graspguide_link/message_io.h"',
         "",
-        "namespace graspguide_link {",
+        "namespace graspguide::link {",
         "",
     ]
     L += documented(
@@ -208,7 +209,20 @@ def render(schema: Schema) -> str:
     L.append("  return LinkStatus::kUnknownId;")
     L.append("}")
     L.append("")
-    L.append("}  // namespace graspguide_link")
+    for c in s.copies:
+        names = ", ".join(f.name for f in c.fields)
+        text = (
+            f"{c.doc} {c.message.name}'s fields {names}: from any struct to any struct with"
+            " members of those names (copy_field: enums by value, arrays element by element)."
+        )
+        L += textwrap.wrap(text, 97, initial_indent="// ", subsequent_indent="// ")
+        L.append("template <class From, class To>")
+        L.append(f"void copy_{c.name}_fields(const From& from, To& to) {{")
+        for f in c.fields:
+            L.append(f"  copy_field(from.{f.name}, to.{f.name});")
+        L.append("}")
+        L.append("")
+    L.append("}  // namespace graspguide::link")
     L.append("")
     return "\n".join(L)
 
@@ -253,7 +267,7 @@ def render_core_status(schema: Schema) -> str:
         '#include "graspguide/status.h"',
         '#include "graspguide_link/messages.h"',
         "",
-        "namespace graspguide_link {",
+        "namespace graspguide::link {",
         "",
         f"static_assert(graspguide::kStatusCount == {len(core)},",
         '              "graspguide::Status and the schema\'s core ErrorCodes differ in number");',
@@ -274,7 +288,7 @@ def render_core_status(schema: Schema) -> str:
         "  return static_cast<ErrorCode>(static_cast<uint8_t>(s));",
         "}",
         "",
-        "}  // namespace graspguide_link",
+        "}  // namespace graspguide::link",
         "",
     ]
     return "\n".join(L)

@@ -114,7 +114,7 @@ def render_h(schema: Schema) -> str:
         "// Calls fn(name, seq, message, bytes, size) for every golden frame, in schema order.",
         "template <class Fn>",
         "void for_each_golden_frame(Fn&& fn) {",
-        "  namespace gl = graspguide_link;",
+        "  namespace gl = graspguide::link;",
     ]
     for g in schema.goldens:
         wire = golden_frame(schema, g)

@@ -11,7 +11,7 @@ import os
 import re
 import struct
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 SCHEMA_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "link_messages.toml")
@@ -154,6 +154,17 @@ class Golden:
 
 
 @dataclass
+class FieldCopy:
+    """A named set of a message's fields that the device copies between the message and its
+    own types (copy_NAME_fields in messages.h): the message's fields, less `skip`."""
+
+    name: str
+    message: Message
+    doc: str
+    fields: list[Field]
+
+
+@dataclass
 class Schema:
     version: int
     link_error_base: int
@@ -162,6 +173,7 @@ class Schema:
     flags: list[Flag]
     messages: list[Message]
     goldens: list[Golden]
+    copies: list[FieldCopy] = field(default_factory=list)
 
     @property
     def named_constants(self) -> list[Constant]:
@@ -325,6 +337,20 @@ def load_schema(path: str = SCHEMA_PATH) -> Schema:
 
     schema = Schema(version, base, constants, enums, flags, messages, [])
     by_name = {m.name: m for m in messages}
+    for c in raw.get("copy", []):
+        _require(_SNAKE.match(c["name"]) is not None, f"copy name {c['name']!r}")
+        _require(c["message"] in by_name, f"copy {c['name']}: unknown message {c['message']}")
+        msg = by_name[c["message"]]
+        skip = set(c.get("skip", []))
+        for other in c.get("skip_fields_of", []):
+            _require(other in by_name, f"copy {c['name']}: unknown message {other}")
+            skip |= {f.name for f in by_name[other].fields}
+        unknown = set(c.get("skip", [])) - {f.name for f in msg.fields}
+        _require(not unknown, f"copy {c['name']}: {msg.name} has no field {sorted(unknown)}")
+        kept = [f for f in msg.fields if f.name not in skip]
+        _require(bool(kept), f"copy {c['name']}: no field left to copy")
+        schema.copies.append(FieldCopy(c["name"], msg, c.get("doc", ""), kept))
+    _require(len({c.name for c in schema.copies}) == len(schema.copies), "duplicate copy names")
     for g in raw.get("golden", []):
         _require(g["message"] in by_name, f"golden {g['name']}: unknown message {g['message']}")
         msg = by_name[g["message"]]

@@ -3,6 +3,6 @@
 #pragma once
 
 #include "graspguide_frame_device/device.h"
-#include "graspguide_frame_device/hal.h"
 #include "graspguide_frame_device/link_subset.h"
 #include "graspguide_frame_device/parser.h"
+#include "graspguide_hal.h"

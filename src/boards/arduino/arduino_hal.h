@@ -4,11 +4,11 @@
 
 #include <Arduino.h>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::board {
 
-class MicrosClock final : public device::Clock {
+class MicrosClock final : public graspguide::hal::Clock {
  public:
   uint32_t now_us() override { return micros(); }
 };
@@ -17,7 +17,7 @@ class MicrosClock final : public device::Clock {
 // does not fit in the transmit buffer is dropped whole (the host counts it as a missing
 // TELEMETRY) instead of blocking the control loop; ports whose availableForWrite() is
 // not implemented (ESP32 BluetoothSerial returns 0) must pass false.
-class SerialByteStream final : public device::ByteStream {
+class SerialByteStream final : public graspguide::hal::ByteStream {
  public:
   SerialByteStream(Stream& port, bool check_space) : port_(port), check_space_(check_space) {}
 
@@ -55,7 +55,7 @@ void drive_low(const uint8_t (&pins)[K], uint8_t (&kept)[K]) {
 // analogWrite() outputs (Teensy, AVR, SAMD, RP2040...). Pins are driven low before
 // anything else runs, so the motors are off from the first microsecond of setup().
 template <int K>
-class AnalogWriteMotors final : public device::MotorOutputs {
+class AnalogWriteMotors final : public graspguide::hal::MotorOutputs {
  public:
   explicit AnalogWriteMotors(const uint8_t (&pins)[K]) { drive_low(pins, pins_); }
 

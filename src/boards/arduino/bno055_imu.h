@@ -12,7 +12,7 @@ namespace graspguide::board {
 
 class Bno055Imu final : public PolledImu {
  public:
-  Bno055Imu(device::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
+  Bno055Imu(graspguide::hal::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
 
   // IMUPLUS: accelerometer and gyroscope fusion without the magnetometer, whose yaw the
   // guidance does not need and whose disturbances (motors, metal) would only add error.
@@ -23,7 +23,9 @@ class Bno055Imu final : public PolledImu {
     return true;
   }
 
-  device::ImuOutput output() const override { return device::ImuOutput::kFusedGravity; }
+  graspguide::hal::ImuOutput output() const override {
+    return graspguide::hal::ImuOutput::kFusedGravity;
+  }
   // The chip's power-on ranges, which IMUPLUS keeps: +-4 g and +-2000 dps. Its gravity
   // vector's magnitude never exceeds the accelerometer's range.
   float accel_full_scale_mps2() const override { return 4.0f * kStandardGravity_mps2; }
@@ -31,7 +33,7 @@ class Bno055Imu final : public PolledImu {
 
   // Gravity and the calibrated rate: the rate keeps the stuck rule meaningful while the
   // hand rests, when the fused gravity alone may hold its 0.01 m/s^2 step for a while.
-  bool read(device::ImuSample& out) override {
+  bool read(graspguide::hal::ImuSample& out) override {
     uint32_t now_us = 0;
     if (!due(now_us)) return false;
     sensors_event_t gravity, gyro;

@@ -5,11 +5,11 @@
 
 #include <Arduino.h>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::board {
 
-class DebouncedButton final : public device::Button {
+class DebouncedButton final : public graspguide::hal::Button {
  public:
   DebouncedButton(uint8_t pin, uint32_t debounce_ms) : pin_(pin), debounce_ms_(debounce_ms) {}
 
@@ -19,18 +19,18 @@ class DebouncedButton final : public device::Button {
     since_ms_ = millis();
   }
 
-  device::ButtonEdge poll() override {
+  graspguide::hal::ButtonEdge poll() override {
     const bool level_down = digitalRead(pin_) == LOW;
     const uint32_t now_ms = millis();
     if (level_down != candidate_) {
       candidate_ = level_down;
       since_ms_ = now_ms;
-      return device::ButtonEdge::kNone;
+      return graspguide::hal::ButtonEdge::kNone;
     }
     if (candidate_ == down_ || uint32_t(now_ms - since_ms_) < debounce_ms_)
-      return device::ButtonEdge::kNone;
+      return graspguide::hal::ButtonEdge::kNone;
     down_ = candidate_;
-    return down_ ? device::ButtonEdge::kPressed : device::ButtonEdge::kReleased;
+    return down_ ? graspguide::hal::ButtonEdge::kPressed : graspguide::hal::ButtonEdge::kReleased;
   }
 
   bool down() const override { return down_; }

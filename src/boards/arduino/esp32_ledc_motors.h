@@ -11,7 +11,7 @@
 namespace graspguide::board {
 
 template <int K>
-class Esp32LedcMotors final : public device::MotorOutputs {
+class Esp32LedcMotors final : public graspguide::hal::MotorOutputs {
  public:
   explicit Esp32LedcMotors(const uint8_t (&pins)[K]) { drive_low(pins, pins_); }
 

@@ -12,7 +12,7 @@ namespace graspguide::board {
 
 class Lsm6dsoxImu final : public PolledImu {
  public:
-  Lsm6dsoxImu(device::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
+  Lsm6dsoxImu(graspguide::hal::Clock& clock, uint32_t period_us) : PolledImu(clock, period_us) {}
 
   // False when no part answers at the default address: read() then never has a sample.
   bool begin() {
@@ -27,13 +27,15 @@ class Lsm6dsoxImu final : public PolledImu {
     return true;
   }
 
-  device::ImuOutput output() const override { return device::ImuOutput::kSixAxis; }
+  graspguide::hal::ImuOutput output() const override {
+    return graspguide::hal::ImuOutput::kSixAxis;
+  }
   float accel_full_scale_mps2() const override { return 8.0f * kStandardGravity_mps2; }
   // The nominal range; the part reports up to 2,294 dps in its over-range band, which counts
   // as out of range here and which no guided hand reaches.
   float gyro_full_scale_radps() const override { return 2000.0f * kRadPerDeg; }
 
-  bool read(device::ImuSample& out) override {
+  bool read(graspguide::hal::ImuSample& out) override {
     uint32_t now_us = 0;
     if (!due(now_us)) return false;
     sensors_event_t accel, gyro, temp;

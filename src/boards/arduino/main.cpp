@@ -64,7 +64,7 @@ gd::DeviceInfo board_info() {
   // Never kCapabilitySimMessages: a real board has its own IMU and button, so LinkDevice
   // answers SIM_IMU_SAMPLE and SIM_BUTTON with sim_only.
 #if GRASPGUIDE_HOSTLESS
-  i.capabilities = uint8_t(i.capabilities | graspguide_link::kCapabilityHostless);
+  i.capabilities = uint8_t(i.capabilities | graspguide::link::kCapabilityHostless);
 #endif
   return i;
 }
@@ -91,11 +91,11 @@ gd::HostlessRunner hostless(motors, clock_us, store, imu.output(), imu.accel_ful
 gd::HostlessRunner* const hostless_link = &hostless;
 
 void poll_hostless() {
-  gd::ImuSample s;
+  graspguide::hal::ImuSample s;
   if (imu.read(s)) hostless.on_sample(s);
-  const gd::ButtonEdge edge = button.poll();
-  if (edge != gd::ButtonEdge::kNone)
-    hostless.on_button(edge == gd::ButtonEdge::kPressed, clock_us.now_us());
+  const graspguide::hal::ButtonEdge edge = button.poll();
+  if (edge != graspguide::hal::ButtonEdge::kNone)
+    hostless.on_button(edge == graspguide::hal::ButtonEdge::kPressed, clock_us.now_us());
   // The links tick the runner too; this one keeps its timers going whatever the links do.
   hostless.tick(clock_us.now_us());
 }
@@ -121,7 +121,7 @@ graspguide::ImuWatchdogConfig<float> imu_health_config() {
 graspguide::ImuWatchdog<float> imu_health(imu_health_config(), 0);
 
 void poll_imu() {
-  gd::ImuSample s;
+  graspguide::hal::ImuSample s;
   if (imu.read(s)) imu_health.on_sample(s.accel_mps2, s.gyro_radps, s.time_us);
   imu_health.poll(clock_us.now_us());
 }

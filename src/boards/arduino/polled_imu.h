@@ -4,16 +4,17 @@
 
 #include <Adafruit_Sensor.h>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::board {
 
-class PolledImu : public device::Imu {
+class PolledImu : public graspguide::hal::Imu {
  protected:
   static constexpr float kStandardGravity_mps2 = 9.80665f;
   static constexpr float kRadPerDeg = 0.0174532925f;
 
-  PolledImu(device::Clock& clock, uint32_t period_us) : clock_(clock), period_us_(period_us) {}
+  PolledImu(graspguide::hal::Clock& clock, uint32_t period_us)
+      : clock_(clock), period_us_(period_us) {}
 
   // The first read() is due at once.
   void started() {
@@ -32,7 +33,7 @@ class PolledImu : public device::Imu {
   }
 
   static void fill(uint32_t now_us, const sensors_event_t& accel, const sensors_event_t& gyro,
-                   device::ImuSample& out) {
+                   graspguide::hal::ImuSample& out) {
     out.time_us = now_us;
     out.accel_mps2[0] = accel.acceleration.x;
     out.accel_mps2[1] = accel.acceleration.y;
@@ -43,7 +44,7 @@ class PolledImu : public device::Imu {
   }
 
  private:
-  device::Clock& clock_;
+  graspguide::hal::Clock& clock_;
   uint32_t period_us_;
   uint32_t last_read_us_ = 0;
   bool started_ = false;

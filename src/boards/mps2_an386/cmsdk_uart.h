@@ -1,5 +1,5 @@
 // GraspGuide: the ARM CMSDK APB UART (Cortex-M System Design Kit, DDI0479C) as a
-// graspguide::device::ByteStream, interrupt driven, for QEMU's mps2-an386 UART0.
+// graspguide::hal::ByteStream, interrupt driven, for QEMU's mps2-an386 UART0.
 //
 // The UART has a one-byte buffer each way and no FIFO. The protocol's POSE is 77 bytes and
 // a solve takes far longer than one byte time on a real line, so a polled receiver would
@@ -12,7 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::m4f {
 
@@ -49,7 +49,7 @@ class ByteRing {
   volatile size_t tail_ = 0;
 };
 
-class CmsdkUart final : public device::ByteStream {
+class CmsdkUart final : public graspguide::hal::ByteStream {
  public:
   static constexpr size_t kRxRing = 512;  // > 6 POSE frames: a whole pipelined window burst
   static constexpr size_t kTxRing = 512;

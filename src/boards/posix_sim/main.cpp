@@ -167,8 +167,9 @@ int main(int argc, char** argv) {
 
   gs::MonotonicClock real_clock;
   gs::VirtualClock virtual_clock;
-  gd::Clock& clock = opt.virtual_clock ? static_cast<gd::Clock&>(virtual_clock)
-                                       : static_cast<gd::Clock&>(real_clock);
+  graspguide::hal::Clock& clock = opt.virtual_clock
+                                      ? static_cast<graspguide::hal::Clock&>(virtual_clock)
+                                      : static_cast<graspguide::hal::Clock&>(real_clock);
   const uint32_t stale_us = uint32_t(opt.stale_ms) * 1000u;
   VirtualTime virtual_time(virtual_clock, real_clock, stale_us);
   gs::TraceMotors motors(clock, trace);
@@ -177,7 +178,7 @@ int main(int argc, char** argv) {
   info.board = "sim-posix";
   info.build_id = GRASPGUIDE_BUILD_ID;
   // The runner holds the plan in RAM (a few KB): static, not on the stack.
-  static gd::HostlessRunner hostless(motors, clock, store, gd::ImuOutput::kSixAxis,
+  static gd::HostlessRunner hostless(motors, clock, store, graspguide::hal::ImuOutput::kSixAxis,
                                      kSimAccelFullScale_mps2, kSimGyroFullScale_radps);
   if (opt.store_path) {
     if (hostless.boot() != gd::StoreStatus::kOk) {
@@ -185,8 +186,8 @@ int main(int argc, char** argv) {
                    opt.store_path);
       return 2;
     }
-    info.capabilities = uint8_t(info.capabilities | graspguide_link::kCapabilityHostless |
-                                graspguide_link::kCapabilitySimMessages);
+    info.capabilities = uint8_t(info.capabilities | graspguide::link::kCapabilityHostless |
+                                graspguide::link::kCapabilitySimMessages);
   }
   gd::LinkDevice device(stream, app, info, opt.virtual_clock ? &virtual_time : nullptr,
                         opt.store_path ? &hostless : nullptr);

@@ -11,11 +11,11 @@
 #include <cstddef>
 #include <string>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::sim {
 
-class PtyStream final : public device::ByteStream {
+class PtyStream final : public graspguide::hal::ByteStream {
  public:
   PtyStream() = default;
   PtyStream(const PtyStream&) = delete;

@@ -4,11 +4,11 @@
 
 #include <time.h>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::sim {
 
-class MonotonicClock final : public device::Clock {
+class MonotonicClock final : public graspguide::hal::Clock {
  public:
   uint32_t now_us() override {
     timespec ts{};
@@ -17,7 +17,7 @@ class MonotonicClock final : public device::Clock {
   }
 };
 
-class VirtualClock final : public device::Clock {
+class VirtualClock final : public graspguide::hal::Clock {
  public:
   uint32_t now_us() override { return now_us_; }
   void set_us(uint32_t t) { now_us_ = t; }

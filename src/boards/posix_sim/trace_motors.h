@@ -4,13 +4,13 @@
 
 #include <cstdio>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::sim {
 
-class TraceMotors final : public device::MotorOutputs {
+class TraceMotors final : public graspguide::hal::MotorOutputs {
  public:
-  TraceMotors(device::Clock& clock, FILE* trace) : clock_(clock), trace_(trace) {
+  TraceMotors(graspguide::hal::Clock& clock, FILE* trace) : clock_(clock), trace_(trace) {
     if (trace_) std::fprintf(trace_, "device_time_us,pwm0,pwm1,pwm2,pwm3\n");
   }
 
@@ -34,7 +34,7 @@ class TraceMotors final : public device::MotorOutputs {
     return true;
   }
 
-  device::Clock& clock_;
+  graspguide::hal::Clock& clock_;
   FILE* trace_;
   Pwm last_;
   bool written_ = false;

@@ -1,17 +1,17 @@
 // The per-frame-only device on the ATmega328P's own peripherals, for its flash and static
 // RAM (`pio run -e frame_device_avr`, then avr-size): UART0 at 115200 baud polled, Timer0
 // and Timer2's four PWM outputs as the motors, Timer1 counting microseconds. Minimal on
-// purpose: the Arduino sketch (issue 15) is the board's real entry point; this image only
+// purpose: the Arduino sketch (promini/) is the board's real entry point; this image only
 // keeps what the device links, so its size is the device's.
 #include <avr/io.h>
 
 #include "graspguide_frame_device.h"
 
-namespace gfd = graspguide_frame_device;
+namespace gfd = graspguide::frame_device;
 
 namespace {
 
-class Uart0 final : public gfd::ByteStream {
+class Uart0 final : public graspguide::hal::ByteStream {
  public:
   Uart0() {
     // 8 MHz, U2X: UBRR 8 gives 111,111 baud (-3.5 %), what the Pro Mini's core uses.
@@ -35,7 +35,7 @@ class Uart0 final : public gfd::ByteStream {
 };
 
 // OC0A (D6), OC0B (D5), OC2A (D11), OC2B (D3): fast PWM.
-class TimerMotors final : public gfd::Motors {
+class TimerMotors final : public graspguide::hal::MotorOutputs {
  public:
   TimerMotors() {
     DDRD |= _BV(PD6) | _BV(PD5) | _BV(PD3);
@@ -55,7 +55,7 @@ class TimerMotors final : public gfd::Motors {
 
 // Timer1 at F_CPU / 8 = 1 MHz: one count per microsecond, widened to 32 bits by polling
 // (the device polls far more often than every 65 ms).
-class Timer1Clock final : public gfd::Clock {
+class Timer1Clock final : public graspguide::hal::Clock {
  public:
   Timer1Clock() { TCCR1B = _BV(CS11); }
   uint32_t now_us() override {

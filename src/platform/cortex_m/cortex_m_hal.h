@@ -5,7 +5,7 @@
 
 #include <cstdint>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
 #ifndef M4F_CORE_HZ
 #define M4F_CORE_HZ 25000000u  // SysTick source clock (25 MHz on QEMU's mps2 boards)
@@ -24,14 +24,14 @@ namespace graspguide::m4f {
 // 1 kHz SysTick interrupt plus the down-counter for the microseconds within the tick.
 // The interrupt also wakes an idle loop once a millisecond, so the POSE watchdog runs
 // even when the line is silent.
-class SysTickClock final : public device::Clock {
+class SysTickClock final : public graspguide::hal::Clock {
  public:
   void start();
   uint32_t now_us() override;
 };
 
 // All motors written together, like a timer's CCR1..CCR4.
-class RegisterMotors final : public device::MotorOutputs {
+class RegisterMotors final : public graspguide::hal::MotorOutputs {
  public:
   void write(const Pwm& pwm) override {
     for (int i = 0; i < kMaxContacts; ++i) m4f_pwm_ccr[i] = pwm.duty[i];

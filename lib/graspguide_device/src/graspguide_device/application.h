@@ -4,9 +4,9 @@
 #pragma once
 
 #include "graspguide.h"
-#include "graspguide_device/hal.h"
 #include "graspguide_frame/trial_clock.h"
 #include "graspguide_frame/watchdog.h"
+#include "graspguide_hal/hal.h"
 
 #ifndef GRASPGUIDE_STALE_TIMEOUT_MS
 #define GRASPGUIDE_STALE_TIMEOUT_MS 200  // no POSE for this long: motors off
@@ -69,7 +69,7 @@ struct Counters {
 
 class Application {
  public:
-  Application(MotorOutputs& motors, Clock& clock,
+  Application(hal::MotorOutputs& motors, hal::Clock& clock,
               uint32_t stale_timeout_us = kDefaultStaleTimeoutUs)
       : motors_(motors), clock_(clock), watchdog_(stale_timeout_us) {
     motors_off();  // whatever the pins did before boot
@@ -240,6 +240,7 @@ class Application {
   }
 
   uint32_t now_us() { return clock_.now_us(); }
+  hal::Clock& clock() { return clock_; }
 
   DeviceState state() const { return state_; }
   const Counters& counters() const { return counters_; }
@@ -280,8 +281,8 @@ class Application {
     return reply;
   }
 
-  MotorOutputs& motors_;
-  Clock& clock_;
+  hal::MotorOutputs& motors_;
+  hal::Clock& clock_;
   PoseWatchdog watchdog_;
   Guidance<Real> guidance_;
   Trial trial_;

@@ -1,4 +1,4 @@
-// The host-less wearable (issue 13): a stored study plan run with no PC. Gravity comes from
+// The host-less wearable: a stored study plan run with no PC. Gravity comes from
 // the IMU on the back of the hand, the posture is the plan's fixed one, a button starts each
 // trial after a rest and a "ready" pattern, and each completed trial is appended to the
 // results log in non-volatile storage before anything else happens.
@@ -12,13 +12,13 @@
 #include <cstring>
 
 #include "graspguide.h"
-#include "graspguide_device/hal.h"
 #include "graspguide_device/plan_store.h"
 #include "graspguide_device/results_log.h"
 #include "graspguide_device/study_plan.h"
 #include "graspguide_device/vibration_pattern.h"
 #include "graspguide_frame/gravity_estimator.h"
 #include "graspguide_frame/imu_watchdog.h"
+#include "graspguide_hal/hal.h"
 
 namespace graspguide::device {
 
@@ -76,8 +76,8 @@ enum class RunPhase : uint8_t { kOff = 0, kRest, kReadyPattern, kWaitButton, kTr
 class HostlessRunner {
  public:
   // output, accel_full_scale_mps2, gyro_full_scale_radps: what the board's Imu says of itself.
-  HostlessRunner(MotorOutputs& motors, Clock& clock, NvStorage& store, ImuOutput output,
-                 float accel_full_scale_mps2, float gyro_full_scale_radps)
+  HostlessRunner(hal::MotorOutputs& motors, hal::Clock& clock, NvStorage& store,
+                 hal::ImuOutput output, float accel_full_scale_mps2, float gyro_full_scale_radps)
       : motors_(motors),
         clock_(clock),
         store_(store),
@@ -199,7 +199,7 @@ class HostlessRunner {
 
   // One IMU sample, in the IMU's axes, stamped with the device's clock. A sample stamped
   // before the last one (signed 32-bit difference) is refused: see time_went_backwards().
-  HostlessFrame on_sample(const ImuSample& s) {
+  HostlessFrame on_sample(const hal::ImuSample& s) {
     if (have_sample_ && int32_t(s.time_us - last_sample_us_) < 0) return time_went_backwards(s);
     HostlessFrame out;
     const Real accel[3] = {Real(s.accel_mps2[0]), Real(s.accel_mps2[1]), Real(s.accel_mps2[2])};
@@ -344,7 +344,7 @@ class HostlessRunner {
   // trial under way is aborted with no record and no result, and begins again with its rest
   // (as the tracker path ends a trial whose POSE steps back); a rest or a pattern starts
   // over from this stamp. No duration is ever made from the step.
-  HostlessFrame time_went_backwards(const ImuSample& s) {
+  HostlessFrame time_went_backwards(const hal::ImuSample& s) {
     HostlessFrame out;
     out.status = Status::kTimeWentBackwards;
     last_sample_us_ = s.time_us;
@@ -383,8 +383,8 @@ class HostlessRunner {
   void adopt_plan() {
     plan_id_valid_ = false;
     const float* q = plan_.header.imu_to_hand_wxyz;
-    const Real n = frame_math::sqrt_of(Real(q[0]) * q[0] + Real(q[1]) * q[1] + Real(q[2]) * q[2] +
-                                       Real(q[3]) * q[3]);
+    const Real n = scalar_math::sqrt_of(Real(q[0]) * q[0] + Real(q[1]) * q[1] + Real(q[2]) * q[2] +
+                                        Real(q[3]) * q[3]);
     const Real w = q[0] / n, x = q[1] / n, y = q[2] / n, z = q[3] / n;
     const Real r[3][3] = {
         {1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
@@ -441,7 +441,7 @@ class HostlessRunner {
   }
 
   void estimate(const Real accel[3], const Real gyro[3], uint32_t time_us) {
-    if (output_ == ImuOutput::kFusedGravity) {
+    if (output_ == hal::ImuOutput::kFusedGravity) {
       // The chip's gravity points up like the accelerometer; set_fused flips it.
       estimator_.set_fused(accel);
       return;
@@ -598,11 +598,11 @@ class HostlessRunner {
     return r;
   }
 
-  MotorOutputs& motors_;
-  Clock& clock_;
+  hal::MotorOutputs& motors_;
+  hal::Clock& clock_;
   NvStorage& store_;
   ResultsLog log_;
-  ImuOutput output_;
+  hal::ImuOutput output_;
   ImuWatchdogConfig<Real> imu_config_;
   ImuWatchdog<Real> imu_;
   GravityEstimator<Real> estimator_;

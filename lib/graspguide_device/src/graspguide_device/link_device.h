@@ -7,23 +7,12 @@
 
 #include "graspguide_device/application.h"
 #include "graspguide_device/hostless_app.h"
+#include "graspguide_hal/link_poll.h"
 #include "graspguide_link/core_status.h"
 #include "graspguide_link/parser.h"
 #include "graspguide_link/writer.h"
 
-#ifndef GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS
-// A frame's bytes arrive together (a 92-byte POSE takes 8 ms at 115200 baud); a partial
-// frame followed by this much silence is dropped, so whatever comes next (a STOP from a
-// host that gave up mid-frame) starts clean even without the leading delimiter.
-#define GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS 50
-#endif
-
 namespace graspguide::device {
-
-namespace link = ::graspguide_link;
-
-inline constexpr uint32_t kPartialFrameTimeoutUs =
-    uint32_t(GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS) * 1000u;
 
 // SET_SCENE's field index of a trial field (ERROR.detail of bad_config), found by name in
 // the schema's field list so the two cannot drift apart.
@@ -79,27 +68,15 @@ class LinkDevice {
   // hostless: the host-less runner of a board that has storage (and an IMU), else nullptr
   // (the PLAN_*, LOG_* and HOSTLESS_RUN requests are then unknown_id). pose_time also
   // hears SIM_IMU_SAMPLE's time.
-  LinkDevice(ByteStream& stream, Application& app, const DeviceInfo& info,
+  LinkDevice(hal::ByteStream& stream, Application& app, const DeviceInfo& info,
              PoseTimeListener* pose_time = nullptr, HostlessRunner* hostless = nullptr)
       : stream_(stream), app_(app), info_(info), pose_time_(pose_time), hostless_(hostless) {}
 
   // Reads what the stream has, handles every complete frame, runs the watchdog.
   // Returns the number of bytes read.
   size_t poll() {
-    uint8_t chunk[64];
-    size_t total = 0;
-    for (;;) {
-      const size_t n = stream_.read(chunk, sizeof chunk);
-      for (size_t i = 0; i < n; ++i) handle(parser_.push(chunk[i]));
-      total += n;
-      if (n < sizeof chunk) break;
-    }
-    const uint32_t now = app_.now_us();
-    if (total > 0) {
-      last_byte_us_ = now;
-    } else if (parser_.mid_frame() && now - last_byte_us_ >= kPartialFrameTimeoutUs) {
-      parser_.discard_partial();
-    }
+    uint32_t now;
+    const size_t total = link_poll_.receive<64>(*this, now);
     TrialReport report;
     if (app_.tick(&report)) send_trial_result(report);
     if (hostless_) {
@@ -112,6 +89,12 @@ class LinkDevice {
   const link::FrameParser& parser() const { return parser_; }
 
  private:
+  friend class hal::LinkPoll;
+  hal::ByteStream& link_stream() { return stream_; }
+  hal::Clock& link_clock() { return app_.clock(); }
+  link::FrameParser& link_parser() { return parser_; }
+  void on_link_event(link::ParseEvent event) { handle(event); }
+
   void handle(link::ParseEvent event) {
     if (event == link::ParseEvent::kNone) return;
     link::ErrorCode code;
@@ -230,10 +213,7 @@ class LinkDevice {
   void send_trial_result(const TrialReport& report) {
     link::TrialResult r;
     r.trial_id = report.trial_id;
-    r.success = report.result.success;
-    r.completion_s = float(report.result.completion_s);
-    r.first_entry_s = float(report.result.first_entry_s);
-    r.final_error_deg = float(report.result.final_error_deg);
+    link::copy_trial_result_fields(report.result, r);
     send(r);
   }
 
@@ -269,8 +249,7 @@ class LinkDevice {
   void on(const link::SetCalibration& m) {
     if (hostless_busy()) return;
     MotorCalibration c;
-    std::memcpy(c.pwm_floor, m.pwm_floor, sizeof c.pwm_floor);
-    std::memcpy(c.gain, m.gain, sizeof c.gain);
+    link::copy_calibration_fields(m, c);
     CalibrationField bad = CalibrationField::kNone;
     const Reply reply = app_.set_calibration(c, &bad);
     if (reply.status == Status::kBadConfig)
@@ -305,38 +284,14 @@ class LinkDevice {
   void on(const link::PlanBegin& m) {
     if (hostless_missing(link::MsgId::kPlanBegin) || motors_in_use()) return;
     PlanHeader h;
-    std::memcpy(h.participant, m.participant, sizeof h.participant);
-    h.simulated = m.simulated;
-    std::memcpy(h.config_hash, m.config_hash, sizeof h.config_hash);
-    h.trial_count = m.trial_count;
-    h.constraints = uint8_t(m.constraints);
-    std::memcpy(h.y_axis, m.y_axis, sizeof h.y_axis);
-    h.threshold_deg = m.threshold_deg;
-    h.hold_s = m.hold_s;
-    h.timeout_s = m.timeout_s;
-    h.rest_s = m.rest_s;
-    std::memcpy(h.hand_k3, m.hand_k3, sizeof h.hand_k3);
-    std::memcpy(h.hand_k4, m.hand_k4, sizeof h.hand_k4);
-    std::memcpy(h.imu_to_hand_wxyz, m.imu_to_hand_wxyz, sizeof h.imu_to_hand_wxyz);
-    std::memcpy(h.pwm_floor, m.pwm_floor, sizeof h.pwm_floor);
-    std::memcpy(h.gain, m.gain, sizeof h.gain);
+    link::copy_plan_begin_fields(m, h);
     answer(hostless_->begin_plan(h), link::MsgId::kPlanBegin);
   }
 
   void on(const link::PlanTrial& m) {
     if (hostless_missing(link::MsgId::kPlanTrial) || motors_in_use()) return;
     PlanTrial t;
-    t.trial_index = m.trial_index;
-    t.session = m.session;
-    t.session_trial = m.session_trial;
-    t.k = m.k;
-    t.policy = uint8_t(m.policy);
-    t.mode = uint8_t(m.mode);
-    t.familiarization = m.familiarization;
-    t.single_motor = m.single_motor;
-    t.wrench_class = uint8_t(m.wrench_class);
-    t.wrench_number = m.wrench_number;
-    std::memcpy(t.wrench, m.wrench, sizeof t.wrench);
+    link::copy_plan_trial_fields(m, t);
     answer(hostless_->add_trial(m.position, t), link::MsgId::kPlanTrial);
   }
 
@@ -389,23 +344,8 @@ class LinkDevice {
     }
     link::LogRecord r;
     r.index = m.index;
-    r.trial_index = rec.trial.trial_index;
-    r.session = rec.trial.session;
-    r.session_trial = rec.trial.session_trial;
-    r.k = rec.trial.k;
-    r.policy = static_cast<link::Policy>(rec.trial.policy);
-    r.mode = static_cast<link::Mode>(rec.trial.mode);
-    r.familiarization = rec.trial.familiarization;
-    r.single_motor = rec.trial.single_motor;
-    r.wrench_class = static_cast<link::WrenchClass>(rec.trial.wrench_class);
-    r.wrench_number = rec.trial.wrench_number;
-    std::memcpy(r.wrench, rec.trial.wrench, sizeof r.wrench);
-    r.success = rec.success;
-    r.completion_s = rec.completion_s;
-    r.first_entry_s = rec.first_entry_s;
-    r.final_error_deg = rec.final_error_deg;
-    r.samples = rec.samples;
-    r.imu_faults = rec.imu_faults;
+    link::copy_plan_trial_fields(rec.trial, r);
+    link::copy_log_record_result_fields(rec, r);
     send(r);
   }
 
@@ -435,10 +375,9 @@ class LinkDevice {
     if (refuse_sim_only(link::MsgId::kSimImuSample)) return;
     if (pose_time_) pose_time_->on_pose_time(m.time_us);
     const bool was_running = hostless_->running();
-    ImuSample s;
+    hal::ImuSample s;
     s.time_us = app_.now_us();
-    std::memcpy(s.accel_mps2, m.accel_mps2, sizeof s.accel_mps2);
-    std::memcpy(s.gyro_radps, m.gyro_radps, sizeof s.gyro_radps);
+    link::copy_imu_sample_fields(m, s);
     const HostlessFrame f = hostless_->on_sample(s);
     // What the sample caused goes first, so a host that has this sample's answer has heard
     // everything before it.
@@ -567,7 +506,7 @@ class LinkDevice {
       stream_.write(out, n);
   }
 
-  ByteStream& stream_;
+  hal::ByteStream& stream_;
   Application& app_;
   DeviceInfo info_;
   PoseTimeListener* pose_time_;
@@ -575,7 +514,7 @@ class LinkDevice {
   link::FrameParser parser_{link::Accept::kHostToDevice};
   link::SequenceCounter seq_;
   uint16_t request_seq_ = 0;
-  uint32_t last_byte_us_ = 0;
+  hal::LinkPoll link_poll_;
   link::ErrorCode last_error_ = link::ErrorCode::kOk;
 };
 

@@ -44,7 +44,7 @@ inline constexpr uint32_t kPlanRegionBytes =
      1) /
     kPlanSectorBytes * kPlanSectorBytes;
 
-namespace store_detail {
+namespace detail {
 
 // Where encoded bytes go: a buffer, a CRC, or the store (put() returns false on a fault).
 class BufferSink {
@@ -289,13 +289,13 @@ inline bool plan_ok(const StudyPlan& p) {
   return true;
 }
 
-}  // namespace store_detail
+}  // namespace detail
 
 // CRC-32 of the plan's stored bytes (header + its trials): identifies the plan, in the
 // region's preamble and in every log record made under it.
 inline uint32_t plan_id(const StudyPlan& plan) {
-  store_detail::CrcSink s;
-  store_detail::encode_plan(s, plan);
+  detail::CrcSink s;
+  detail::encode_plan(s, plan);
   return s.crc();
 }
 
@@ -305,7 +305,7 @@ inline uint32_t plan_id(const StudyPlan& plan) {
 // magic, which loads as kNoPlan. kStorageFailed: a write failed; the region then holds no
 // plan unless nothing at all was written.
 inline StoreStatus save_plan(NvStorage& store, const StudyPlan& plan) {
-  using namespace store_detail;
+  using namespace detail;
   if (store.size_bytes() < kPlanRegionBytes) return StoreStatus::kTooSmall;
   if (!plan_ok(plan)) return StoreStatus::kBadPlan;
   const uint8_t zero[4] = {0, 0, 0, 0};
@@ -329,7 +329,7 @@ inline StoreStatus save_plan(NvStorage& store, const StudyPlan& plan) {
 // holds no complete, intact plan of this layout that passes the checks; kStorageFailed on a read
 // fault; kTooSmall when the store cannot hold a plan region.
 inline StoreStatus load_plan(NvStorage& store, StudyPlan& plan) {
-  using namespace store_detail;
+  using namespace detail;
   clear_plan(plan);
   if (store.size_bytes() < kPlanRegionBytes) return StoreStatus::kTooSmall;
   uint8_t pre[kPlanPreambleBytes];

@@ -173,21 +173,21 @@ class ResultsLog {
 
   template <typename Sink>
   static bool encode_record(Sink& s, const LogRecord& r) {
-    using namespace store_detail;
+    using namespace detail;
     return encode_trial(s, r.trial) && put_u8(s, r.success ? 1 : 0) && put_f32(s, r.completion_s) &&
            put_f32(s, r.first_entry_s) && put_f32(s, r.final_error_deg) && put_u32(s, r.samples) &&
            put_u16(s, r.imu_faults);
   }
   template <typename Source>
   static bool decode_record(Source& s, LogRecord& r) {
-    using namespace store_detail;
+    using namespace detail;
     return decode_trial(s, r.trial) && get_bool(s, r.success) && get_f32(s, r.completion_s) &&
            get_f32(s, r.first_entry_s) && get_f32(s, r.final_error_deg) && get_u32(s, r.samples) &&
            get_u16(s, r.imu_faults);
   }
 
   static void encode_slot(const LogRecord& r, uint32_t plan_id, uint8_t (&slot)[kLogSlotBytes]) {
-    using namespace store_detail;
+    using namespace detail;
     std::memset(slot, 0, kLogSlotBytes);
     BufferSink s(slot, kLogCrcOffset);
     put_u32(s, kLogMagic);
@@ -199,7 +199,7 @@ class ResultsLog {
   }
 
   static Kind classify(const uint8_t (&slot)[kLogSlotBytes], LogRecord* r, uint32_t* plan_id) {
-    using namespace store_detail;
+    using namespace detail;
     bool erased = true;
     for (uint8_t b : slot) erased = erased && b == 0xFF;
     if (erased) return Kind::kErased;
@@ -225,8 +225,8 @@ class ResultsLog {
     }
     if (kind != Kind::kValid) return;
     uint32_t id = 0;
-    store_detail::BufferSource s(slot + 4, 4);
-    store_detail::get_u32(s, id);
+    detail::BufferSource s(slot + 4, 4);
+    detail::get_u32(s, id);
     if (records_ == 0)
       first_plan_id_ = id;
     else if (id != first_plan_id_)

@@ -106,7 +106,7 @@ inline MotorCalibration plan_calibration(const PlanHeader& h) {
   return c;
 }
 
-namespace plan_detail {
+namespace detail {
 
 inline bool all_finite(const float* v, int n) {
   for (int i = 0; i < n; ++i)
@@ -143,12 +143,12 @@ inline PlanCheck bad(uint8_t field, uint8_t* bad_field) {
   return PlanCheck::kBadField;
 }
 
-}  // namespace plan_detail
+}  // namespace detail
 
 // kOk, or kBadField with *bad_field = the first offending PLAN_BEGIN field's index.
 inline PlanCheck check_header(const PlanHeader& h, uint8_t* bad_field) {
   using F = PlanBeginField;
-  using namespace plan_detail;
+  using namespace detail;
   const auto fail = [bad_field](F f) { return bad(static_cast<uint8_t>(f), bad_field); };
   if (!participant_ok(h.participant)) return fail(F::kParticipant);
   if (h.trial_count < 1 || h.trial_count > kMaxPlanTrials) return fail(F::kTrialCount);
@@ -185,7 +185,7 @@ inline PlanCheck check_header(const PlanHeader& h, uint8_t* bad_field) {
 // position (field 0) is the link's to check: it is not part of the stored trial.
 inline PlanCheck check_trial(const PlanTrial& t, uint8_t* bad_field) {
   using F = PlanTrialField;
-  using namespace plan_detail;
+  using namespace detail;
   const auto fail = [bad_field](F f) { return bad(static_cast<uint8_t>(f), bad_field); };
   if (t.trial_index < 1) return fail(F::kTrialIndex);  // the study numbers trials 1..N
   if (t.session_trial < 1) return fail(F::kSessionTrial);

@@ -1,5 +1,6 @@
-// Gravity in the hand frame from a 6-axis IMU on the back of the hand (issue 13), the only
-// input the guidance error needs (alignment_from_gravity): no magnetometer, no yaw.
+// Gravity in the hand frame from a 6-axis IMU on the back of the hand, for the host-less
+// mode: the only input the guidance error needs (alignment_from_gravity): no magnetometer,
+// no yaw.
 //
 // The method is a Mahony-type complementary filter on the gravity direction alone, with
 // gyro-bias estimation and an accelerometer-trust gate:
@@ -74,7 +75,7 @@ struct GravityGains {
 // kBadConfig unless every gain is finite and non-negative (the gate positive).
 template <typename T>
 inline Status validate_gravity_gains(const GravityGains<T>& g) {
-  using frame_math::is_finite;
+  using scalar_math::is_finite;
   if (!is_finite(g.kp_per_s) || !is_finite(g.ki_per_s2) || !is_finite(g.accel_gate_mps2))
     return Status::kBadConfig;
   if (g.kp_per_s < T(0) || g.ki_per_s2 < T(0) || !(g.accel_gate_mps2 > T(0)))
@@ -107,7 +108,7 @@ class GravityEstimator {
   // outside (0, kMaxSampleInterval_s], kBadAxis for a zero accelerometer before the first
   // estimate (after it, such a sample is simply not trusted).
   Status update(const T accel_mps2[3], const T gyro_radps[3], T dt_s) {
-    using frame_math::is_finite;
+    using scalar_math::is_finite;
     for (int i = 0; i < 3; ++i)
       if (!is_finite(accel_mps2[i]) || !is_finite(gyro_radps[i])) return Status::kNonFiniteInput;
     if (!is_finite(dt_s)) return Status::kNonFiniteInput;
@@ -117,10 +118,10 @@ class GravityEstimator {
                  accel_mps2[2] * accel_mps2[2];
     // Finite components can still square to infinity: such a sample is no gravity either.
     const bool has_direction =
-        a2 >= T(kMinAccel_mps2 * kMinAccel_mps2) && a2 <= frame_math::Limits<T>::kMax;
+        a2 >= T(kMinAccel_mps2 * kMinAccel_mps2) && a2 <= scalar_math::Limits<T>::kMax;
     if (!initialised_) {
       if (!has_direction) return Status::kBadAxis;
-      const T inv = T(-1) / frame_math::sqrt_of(a2);
+      const T inv = T(-1) / scalar_math::sqrt_of(a2);
       for (int i = 0; i < 3; ++i) g_[i] = accel_mps2[i] * inv;
       initialised_ = true;
       accel_trusted_ = true;
@@ -128,8 +129,8 @@ class GravityEstimator {
     }
 
     T w[3] = {gyro_radps[0] - bias_[0], gyro_radps[1] - bias_[1], gyro_radps[2] - bias_[2]};
-    const T norm_a = has_direction ? frame_math::sqrt_of(a2) : T(0);
-    accel_trusted_ = has_direction && frame_math::abs_of(norm_a - T(kStandardGravity_mps2)) <=
+    const T norm_a = has_direction ? scalar_math::sqrt_of(a2) : T(0);
+    accel_trusted_ = has_direction && scalar_math::abs_of(norm_a - T(kStandardGravity_mps2)) <=
                                           gains_.accel_gate_mps2;
     if (accel_trusted_) {
       // e = m x g with m = -a / |a| the measured direction: turning g about e moves it
@@ -152,7 +153,7 @@ class GravityEstimator {
     T n[3] = {g_[0] + (g_[1] * w[2] - g_[2] * w[1]) * dt_s,
               g_[1] + (g_[2] * w[0] - g_[0] * w[2]) * dt_s,
               g_[2] + (g_[0] * w[1] - g_[1] * w[0]) * dt_s};
-    const T inv = T(1) / frame_math::sqrt_of(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const T inv = T(1) / scalar_math::sqrt_of(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     for (int i = 0; i < 3; ++i) g_[i] = n[i] * inv;
     return Status::kOk;
   }
@@ -164,14 +165,14 @@ class GravityEstimator {
     T v[3] = {reported[0], reported[1], reported[2]};
     T m = T(0);
     for (int i = 0; i < 3; ++i) {
-      if (!frame_math::is_finite(v[i])) return Status::kNonFiniteInput;
-      const T a = frame_math::abs_of(v[i]);
+      if (!scalar_math::is_finite(v[i])) return Status::kNonFiniteInput;
+      const T a = scalar_math::abs_of(v[i]);
       if (a > m) m = a;
     }
     if (!(m >= T(kMinQuaternionNorm))) return Status::kBadAxis;
     // Scaled by the largest component first, so no square overflows or underflows.
     for (int i = 0; i < 3; ++i) v[i] /= m;
-    const T inv = T(-1) / frame_math::sqrt_of(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    const T inv = T(-1) / scalar_math::sqrt_of(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     for (int i = 0; i < 3; ++i) g_[i] = v[i] * inv;
     initialised_ = true;
     accel_trusted_ = true;

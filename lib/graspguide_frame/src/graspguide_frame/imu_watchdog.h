@@ -50,9 +50,9 @@ struct ImuWatchdogConfig {
 template <typename T>
 Status validate_imu_watchdog_config(const ImuWatchdogConfig<T>& c) {
   const bool ok = c.stale_ms >= 1 && c.stale_ms <= kImuMaxStaleMs && c.stuck_samples >= 2 &&
-                  c.recovery_samples >= 1 && frame_math::is_finite(c.accel_full_scale_mps2) &&
+                  c.recovery_samples >= 1 && scalar_math::is_finite(c.accel_full_scale_mps2) &&
                   c.accel_full_scale_mps2 > T(0) &&
-                  frame_math::is_finite(c.gyro_full_scale_radps) && c.gyro_full_scale_radps > T(0);
+                  scalar_math::is_finite(c.gyro_full_scale_radps) && c.gyro_full_scale_radps > T(0);
   return ok ? Status::kOk : Status::kBadImuConfig;
 }
 
@@ -143,7 +143,7 @@ class ImuWatchdog {
   uint32_t samples() const { return samples_; }
 
  private:
-  static bool within(T x, T full_scale) { return frame_math::abs_of(x) <= full_scale; }
+  static bool within(T x, T full_scale) { return scalar_math::abs_of(x) <= full_scale; }
 
   ImuWatchdogConfig<T> config_;
   Status config_status_;

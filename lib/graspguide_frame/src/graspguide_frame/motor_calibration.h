@@ -1,4 +1,4 @@
-// A participant's per-motor calibration (issue 16; docs/calibration.md): perceived vibration
+// A participant's per-motor calibration (docs/calibration.md): perceived vibration
 // differs by finger and person, so each motor gets its own PWM floor and gain,
 //   duty_i = floor(pwm_floor_i + G * (gain_i * |m_i|) + 0.5), clamped to 0..255
 // (pwm.h; G = kPwmSpan in mode C, alpha in mode V). The identity (kPwmMin, 1) is the
@@ -47,7 +47,7 @@ inline CalibrationCheck check_calibration(const MotorCalibration& c, uint8_t* mo
     CalibrationCheck bad = CalibrationCheck::kOk;
     if (c.pwm_floor[i] > kCalibrationFloorMax)
       bad = CalibrationCheck::kPwmFloorTooHigh;
-    else if (!frame_math::is_finite(c.gain[i]))
+    else if (!scalar_math::is_finite(c.gain[i]))
       bad = CalibrationCheck::kGainNotFinite;
     else if (!(c.gain[i] >= kCalibrationGainMin && c.gain[i] <= kCalibrationGainMax))
       bad = CalibrationCheck::kGainOutOfRange;

@@ -59,13 +59,13 @@ PwmPlan<T> plan_pwm(const T* levels, int k) {
   PwmPlan<T> plan;
   T largest = T(0);
   for (int i = 0; i < k && i < kMaxContacts; ++i) {
-    const T level = frame_math::abs_of(levels[i]);
+    const T level = scalar_math::abs_of(levels[i]);
     if (!(level > T(kMotorOffLevel))) continue;  // NaN too
     plan.on = static_cast<uint8_t>(plan.on | (1u << i));
     plan.twice_scaled[i] = level + level;
     if (plan.twice_scaled[i] > largest) largest = plan.twice_scaled[i];
   }
-  if (largest > T(0) && largest <= frame_math::Limits<T>::kMax)
+  if (largest > T(0) && largest <= scalar_math::Limits<T>::kMax)
     plan.gain_limit = T(2 * 255 - 1 - 2 * kPwmMin) / largest;
   return plan;
 }
@@ -79,12 +79,12 @@ PwmPlan<T> plan_pwm(const T* levels, int k, const MotorCalibration& calibration)
   // multiplications (a division costs an 8-bit AVR ~500 cycles; one is paid below).
   T room_first = T(1), scaled_first = T(0);
   for (int i = 0; i < k && i < kMaxContacts; ++i) {
-    const T level = frame_math::abs_of(levels[i]);
+    const T level = scalar_math::abs_of(levels[i]);
     if (!(level > T(kMotorOffLevel))) continue;  // NaN too
     plan.on = static_cast<uint8_t>(plan.on | (1u << i) | PwmPlan<T>::kCalibratedBit);
     plan.twice_floor[i] = T(2 * int(calibration.pwm_floor[i]));
     plan.twice_scaled[i] = T(calibration.gain[i]) * (level + level);
-    if (!(plan.twice_scaled[i] <= frame_math::Limits<T>::kMax)) {
+    if (!(plan.twice_scaled[i] <= scalar_math::Limits<T>::kMax)) {
       unbounded = true;  // an infinite level: every frame compares
       continue;
     }
@@ -108,7 +108,7 @@ PwmPlan<T> plan_pwm(const T* levels, int k, const MotorCalibration& calibration)
 // when the sum is >= 0, and doubling is exact in binary floating point: the same number as
 // the reference's rounding, without floor() (an 8-bit AVR pays ~200 cycles for each).
 // Clamped to 0..255; a NaN gain leaves every motor off.
-namespace pwm_detail {
+namespace detail {
 
 // One frame's loop; floor_of(i) is 2 floor_i (a constant for the paper's mapping).
 template <typename T, typename TwiceFloor>
@@ -130,15 +130,15 @@ inline Pwm pwm_loop(const PwmPlan<T>& plan, T gain, TwiceFloor twice_floor) {
   return out;
 }
 
-}  // namespace pwm_detail
+}  // namespace detail
 
 // Two copies of the loop, so the paper's mapping keeps its immediate floor: loading a
 // floor per motor cost the ATmega328P's k=4 frame 20 cycles (docs/performance.md).
 template <typename T>
 Pwm pwm_from_plan(const PwmPlan<T>& plan, T gain) {
   if (plan.on & PwmPlan<T>::kCalibratedBit)
-    return pwm_detail::pwm_loop(plan, gain, [&plan](int i) { return plan.twice_floor[i]; });
-  return pwm_detail::pwm_loop(plan, gain, [](int) { return T(2 * kPwmMin); });
+    return detail::pwm_loop(plan, gain, [&plan](int i) { return plan.twice_floor[i]; });
+  return detail::pwm_loop(plan, gain, [](int) { return T(2 * kPwmMin); });
 }
 
 template <typename T>

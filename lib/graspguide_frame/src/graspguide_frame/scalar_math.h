@@ -6,7 +6,7 @@
 #include <math.h>
 
 namespace graspguide {
-namespace frame_math {
+namespace scalar_math {
 
 inline float sqrt_of(float x) { return sqrtf(x); }
 inline double sqrt_of(double x) { return sqrt(x); }
@@ -50,5 +50,5 @@ inline bool is_finite(T x) {
   return abs_of(x) <= Limits<T>::kMax;
 }
 
-}  // namespace frame_math
+}  // namespace scalar_math
 }  // namespace graspguide

@@ -2,7 +2,7 @@
 // the per-frame work on streamed poses (error, alpha, PWM, the trial, the watchdog). Every
 // request is answered as lib/graspguide_device's LinkDevice answers it, except what needs the
 // full solve: SET_SCENE and POSE contacts are per_frame_only. Portable: a board gives it a
-// ByteStream, its Motors and a Clock.
+// ByteStream, its MotorOutputs and a Clock (graspguide_hal).
 #pragma once
 
 #include <stddef.h>
@@ -10,9 +10,10 @@
 #include <string.h>
 
 #include "graspguide_frame.h"
-#include "graspguide_frame_device/hal.h"
 #include "graspguide_frame_device/link_subset.h"
 #include "graspguide_frame_device/parser.h"
+#include "graspguide_hal/hal.h"
+#include "graspguide_hal/link_poll.h"
 
 #ifndef GRASPGUIDE_STALE_TIMEOUT_MS
 #define GRASPGUIDE_STALE_TIMEOUT_MS 200  // no POSE for this long: motors off
@@ -22,16 +23,12 @@
 // timestamps stopped advancing (as graspguide_device/application.h).
 #define GRASPGUIDE_TRIAL_CLOCK_SLACK_MS 1000
 #endif
-#ifndef GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS
-// A partial frame followed by this much silence is dropped, so what comes next starts clean.
-#define GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS 50
-#endif
 
-namespace graspguide_frame_device {
+namespace graspguide {
+namespace frame_device {
 
 constexpr uint32_t kStaleTimeoutUs = uint32_t(GRASPGUIDE_STALE_TIMEOUT_MS) * 1000u;
 constexpr uint32_t kTrialClockSlackUs = uint32_t(GRASPGUIDE_TRIAL_CLOCK_SLACK_MS) * 1000u;
-constexpr uint32_t kPartialFrameTimeoutUs = uint32_t(GRASPGUIDE_PARTIAL_FRAME_TIMEOUT_MS) * 1000u;
 // A unit force direction, rounded to float32 by the host: |f|^2 is within a few ulp of 1.
 constexpr float kForceUnitSlack = 1e-4f;
 
@@ -47,7 +44,8 @@ class FrameDevice {
  public:
   using State = link::DeviceState;
 
-  FrameDevice(ByteStream& stream, Motors& motors, Clock& clock, const DeviceInfo& info)
+  FrameDevice(hal::ByteStream& stream, hal::MotorOutputs& motors, hal::Clock& clock,
+              const DeviceInfo& info)
       : stream_(stream), motors_(motors), clock_(clock), info_(info) {
     motors_off();  // whatever the pins did before boot
   }
@@ -55,20 +53,8 @@ class FrameDevice {
   // Reads what the stream has, handles every complete frame, runs the watchdog and the
   // trial's own clock. Returns the number of bytes read.
   size_t poll() {
-    uint8_t chunk[16];
-    size_t total = 0;
-    for (;;) {
-      const size_t n = stream_.read(chunk, sizeof chunk);
-      for (size_t i = 0; i < n; ++i) handle(parser_.push(chunk[i]));
-      total += n;
-      if (n < sizeof chunk) break;
-    }
-    const uint32_t now = clock_.now_us();
-    if (total > 0) {
-      last_byte_us_ = now;
-    } else if (parser_.mid_frame() && now - last_byte_us_ >= kPartialFrameTimeoutUs) {
-      parser_.discard_partial();
-    }
+    uint32_t now_us;
+    const size_t total = link_poll_.receive<16>(*this, now_us);
     tick();
     return total;
   }
@@ -79,6 +65,12 @@ class FrameDevice {
   const FrameParser& parser() const { return parser_; }
 
  private:
+  friend class hal::LinkPoll;
+  hal::ByteStream& link_stream() { return stream_; }
+  hal::Clock& link_clock() { return clock_; }
+  FrameParser& link_parser() { return parser_; }
+  void on_link_event(ParseEvent event) { handle(event); }
+
   void handle(ParseEvent event) {
     if (event == ParseEvent::kNone) return;
     const FrameHeader& h = parser_.frame().header;
@@ -158,7 +150,7 @@ class FrameDevice {
     send(r);
   }
 
-  static bool finite(float x) { return graspguide::frame_math::is_finite(x); }
+  static bool finite(float x) { return graspguide::scalar_math::is_finite(x); }
 
   // The field that makes the posture unusable, or 0xFF. The host computed it with the same
   // core, so a bad one is a host bug or a corrupted request, never something to render.
@@ -177,7 +169,7 @@ class FrameDevice {
       if (!finite(m.force_unit[i])) return P::kFieldForceUnit;
       n2 += m.force_unit[i] * m.force_unit[i];
     }
-    if (!(graspguide::frame_math::abs_of(n2 - 1.0f) <= kForceUnitSlack)) return P::kFieldForceUnit;
+    if (!(graspguide::scalar_math::abs_of(n2 - 1.0f) <= kForceUnitSlack)) return P::kFieldForceUnit;
     for (uint8_t i = 0; i < 6; ++i)
       if (!finite(m.wrench[i])) return P::kFieldWrench;
     graspguide::TrialField trial_field = graspguide::TrialField::kNone;
@@ -419,9 +411,9 @@ class FrameDevice {
                      [this](const uint8_t* data, size_t n) { stream_.write(data, n); });
   }
 
-  ByteStream& stream_;
-  Motors& motors_;
-  Clock& clock_;
+  hal::ByteStream& stream_;
+  hal::MotorOutputs& motors_;
+  hal::Clock& clock_;
   DeviceInfo info_;
   FrameParser parser_;
   // The posture, as the host solved it, and the participant's calibration.
@@ -446,9 +438,10 @@ class FrameDevice {
   bool stale_ = false;
   uint16_t request_seq_ = 0;
   uint16_t next_seq_ = 0;
-  uint32_t last_byte_us_ = 0;
+  hal::LinkPoll link_poll_;
   uint32_t stale_events_ = 0;
   link::ErrorCode last_error_ = link::ErrorCode::kOk;
 };
 
-}  // namespace graspguide_frame_device
+}  // namespace frame_device
+}  // namespace graspguide

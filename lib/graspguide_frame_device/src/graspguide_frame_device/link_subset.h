@@ -12,7 +12,8 @@
 #include "graspguide_frame/status.h"
 #include "graspguide_frame_device/wire.h"
 
-namespace graspguide_frame_device {
+namespace graspguide {
+namespace frame_device {
 namespace link {
 
 constexpr uint8_t kProtocolVersion = 4;
@@ -648,4 +649,5 @@ static_assert(same_value(CoreStatus::kBadImuConfig, ErrorCode::kBadImuConfig), "
 constexpr ErrorCode error_code_of(CoreStatus s) { return static_cast<ErrorCode>(s); }
 
 }  // namespace link
-}  // namespace graspguide_frame_device
+}  // namespace frame_device
+}  // namespace graspguide

@@ -12,7 +12,8 @@
 #include "graspguide_frame_device/link_subset.h"
 #include "graspguide_frame_device/wire.h"
 
-namespace graspguide_frame_device {
+namespace graspguide {
+namespace frame_device {
 
 enum class ParseEvent : uint8_t {
   kNone = 0,  // nothing complete yet (also: a lone delimiter, which is idle line)
@@ -144,4 +145,5 @@ class FrameParser {
   uint32_t bad_frames_ = 0;
 };
 
-}  // namespace graspguide_frame_device
+}  // namespace frame_device
+}  // namespace graspguide

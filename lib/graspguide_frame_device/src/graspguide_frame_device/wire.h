@@ -8,7 +8,8 @@
 #include <stdint.h>
 #include <string.h>
 
-namespace graspguide_frame_device {
+namespace graspguide {
+namespace frame_device {
 namespace link {
 
 static_assert(sizeof(float) == 4, "the wire carries IEEE-754 binary32");
@@ -96,4 +97,5 @@ void cobs_write(const uint8_t* in, size_t size, Sink&& sink) {
 }
 
 }  // namespace link
-}  // namespace graspguide_frame_device
+}  // namespace frame_device
+}  // namespace graspguide

@@ -1,12 +1,14 @@
-// In-memory hardware for tests and host tools: a clock set by hand, motors that record
-// every write, an IMU and a button fed by the test.
+// In-memory hardware for tests and host tools, for either device library: a clock set by
+// hand, motors that record every write, an IMU and a button fed by the test, and a serial
+// stream of two queues.
 #pragma once
 
-#include <cstring>
+#include <string.h>
 
-#include "graspguide_device/hal.h"
+#include "graspguide_hal/hal.h"
 
-namespace graspguide::device {
+namespace graspguide {
+namespace hal {
 
 class FakeClock final : public Clock {
  public:
@@ -95,14 +97,14 @@ class MemoryStream final : public ByteStream {
   // Host side.
   bool host_send(const uint8_t* data, size_t n) {
     if (in_size_ + n > kCapacity) return false;
-    std::memcpy(in_ + in_size_, data, n);
+    memcpy(in_ + in_size_, data, n);
     in_size_ += n;
     return true;
   }
   size_t host_receive(uint8_t* out, size_t capacity) {
     const size_t n = out_size_ < capacity ? out_size_ : capacity;
-    std::memcpy(out, out_, n);
-    std::memmove(out_, out_ + n, out_size_ - n);
+    memcpy(out, out_, n);
+    memmove(out_, out_ + n, out_size_ - n);
     out_size_ -= n;
     return n;
   }
@@ -110,14 +112,14 @@ class MemoryStream final : public ByteStream {
   // Device side.
   size_t read(uint8_t* buffer, size_t capacity) override {
     const size_t n = in_size_ - in_read_ < capacity ? in_size_ - in_read_ : capacity;
-    std::memcpy(buffer, in_ + in_read_, n);
+    memcpy(buffer, in_ + in_read_, n);
     in_read_ += n;
     if (in_read_ == in_size_) in_read_ = in_size_ = 0;
     return n;
   }
   size_t write(const uint8_t* data, size_t length) override {
     const size_t n = out_size_ + length > kCapacity ? kCapacity - out_size_ : length;
-    std::memcpy(out_ + out_size_, data, n);
+    memcpy(out_ + out_size_, data, n);
     out_size_ += n;
     return n;
   }
@@ -128,4 +130,5 @@ class MemoryStream final : public ByteStream {
   size_t in_size_ = 0, in_read_ = 0, out_size_ = 0;
 };
 
-}  // namespace graspguide::device
+}  // namespace hal
+}  // namespace graspguide

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <limits>
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 static_assert(sizeof(float) == 4 && std::numeric_limits<float>::is_iec559,
               "the wire carries IEEE-754 binary32");
@@ -63,4 +63,4 @@ inline bool ascii_field_valid(const uint8_t* p, size_t size) {
   return true;
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

@@ -9,7 +9,7 @@
 
 #include "graspguide_link/link_status.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 inline constexpr uint8_t kCobsMaxCode = 0xFF;  // a block of 254 data bytes, no zero
 inline constexpr size_t kCobsMaxBlockData = 254;
@@ -117,4 +117,4 @@ class CobsStreamDecoder {
   bool started_ = false;       // a code byte of this frame was seen
 };
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

@@ -10,7 +10,7 @@
 #include "graspguide/status.h"
 #include "graspguide_link/messages.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 static_assert(graspguide::kStatusCount == 19,
               "graspguide::Status and the schema's core ErrorCodes differ in number");
@@ -61,4 +61,4 @@ constexpr ErrorCode error_code_of(graspguide::Status s) {
   return static_cast<ErrorCode>(static_cast<uint8_t>(s));
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

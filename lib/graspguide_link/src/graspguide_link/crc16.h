@@ -6,7 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 inline constexpr uint16_t kCrc16Poly = 0x1021;
 inline constexpr uint16_t kCrc16Init = 0xFFFF;
@@ -49,4 +49,4 @@ constexpr uint16_t crc16_of_check_string() {
 }  // namespace detail
 static_assert(detail::crc16_of_check_string() == 0x29B1, "CRC-16/CCITT-FALSE check value");
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

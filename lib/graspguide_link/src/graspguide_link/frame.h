@@ -12,7 +12,7 @@
 #include "graspguide_link/link_status.h"
 #include "graspguide_link/messages.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 inline constexpr uint8_t kFrameDelimiter = 0x00;
 inline constexpr size_t kHeaderSize = 4;  // version, msg_id, seq
@@ -97,4 +97,4 @@ inline LinkStatus check_frame(const uint8_t* raw, size_t size, Accept accept, Fr
   return LinkStatus::kOk;
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

@@ -4,7 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 enum class LinkStatus : uint8_t {
   kOk = 0,
@@ -33,4 +33,4 @@ constexpr const char* link_status_name(LinkStatus s) {
   return i < sizeof kLinkStatusNames / sizeof kLinkStatusNames[0] ? kLinkStatusNames[i] : "unknown";
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

@@ -12,7 +12,7 @@
 #include "graspguide_link/byte_order.h"
 #include "graspguide_link/link_status.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 namespace wire {
 
 // Writes one element at p and moves p past it: integers little-endian, whatever their size.
@@ -161,6 +161,18 @@ LinkStatus unpack(const uint8_t* in, size_t size, Msg* out, uint8_t* bad_field =
   return LinkStatus::kOk;
 }
 
+// One field of a generated copy_NAME_fields (messages.h) between a message and a device's
+// own type: a value by static_cast (an enum to or from its integer, double to float), an
+// array element by element.
+template <class From, class To>
+void copy_field(const From& from, To& to) {
+  to = static_cast<To>(from);
+}
+template <class From, class To, size_t N>
+void copy_field(const From (&from)[N], To (&to)[N]) {
+  for (size_t i = 0; i < N; ++i) copy_field(from[i], to[i]);
+}
+
 // Wire equality: the same payload bytes (floats by bit pattern: NaN == the same NaN,
 // -0 != +0; ascii fields over all their bytes).
 template <class Msg, EnableIfMessage<Msg> = 0>
@@ -178,4 +190,4 @@ bool operator!=(const Msg& a, const Msg& b) {
   return !(a == b);
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

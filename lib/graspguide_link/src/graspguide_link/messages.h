@@ -11,7 +11,7 @@
 #include "graspguide_link/link_status.h"
 #include "graspguide_link/message_io.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 // Frames of any other are bad_version.
 inline constexpr uint8_t kProtocolVersion = 4;
@@ -1573,4 +1573,89 @@ LinkStatus visit_payload(uint8_t msg_id, const uint8_t* payload, size_t size, Vi
   return LinkStatus::kUnknownId;
 }
 
-}  // namespace graspguide_link
+// PLAN_BEGIN and the stored plan's header (graspguide_device's PlanHeader). PLAN_BEGIN's fields
+// participant, simulated, config_hash, trial_count, constraints, y_axis, threshold_deg, hold_s,
+// timeout_s, rest_s, hand_k3, hand_k4, imu_to_hand_wxyz, pwm_floor, gain: from any struct to any
+// struct with members of those names (copy_field: enums by value, arrays element by element).
+template <class From, class To>
+void copy_plan_begin_fields(const From& from, To& to) {
+  copy_field(from.participant, to.participant);
+  copy_field(from.simulated, to.simulated);
+  copy_field(from.config_hash, to.config_hash);
+  copy_field(from.trial_count, to.trial_count);
+  copy_field(from.constraints, to.constraints);
+  copy_field(from.y_axis, to.y_axis);
+  copy_field(from.threshold_deg, to.threshold_deg);
+  copy_field(from.hold_s, to.hold_s);
+  copy_field(from.timeout_s, to.timeout_s);
+  copy_field(from.rest_s, to.rest_s);
+  copy_field(from.hand_k3, to.hand_k3);
+  copy_field(from.hand_k4, to.hand_k4);
+  copy_field(from.imu_to_hand_wxyz, to.imu_to_hand_wxyz);
+  copy_field(from.pwm_floor, to.pwm_floor);
+  copy_field(from.gain, to.gain);
+}
+
+// A plan trial as the device stores it (PlanTrial), and a stored record's trial in LOG_RECORD.
+// PLAN_TRIAL's fields trial_index, session, session_trial, k, policy, mode, familiarization,
+// single_motor, wrench_class, wrench_number, wrench: from any struct to any struct with members
+// of those names (copy_field: enums by value, arrays element by element).
+template <class From, class To>
+void copy_plan_trial_fields(const From& from, To& to) {
+  copy_field(from.trial_index, to.trial_index);
+  copy_field(from.session, to.session);
+  copy_field(from.session_trial, to.session_trial);
+  copy_field(from.k, to.k);
+  copy_field(from.policy, to.policy);
+  copy_field(from.mode, to.mode);
+  copy_field(from.familiarization, to.familiarization);
+  copy_field(from.single_motor, to.single_motor);
+  copy_field(from.wrench_class, to.wrench_class);
+  copy_field(from.wrench_number, to.wrench_number);
+  copy_field(from.wrench, to.wrench);
+}
+
+// A stored record's result (graspguide_device's LogRecord) in LOG_RECORD. LOG_RECORD's fields
+// success, completion_s, first_entry_s, final_error_deg, samples, imu_faults: from any struct to
+// any struct with members of those names (copy_field: enums by value, arrays element by
+// element).
+template <class From, class To>
+void copy_log_record_result_fields(const From& from, To& to) {
+  copy_field(from.success, to.success);
+  copy_field(from.completion_s, to.completion_s);
+  copy_field(from.first_entry_s, to.first_entry_s);
+  copy_field(from.final_error_deg, to.final_error_deg);
+  copy_field(from.samples, to.samples);
+  copy_field(from.imu_faults, to.imu_faults);
+}
+
+// A trial's result (graspguide::TrialResult) in TRIAL_RESULT. TRIAL_RESULT's fields success,
+// completion_s, first_entry_s, final_error_deg: from any struct to any struct with members of
+// those names (copy_field: enums by value, arrays element by element).
+template <class From, class To>
+void copy_trial_result_fields(const From& from, To& to) {
+  copy_field(from.success, to.success);
+  copy_field(from.completion_s, to.completion_s);
+  copy_field(from.first_entry_s, to.first_entry_s);
+  copy_field(from.final_error_deg, to.final_error_deg);
+}
+
+// SET_CALIBRATION and graspguide::MotorCalibration. SET_CALIBRATION's fields pwm_floor, gain:
+// from any struct to any struct with members of those names (copy_field: enums by value, arrays
+// element by element).
+template <class From, class To>
+void copy_calibration_fields(const From& from, To& to) {
+  copy_field(from.pwm_floor, to.pwm_floor);
+  copy_field(from.gain, to.gain);
+}
+
+// A simulated IMU sample's readings (graspguide::hal::ImuSample); its time is the device
+// clock's. SIM_IMU_SAMPLE's fields accel_mps2, gyro_radps: from any struct to any struct with
+// members of those names (copy_field: enums by value, arrays element by element).
+template <class From, class To>
+void copy_imu_sample_fields(const From& from, To& to) {
+  copy_field(from.accel_mps2, to.accel_mps2);
+  copy_field(from.gyro_radps, to.gyro_radps);
+}
+
+}  // namespace graspguide::link

@@ -11,7 +11,7 @@
 #include "graspguide_link/link_status.h"
 #include "graspguide_link/messages.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 enum class ParseEvent : uint8_t {
   kNone = 0,  // nothing complete yet (also: an empty frame, i.e. a lone delimiter)
@@ -154,4 +154,4 @@ LinkStatus read_message(const FrameView& frame, Msg* out, uint8_t* bad_field = n
   return unpack(frame.payload, frame.payload_size, out, bad_field);
 }
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link

@@ -8,7 +8,7 @@
 #include "graspguide_link/link_status.h"
 #include "graspguide_link/messages.h"
 
-namespace graspguide_link {
+namespace graspguide::link {
 
 // Bytes on the wire of Msg, at most (delimiter included): size a buffer for one message.
 template <class Msg>
@@ -42,4 +42,4 @@ class SequenceCounter {
   uint16_t next_ = 0;
 };
 
-}  // namespace graspguide_link
+}  // namespace graspguide::link
