@@ -305,8 +305,8 @@ TEST(ForceQp, IterationCapIsAStatus) {
 // The feasibility tolerance judges infeasibility only; it is not where the iterations
 // stop. With a tolerance 1e7 times wider (1e-2 |lambda0|) every model that holds within
 // the tight one reaches the same optimum: a violation the tolerance allows still takes its
-// primal or dual step (issue 17: float stopped one dual step short, a motor off instead
-// of on).
+// primal or dual step: a float iterate stopped there is one dual step short of the
+// optimum, a motor off instead of on.
 TEST(ForceQp, TheToleranceDoesNotStopTheIterationsEarly) {
   std::mt19937_64 rng(35);
   int moved = 0, compared = 0;

@@ -2,9 +2,9 @@
 // grasp_solution.h): hands four million random scenes found float getting wrong, one for
 // each way float shows it cannot vouch for an answer, are retried and come out as the
 // double core's answer on the same float inputs; ordinary hands are not retried; the
-// retry can be switched off, and double never retries. The hands are
-// tools/scripts/issue17_m4f_agreement.py's RETRY_SCENES, whose test
-// (tools/tests/test_float_paper_agreement.py) compares them with the float64 reference.
+// retry can be switched off, and double never retries. The hands are the 'retry' list of
+// test/data/hard_hands.json, which the Python tests also compare with the float64
+// reference.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,7 +21,8 @@ namespace {
 // Why float cannot vouch for the hand's answer.
 enum class Doubt { kVerdict, kResidual };
 
-struct HardHand {
+// A hand float cannot vouch for, and why.
+struct RetryHand {
   const char* name;
   int k;
   double contacts[4][3];
@@ -30,7 +31,7 @@ struct HardHand {
   Doubt doubt;
 };
 
-const HardHand kHands[] = {
+const RetryHand kRetryHands[] = {
     {"p2204522",
      3,
      {{0.04494037585436739, 0.03053429712849922, 0.02266664723980756},
@@ -88,14 +89,14 @@ const HardHand kHands[] = {
 };
 
 template <int K>
-gg::Contacts<float, K> contacts_of(const HardHand& h) {
+gg::Contacts<float, K> contacts_of(const RetryHand& h) {
   gg::Contacts<float, K> c;
   for (int i = 0; i < K; ++i)
     for (int j = 0; j < 3; ++j) c(j, i) = float(h.contacts[i][j]);
   return c;
 }
 
-gg::Vec6<float> wrench_of(const HardHand& h) {
+gg::Vec6<float> wrench_of(const RetryHand& h) {
   gg::Vec6<float> w;
   w << float(h.force[0]), float(h.force[1]), float(h.force[2]), 0.0f, 0.0f, 0.0f;
   return w;
@@ -111,7 +112,7 @@ gg::Status solve(const gg::Contacts<float, K>& c, const gg::Vec6<float>& w, gg::
 // The float structured route's pieces, as grasp_forces runs them: whether its verdicts
 // were firm and whether it vouches for its answer.
 template <int K>
-gg::ForceSolution<float, K> float_forces(const HardHand& h) {
+gg::ForceSolution<float, K> float_forces(const RetryHand& h) {
   const auto c = contacts_of<K>(h);
   const auto w_in = wrench_of(h);
   gg::ContactFrames<float, K> frames;
@@ -133,7 +134,7 @@ gg::ForceSolution<float, K> float_forces(const HardHand& h) {
 }
 
 template <int K>
-void check_hand(const HardHand& h) {
+void check_hand(const RetryHand& h) {
   SCOPED_TRACE(h.name);
   const auto c = contacts_of<K>(h);
   const auto w = wrench_of(h);
@@ -170,7 +171,7 @@ void check_hand(const HardHand& h) {
 }  // namespace
 
 TEST(DoubleRetry, HandsFloatCannotVouchForGetDoublesAnswer) {
-  for (const auto& h : kHands) {
+  for (const auto& h : kRetryHands) {
     if (h.k == 3)
       check_hand<3>(h);
     else
@@ -219,7 +220,7 @@ TEST(DoubleRetry, OrdinaryHandsAreRarelyRetried) {
 
 // An iteration cap float hits is retried too, under the same cap.
 TEST(DoubleRetry, AnIterationLimitIsRetriedUnderTheSameCap) {
-  const auto& h = kHands[0];
+  const auto& h = kRetryHands[0];
   gg::SolverSettings capped, capped_off;
   capped.max_iterations = capped_off.max_iterations = 1;
   capped_off.double_retry = false;

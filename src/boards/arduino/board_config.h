@@ -48,7 +48,7 @@
 #define GRASPGUIDE_IMU_PERIOD_US 10000
 #endif
 
-// The host-less mode (issue 13: a stored plan run with the IMU and the button, no PC) needs
+// The host-less mode (a stored plan run with the IMU and the button, no PC) needs
 // an IMU and a store that holds the plan region (8 KiB) and its log: the ESP32's LittleFS
 // partition. The Teensy 4.0's EEPROM emulation is 1,080 bytes and a generic core has no file
 // API common to all boards, so those builds have no host-less mode. 1 on a board without

@@ -1,6 +1,6 @@
 // Whether float can vouch for the structured route's answer, or solve_grasp must ask
-// double (issue 17). Float decides most hands as double does; where it cannot, its own
-// figures say so, and one retry in double per posture costs less than a wrong cue:
+// double. Float decides most hands as double does; where it cannot, its own figures say
+// so, and one retry in double per posture costs less than a wrong cue:
 //   - an infeasibility verdict within its rounding (ForceSolution::firm, force_qp.h);
 //   - an optimum that misses equilibrium by more than kCertainResidualRel |lambda0|: the
 //     rounding of forces 1e4 times |lambda0| or more, or of a step along a row that
