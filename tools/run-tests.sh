@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# GraspGuide full test run (what .ci/run executes):
+# GraspGuide test run. Two tiers (`bash tools/run-tests.sh --help` lists them):
+#   full (no option; what .ci/run executes):
 #   1. tools/bootstrap.sh        (Debian packages, Eigen check, .venv, ./tools)
 #   2. tools/scripts/check_style.sh  (ruff lint and format, mypy, clang-format, every
-#      generator's --check; each is 1 case)
+#      generator's --check, the import layers; each is 1 case)
 #   3. pio test -e native        (GoogleTest suites in test/test_*/, offline), and the
 #      Arduino board compiled on the host against a stub of the Arduino API (1 case)
 #   4. tools/install-arm.sh      (ARM toolchain and QEMU, installed once), then
@@ -11,6 +12,10 @@
 #      per-frame layer's cycles on the ATmega328P under simavr (1 case)
 #   5. pytest tools/tests        (if that directory exists; its QEMU firmware test
 #      runs the m4f_firmware image of step 4)
+#   --fast: steps 1, 2, the native GoogleTest suites of step 3 and the pytest tests not
+#      marked `cross` or `slow` (tools/tests/conftest.py says which are): no cross
+#      toolchain, emulator or simulator of another CPU, and no Arduino stub compile.
+#      It says that it is the fast tier and how many tests it left out.
 # Output of every stage goes to the console. Test cases are counted from
 # machine-readable reports (PlatformIO's JSON report, pytest's JUnit XML), and
 # the run ends with exactly one line "N passed, N failed, N skipped".
@@ -27,6 +32,49 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
+usage() {
+    cat <<'EOF'
+usage: bash tools/run-tests.sh [--fast] [--help]
+
+The test command, in two tiers. Both end with one line "N passed, N failed, N skipped"
+and exit non-zero if anything failed.
+
+  (no option)  the full run, what .ci/run calls (with CI=true: no check may skip):
+               bootstrap, style checks, pio test -e native, the Arduino board compiled
+               against a stub of the Arduino API, the ARM builds and their stage counts
+               under QEMU, the per-frame layer under simavr, and every pytest test in
+               tools/tests.
+  --fast       the developer's loop (about 3 minutes with warm builds): bootstrap, style
+               checks, pio test -e native and the pytest tests that are not marked
+               `cross` (they launch QEMU, arm-none-eabi, avr-gcc or simavr, arduino-cli
+               or mpy-cross) or `slow` (tools/tests/conftest.py marks them). It leaves
+               out the Arduino stub compile, the ARM and AVR builds, and says how many
+               pytest tests it left out.
+  --help       this text.
+
+One room's Python tests:  .venv/bin/python -m pytest tools/tests/<room>
+Only the fast ones:       .venv/bin/python -m pytest tools/tests -m "not cross and not slow"
+EOF
+}
+
+FAST=0
+for arg in "$@"; do
+    case $arg in
+        --fast) FAST=1 ;;
+        -h | --help)
+            usage
+            exit 0
+            ;;
+        *)
+            echo "run-tests: unknown option '$arg'" >&2
+            usage >&2
+            exit 2
+            ;;
+    esac
+done
+# The pytest tests the fast tier leaves out (markers registered in tools/pyproject.toml).
+FAST_DESELECT="cross or slow"
+
 PASSED=0
 FAILED=0
 SKIPPED=0
@@ -41,6 +89,11 @@ finish() {
     echo
     if ((${#STAGE_ERRORS[@]})); then
         printf 'run-tests: stage error: %s\n' "${STAGE_ERRORS[@]}"
+    fi
+    if ((FAST)); then
+        echo "run-tests: FAST TIER, not the full run: left out the Arduino stub compile," \
+            "the ARM builds, QEMU and simavr, and ${FAST_LEFT_OUT:-no} pytest tests" \
+            "(marked $FAST_DESELECT); the full run is bash tools/run-tests.sh"
     fi
     echo "$PASSED passed, $FAILED failed, $SKIPPED skipped"
     if ((FAILED > 0 || ${#STAGE_ERRORS[@]} > 0)); then
@@ -190,86 +243,93 @@ else
     tally pio/GoogleTest "$pio_rc" "$pio_json" count_pio_report
 fi
 
-# The Arduino board (src/boards/arduino) cannot be built for its real cores here (their
-# toolchains are not obtainable offline); it is compiled and linked on the host against a
-# minimal stub of the Arduino API (src/harness/arduino_api_check), once per board variant.
-# That proves it compiles, not that it runs.
-run_case "Arduino board compile check (host, Arduino API stub)" arduino_check \
-    "$ROOT/.venv/bin/pio" run -e arduino_check_generic -e arduino_check_featheresp32 \
-    -e arduino_check_teensy40 -e arduino_check_featheresp32_bno055
-
-# --- 4. Bare-metal ARM builds and QEMU runs -----------------------------------------
-# Before pytest, because its QEMU firmware test needs the m4f_firmware image. Each build
-# is one test case; the stage counts under QEMU (and their check against
-# tools/perf/stage_baseline.json) are one more. The toolchain and QEMU (about 400 MB)
-# are installed here, not by bootstrap.sh, so that tools/run-main.sh does without them.
 ARM_ENVS=(cortex_m4f m4f_firmware m4f_stages m7_stages m7_stages_double m4f_imu)
-arm_why=""
-if [[ -n ${GRASPGUIDE_NO_ARM:-} ]]; then
-    arm_why="GRASPGUIDE_NO_ARM is set"
-else
-    banner "ARM toolchain and QEMU: tools/install-arm.sh"
-    if ! bash "$ROOT/tools/install-arm.sh"; then
-        arm_why="tools/install-arm.sh failed, see above"
-    elif ! command -v arm-none-eabi-g++ >/dev/null 2>&1; then
-        arm_why="arm-none-eabi-g++ not on PATH after tools/install-arm.sh"
-    fi
-fi
 # The firmware that --port qemu runs builds into a folder of its own
 # (graspguide.devices.builds), as its launcher looks for it there: pio deletes its whole
 # build folder when its project checksum changes, and the others' builds must not take
 # this one with them.
 DEVICE_ENVS=" m4f_firmware "
-for env in "${ARM_ENVS[@]}"; do
-    if [[ -z $arm_why && $DEVICE_ENVS == *" $env "* ]]; then
-        run_case "$env build" "$env" env PLATFORMIO_BUILD_DIR="$ROOT/.pio/build-$env" \
-            "$ROOT/.venv/bin/pio" run -e "$env"
-    elif [[ -z $arm_why ]]; then
-        run_case "$env build" "$env" "$ROOT/.venv/bin/pio" run -e "$env"
-    else
-        firmware_unavailable "pio run -e $env" "$arm_why"
-    fi
-done
-qemu_why=$arm_why
-if [[ -z $qemu_why ]] && ! command -v qemu-system-arm >/dev/null 2>&1; then
-    qemu_why="qemu-system-arm not on PATH after tools/install-arm.sh"
-fi
-if [[ -z $qemu_why ]]; then
-    # It runs `pio run` on the three images first (seconds when they are up to date): an
-    # image left over from before a failed build is never the one counted.
-    run_case "QEMU stage counts within baseline" qemu_stages \
-        "$ROOT/.venv/bin/graspguide" bench --target m4f --target m7 --target m7d \
-        --json "$REPORT_DIR/qemu_stages.json"
-else
-    firmware_unavailable "QEMU stage counts (graspguide bench --target m4f --target m7 --target m7d)" "$qemu_why"
-fi
-if [[ -z $qemu_why ]]; then
-    # The gravity estimator's instructions per update (host-less mode), and that the image's
-    # estimate tracked its stream.
-    run_case "QEMU gravity-estimator cost" imu_cost \
-        "$ROOT/.venv/bin/python" "$ROOT/tools/scripts/imu_cost.py" --no-build \
-        --json "$REPORT_DIR/imu_cost.json"
-else
-    firmware_unavailable "QEMU gravity-estimator cost (tools/scripts/imu_cost.py)" "$qemu_why"
-fi
 
-# The per-frame layer on the paper's ATmega328P, built with Debian's gcc-avr (installed by
-# bootstrap.sh with avr-libc and simavr) and run cycle-exact under simavr: cycles against
-# tools/perf/avr_baseline.json, PWM against the float64 reference (1 case).
-avr_why=""
-for tool in avr-g++ avr-size avr-nm; do
-    if [[ -z $avr_why ]] && ! command -v "$tool" >/dev/null 2>&1; then
-        avr_why="$tool not on PATH after tools/bootstrap.sh (Debian's gcc-avr)"
-    fi
-done
-if [[ -z $avr_why && ! -f /usr/include/simavr/sim_avr.h ]]; then
-    avr_why="simavr's headers missing after tools/bootstrap.sh (Debian's libsimavr-dev)"
-fi
-if [[ -z $avr_why ]]; then
-    run_case "AVR per-frame layer within baseline" avr_frame \
-        "$ROOT/.venv/bin/graspguide" bench --target avr --json "$REPORT_DIR/avr_frame.json"
+# The firmware checks: none of them is in the fast tier.
+if ((FAST)); then
+    echo
+    echo "run-tests: fast tier: leaving out the Arduino stub compile, the ARM builds, QEMU and simavr"
 else
-    firmware_unavailable "AVR per-frame layer (graspguide bench --target avr)" "$avr_why"
+    # The Arduino board (src/boards/arduino) cannot be built for its real cores here (their
+    # toolchains are not obtainable offline); it is compiled and linked on the host against a
+    # minimal stub of the Arduino API (src/harness/arduino_api_check), once per board variant.
+    # That proves it compiles, not that it runs.
+    run_case "Arduino board compile check (host, Arduino API stub)" arduino_check \
+        "$ROOT/.venv/bin/pio" run -e arduino_check_generic -e arduino_check_featheresp32 \
+        -e arduino_check_teensy40 -e arduino_check_featheresp32_bno055
+
+    # --- 4. Bare-metal ARM builds and QEMU runs -----------------------------------------
+    # Before pytest, because its QEMU firmware test needs the m4f_firmware image. Each build
+    # is one test case; the stage counts under QEMU (and their check against
+    # tools/perf/stage_baseline.json) are one more. The toolchain and QEMU (about 400 MB)
+    # are installed here, not by bootstrap.sh, so that tools/run-main.sh does without them.
+    arm_why=""
+    if [[ -n ${GRASPGUIDE_NO_ARM:-} ]]; then
+        arm_why="GRASPGUIDE_NO_ARM is set"
+    else
+        banner "ARM toolchain and QEMU: tools/install-arm.sh"
+        if ! bash "$ROOT/tools/install-arm.sh"; then
+            arm_why="tools/install-arm.sh failed, see above"
+        elif ! command -v arm-none-eabi-g++ >/dev/null 2>&1; then
+            arm_why="arm-none-eabi-g++ not on PATH after tools/install-arm.sh"
+        fi
+    fi
+    for env in "${ARM_ENVS[@]}"; do
+        if [[ -z $arm_why && $DEVICE_ENVS == *" $env "* ]]; then
+            run_case "$env build" "$env" env PLATFORMIO_BUILD_DIR="$ROOT/.pio/build-$env" \
+                "$ROOT/.venv/bin/pio" run -e "$env"
+        elif [[ -z $arm_why ]]; then
+            run_case "$env build" "$env" "$ROOT/.venv/bin/pio" run -e "$env"
+        else
+            firmware_unavailable "pio run -e $env" "$arm_why"
+        fi
+    done
+    qemu_why=$arm_why
+    if [[ -z $qemu_why ]] && ! command -v qemu-system-arm >/dev/null 2>&1; then
+        qemu_why="qemu-system-arm not on PATH after tools/install-arm.sh"
+    fi
+    if [[ -z $qemu_why ]]; then
+        # It runs `pio run` on the three images first (seconds when they are up to date): an
+        # image left over from before a failed build is never the one counted.
+        run_case "QEMU stage counts within baseline" qemu_stages \
+            "$ROOT/.venv/bin/graspguide" bench --target m4f --target m7 --target m7d \
+            --json "$REPORT_DIR/qemu_stages.json"
+    else
+        firmware_unavailable "QEMU stage counts (graspguide bench --target m4f --target m7 --target m7d)" "$qemu_why"
+    fi
+    if [[ -z $qemu_why ]]; then
+        # The gravity estimator's instructions per update (host-less mode), and that the image's
+        # estimate tracked its stream.
+        run_case "QEMU gravity-estimator cost" imu_cost \
+            "$ROOT/.venv/bin/python" "$ROOT/tools/scripts/imu_cost.py" --no-build \
+            --json "$REPORT_DIR/imu_cost.json"
+    else
+        firmware_unavailable "QEMU gravity-estimator cost (tools/scripts/imu_cost.py)" "$qemu_why"
+    fi
+
+    # The per-frame layer on the paper's ATmega328P, built with Debian's gcc-avr (installed by
+    # bootstrap.sh with avr-libc and simavr) and run cycle-exact under simavr: cycles against
+    # tools/perf/avr_baseline.json, PWM against the float64 reference (1 case).
+    avr_why=""
+    for tool in avr-g++ avr-size avr-nm; do
+        if [[ -z $avr_why ]] && ! command -v "$tool" >/dev/null 2>&1; then
+            avr_why="$tool not on PATH after tools/bootstrap.sh (Debian's gcc-avr)"
+        fi
+    done
+    if [[ -z $avr_why && ! -f /usr/include/simavr/sim_avr.h ]]; then
+        avr_why="simavr's headers missing after tools/bootstrap.sh (Debian's libsimavr-dev)"
+    fi
+    if [[ -z $avr_why ]]; then
+        run_case "AVR per-frame layer within baseline" avr_frame \
+            "$ROOT/.venv/bin/graspguide" bench --target avr --json "$REPORT_DIR/avr_frame.json"
+    else
+        firmware_unavailable "AVR per-frame layer (graspguide bench --target avr)" "$avr_why"
+    fi
 fi
 
 # --- 5. pytest -----------------------------------------------------------------
@@ -281,10 +341,16 @@ if [[ -d $ROOT/tools/tests ]]; then
     # came from numpy linear algebra on the author's CPU then fails here too, not only on
     # a newcomer's machine (the golden closed loops of test_participant.py once did).
     # test_participant.py also runs the participant under both kernels and compares.
-    OPENBLAS_CORETYPE=Prescott "$PY" -m pytest tools/tests -q --junitxml="$junit" 2>&1 |
+    # The fast tier deselects the tests marked cross or slow (-m); pytest counts them.
+    select=()
+    ((FAST)) && select=(-m "not ($FAST_DESELECT)")
+    OPENBLAS_CORETYPE=Prescott "$PY" -m pytest tools/tests -q "${select[@]}" --junitxml="$junit" 2>&1 |
         tee "$REPORT_DIR/pytest.log"
     py_rc=${PIPESTATUS[0]}
     set -e
+    if ((FAST)); then
+        FAST_LEFT_OUT="$(grep -Eo '[0-9]+ deselected' "$REPORT_DIR/pytest.log" | tail -n 1 | cut -d' ' -f1)"
+    fi
     if ((py_rc == 5)); then
         echo "run-tests: pytest collected no tests: 0 test cases"
     else

@@ -210,3 +210,253 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         width = max(len(n) for n, _ in _MEASUREMENTS)
         for name, text in _MEASUREMENTS:
             terminalreporter.write_line(f"{name:<{width}}  {text}")
+
+
+# --------------------------------------------------------------------------------------
+# Tiers. `cross`: the test launches a cross toolchain or runs another CPU's code (QEMU or
+# arm-none-eabi, avr-gcc or simavr, arduino-cli, mpy-cross). `slow`: it needs none of them
+# but takes seconds to minutes on two cores (over about 3 s under a full run's load).
+# `bash tools/run-tests.sh --fast` leaves both out (-m "not (cross or slow)"); the full run
+# runs every test. The markers are registered in tools/pyproject.toml (--strict-markers).
+# They are given here, from what a test uses: its module, a fixture, a fixture
+# parametrized with a device port, or the test itself (its function's name, every
+# parameter). A name below that its module does not define fails the collection, so a
+# renamed test cannot slip into the fast tier unnoticed.
+# --------------------------------------------------------------------------------------
+# Module -> what each of its tests launches.
+CROSS_MODULES = {
+    "test_qemu_firmware.py": "QEMU runs the m4f firmware",
+    "test_promini_build.py": "arduino-cli and avr-gcc build the Pro Mini sketch",
+}
+# Fixture -> what it launches; "module.py::name" is a module's own fixture.
+CROSS_FIXTURES = {
+    "sketch_build": "arduino-cli and avr-gcc build the Pro Mini sketch",
+    "sketch_elf": "arduino-cli and avr-gcc build the Pro Mini sketch",
+    "test_avr_frame.py::measured": "avr-gcc builds the per-frame layer, simavr runs it",
+    "test_promini_sim.py::runner": "the simavr runner is built against libsimavr",
+    "test_promini_sim.py::echo_elf": "avr-gcc builds a UART echo sketch",
+}
+# A fixture parametrized with one of these ports starts that device.
+CROSS_PORTS = {
+    "qemu": "QEMU runs the m4f firmware",
+    "promini-sim": "simavr runs the Pro Mini sketch",
+}
+# "module.py" -> (what its tests below launch themselves, [test function names]).
+CROSS_TESTS = {
+    "test_latency.py": ("QEMU runs the m4f firmware", ["test_latency_on_qemu"]),
+    "test_motors_cmd.py": (
+        "QEMU runs the m4f firmware",
+        [
+            "test_ctrl_c_leaves_the_qemu_firmwares_motor_registers_off",
+            "test_port_qemu_starts_the_firmware_and_drives_it",
+        ],
+    ),
+    "test_device_builds.py": (
+        "arduino-cli builds the Pro Mini sketch, simavr runs it",
+        ["test_the_readmes_promini_sim_latency_works_on_a_fresh_checkout"],
+    ),
+    "test_micropython_port.py": (
+        "mpy-cross compiles the port",
+        ["test_every_module_of_the_port_compiles_with_mpy_cross"],
+    ),
+    "test_mp_tools.py": (
+        "graspguide mp build/deploy compiles with mpy-cross",
+        [
+            "test_mp_build_stages_the_boards_file_system",
+            "test_mp_build_of_a_module_that_is_not_micropython_names_file_and_line",
+            "test_mp_build_of_native_code_needs_an_arch",
+            "test_mp_build_of_the_real_port",
+            "test_mp_deploy_and_run_command_lines",
+            "test_mp_deploy_without_mpremote_fails_naming_the_fix",
+            "test_mp_deploy_and_run_end_to_end_on_the_interpreter",
+            "test_mp_deploy_of_the_real_port_loads_its_plan_and_levels_on_the_interpreter",
+        ],
+    ),
+}
+# Fixture -> why it is slow; "module.py::name" is a module's own fixture.
+SLOW_FIXTURES = {
+    "test_float_paper_agreement.py::run": "solves thousands of random paper scenes twice",
+}
+# "module.py" -> (why the tests below are slow, [test function names]).
+SLOW_TESTS = {
+    "test_analysis.py": (
+        "runs the paper's protocol for a participant on the simulated device",
+        ["test_pilot_of_one_real_participant_run_is_analysed"],
+    ),
+    "test_device_builds.py": (
+        "pio builds the simulated device from nothing",
+        [
+            "test_a_missing_simulated_device_is_built_on_first_use_showing_progress",
+            "test_building_the_qemu_firmware_as_its_error_says_keeps_the_simulated_device",
+        ],
+    ),
+    "test_device_log_damaged.py": (
+        "runs a study on the simulated device",
+        ["test_on_the_simulated_device_a_damaged_record_is_run_again_once_and_named"],
+    ),
+    "test_hostless_device_rules.py": (
+        "runs a host-less study on the simulated device",
+        ["test_a_study_with_one_sample_stamped_back_runs_that_trial_again_once"],
+    ),
+    "test_hostless_study.py": (
+        "runs host-less studies on the simulated device",
+        [
+            "test_one_participants_hostless_study_finishes_and_analyses",
+            "test_an_imu_fault_mid_trial_is_reported_counted_and_the_study_goes_on",
+            "test_ctrl_c_stops_the_run_and_the_same_device_resumes_it",
+            "test_a_sigkill_mid_study_loses_no_completed_trial_record",
+            "test_under_a_tilted_mount_the_devices_error_follows_the_true_error",
+            "test_resuming_under_another_calibration_is_refused_naming_both",
+            "test_the_plans_calibration_shapes_every_telemetry_pwm",
+            "test_cli_usage_errors",
+            "test_with_the_default_noise_the_means_are_the_bias_and_gravity",
+        ],
+    ),
+    "test_mp_tools.py": (
+        "mpremote downloads records through the MicroPython interpreter",
+        ["test_mp_log_downloads_the_boards_records_as_device_log_does"],
+    ),
+    "test_micropython_formats.py": (
+        "a study's plan and records through the MicroPython interpreter",
+        [
+            "test_the_port_reads_the_plan_and_records_the_cpp_device_stored",
+            "test_the_cpp_device_reads_the_records_and_plan_the_port_wrote",
+        ],
+    ),
+    "test_micropython_port.py": (
+        "the port's own tests in the MicroPython interpreter",
+        ["test_port_tests_pass_inside_the_micropython_interpreter"],
+    ),
+    "test_micropython_solve.py": (
+        "solves the hard paper scenes in emulated float32",
+        ["test_emulated_float32_on_the_hard_paper_scenes"],
+    ),
+    "test_demo.py": (
+        "runs demo studies on simulated devices",
+        [
+            "test_demo_killed_mid_study_resumes_every_trial_exactly_once",
+            "test_demo_prints_tables_and_writes_figure",
+            "test_pipelined_and_lockstep_runs_give_identical_trials",
+        ],
+    ),
+    "test_plots.py": (
+        "runs trials and draws their figures",
+        [
+            "test_a_fresh_simulated_run_plots",
+            "test_cli_writes_png_and_svg",
+            "test_cli_one_trial_and_format",
+            "test_bad_input",
+        ],
+    ),
+    "test_torn_records.py": (
+        "analyses and plots a study in subprocesses",
+        [
+            "test_analyze_reads_every_complete_record_and_says_what_to_do",
+            "test_plot_draws_the_complete_trials_and_says_what_was_left_out",
+        ],
+    ),
+    "test_calibration_cli.py": (
+        "whole calibrations in subprocesses",
+        [
+            "test_virtual_participant_on_sim",
+            "test_operator_full_run_and_apply",
+            "test_usage_errors",
+        ],
+    ),
+    "test_cli_papercuts.py": (
+        "a trial or an analysis into a closed pipe",
+        [
+            "test_trial_into_a_closed_pipe_stops_the_motors_and_keeps_the_records",
+            "test_analyze_into_a_closed_pipe_ends_quietly",
+        ],
+    ),
+    "test_device_e2e.py": (
+        "many graspguide subprocesses on the simulated device",
+        [
+            "test_cli_solve_device_usage_errors",
+            "test_cli_device_engine_answers_bad_requests_like_the_core",
+            "test_cli_device_engine_agrees_on_the_known_answers",
+            "test_cli_device_engine_agrees_on_the_examples",
+            "test_cli_info_and_ports",
+        ],
+    ),
+    "test_reference.py": (
+        "the pure-Python reference on many scenes",
+        [
+            "test_known_answers_reproduce",
+            "test_margin_agrees_with_enumeration",
+            "test_scaled_quaternion_equals_unit",
+            "test_qp_optimum_is_the_projection",
+        ],
+    ),
+    "test_runner_calibration.py": (
+        "runs trials on the simulated device",
+        [
+            "test_trial_applies_the_stored_calibration",
+            "test_a_bad_calibration_file_stops_the_run_before_the_device",
+        ],
+    ),
+    "test_replay_log.py": (
+        "streams and replays a trial",
+        ["test_a_stream_log_replays_as_the_same_trial"],
+    ),
+    "test_sim_children.py": (
+        "interrupts trials on the simulated device",
+        ["test_interrupted_trial_stops_cleanly_and_leaves_no_simulator"],
+    ),
+}
+
+
+def _tier_reasons(item) -> dict[str, str]:
+    """{"cross" and/or "slow": why} for one collected test, from the tables above."""
+    module = item.path.name
+    reasons = {}
+    if module in CROSS_MODULES:
+        reasons["cross"] = CROSS_MODULES[module]
+    for name in item.fixturenames:
+        for marker, table in (("cross", CROSS_FIXTURES), ("slow", SLOW_FIXTURES)):
+            why = table.get(name) or table.get(f"{module}::{name}")
+            if why:
+                reasons[marker] = f"fixture {name}: {why}"
+    callspec = getattr(item, "callspec", None)
+    for name, value in (callspec.params if callspec else {}).items():
+        # A fixture's parameter only: a test parametrized directly with a port's name gets
+        # the name, not the device.
+        defs = item._fixtureinfo.name2fixturedefs.get(name, ())
+        if isinstance(value, str) and value in CROSS_PORTS and any(d.params for d in defs):
+            reasons["cross"] = f"fixture {name}={value}: {CROSS_PORTS[value]}"
+    for marker, table in (("cross", CROSS_TESTS), ("slow", SLOW_TESTS)):
+        why, tests = table.get(module, ("", ()))
+        if item.originalname in tests:
+            reasons[marker] = why
+    return reasons
+
+
+def _check_tier_tables(items) -> None:
+    """Every module and module-qualified name in the tables exists (a test module's
+    function or fixture of that name, checked when the module is collected)."""
+    modules = {item.path.name: item.module for item in items if hasattr(item, "module")}
+    on_disk = {p.name for p in pathlib.Path(TESTS_DIR).rglob("test_*.py")}
+    stale = []
+    names = [k.partition("::")[::2] for k in (*CROSS_FIXTURES, *SLOW_FIXTURES) if "::" in k]
+    for table in (CROSS_TESTS, SLOW_TESTS):
+        names += [(module, test) for module, (_, tests) in table.items() for test in tests]
+    for module in (*CROSS_MODULES, *CROSS_TESTS, *SLOW_TESTS):
+        if module not in on_disk:
+            stale.append(module)
+    for module, name in names:
+        if module in modules and not hasattr(modules[module], name):
+            stale.append(f"{module}::{name}")
+    if stale:
+        raise pytest.UsageError(
+            "tools/tests/conftest.py marks tests, fixtures or modules that do not exist "
+            "(renamed? rename them there too): " + ", ".join(sorted(set(stale)))
+        )
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(session, config, items):
+    _check_tier_tables(items)
+    for item in items:
+        for marker, why in _tier_reasons(item).items():
+            item.add_marker(getattr(pytest.mark, marker)(reason=why))
