@@ -6,7 +6,7 @@
 #   3. ./.venv with the pinned tools/requirements-dev.txt (re-installed only
 #      when that file changes);
 #   4. the Python package in tools/ (if tools/pyproject.toml exists),
-#      re-installed only when its sources (tools/, lib/graspguide/, lib/graspguide_frame/) change;
+#      re-installed only when its sources (tools/, lib/graspguide/, lib/graspguide_cue/) change;
 #   5. the simulated device (.pio/build-sim/sim/program, `pio run -e sim`) when
 #      platformio.ini has [env:sim]; pio rebuilds only what changed;
 #   6. arduino-cli (pinned version, built from Go sources into .tools/arduino-cli/,
@@ -23,7 +23,7 @@ die() { printf 'bootstrap: ERROR: %s\n' "$*" >&2; exit 1; }
 
 # --- 1. Debian packages ------------------------------------------------------
 # gcc-avr, avr-libc, simavr and libsimavr-dev: the per-frame layer built for the ATmega328P
-# and its cycle counts (src/harness/avr_frame/).
+# and its cycle counts (src/harness/avr_cue/).
 # arduino-core-avr and universal-ctags: the Pro Mini sketch (promini/) built offline by
 # arduino-cli (step 6); golang-go only when no `go` is on PATH, to build arduino-cli (step 6
 # checks that the Go found is recent enough).
@@ -77,7 +77,7 @@ if [[ -f $ROOT/tools/pyproject.toml ]]; then
     # Everything that can change what `pip install ./tools` builds.
     src_dirs=(tools)
     [[ -d lib/graspguide ]] && src_dirs+=(lib/graspguide)
-    [[ -d lib/graspguide_frame ]] && src_dirs+=(lib/graspguide_frame)
+    [[ -d lib/graspguide_cue ]] && src_dirs+=(lib/graspguide_cue)
     src_hash="$(
         {
             find "${src_dirs[@]}" -type f \

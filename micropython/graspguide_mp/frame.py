@@ -1,4 +1,4 @@
-"""The per-frame layer of lib/graspguide_frame in MicroPython: the guidance error and alpha
+"""The per-frame layer of lib/graspguide_cue in MicroPython: the guidance error and alpha
 from gravity, PWM from motor levels, the trial state machine, the IMU health rule and the
 gravity estimator. Same numbers and statuses as the C++ (alignment.h, pwm.h, trial.h,
 imu_watchdog.h, gravity_estimator.h); no list is made per frame: results go into lists
@@ -115,7 +115,7 @@ def pwm_gain(mode, alpha):
     return float(PWM_SPAN) if mode == MODE_C else alpha
 
 
-# A participant's calibration (graspguide_frame/motor_calibration.h): per motor a PWM floor
+# A participant's calibration (graspguide_cue/motor_calibration.h): per motor a PWM floor
 # and a gain; IDENTITY_FLOOR / IDENTITY_GAIN give the paper's mapping bit for bit.
 CALIBRATION_MOTORS = 4
 IDENTITY_FLOOR = (PWM_MIN,) * CALIBRATION_MOTORS

@@ -1,6 +1,6 @@
 """Algorithm 1 for one posture (docs/algorithm.md, steps 1-7), a port of the C++ core's
 structured route (lib/graspguide/src/graspguide: contact_frames.h, grasp_structure.h,
-relevance.h, force_qp.h via qp.py, motor_levels.h; graspguide_frame: alignment.h, pwm.h)
+relevance.h, force_qp.h via qp.py, motor_levels.h; graspguide_cue: alignment.h, pwm.h)
 to MicroPython: lists of floats, no numpy.
 
 solve(...) returns a Result; on any status but OK every PWM is 0 (motors off).
@@ -17,7 +17,7 @@ from graspguide_mp import qp
 from graspguide_mp import status as st
 from graspguide_mp.linalg import all_finite, cross, dot, norm, stable_norm
 
-# tolerances.h, graspguide_frame/tolerances.h
+# tolerances.h, graspguide_cue/tolerances.h
 K_COINCIDENT_REL_TOL = 1e-4
 K_INPUT_PRECISION_REL_TOL = 1e-3
 K_AXIS_PARALLEL_TOL = 1e-3
@@ -305,7 +305,7 @@ def motor_levels(lam, k, policy_fperp):
 
 
 def pwm_from_levels(levels, k, gain, largest_finite):
-    """graspguide_frame/pwm.h: floor(70 + gain |m_i| + 0.5) clamped to 0..255, computed as
+    """graspguide_cue/pwm.h: floor(70 + gain |m_i| + 0.5) clamped to 0..255, computed as
     (trunc(140 + gain 2|m_i|) + 1) >> 1 like the C++; levels at or below 1e-3 are off."""
     out = [0] * k
     twice = [0.0] * k

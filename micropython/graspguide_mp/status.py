@@ -1,4 +1,4 @@
-"""The statuses of graspguide_frame/status.h: the same order (the code is the index, as
+"""The statuses of graspguide_cue/status.h: the same order (the code is the index, as
 the protocol's ErrorCode carries it), the same snake_case names and the same messages.
 tools/tests/test_micropython_solve.py checks this table against the C++ list."""
 

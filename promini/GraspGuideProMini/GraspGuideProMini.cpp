@@ -1,7 +1,7 @@
 // setup() and loop(): wiring only; everything the board decides is in the device.
 #include <Arduino.h>
 
-#include <graspguide_frame_device.h>
+// board_glue.h first: it names the libraries in the order arduino-cli must find them.
 #include "board_glue.h"
 
 // The first 8 hex digits of the commit it was built from, stamped by the build
@@ -15,7 +15,7 @@ namespace {
 graspguide::promini::SerialStream g_stream;
 graspguide::promini::PwmMotors g_motors;
 graspguide::promini::MicrosClock g_clock;
-graspguide::frame_device::FrameDevice* g_device = nullptr;
+graspguide::cue_device::CueDevice* g_device = nullptr;
 
 }  // namespace
 
@@ -23,10 +23,10 @@ void setup() {
   // Motors off before anything else can fail or wait.
   g_motors.begin();
   Serial.begin(graspguide::promini::kBaud);
-  graspguide::frame_device::DeviceInfo info;
+  graspguide::cue_device::DeviceInfo info;
   info.build_id = GRASPGUIDE_BUILD_ID;
   // Built here, not as a global, so its first motor write finds the pins already set up.
-  static graspguide::frame_device::FrameDevice device(g_stream, g_motors, g_clock, info);
+  static graspguide::cue_device::CueDevice device(g_stream, g_motors, g_clock, info);
   g_device = &device;
 }
 

@@ -9,4 +9,5 @@
 //   GraspGuideProMini.cpp setup() and loop(): motors off, then poll the device
 //
 // The device itself (the protocol subset, SET_POSTURE, POSE -> PWM, the trial, the
-// watchdog) is the Arduino library lib/graspguide_frame_device on lib/graspguide_frame.
+// watchdog) is the Arduino library lib/graspguide_cue_device on lib/graspguide_cue, with
+// the board's interfaces from lib/graspguide_hal.

@@ -4,8 +4,12 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include <graspguide_frame.h>
-#include <graspguide_frame_device.h>
+// Each library before the one that needs it: arduino-cli finds a library by the header
+// an include names, so graspguide_hal.h comes before graspguide_cue_device.h uses it.
+#include <graspguide_cue.h>
+#include <graspguide_hal.h>
+
+#include <graspguide_cue_device.h>
 
 namespace graspguide {
 namespace promini {

@@ -8,7 +8,7 @@
 #include <random>
 #include <type_traits>
 
-#include "graspguide_frame/alignment.h"
+#include "graspguide_cue/alignment.h"
 
 namespace gg = graspguide;
 

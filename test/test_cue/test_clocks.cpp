@@ -2,8 +2,8 @@
 // across the wraps of their 32-bit counters.
 #include <gtest/gtest.h>
 
-#include "graspguide_frame/trial_clock.h"
-#include "graspguide_frame/watchdog.h"
+#include "graspguide_cue/trial_clock.h"
+#include "graspguide_cue/watchdog.h"
 
 namespace gg = graspguide;
 

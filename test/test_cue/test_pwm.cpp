@@ -5,7 +5,7 @@
 #include <limits>
 #include <random>
 
-#include "graspguide_frame/pwm.h"
+#include "graspguide_cue/pwm.h"
 
 namespace gg = graspguide;
 

@@ -5,7 +5,7 @@
 #include <set>
 #include <string>
 
-#include "graspguide_frame/status.h"
+#include "graspguide_cue/status.h"
 
 namespace gg = graspguide;
 

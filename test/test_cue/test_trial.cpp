@@ -1,7 +1,7 @@
 // The trial state machine on injected timestamps: hold, broken holds, timeout, bad input.
 #include <gtest/gtest.h>
 
-#include "graspguide_frame/trial.h"
+#include "graspguide_cue/trial.h"
 
 namespace gg = graspguide;
 

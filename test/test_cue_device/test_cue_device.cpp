@@ -1,4 +1,4 @@
-// The per-frame-only device (lib/graspguide_frame_device) against the references it must
+// The per-frame-only device (lib/graspguide_cue_device) against the references it must
 // agree with: graspguide_link's parser and writer (C++17) for every byte on the wire, the
 // full-solve LinkDevice for every answer and, after the host's SET_POSTURE from
 // graspguide::Guidance, for the PWM of the same pose stream.
@@ -12,14 +12,14 @@
 #include <vector>
 
 #include "common/hand_scenes.h"
+#include "graspguide_cue_device.h"
 #include "graspguide_device/link_device.h"
-#include "graspguide_frame_device.h"
 #include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;
 namespace gd = graspguide::device;
 namespace gl = graspguide::link;
-namespace gfd = graspguide::frame_device;
+namespace gfd = graspguide::cue_device;
 namespace gh = graspguide::hal;
 
 namespace {
@@ -87,7 +87,7 @@ struct BoardRig {
   BoardStream stream;
   gh::RecordingMotors motors;
   gh::FakeClock clock;
-  gfd::FrameDevice device{stream, motors, clock, gfd::DeviceInfo{}};
+  gfd::CueDevice device{stream, motors, clock, gfd::DeviceInfo{}};
   Host host;
 
   template <class Msg>
@@ -250,13 +250,13 @@ void for_each_message(gl::MessageList<M...>, Fn&& fn) {
 
 }  // namespace
 
-TEST(FrameDevice, MotorsAreOffFromBoot) {
+TEST(CueDevice, MotorsAreOffFromBoot) {
   BoardRig r;
   EXPECT_GE(r.motors.writes(), 1u);
   EXPECT_TRUE(r.motors.all_off());
 }
 
-TEST(FrameDevice, HelloSaysPerFrameOnlyFloatAndPromini) {
+TEST(CueDevice, HelloSaysPerFrameOnlyFloatAndPromini) {
   BoardRig r;
   const uint16_t s = r.send(gl::Hello{});
   const auto reply = only<gl::HelloReply>(r.receive());
@@ -270,7 +270,7 @@ TEST(FrameDevice, HelloSaysPerFrameOnlyFloatAndPromini) {
 
 // Every host -> device message with its default fields, on a fresh device: the same answer
 // as the full-solve device, except what only it can do.
-TEST(FrameDevice, AnswersEveryRequestAsTheFullSolveDeviceDoes) {
+TEST(CueDevice, AnswersEveryRequestAsTheFullSolveDeviceDoes) {
   auto each = [](auto message) {
     using Msg = decltype(message);
     if (!gl::is_host_to_device_id(uint8_t(Msg::kId))) return;
@@ -308,7 +308,7 @@ TEST(FrameDevice, AnswersEveryRequestAsTheFullSolveDeviceDoes) {
 
 // The same trial on both devices: SET_SCENE + START_TRIAL on the full-solve one, the host's
 // SET_POSTURE + START_TRIAL on this one, then the same POSE stream.
-TEST(FrameDevice, ThePoseStreamGivesTheFullSolveDevicesPwmWithinOneCount) {
+TEST(CueDevice, ThePoseStreamGivesTheFullSolveDevicesPwmWithinOneCount) {
   std::mt19937_64 rng(15);
   int compared = 0, driven = 0, succeeded = 0, timed_out = 0;
   for (int n = 0; n < 24; ++n) {
@@ -376,7 +376,7 @@ TEST(FrameDevice, ThePoseStreamGivesTheFullSolveDevicesPwmWithinOneCount) {
   EXPECT_GT(timed_out, 0);
 }
 
-TEST(FrameDevice, SetPostureRefusesEachBadFieldByItsSchemaIndexAndStopsTheMotors) {
+TEST(CueDevice, SetPostureRefusesEachBadFieldByItsSchemaIndexAndStopsTheMotors) {
   struct Bad {
     const char* field;
     void (*spoil)(gl::SetPosture&);
@@ -428,7 +428,7 @@ TEST(FrameDevice, SetPostureRefusesEachBadFieldByItsSchemaIndexAndStopsTheMotors
   EXPECT_EQ(expect_error(r.receive(), gl::ErrorCode::kBadEnumValue).detail, posture_field("mode"));
 }
 
-TEST(FrameDevice, StartTrialNeedsThePosturesExactWrench) {
+TEST(CueDevice, StartTrialNeedsThePosturesExactWrench) {
   BoardRig r;
   const gl::SetPosture p = valid_posture();
   expect_error(r.receive_after(start_for(p)), gl::ErrorCode::kNoScene);
@@ -438,12 +438,12 @@ TEST(FrameDevice, StartTrialNeedsThePosturesExactWrench) {
   const auto e = expect_error(r.receive_after(other), gl::ErrorCode::kPostureMismatch);
   EXPECT_EQ(e.detail, 0);
   only<gl::Ack>(r.receive_after(start_for(p)));
-  EXPECT_EQ(r.device.state(), gfd::FrameDevice::State::kTrialRunning);
+  EXPECT_EQ(r.device.state(), gfd::CueDevice::State::kTrialRunning);
   // Refused while it runs, as SET_SCENE is on the full-solve device.
   expect_error(r.receive_after(p), gl::ErrorCode::kNotAllowedInState);
 }
 
-TEST(FrameDevice, PoseContactsNeedTheFullSolve) {
+TEST(CueDevice, PoseContactsNeedTheFullSolve) {
   BoardRig r;
   const gl::SetPosture p = valid_posture();
   only<gl::Ack>(r.receive_after(p));
@@ -455,7 +455,7 @@ TEST(FrameDevice, PoseContactsNeedTheFullSolve) {
   EXPECT_TRUE(r.motors.all_off());
 }
 
-TEST(FrameDevice, TheWatchdogStopsTheMotorsWhenPosesStop) {
+TEST(CueDevice, TheWatchdogStopsTheMotorsWhenPosesStop) {
   BoardRig r;
   const gl::SetPosture p = valid_posture();
   only<gl::Ack>(r.receive_after(p));
@@ -477,7 +477,7 @@ TEST(FrameDevice, TheWatchdogStopsTheMotorsWhenPosesStop) {
   EXPECT_EQ(s.state, gl::DeviceState::kTrialRunning);
 }
 
-TEST(FrameDevice, TheTrialEndsOnTheBoardsClockWhenPoseTimesFreeze) {
+TEST(CueDevice, TheTrialEndsOnTheBoardsClockWhenPoseTimesFreeze) {
   BoardRig r;
   gl::SetPosture p = valid_posture();
   p.threshold_deg = 0.0f;
@@ -496,10 +496,10 @@ TEST(FrameDevice, TheTrialEndsOnTheBoardsClockWhenPoseTimesFreeze) {
   EXPECT_EQ(result.trial_id, 9);
   EXPECT_FALSE(result.success);
   EXPECT_FLOAT_EQ(result.completion_s, 1.0f);
-  EXPECT_EQ(r.device.state(), gfd::FrameDevice::State::kSceneSet);
+  EXPECT_EQ(r.device.state(), gfd::CueDevice::State::kSceneSet);
 }
 
-TEST(FrameDevice, StopEndsTheTrialAndTheMotorsAtOnce) {
+TEST(CueDevice, StopEndsTheTrialAndTheMotorsAtOnce) {
   BoardRig r;
   const gl::SetPosture p = valid_posture();
   only<gl::Ack>(r.receive_after(p));
@@ -511,7 +511,7 @@ TEST(FrameDevice, StopEndsTheTrialAndTheMotorsAtOnce) {
   ASSERT_FALSE(r.motors.all_off());
   only<gl::Ack>(r.receive_after(gl::Stop{}));
   EXPECT_TRUE(r.motors.all_off());
-  EXPECT_EQ(r.device.state(), gfd::FrameDevice::State::kStopped);
+  EXPECT_EQ(r.device.state(), gfd::CueDevice::State::kStopped);
   // The posture stays: a new trial needs no new SET_POSTURE.
   only<gl::Ack>(r.receive_after(start_for(p)));
 }
@@ -519,7 +519,7 @@ TEST(FrameDevice, StopEndsTheTrialAndTheMotorsAtOnce) {
 // Garbage, cut frames, frames of every size and ids up to the schema's largest, fed to this
 // parser and to graspguide_link's: the same verdict at every byte, the same header and
 // payload for every trusted one.
-TEST(FrameDevice, TheParserAgreesWithGraspguideLinkOnAnyByteStream) {
+TEST(CueDevice, TheParserAgreesWithGraspguideLinkOnAnyByteStream) {
   std::mt19937_64 rng(99);
   std::uniform_int_distribution<int> byte(0, 255), pick(0, 9);
   for (int round = 0; round < 200; ++round) {
@@ -573,7 +573,7 @@ TEST(FrameDevice, TheParserAgreesWithGraspguideLinkOnAnyByteStream) {
   }
 }
 
-TEST(FrameDevice, GarbageIsCountedAndTheNextRequestIsAnswered) {
+TEST(CueDevice, GarbageIsCountedAndTheNextRequestIsAnswered) {
   BoardRig r;
   LinkRig full;
   std::mt19937_64 rng(5);
@@ -598,7 +598,7 @@ TEST(FrameDevice, GarbageIsCountedAndTheNextRequestIsAnswered) {
   EXPECT_EQ(status.bad_frames, full.device->parser().bad_frames());
 }
 
-TEST(FrameDevice, APartialFrameIsDroppedAfterSilence) {
+TEST(CueDevice, APartialFrameIsDroppedAfterSilence) {
   BoardRig r;
   uint16_t s = 0;
   const auto f = r.host.frame(gl::Hello{}, &s);
@@ -608,7 +608,7 @@ TEST(FrameDevice, APartialFrameIsDroppedAfterSilence) {
   EXPECT_EQ(only<gl::HelloReply>(r.receive()).request_seq, s);
 }
 
-TEST(FrameDevice, BadVersionAndBadLengthAreAnsweredWithTheirDetail) {
+TEST(CueDevice, BadVersionAndBadLengthAreAnsweredWithTheirDetail) {
   BoardRig r;
   gl::FrameHeader h;
   h.version = 9;

@@ -7,8 +7,8 @@
 #include <limits>
 #include <random>
 
-#include "graspguide_frame/alignment.h"
-#include "graspguide_frame/gravity_estimator.h"
+#include "graspguide_cue/alignment.h"
+#include "graspguide_cue/gravity_estimator.h"
 
 namespace gg = graspguide;
 

@@ -1,4 +1,4 @@
-// The IMU health rule (graspguide_frame/imu_watchdog.h): stale, stuck and out-of-range IMUs,
+// The IMU health rule (graspguide_cue/imu_watchdog.h): stale, stuck and out-of-range IMUs,
 // recovery, fault counts, the wrap of the microsecond clock, and that a fault turns the
 // motors off.
 #include <gtest/gtest.h>
@@ -9,7 +9,7 @@
 #include <limits>
 #include <string>
 
-#include "graspguide_frame/imu_watchdog.h"
+#include "graspguide_cue/imu_watchdog.h"
 #include "graspguide_hal/fake_hal.h"
 
 namespace gg = graspguide;

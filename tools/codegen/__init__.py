@@ -6,5 +6,5 @@
 One module per job: schema (load and validate the TOML), emit_cpp (messages.h, core_status.h),
 emit_python (link/messages.py), emit_golden (the golden frames, encoded independently),
 emit_docs (docs/protocol.md's message reference), emit_avr (the per-frame-only board's subset,
-lib/graspguide_frame_device); __main__ writes or checks them.
+lib/graspguide_cue_device); __main__ writes or checks them.
 """

@@ -22,7 +22,7 @@ PY_PATH = os.path.join(ROOT, "tools", "graspguide", "link", "messages.py")
 GOLDEN_JSON_PATH = os.path.join(ROOT, "test", "data", "golden_frames.json")
 GOLDEN_H_PATH = os.path.join(ROOT, "test", "data", "golden_frames.h")
 DOC_PATH = os.path.join(ROOT, "docs", "protocol.md")
-AVR_DIR = os.path.join(ROOT, "lib", "graspguide_frame_device", "src", "graspguide_frame_device")
+AVR_DIR = os.path.join(ROOT, "lib", "graspguide_cue_device", "src", "graspguide_cue_device")
 
 
 def outputs(schema: Schema) -> dict[str, str]:

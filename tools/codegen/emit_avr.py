@@ -1,4 +1,4 @@
-"""lib/graspguide_frame_device/src/graspguide_frame_device/link_subset.h: the messages a
+"""lib/graspguide_cue_device/src/graspguide_cue_device/link_subset.h: the messages a
 per-frame-only board (the Pro Mini) speaks, in C++14 for avr-gcc 5.4 without a C++
 standard library: ids, the enums those messages use, one struct per message and a plain
 pack or unpack function for each (no templates over field lists, no if constexpr)."""
@@ -152,11 +152,11 @@ def render(schema: Schema) -> str:
         "#include <stddef.h>",
         "#include <stdint.h>",
         "",
-        '#include "graspguide_frame/status.h"',
-        '#include "graspguide_frame_device/wire.h"',
+        '#include "graspguide_cue/status.h"',
+        '#include "graspguide_cue_device/wire.h"',
         "",
         "namespace graspguide {",
-        "namespace frame_device {",
+        "namespace cue_device {",
         "namespace link {",
         "",
         f"constexpr uint8_t kProtocolVersion = {s.version};",
@@ -238,7 +238,7 @@ def render(schema: Schema) -> str:
     core = [v for v in s.enums["ErrorCode"].values if v.value < s.link_error_base]
     L += [
         "// The core's statuses are the first ErrorCodes, name for name and value for value",
-        "// (graspguide_frame/status.h): checked here, so a status converts by value.",
+        "// (graspguide_cue/status.h): checked here, so a status converts by value.",
         "using CoreStatus = graspguide::Status;",
         f'static_assert(graspguide::kStatusCount == {len(core)}, "statuses and schema differ");',
         "constexpr bool same_value(CoreStatus s, ErrorCode e) { return uint8_t(s) == uint8_t(e); }",
@@ -254,7 +254,7 @@ def render(schema: Schema) -> str:
         "",
     ]
     L.append("}  // namespace link")
-    L.append("}  // namespace frame_device")
+    L.append("}  // namespace cue_device")
     L.append("}  // namespace graspguide")
     L.append("")
     return "\n".join(L)

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "graspguide.h"
-#include "graspguide_frame/gravity_estimator.h"
+#include "graspguide_cue/gravity_estimator.h"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -400,7 +400,7 @@ class PyGuidance {
   std::unique_ptr<gg::Guidance<double>> g_;  // heap: Eigen members need 16-byte alignment
 };
 
-// The device's gravity estimator (graspguide_frame/gravity_estimator.h) in float (as the
+// The device's gravity estimator (graspguide_cue/gravity_estimator.h) in float (as the
 // MCU runs it) or double, so Python can run the same C++ on an IMU stream.
 template <typename T>
 struct GravityState {
@@ -1014,7 +1014,7 @@ NB_MODULE(_core, m) {
                      GRASPGUIDE_GRAVITY_ACCEL_GATE_MPS2);
   nb::class_<PyGravityEstimator>(
       m, "GravityEstimator",
-      "The device's gravity estimator (graspguide_frame/gravity_estimator.h): unit gravity "
+      "The device's gravity estimator (graspguide_cue/gravity_estimator.h): unit gravity "
       "in the hand frame (pointing down) from accelerometer [m/s^2, specific force] and gyro "
       "[rad/s] samples, with gyro-bias estimation; or a fused chip's gravity report. Methods "
       "return a status name ('ok' or the error; on error nothing changes).")

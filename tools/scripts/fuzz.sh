@@ -84,7 +84,7 @@ harness_sources() {
 harness_includes() {
     case $1 in
         frame_parser) echo -Ilib/graspguide_link/src ;;
-        device) echo -Ilib/graspguide/src -Ilib/graspguide_frame/src -Ilib/graspguide_link/src -Ilib/graspguide_hal/src -Ilib/graspguide_device/src \
+        device) echo -Ilib/graspguide/src -Ilib/graspguide_cue/src -Ilib/graspguide_link/src -Ilib/graspguide_hal/src -Ilib/graspguide_device/src \
                      -Itest -I/usr/include/eigen3 ;;
     esac
 }

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Print the gravity-estimation comparison (SIMULATED streams): the device's
-estimator (lib/graspguide_frame/.../gravity_estimator.h through _core), VQF and x-io Fusion,
+estimator (lib/graspguide_cue/.../gravity_estimator.h through _core), VQF and x-io Fusion,
 error RMS and max in degrees during guidance motion, per stream.
 
     python tools/scripts/imu_compare.py [--json FILE] [--seed N] [--duration-s S]

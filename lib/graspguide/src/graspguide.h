@@ -4,4 +4,4 @@
 #pragma once
 
 #include "graspguide/guidance.h"
-#include "graspguide_frame/trial.h"
+#include "graspguide_cue/trial.h"

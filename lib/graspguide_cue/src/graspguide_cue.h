@@ -4,9 +4,9 @@
 // docs/per-frame-layer.md.
 #pragma once
 
-#include "graspguide_frame/alignment.h"
-#include "graspguide_frame/pwm.h"
-#include "graspguide_frame/status.h"
-#include "graspguide_frame/trial.h"
-#include "graspguide_frame/trial_clock.h"
-#include "graspguide_frame/watchdog.h"
+#include "graspguide_cue/alignment.h"
+#include "graspguide_cue/pwm.h"
+#include "graspguide_cue/status.h"
+#include "graspguide_cue/trial.h"
+#include "graspguide_cue/trial_clock.h"
+#include "graspguide_cue/watchdog.h"

@@ -2,7 +2,7 @@
 // each posture, and the device loop over it. See docs/per-frame-layer.md.
 #pragma once
 
-#include "graspguide_frame_device/device.h"
-#include "graspguide_frame_device/link_subset.h"
-#include "graspguide_frame_device/parser.h"
+#include "graspguide_cue_device/device.h"
+#include "graspguide_cue_device/link_subset.h"
+#include "graspguide_cue_device/parser.h"
 #include "graspguide_hal.h"

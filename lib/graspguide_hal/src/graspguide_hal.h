@@ -1,5 +1,5 @@
 // GraspGuide's hardware interfaces (hal.h) and the link's poll loop (link_poll.h), shared
-// by lib/graspguide_device and lib/graspguide_frame_device; fake_hal.h holds the
+// by lib/graspguide_device and lib/graspguide_cue_device; fake_hal.h holds the
 // in-memory fakes the tests use.
 #pragma once
 

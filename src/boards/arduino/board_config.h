@@ -42,7 +42,7 @@
 #endif
 
 // One IMU read per 10 ms (100 Hz): the rate the health thresholds are argued for
-// (graspguide_frame/imu_watchdog.h). Slower than the LSM6DSOX's 104 Hz output, so every read
+// (graspguide_cue/imu_watchdog.h). Slower than the LSM6DSOX's 104 Hz output, so every read
 // is a fresh conversion; the BNO055 fuses at 100 Hz.
 #ifndef GRASPGUIDE_IMU_PERIOD_US
 #define GRASPGUIDE_IMU_PERIOD_US 10000

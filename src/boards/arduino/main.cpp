@@ -8,8 +8,8 @@
 #include "board_config.h"
 #include "debounced_button.h"
 #include "esp32_ledc_motors.h"
+#include "graspguide_cue/imu_watchdog.h"
 #include "graspguide_device/link_device.h"
-#include "graspguide_frame/imu_watchdog.h"
 
 #if GRASPGUIDE_IMU == GRASPGUIDE_IMU_LSM6DSOX
 #include "lsm6dsox_imu.h"

@@ -12,7 +12,7 @@
 //   'E'                               the end            -> "E stack_bytes", and halts
 // One line per record; err and alpha are the float's bits in hex, the rest is decimal.
 #include "channel.h"
-#include "graspguide_frame.h"
+#include "graspguide_cue.h"
 
 namespace gg = graspguide;
 

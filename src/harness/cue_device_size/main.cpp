@@ -1,13 +1,13 @@
 // The per-frame-only device on the ATmega328P's own peripherals, for its flash and static
-// RAM (`pio run -e frame_device_avr`, then avr-size): UART0 at 115200 baud polled, Timer0
+// RAM (`pio run -e cue_device_avr`, then avr-size): UART0 at 115200 baud polled, Timer0
 // and Timer2's four PWM outputs as the motors, Timer1 counting microseconds. Minimal on
 // purpose: the Arduino sketch (promini/) is the board's real entry point; this image only
 // keeps what the device links, so its size is the device's.
 #include <avr/io.h>
 
-#include "graspguide_frame_device.h"
+#include "graspguide_cue_device.h"
 
-namespace gfd = graspguide::frame_device;
+namespace gfd = graspguide::cue_device;
 
 namespace {
 
@@ -76,6 +76,6 @@ int main() {
   static Uart0 uart;
   static TimerMotors motors;
   static Timer1Clock clock;
-  static gfd::FrameDevice device(uart, motors, clock, gfd::DeviceInfo{});
+  static gfd::CueDevice device(uart, motors, clock, gfd::DeviceInfo{});
   for (;;) device.poll();
 }

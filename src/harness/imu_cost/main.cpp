@@ -12,7 +12,7 @@
 #include "../stage_counts/qemu_halt.h"
 #include "../stage_counts/semihosting.h"
 #include "../stage_counts/systick_counter.h"
-#include "graspguide_frame/gravity_estimator.h"
+#include "graspguide_cue/gravity_estimator.h"
 
 namespace {
 

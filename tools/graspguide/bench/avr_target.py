@@ -1,10 +1,10 @@
 """Cycle counts of the per-frame layer on the ATmega328P under simavr
 (``graspguide bench --target avr``).
 
-The harness src/harness/avr_frame/ is the per-frame layer (lib/graspguide_frame) built for
-the paper's Arduino Pro Mini MCU by ``pio run -e avr_frame`` (Debian's avr-gcc 5.4, C++14,
+The harness src/harness/avr_cue/ is the per-frame layer (lib/graspguide_cue) built for
+the paper's Arduino Pro Mini MCU by ``pio run -e avr_cue`` (Debian's avr-gcc 5.4, C++14,
 -Os). It runs cycle-exact under libsimavr at 8 MHz in a small runner
-(src/harness/avr_frame/simavr_runner/runner.c, built here with the host's C compiler),
+(src/harness/avr_cue/simavr_runner/runner.c, built here with the host's C compiler),
 which feeds it this module's stimulus byte by byte and prints the cycles between two
 marks around each measured call. Measured, each on its own:
 
@@ -46,19 +46,19 @@ from graspguide.bench.targets import TargetError
 from graspguide.core import reference
 
 KEY = "atmega328p"  # the JSON's and the baseline's top-level key
-ENV = "avr_frame"  # the PlatformIO environment of the harness
+ENV = "avr_cue"  # the PlatformIO environment of the harness
 CLOCK_HZ = 8_000_000
 BASELINE = Path("tools", "perf", "avr_baseline.json")  # relative to the repository
 TOLERANCE = 0.10
 GOAL_FRAME_CYCLES = 8_000  # the goal: a fixed-posture frame within 1 ms at 8 MHz
-RUNNER_SOURCE = Path("src", "harness", "avr_frame", "simavr_runner", "runner.c")
+RUNNER_SOURCE = Path("src", "harness", "avr_cue", "simavr_runner", "runner.c")
 BUILD_TIMEOUT_S = 600.0
 RUN_TIMEOUT_S = 300.0  # a run takes a few seconds; a hang must not stall the tests
 MAX_CYCLES = 2_000_000_000  # the runner's own guard: 250 s of simulated time
 SEED = 12
 RANDOM_ORIENTATIONS = 64  # per posture
 MODES = {"C": 0, "V": 1}
-# The harness's statuses and trial states, by value (graspguide_frame/status.h, trial.h).
+# The harness's statuses and trial states, by value (graspguide_cue/status.h, trial.h).
 STATUS_OK, STATUS_TIME_WENT_BACKWARDS = 0, 13
 RUNNING, SUCCEEDED, FAILED = 1, 2, 3
 STALE_TIMEOUT_US = 200_000  # the harness's watchdog, the device application's default
@@ -75,7 +75,7 @@ class AvrToolMissing(AvrTargetError):
 
 
 class AvrBuildFailed(AvrTargetError):
-    """``pio run -e avr_frame`` or the runner's compilation failed."""
+    """``pio run -e avr_cue`` or the runner's compilation failed."""
 
 
 class AvrRunFailed(AvrTargetError):
@@ -290,7 +290,7 @@ def check_tools() -> str:
 
 
 def build(root: Path, progress: Callable[[str], None] | None = None) -> None:
-    """``pio run -e avr_frame`` (rebuilds only what changed) and the simavr runner (when
+    """``pio run -e avr_cue`` (rebuilds only what changed) and the simavr runner (when
     its source is newer than the program)."""
     cc = check_tools()
     if progress:

@@ -109,7 +109,7 @@ class Policy(enum.IntEnum):
 
 
 class Mode(enum.IntEnum):
-    """graspguide::Mode (graspguide_frame/pwm.h)"""
+    """graspguide::Mode (graspguide_cue/pwm.h)"""
 
     C = 0x00  # constant intensity (C)
     V = 0x01  # intensity proportional to the error (V)

@@ -21,7 +21,7 @@ Layout, little-endian throughout:
    6       u16    trial count (the plan's)
    8       u32    plan id: the CRC-32 of the plan payload above, so levels
                   are never applied to another plan
-   12      32 B   per trial, in plan order: u8 status code (graspguide_frame/
+   12      32 B   per trial, in plan order: u8 status code (graspguide_cue/
                   status.h; 0 ok), u8 k, u16 reserved 0, f32 levels[4]
                   (0 beyond k), f32 force_unit[3] (f̂, the unit force in the
                   hand frame)

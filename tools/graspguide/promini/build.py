@@ -32,7 +32,7 @@ BUILD_PROPERTIES = (
 #: tools/pio/scripts/build_id.py stamps the other boards.
 BUILD_ID_MACRO = "GRASPGUIDE_BUILD_ID"
 #: The project's Arduino libraries the sketch uses, relative to the repository.
-LIBRARIES = ("lib/graspguide_frame", "lib/graspguide_hal", "lib/graspguide_frame_device")
+LIBRARIES = ("lib/graspguide_cue", "lib/graspguide_hal", "lib/graspguide_cue_device")
 #: The Pro Mini's budget: flash (the 32 KB less the 2 KB bootloader is 30 KB), and static RAM
 #: plus the measured stack within 1.5 KB of the 2 KB.
 FLASH_BUDGET_BYTES = 30 * 1024

@@ -22,7 +22,7 @@ Format (every key is checked; an unknown key is an error, so a typo is never ign
     timeout_s = 90.0             # (0, 1800] seconds
 
 The [trial] ranges are the core's (``graspguide.core._core.TRIAL_LIMITS``, from
-graspguide_frame/trial_config.h), so the file, the core and the device accept the same
+graspguide_cue/trial_config.h), so the file, the core and the device accept the same
 values. The contacts must span like a hand in the stated unit (:func:`hand_span_problem`:
 the two farthest 5 mm to 0.5 m apart), so a file in millimetres that says ``units = "m"``
 is refused, not guided.

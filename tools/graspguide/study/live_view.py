@@ -24,7 +24,7 @@ FINAL_STATES = (SUCCESS, TIMEOUT, STOPPED)
 
 class TrialProgress:
     """The trial's state from its TELEMETRY, by the device's rule
-    (lib/graspguide_frame/src/graspguide_frame/trial.h): holding while error_deg <=
+    (lib/graspguide_cue/src/graspguide_cue/trial.h): holding while error_deg <=
     threshold_deg, the hold counted from the first frame of the current stretch; success
     once it lasted hold_s. Display only: the TRIAL_RESULT decides."""
 

@@ -1,4 +1,4 @@
-"""The per-frame layer on the ATmega328P: built with avr-gcc (`pio run -e avr_frame`), run
+"""The per-frame layer on the ATmega328P: built with avr-gcc (`pio run -e avr_cue`), run
 under simavr at 8 MHz, its PWM against the float64 reference on the same inputs, cycle
 counts produced for every part; and graspguide.bench.avr_target's parser, baseline rule
 and errors on synthetic output. The regression check against tools/perf/avr_baseline.json

@@ -318,7 +318,7 @@ def test_per_frame_board_refusals_are_raised_on_the_host_before_sending():
 # --------------------------------------------------------------------------------------
 # The real sketch (promini/GraspGuideProMini, built by arduino-cli) under the runner
 # --------------------------------------------------------------------------------------
-STALE_TIMEOUT_MS = 200  # GRASPGUIDE_STALE_TIMEOUT_MS of lib/graspguide_frame_device
+STALE_TIMEOUT_MS = 200  # GRASPGUIDE_STALE_TIMEOUT_MS of lib/graspguide_cue_device
 SWEEP_AXIS = (0.6, 0.0, 0.8)
 
 

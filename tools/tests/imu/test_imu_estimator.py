@@ -1,4 +1,4 @@
-"""The device's gravity estimator (graspguide_frame/gravity_estimator.h through _core) on the
+"""The device's gravity estimator (graspguide_cue/gravity_estimator.h through _core) on the
 virtual participant's IMU streams (SIMULATED): it meets its goal during guidance
 motion, beside VQF and x-io Fusion run on the same samples, and misses it without bias
 estimation."""

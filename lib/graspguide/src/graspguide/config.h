@@ -3,7 +3,7 @@
 #pragma once
 
 // The PWM range (GRASPGUIDE_PWM_MIN, GRASPGUIDE_PWM_SPAN) and the contact counts.
-#include "graspguide_frame/config.h"
+#include "graspguide_cue/config.h"
 
 #ifndef GRASPGUIDE_USE_DOUBLE
 #define GRASPGUIDE_USE_DOUBLE 0  // microcontrollers with a single-precision FPU

@@ -5,7 +5,7 @@
 
 #include "graspguide/grasp_solution.h"
 #include "graspguide/orientation.h"
-#include "graspguide_frame/pwm.h"
+#include "graspguide_cue/pwm.h"
 
 namespace graspguide {
 

@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "graspguide/scene.h"
-#include "graspguide_frame/pwm.h"
+#include "graspguide_cue/pwm.h"
 
 namespace graspguide {
 
@@ -23,7 +23,7 @@ Status motor_levels(const ForceVec<T, K>& lambda, Policy policy, LevelVec<T, K>&
   return Status::kOk;
 }
 
-// The per-frame layer's PWM (graspguide_frame/pwm.h) on an Eigen level vector.
+// The per-frame layer's PWM (graspguide_cue/pwm.h) on an Eigen level vector.
 template <typename T, int K>
 Pwm pwm_from_levels(const LevelVec<T, K>& m, T gain) {
   return pwm_from_levels<T>(m.data(), K, gain);

@@ -1,9 +1,9 @@
 // Step 7a on Eigen types: the per-frame layer's guidance error and alpha
-// (graspguide_frame/alignment.h) for callers that hold Eigen vectors and quaternions.
+// (graspguide_cue/alignment.h) for callers that hold Eigen vectors and quaternions.
 #pragma once
 
 #include "graspguide/types.h"
-#include "graspguide_frame/alignment.h"
+#include "graspguide_cue/alignment.h"
 
 namespace graspguide {
 

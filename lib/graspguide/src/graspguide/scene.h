@@ -7,8 +7,8 @@
 #include "graspguide/tolerances.h"
 #include "graspguide/types.h"
 // Mode and TrialConfig (with its ranges) are the per-frame layer's.
-#include "graspguide_frame/pwm.h"
-#include "graspguide_frame/trial_config.h"
+#include "graspguide_cue/pwm.h"
+#include "graspguide_cue/trial_config.h"
 
 namespace graspguide {
 

@@ -1,5 +1,5 @@
 // The statuses live with the per-frame layer, which an AVR builds without the core; the one
-// list is graspguide_frame/status.h.
+// list is graspguide_cue/status.h.
 #pragma once
 
-#include "graspguide_frame/status.h"
+#include "graspguide_cue/status.h"

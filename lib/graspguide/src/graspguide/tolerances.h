@@ -4,7 +4,7 @@
 #pragma once
 
 // kMotorOffLevel and kMinQuaternionNorm: the per-frame layer's.
-#include "graspguide_frame/tolerances.h"
+#include "graspguide_cue/tolerances.h"
 
 namespace graspguide {
 

@@ -5,7 +5,7 @@
 #include "graspguide/eigen.h"
 
 #include "graspguide/config.h"
-#include "graspguide_frame/pwm.h"  // Pwm
+#include "graspguide_cue/pwm.h"  // Pwm
 
 namespace graspguide {
 

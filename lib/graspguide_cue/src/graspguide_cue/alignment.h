@@ -8,10 +8,10 @@
 // rotated, and only its row of R(q) is computed. docs/per-frame-layer.md has the costs.
 #pragma once
 
-#include "graspguide_frame/config.h"
-#include "graspguide_frame/scalar_math.h"
-#include "graspguide_frame/status.h"
-#include "graspguide_frame/tolerances.h"
+#include "graspguide_cue/config.h"
+#include "graspguide_cue/scalar_math.h"
+#include "graspguide_cue/status.h"
+#include "graspguide_cue/tolerances.h"
 
 namespace graspguide {
 

@@ -24,9 +24,9 @@
 // gravity_in_hand() does for a tracker's quaternion. C++14, no heap, no standard library.
 #pragma once
 
-#include "graspguide_frame/scalar_math.h"
-#include "graspguide_frame/status.h"
-#include "graspguide_frame/tolerances.h"
+#include "graspguide_cue/scalar_math.h"
+#include "graspguide_cue/status.h"
+#include "graspguide_cue/tolerances.h"
 
 // Overridable from build_flags: the filter gains (1/s and 1/s^2) and the accelerometer gate
 // (m/s^2 away from 1 g). See GravityGains below for why these values.

@@ -4,8 +4,8 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/scalar_math.h"
-#include "graspguide_frame/status.h"
+#include "graspguide_cue/scalar_math.h"
+#include "graspguide_cue/status.h"
 
 // Stale: no sample for this long. Half the pose watchdog's 200 ms, so the host-less mode stops
 // the motors no later than the tracker-driven one; at 100 Hz it lets 9 samples go missing (an

@@ -7,8 +7,8 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/config.h"
-#include "graspguide_frame/scalar_math.h"
+#include "graspguide_cue/config.h"
+#include "graspguide_cue/scalar_math.h"
 
 namespace graspguide {
 

@@ -7,10 +7,10 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/config.h"
-#include "graspguide_frame/motor_calibration.h"
-#include "graspguide_frame/scalar_math.h"
-#include "graspguide_frame/tolerances.h"
+#include "graspguide_cue/config.h"
+#include "graspguide_cue/motor_calibration.h"
+#include "graspguide_cue/scalar_math.h"
+#include "graspguide_cue/tolerances.h"
 
 namespace graspguide {
 

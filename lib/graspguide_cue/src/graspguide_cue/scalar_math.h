@@ -14,7 +14,7 @@ inline double sqrt_of(double x) { return sqrt(x); }
 // function, in a form that takes the scalings of alignment.h with it. In float a cubic in z,
 // fitted by weighted least squares on Chebyshev nodes for the relative error of asin over
 // |x| <= 0.5: largest relative error 1.7e-7, about one unit in the last place (libm's asinf:
-// 7.1e-8), checked by test/test_frame. avr-libc's asinf covers [-1, 1] and costs 2,614
+// 7.1e-8), checked by test/test_cue. avr-libc's asinf covers [-1, 1] and costs 2,614
 // cycles on the ATmega328P; this costs about 1,200.
 inline float asin_deg_ratio(float z) {
   return (((2.89023395f * z + 2.27760342f) * z + 4.32354196f) * z + 9.54844901f) * z + 57.2957838f;

@@ -5,8 +5,8 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/status.h"
-#include "graspguide_frame/trial_config.h"
+#include "graspguide_cue/status.h"
+#include "graspguide_cue/trial_config.h"
 
 namespace graspguide {
 

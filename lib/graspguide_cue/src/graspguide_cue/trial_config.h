@@ -4,7 +4,7 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/status.h"
+#include "graspguide_cue/status.h"
 
 namespace graspguide {
 

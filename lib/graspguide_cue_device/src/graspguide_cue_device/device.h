@@ -9,9 +9,9 @@
 #include <stdint.h>
 #include <string.h>
 
-#include "graspguide_frame.h"
-#include "graspguide_frame_device/link_subset.h"
-#include "graspguide_frame_device/parser.h"
+#include "graspguide_cue.h"
+#include "graspguide_cue_device/link_subset.h"
+#include "graspguide_cue_device/parser.h"
 #include "graspguide_hal/hal.h"
 #include "graspguide_hal/link_poll.h"
 
@@ -25,7 +25,7 @@
 #endif
 
 namespace graspguide {
-namespace frame_device {
+namespace cue_device {
 
 constexpr uint32_t kStaleTimeoutUs = uint32_t(GRASPGUIDE_STALE_TIMEOUT_MS) * 1000u;
 constexpr uint32_t kTrialClockSlackUs = uint32_t(GRASPGUIDE_TRIAL_CLOCK_SLACK_MS) * 1000u;
@@ -40,12 +40,12 @@ struct DeviceInfo {
   uint32_t build_id = 0;
 };
 
-class FrameDevice {
+class CueDevice {
  public:
   using State = link::DeviceState;
 
-  FrameDevice(hal::ByteStream& stream, hal::MotorOutputs& motors, hal::Clock& clock,
-              const DeviceInfo& info)
+  CueDevice(hal::ByteStream& stream, hal::MotorOutputs& motors, hal::Clock& clock,
+            const DeviceInfo& info)
       : stream_(stream), motors_(motors), clock_(clock), info_(info) {
     motors_off();  // whatever the pins did before boot
   }
@@ -443,5 +443,5 @@ class FrameDevice {
   link::ErrorCode last_error_ = link::ErrorCode::kOk;
 };
 
-}  // namespace frame_device
+}  // namespace cue_device
 }  // namespace graspguide

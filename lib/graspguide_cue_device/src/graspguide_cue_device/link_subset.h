@@ -9,11 +9,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "graspguide_frame/status.h"
-#include "graspguide_frame_device/wire.h"
+#include "graspguide_cue/status.h"
+#include "graspguide_cue_device/wire.h"
 
 namespace graspguide {
-namespace frame_device {
+namespace cue_device {
 namespace link {
 
 constexpr uint8_t kProtocolVersion = 4;
@@ -36,7 +36,7 @@ constexpr size_t kSchemaMaxPayloadSize = 168;
 constexpr size_t kMaxAcceptedPayloadSize = 69;
 constexpr size_t kMaxSentPayloadSize = 29;
 
-// graspguide::Mode (graspguide_frame/pwm.h)
+// graspguide::Mode (graspguide_cue/pwm.h)
 enum class Mode : uint8_t {
   kC = 0x00,
   kV = 0x01,
@@ -615,7 +615,7 @@ inline void pack(const Status& m, uint8_t* out) {
 }
 
 // The core's statuses are the first ErrorCodes, name for name and value for value
-// (graspguide_frame/status.h): checked here, so a status converts by value.
+// (graspguide_cue/status.h): checked here, so a status converts by value.
 using CoreStatus = graspguide::Status;
 static_assert(graspguide::kStatusCount == 19, "statuses and schema differ");
 constexpr bool same_value(CoreStatus s, ErrorCode e) { return uint8_t(s) == uint8_t(e); }
@@ -649,5 +649,5 @@ static_assert(same_value(CoreStatus::kBadImuConfig, ErrorCode::kBadImuConfig), "
 constexpr ErrorCode error_code_of(CoreStatus s) { return static_cast<ErrorCode>(s); }
 
 }  // namespace link
-}  // namespace frame_device
+}  // namespace cue_device
 }  // namespace graspguide

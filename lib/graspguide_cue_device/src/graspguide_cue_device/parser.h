@@ -9,11 +9,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "graspguide_frame_device/link_subset.h"
-#include "graspguide_frame_device/wire.h"
+#include "graspguide_cue_device/link_subset.h"
+#include "graspguide_cue_device/wire.h"
 
 namespace graspguide {
-namespace frame_device {
+namespace cue_device {
 
 enum class ParseEvent : uint8_t {
   kNone = 0,  // nothing complete yet (also: a lone delimiter, which is idle line)
@@ -145,5 +145,5 @@ class FrameParser {
   uint32_t bad_frames_ = 0;
 };
 
-}  // namespace frame_device
+}  // namespace cue_device
 }  // namespace graspguide

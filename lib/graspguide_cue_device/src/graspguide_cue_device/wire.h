@@ -9,7 +9,7 @@
 #include <string.h>
 
 namespace graspguide {
-namespace frame_device {
+namespace cue_device {
 namespace link {
 
 static_assert(sizeof(float) == 4, "the wire carries IEEE-754 binary32");
@@ -97,5 +97,5 @@ void cobs_write(const uint8_t* in, size_t size, Sink&& sink) {
 }
 
 }  // namespace link
-}  // namespace frame_device
+}  // namespace cue_device
 }  // namespace graspguide

@@ -4,8 +4,8 @@
 #pragma once
 
 #include "graspguide.h"
-#include "graspguide_frame/trial_clock.h"
-#include "graspguide_frame/watchdog.h"
+#include "graspguide_cue/trial_clock.h"
+#include "graspguide_cue/watchdog.h"
 #include "graspguide_hal/hal.h"
 
 #ifndef GRASPGUIDE_STALE_TIMEOUT_MS

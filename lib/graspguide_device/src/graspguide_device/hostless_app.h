@@ -12,12 +12,12 @@
 #include <cstring>
 
 #include "graspguide.h"
+#include "graspguide_cue/gravity_estimator.h"
+#include "graspguide_cue/imu_watchdog.h"
 #include "graspguide_device/plan_store.h"
 #include "graspguide_device/results_log.h"
 #include "graspguide_device/study_plan.h"
 #include "graspguide_device/vibration_pattern.h"
-#include "graspguide_frame/gravity_estimator.h"
-#include "graspguide_frame/imu_watchdog.h"
 #include "graspguide_hal/hal.h"
 
 namespace graspguide::device {

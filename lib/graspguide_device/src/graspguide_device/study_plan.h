@@ -6,9 +6,9 @@
 #include <cmath>
 #include <cstdint>
 
-#include "graspguide_frame/motor_calibration.h"
-#include "graspguide_frame/pwm.h"
-#include "graspguide_frame/trial_config.h"
+#include "graspguide_cue/motor_calibration.h"
+#include "graspguide_cue/pwm.h"
+#include "graspguide_cue/trial_config.h"
 
 namespace graspguide::device {
 

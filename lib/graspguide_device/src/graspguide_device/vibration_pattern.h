@@ -5,7 +5,7 @@
 
 #include <stdint.h>
 
-#include "graspguide_frame/pwm.h"
+#include "graspguide_cue/pwm.h"
 
 #ifndef GRASPGUIDE_PATTERN_DUTY
 // Well above the PWM floor (70), so every finger feels it, and below 255, so a pattern

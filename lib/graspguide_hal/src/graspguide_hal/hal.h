@@ -7,7 +7,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "graspguide_frame/pwm.h"
+#include "graspguide_cue/pwm.h"
 
 namespace graspguide {
 namespace hal {
@@ -59,7 +59,7 @@ struct ImuSample {
 
 // An inertial sensor, polled. read() never blocks for long (one bus transfer) and returns
 // false when the part has no new sample since the last call, or the transfer failed; the
-// health rule (graspguide_frame/imu_watchdog.h) turns a long silence into a fault.
+// health rule (graspguide_cue/imu_watchdog.h) turns a long silence into a fault.
 class Imu {
  public:
   virtual ImuOutput output() const = 0;

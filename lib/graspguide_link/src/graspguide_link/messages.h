@@ -286,7 +286,7 @@ constexpr const char* enum_name(Policy v) {
   return "unknown";
 }
 
-// graspguide::Mode (graspguide_frame/pwm.h)
+// graspguide::Mode (graspguide_cue/pwm.h)
 enum class Mode : uint8_t {
   kC = 0x00,  // constant intensity (C)
   kV = 0x01,  // intensity proportional to the error (V)
