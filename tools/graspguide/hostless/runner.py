@@ -47,6 +47,7 @@ from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.hostless.imu_world import ImuWorld, unit_quaternion
 from graspguide.imu.synthetic import ImuNoise
 from graspguide.protocol.study_protocol import PlannedTrial, Protocol, derive_seed
+from graspguide.records.files import WORLD_FILE
 from graspguide.run_errors import RunnerError
 from graspguide.study.progress import Progress
 from graspguide.study.runner import RESULT_MARGIN_S, StudyRunner, append_line, read_run_jsonl
@@ -81,9 +82,6 @@ FOLLOW_REAL_TIME_AFTER_S = 0.1
 FIRST_EVENT_WAIT_S = 2.0
 #: Minimum jerk: peak speed = this x amplitude / duration.
 _MIN_JERK_PEAK = 1.875
-#: OUT/PID/WORLD_FILE: per trial result, the true error of the hand the world moved beside
-#: the device's estimate (TrueError).
-WORLD_FILE = "world.jsonl"
 #: Where the world's clock stopped, per device client: a later run on the same device
 #: continues from there (the device's clock follows the samples and must not go back).
 _WORLD_CLOCK_US: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()

@@ -51,6 +51,7 @@ from graspguide.core.rotations import (
     slerp,
 )
 from graspguide.core.vocabulary import FINGERS
+from graspguide.records.files import SESSION_POSES_FILE
 
 Sample = tuple[float, tuple[float, float, float, float], list[list[float]] | None]
 QUAT_COLUMNS = ["t_s", "qw", "qx", "qy", "qz"]
@@ -204,7 +205,7 @@ class ReplaySource(Source):
     @staticmethod
     def _load(path: str, convention: TrackerConvention) -> list[Sample]:
         if os.path.isdir(path):  # a `graspguide stream --log` session folder
-            path = os.path.join(path, "poses.csv")
+            path = os.path.join(path, SESSION_POSES_FILE)
         try:
             f = open(path, newline="", encoding="utf-8")
         except OSError as e:

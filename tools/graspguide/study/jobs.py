@@ -13,6 +13,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from graspguide.records.files import ParticipantFiles
+
 
 @dataclasses.dataclass
 class TrialJob:
@@ -42,7 +44,7 @@ class TrialJob:
         ]
 
     def completed_trials(self) -> int:
-        return count_lines(os.path.join(self.study_dir, self.participant, "trials.jsonl"))
+        return count_lines(ParticipantFiles.of(self.study_dir, self.participant).trials)
 
 
 def repo_root() -> str | None:
