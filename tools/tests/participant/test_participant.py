@@ -903,6 +903,7 @@ def test_trajectories_do_not_depend_on_the_openblas_kernel():
     # The child imports this module and the same graspguide as this process.
     paths = [
         os.path.dirname(os.path.abspath(__file__)),
+        os.path.dirname(os.path.dirname(os.path.abspath(__file__))),  # conftest's folder
         os.path.dirname(os.path.dirname(os.path.abspath(_core.__file__))),
     ]
     digests = {}

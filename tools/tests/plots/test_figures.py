@@ -184,7 +184,7 @@ def test_a_stream_log_plot_says_simulated_when_the_log_does(tmp_path, simulated)
 
 
 def test_figure4_spells_f_perp_one_way(tmp_path):
-    from test_analysis import make_study
+    from analysis.test_analysis import make_study
 
     from graspguide.analysis import paper_tables as analysis
 
