@@ -28,7 +28,7 @@ from graspguide.core import _core, reference
 from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.hostless.imu_world import ImuWorld
 from graspguide.imu.synthetic import sweep_poses
-from graspguide.study.participant import VirtualParticipant
+from graspguide.participant.model import VirtualParticipant
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.path.join(HERE, "..", "data")
