@@ -358,6 +358,8 @@ SLOW_TESTS = {
     "test_calibration_cli.py": (
         "whole calibrations in subprocesses",
         [
+            "test_file_lists_every_trial_typed",
+            "test_operator_ctrl_c_during_a_stimulus",
             "test_virtual_participant_on_sim",
             "test_operator_full_run_and_apply",
             "test_usage_errors",
@@ -366,6 +368,7 @@ SLOW_TESTS = {
     "test_cli_papercuts.py": (
         "a trial or an analysis into a closed pipe",
         [
+            "test_stream_into_a_closed_pipe_stops_the_motors",
             "test_trial_into_a_closed_pipe_stops_the_motors_and_keeps_the_records",
             "test_analyze_into_a_closed_pipe_ends_quietly",
         ],
@@ -373,6 +376,8 @@ SLOW_TESTS = {
     "test_device_e2e.py": (
         "many graspguide subprocesses on the simulated device",
         [
+            "test_killed_host_turns_motors_off_within_the_watchdog",
+            "test_stale_stream_turns_motors_off_within_the_watchdog",
             "test_cli_solve_device_usage_errors",
             "test_cli_device_engine_answers_bad_requests_like_the_core",
             "test_cli_device_engine_agrees_on_the_known_answers",
@@ -403,6 +408,102 @@ SLOW_TESTS = {
     "test_sim_children.py": (
         "interrupts trials on the simulated device",
         ["test_interrupted_trial_stops_cleanly_and_leaves_no_simulator"],
+    ),
+    "test_operator_runner.py": (
+        "drives the operator console in a pty through whole trials",
+        [
+            "test_tlx_anchors_shown_per_scale_with_the_virtual_participant_as_a_person",
+            "test_ready_prompt_rest_and_every_key_logged_against_its_trial",
+            "test_ctrl_c_then_resume_honours_the_skip_and_the_redo",
+        ],
+    ),
+    "test_trial_panel.py": (
+        "runs trials with the TLX questionnaire in a pty",
+        [
+            "test_the_tlx_answers_are_reviewed_before_they_are_saved",
+            "test_tlx_answers_from_input_that_is_not_a_terminal_are_saved_as_given",
+        ],
+    ),
+    "test_runner.py": (
+        "runs and kills studies on the simulated device",
+        [
+            "test_kill_mid_study_and_resume_every_trial_exactly_once",
+            "test_real_time_run_on_the_device_clock",
+        ],
+    ),
+    "test_sim_safety.py": (
+        "waits out the watchdog in real time",
+        [
+            "test_a_host_that_stops_reading_loses_whole_answers_only",
+            "test_no_request_keeps_the_motors_on_past_the_watchdog_with_a_1mib_store",
+            "test_virtual_clock_trial_of_a_silent_host_ends_in_real_time",
+        ],
+    ),
+    "test_hostless_clock.py": (
+        "runs host-less plans against a paused host",
+        [
+            "test_a_host_paused_mid_run_finds_the_device_ahead_and_runs_the_plan",
+            "test_a_host_slowed_at_start_finds_the_device_ahead_and_runs_the_plan",
+        ],
+    ),
+    "test_stream_panel.py": (
+        "streams to the live panel in a pty",
+        [
+            "test_panel_in_a_pty_shows_states_in_order",
+        ],
+    ),
+    "test_sweep.py": (
+        "runs sweeps of trials",
+        [
+            "test_tiny_sweep_end_to_end_and_resume",
+            "test_larger_threshold_never_makes_the_same_trajectory_take_longer",
+        ],
+    ),
+    "test_lab_streams.py": (
+        "streams and runs trials from lab-stream sources",
+        [
+            "test_stream_lsl_matches_the_session_log",
+            "test_trial_lsl_matches_the_trial_records",
+            "test_observer_interface_pushes_in_order",
+        ],
+    ),
+    "test_bench.py": (
+        "solves the benchmark's scene sets",
+        [
+            "test_instances_are_the_paper_hand_and_seeded_random_hands",
+            "test_accuracy_set_is_more_hands_under_every_combination",
+            "test_bad_options_are_clear_errors",
+        ],
+    ),
+    "test_stream_pacing.py": (
+        "streams a trial to the simulated device",
+        [
+            "test_stream_to_the_simulated_device_is_not_paced",
+        ],
+    ),
+    "test_motors_cmd.py": (
+        "switches the simulated device's motors in a subprocess",
+        [
+            "test_motors_on_sim_prints_a_trace_and_switches_off",
+        ],
+    ),
+    "test_bench_targets.py": (
+        "waits for a hanging QEMU's timeout",
+        [
+            "test_qemu_that_hangs_is_killed_at_the_timeout",
+        ],
+    ),
+    "test_disk_faults.py": (
+        "runs trials onto a size-limited disk",
+        [
+            "test_trial_on_a_size_limit_stops_with_one_line_and_resumes",
+        ],
+    ),
+    "test_stream_interrupt.py": (
+        "interrupts a stream in a pty",
+        [
+            "test_ctrl_c_in_a_terminal_leaves_the_panel_stopped_with_the_motors_off",
+        ],
     ),
 }
 
