@@ -3,8 +3,8 @@
 // each way float shows it cannot vouch for an answer, are retried and come out as the
 // double core's answer on the same float inputs; ordinary hands are not retried; the
 // retry can be switched off, and double never retries. The hands are the 'retry' list of
-// test/data/hard_hands.json, which the Python tests also compare with the float64
-// reference.
+// test/data/hard_hands.json (data/retry_hands.h is generated from it), which the Python
+// tests also compare with the float64 reference.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -12,81 +12,16 @@
 #include <random>
 
 #include "common/hand_scenes.h"
+#include "data/retry_hands.h"
 #include "graspguide.h"
 
 namespace gg = graspguide;
 
 namespace {
 
-// Why float cannot vouch for the hand's answer.
-enum class Doubt { kVerdict, kResidual };
-
-// A hand float cannot vouch for, and why.
-struct RetryHand {
-  const char* name;
-  int k;
-  double contacts[4][3];
-  double force[3];
-  gg::Policy policy;
-  Doubt doubt;
-};
-
-const RetryHand kRetryHands[] = {
-    {"p2204522",
-     3,
-     {{0.04494037585436739, 0.03053429712849922, 0.02266664723980756},
-      {0.0034042718550601047, 0.0936372274491434, 0.04528011312471476},
-      {-0.0008358505308126273, 0.10035906448590609, 0.047446552315281484},
-      {0, 0, 0}},
-     {-0.46772854432514194, 0.8662874692784672, 0.1754309818549512},
-     gg::Policy::kFperp,
-     Doubt::kVerdict},
-    {"p1453642",
-     3,
-     {{0.049673006960451814, 0.04444279826351377, 0.04946824877769698},
-      {0.021290198851965834, 0.10906204826065943, 0.04436559409614136},
-      {-0.007043224497789708, 0.0986230492963951, 0.03927807832390602},
-      {0, 0, 0}},
-     {-0.25615441567575364, -0.9572968717493527, 0.13404333131012683},
-     gg::Policy::kFperp,
-     Doubt::kResidual},
-    {"p106034",
-     3,
-     {{0.04966689690685262, 0.04904829611896976, 0.028451813224532364},
-      {0.015150478548027601, 0.08653778858444987, 0.04477521817827912},
-      {0.0026737704556028443, 0.09859745445699755, 0.05067568391195605},
-      {0, 0, 0}},
-     {-0.7315100647478698, 0.43412553421836625, -0.5257642491765538},
-     gg::Policy::kFperp,
-     Doubt::kVerdict},
-    {"p2629315",
-     4,
-     {{0.05987951702495167, 0.03420736161367301, 0.03660593936668528},
-      {0.005796428972927941, 0.08790590508182465, 0.05329308046545888},
-      {-0.020436409997482412, 0.10461078872731762, 0.04811943651930693},
-      {0.000818933349785278, 0.04828420629934567, -0.008466220551860134}},
-     {-0.38660475577729636, -0.17613507622123836, -0.9052696823239557},
-     gg::Policy::kFperp,
-     Doubt::kVerdict},
-    {"p2811766",
-     3,
-     {{0.05485703701071162, 0.05465707963124879, 0.035008042702543235},
-      {0.004148189523642333, 0.09639376161412362, 0.043008875423138165},
-      {-0.0011276620677085087, 0.09011119765015829, 0.043841289508471284},
-      {0, 0, 0}},
-     {-0.9084423493251154, -0.3656606419845235, 0.20254577965519593},
-     gg::Policy::kFperp,
-     Doubt::kVerdict},
-    {"p088019",
-     4,
-     {{0.05842269759759068, 0.03797525790643823, 0.023508602738658825},
-      {0.016381862968775293, 0.09412782146845693, 0.04094672097384096},
-      {-0.0025551265951760504, 0.11335564010399796, 0.043548343426526526},
-      {0.010984554721106873, 0.04987878496888214, -0.0013707045366395942}},
-     {-0.7874333864068572, 0.5977609094119497, -0.15043456102514416},
-     gg::Policy::kFperp,
-     Doubt::kResidual},
-};
+using graspguide_test::kRetryHands;
+using graspguide_test::RetryDoubt;
+using graspguide_test::RetryHand;
 
 template <int K>
 gg::Contacts<float, K> contacts_of(const RetryHand& h) {
@@ -142,7 +77,7 @@ void check_hand(const RetryHand& h) {
   EXPECT_FALSE(f.certain);
   // Each hand fails the check it was kept for: an infeasibility verdict within float's
   // rounding, or an optimum off equilibrium.
-  EXPECT_EQ(f.firm, h.doubt != Doubt::kVerdict);
+  EXPECT_EQ(f.firm, h.doubt != RetryDoubt::kVerdict);
 
   gg::SolverSettings on, off;
   off.double_retry = false;

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 if __package__ in (None, ""):  # run as `python3 tools/codegen`: import as the package
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from codegen import emit_avr, emit_cpp, emit_docs, emit_golden, emit_python  # noqa: E402
+from codegen import emit_avr, emit_cpp, emit_docs, emit_golden, emit_hands, emit_python  # noqa: E402
 from codegen.schema import REGEN, Schema, SchemaError, load_schema  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -22,6 +22,8 @@ PY_PATH = os.path.join(ROOT, "tools", "graspguide", "link", "messages.py")
 GOLDEN_JSON_PATH = os.path.join(ROOT, "test", "data", "golden_frames.json")
 GOLDEN_H_PATH = os.path.join(ROOT, "test", "data", "golden_frames.h")
 DOC_PATH = os.path.join(ROOT, "docs", "protocol.md")
+HANDS_JSON_PATH = os.path.join(ROOT, *emit_hands.HANDS_SOURCE.split("/"))
+RETRY_HANDS_H_PATH = os.path.join(ROOT, "test", "data", "retry_hands.h")
 AVR_DIR = os.path.join(ROOT, "lib", "graspguide_cue_device", "src", "graspguide_cue_device")
 
 
@@ -40,11 +42,17 @@ def outputs(schema: Schema) -> dict[str, str]:
     # Likewise the per-frame board's library (its manifest says whether the copy has it).
     if os.path.exists(os.path.join(os.path.dirname(os.path.dirname(AVR_DIR)), "library.json")):
         out[os.path.join(AVR_DIR, "link_subset.h")] = emit_avr.render(schema)
+    if os.path.exists(HANDS_JSON_PATH):
+        with open(HANDS_JSON_PATH, encoding="utf-8") as fh:
+            out[RETRY_HANDS_H_PATH] = emit_hands.render_h(fh.read())
     return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="codegen", description="Generate the link message code.")
+    ap = argparse.ArgumentParser(
+        prog="codegen",
+        description="Generate the link message code and the native tests' retry hands.",
+    )
     ap.add_argument(
         "--check",
         action="store_true",
@@ -55,6 +63,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         files = outputs(load_schema())
     except (SchemaError, KeyError, tomllib.TOMLDecodeError) as e:
         print(f"codegen: schema error: {e}", file=sys.stderr)
+        return 2
+    except emit_hands.HandsError as e:
+        print(f"codegen: {e}", file=sys.stderr)
         return 2
     stale = []
     for path, text in files.items():

@@ -459,9 +459,10 @@ def test_stale_generated_code_fails_the_check(tmp_path):
         "tools/graspguide/link/messages.py",
         "test/data/golden_frames.json",
         "test/data/golden_frames.h",
+        "test/data/retry_hands.h",
         "docs/protocol.md",
     ]
-    for r in generator + outputs:
+    for r in generator + outputs + ["test/data/hard_hands.json"]:
         os.makedirs(tmp_path / os.path.dirname(r), exist_ok=True)
         shutil.copy(os.path.join(REPO_ROOT, r), tmp_path / r)
     gen = str(tmp_path / "tools" / "codegen")
@@ -477,6 +478,23 @@ def test_stale_generated_code_fails_the_check(tmp_path):
         res = subprocess.run([sys.executable, gen, "--check"], capture_output=True, text=True)
         assert res.returncode == 1 and r in res.stderr, r
         (tmp_path / r).write_text(original, encoding="utf-8")
+
+
+def test_a_retry_hand_without_its_doubt_is_refused_naming_the_field(tmp_path):
+    for name in os.listdir(os.path.join(TOOLS_DIR, "codegen")):
+        if name.endswith((".py", ".toml")):
+            os.makedirs(tmp_path / "tools" / "codegen", exist_ok=True)
+            shutil.copy(os.path.join(TOOLS_DIR, "codegen", name), tmp_path / "tools" / "codegen")
+    hands = json.loads(open(os.path.join(REPO_ROOT, "test", "data", "hard_hands.json")).read())
+    del hands["retry"][1]["doubt"]
+    (tmp_path / "test" / "data").mkdir(parents=True)
+    (tmp_path / "test" / "data" / "hard_hands.json").write_text(json.dumps(hands))
+    res = subprocess.run(
+        [sys.executable, str(tmp_path / "tools" / "codegen")], capture_output=True, text=True
+    )
+    assert res.returncode == 2
+    assert "retry hand 'p1453642': 'doubt' must be one of ['residual', 'verdict']" in res.stderr
+    assert not (tmp_path / "test" / "data" / "retry_hands.h").exists()
 
 
 def test_the_installed_package_has_the_current_protocol_code():

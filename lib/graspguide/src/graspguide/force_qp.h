@@ -245,6 +245,45 @@ Status fixed_rows(const GraspStructure<T, K>& st, const ForceVec<T, K>& start, u
 // stage counts are those of one function.
 #define GRASPGUIDE_QP_STEP __attribute__((always_inline)) inline
 
+// The arrays of one dual active-set solve, apart from its scalars: the arrays' addresses
+// go to the steps the compiler keeps out of line (the active rows' split, add and drop;
+// the equalities' columns), and a scalar beside them would be reloaded after every such
+// call, where on its own it stays in a register.
+template <typename T, int K>
+struct DualActiveSetArrays {
+  using Rows = ActiveRows<T, K>;
+  using Vec = ForceVec<T, K>;
+  static constexpr int kMax = Rows::kMax;
+
+  EqualityRows<T, K> eq;
+  Rows rows;
+  int w[kMax];  // constraint index of each active row
+  T u[kMax];    // its multiplier
+  // The candidate's steps: v = P e_cand, z its part the active rows cannot reach, d its
+  // part they can (Q^T v) and coeff = r^-1 d.
+  Vec v, z;
+  T d[kMax], coeff[kMax];
+  Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
+  bool have_shared = false;
+
+  // A row the active ones determine: on this face its value follows from equilibrium
+  // alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of the rounding the
+  // iterate carries from large steps. `size` is what its sum's cancellations started from.
+  T dependent_value(const Vec& start, int cand, T& size) {
+    if (!have_shared) {
+      eq.shared_part(start, shared);
+      have_shared = true;
+    }
+    T value = shared(cand);
+    size = std::abs(shared(cand));
+    for (int i = 0; i < rows.n; ++i) {
+      value -= coeff[i] * shared(w[i]);
+      size += std::abs(coeff[i] * shared(w[i]));
+    }
+    return value;
+  }
+};
+
 // One dual active-set solve (project_forces) and its steps. The equalities are always
 // held (eq); rows holds the active inequality rows as an orthonormal basis, w their
 // indices and u their multipliers. Each candidate row is added by steps along
@@ -259,13 +298,22 @@ struct DualActiveSet {
   // that float computes to 3e-7 (a bound of 7e-5), and hides them.
   static constexpr T kStepUlps = T(2) * std::numeric_limits<T>::epsilon();
 
-  DualActiveSet(const Vec& start_, Vec& lambda_, uint16_t constrained_, T violation_tol_,
-                T rel_tol_)
+  DualActiveSet(DualActiveSetArrays<T, K>& arrays, const Vec& start_, Vec& lambda_,
+                uint16_t constrained_, T violation_tol_, T rel_tol_)
       : start(start_),
         lambda(lambda_),
         constrained(constrained_),
         violation_tol(violation_tol_),
-        rel_tol(rel_tol_) {}
+        rel_tol(rel_tol_),
+        a(arrays),
+        eq(arrays.eq),
+        rows(arrays.rows),
+        w(arrays.w),
+        u(arrays.u),
+        v(arrays.v),
+        z(arrays.z),
+        d(arrays.d),
+        coeff(arrays.coeff) {}
 
   const Vec& start;
   Vec& lambda;
@@ -273,10 +321,15 @@ struct DualActiveSet {
   const T violation_tol;
   const T rel_tol;
 
-  EqualityRows<T, K> eq;
-  Rows rows;
-  int w[kMax];  // constraint index of each active row
-  T u[kMax];    // its multiplier
+  DualActiveSetArrays<T, K>& a;
+  EqualityRows<T, K>& eq;
+  Rows& rows;
+  int (&w)[kMax];
+  T (&u)[kMax];
+  Vec &v, &z;
+  T (&d)[kMax];
+  T (&coeff)[kMax];
+
   T dep_tol = T(0);
   int limit = 0;        // the most independent inequality rows beside the equalities
   uint16_t active = 0;  // fixed rows are held by eq, never by `rows`
@@ -287,15 +340,6 @@ struct DualActiveSet {
   // row 1e-4 long (a near-degenerate vertex) is large, and so is its error; violations
   // below the bound are rounding, not a reason to move again.
   T step_error = T(0);
-  Vec shared;  // the equalities' shared part, formed the first time a dependent row needs it
-  bool have_shared = false;
-
-  // The candidate's steps: v = P e_cand, z its part the active rows cannot reach, d its
-  // part they can (Q^T v) and coeff = r^-1 d.
-  Vec v, z;
-  T d[kMax], coeff[kMax];
-  T z_norm = T(0);
-  bool dependent = false;  // no primal step: the active rows determine the candidate
 
   // The equalities: equilibrium, and the fixed rows held at zero (kQpInfeasible if
   // equilibrium contradicts them). lambda starts at the unconstrained optimum on them:
@@ -362,26 +406,10 @@ struct DualActiveSet {
 
   // Splits the candidate's column against the active rows. With as many active rows as
   // null(G) has dimensions, nothing is left to move along, whatever rounding says.
-  GRASPGUIDE_QP_STEP void split_candidate() {
+  // Returns whether the candidate is dependent, and its length |z| in z_norm.
+  GRASPGUIDE_QP_STEP bool split_candidate(T& z_norm) {
     z_norm = rows.split(v, d, z, coeff);
-    dependent = !(z_norm > dep_tol) || rows.n >= limit;
-  }
-
-  // A row the active ones determine: on this face its value follows from equilibrium
-  // alone, lambda_c = lambda0_c - sum_i coeff_i lambda0_(w_i), free of the rounding the
-  // iterate carries from large steps. `size` is what its sum's cancellations started from.
-  GRASPGUIDE_QP_STEP T dependent_value(int cand, T& size) {
-    if (!have_shared) {
-      eq.shared_part(start, shared);
-      have_shared = true;
-    }
-    T value = shared(cand);
-    size = std::abs(shared(cand));
-    for (int i = 0; i < rows.n; ++i) {
-      value -= coeff[i] * shared(w[i]);
-      size += std::abs(coeff[i] * shared(w[i]));
-    }
-    return value;
+    return !(z_norm > dep_tol) || rows.n >= limit;
   }
 
   // A degenerate vertex (the paper model's common case) holds a dependent row at zero;
@@ -390,7 +418,7 @@ struct DualActiveSet {
   // the row holds when the tolerance allows it, and otherwise certifies infeasibility.
   GRASPGUIDE_QP_STEP bool dependent_row_holds(int cand, T tol) {
     T size;
-    const T value = dependent_value(cand, size);
+    const T value = a.dependent_value(start, cand, size);
     bool can_leave = false;
     for (int i = 0; i < rows.n; ++i) can_leave = can_leave || coeff[i] > T(0);
     const T rounding = tol > kStepUlps * size ? tol : kStepUlps * size;
@@ -422,9 +450,9 @@ struct DualActiveSet {
   //   shared part by its shortest row, and coeff = r^-1 d divides by the active rows'
   //   shortest: a basis row 3e-3 long makes it 1e-4 |lambda0|, far above two ulps of the
   //   terms.
-  GRASPGUIDE_QP_STEP bool infeasibility_is_firm(int cand) {
+  GRASPGUIDE_QP_STEP bool infeasibility_is_firm(int cand, T z_norm) {
     T size;
-    const T value = dependent_value(cand, size);
+    const T value = a.dependent_value(start, cand, size);
     T r_min = T(1), spread = T(1);
     for (int i = 0; i < rows.n; ++i) {
       if (std::abs(rows.r[i][i]) < r_min) r_min = std::abs(rows.r[i][i]);
@@ -437,7 +465,7 @@ struct DualActiveSet {
 
   // Moves t along the candidate's steps: lambda along z (unless dependent), the active
   // multipliers along -coeff, the candidate's own multiplier u_cand up.
-  GRASPGUIDE_QP_STEP void take_step(T t, T& u_cand) {
+  GRASPGUIDE_QP_STEP void take_step(T t, bool dependent, T& u_cand) {
     if (!dependent) {
       lambda.noalias() += t * z;
       step_error += kStepUlps * std::abs(t);
@@ -447,7 +475,7 @@ struct DualActiveSet {
   }
 
   // A full step: the candidate reaches zero and becomes active with multiplier u_cand.
-  GRASPGUIDE_QP_STEP void add_active_row(int cand, T u_cand) {
+  GRASPGUIDE_QP_STEP void add_active_row(int cand, T u_cand, T z_norm) {
     lambda(cand) = T(0);
     w[rows.n] = cand;
     u[rows.n] = u_cand;
@@ -475,7 +503,10 @@ struct DualActiveSet {
     T u_cand = T(0);
     for (;;) {
       if (++info.iterations > max_iterations) return Status::kQpIterationLimit;
-      split_candidate();
+      // |z| and whether the candidate is dependent (no primal step: the active rows
+      // determine it), as locals that stay in registers.
+      T z_norm;
+      const bool dependent = split_candidate(z_norm);
       if (dependent && u_cand == T(0) && dependent_row_holds(cand, tol)) {
         settled = static_cast<uint16_t>(settled | (1u << cand));
         return Status::kOk;
@@ -483,14 +514,14 @@ struct DualActiveSet {
       int drop;
       const T t_dual = dual_step_limit(drop);
       if (dependent && drop < 0) {
-        info.firm = infeasibility_is_firm(cand);
+        info.firm = infeasibility_is_firm(cand, z_norm);
         return Status::kQpInfeasible;
       }
       const T t_primal =
           dependent ? std::numeric_limits<T>::infinity() : -lambda(cand) / (z_norm * z_norm);
-      take_step(t_primal <= t_dual ? t_primal : t_dual, u_cand);
+      take_step(t_primal <= t_dual ? t_primal : t_dual, dependent, u_cand);
       if (t_primal <= t_dual) {
-        add_active_row(cand, u_cand);
+        add_active_row(cand, u_cand, z_norm);
         return Status::kOk;
       }
       drop_active_row(drop);
@@ -528,7 +559,8 @@ Status project_forces(const GraspStructure<T, K>& st, const ForceVec<T, K>& star
                       T dependent_tol, int max_iterations, ForceVec<T, K>& lambda, QpInfo& info,
                       int known_dependences = 0) {
   info = QpInfo{};
-  detail::DualActiveSet<T, K> qp(start, lambda, constrained, violation_tol, rel_tol);
+  detail::DualActiveSetArrays<T, K> arrays;
+  detail::DualActiveSet<T, K> qp(arrays, start, lambda, constrained, violation_tol, rel_tol);
   Status s = qp.hold_equalities(st, fixed, dependent_tol, known_dependences, info);
   if (s != Status::kOk) return s;
   for (;;) {
