@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import TESTS_DIR as CONFTEST_DIR
+from bad_requests import BAD_CASES, GOOD_LINE
 from conftest import TOOLS_DIR
 from known_answer_requests import load_cases, request_lines
 
@@ -632,13 +632,8 @@ def test_cli_device_engine_agrees_on_the_known_answers(report_figure):
 
 
 def test_cli_device_engine_answers_bad_requests_like_the_core():
-    """Every bad-input case of test_cli.py (one fault each): the same code and message
+    """Every bad-input case of bad_requests.py (one fault each): the same code and message
     from the device engine as from the core, and the stream goes on."""
-    sys.path.insert(0, os.path.join(CONFTEST_DIR, "cli"))
-    try:
-        from test_cli import BAD_CASES, GOOD_LINE
-    finally:
-        sys.path.pop(0)
     data = b"".join(line + b"\n" + GOOD_LINE.encode() + b"\n" for _, line, _, _ in BAD_CASES)
     answers = {}
     for engine in (["--scalar", "float"], ["--engine", "device", "--port", "sim"]):
