@@ -29,10 +29,13 @@ COLORS = {"F+C": "#c0504d", "Fperp+C": "#e6a19f", "F+V": "#4f81bd", "Fperp+V": "
 RemovedTrial = tuple[str, int, str, str]
 
 
-def clipped_sd_bar(mean: float, sd: float, low: float = 0.0, high: float = TIMEOUT_S):
-    """The (lower, upper) lengths of a mean ± SD bar kept inside [low, high]: a time cannot
-    be negative nor run past the timeout, whatever the SD of a piled-up condition says."""
-    return max(0.0, min(sd, mean - low)), max(0.0, min(sd, high - mean))
+def sd_range(mean: float | None, sd: float | None, timeout_s: float = TIMEOUT_S):
+    """(below, above) the mean for its ± SD bar, cut at 0 s and at the timeout: no trial
+    is shorter than 0 or longer than the timeout (a failure counts as it), whatever the SD
+    of a condition piled up at both ends says."""
+    if mean is None or not sd:
+        return 0.0, 0.0
+    return min(sd, max(mean, 0.0)), min(sd, max(timeout_s - mean, 0.0))
 
 
 def trial_figure(
@@ -101,7 +104,7 @@ def trial_figure(
             )
             if paper and (k, m) in paper:
                 mean, sd = paper[(k, m)]
-                lo, hi = clipped_sd_bar(mean, sd)
+                lo, hi = sd_range(mean, sd)
                 ax.errorbar(
                     [i + 0.36],
                     [mean],

@@ -43,6 +43,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from graspguide.analysis.trial_figure import sd_range
 from graspguide.exit_codes import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from graspguide.records.files import ParticipantFiles
 from graspguide.records.storage import write_file_whole, write_json_file
@@ -432,14 +433,6 @@ def _dodged(xs: Sequence[float], j: int, n: int, log: bool) -> list[float]:
     if log:
         return [x * (1.0 + 0.035 * k) for x in xs]
     return [x + 0.1 * k for x in xs]
-
-
-def sd_range(mean: float | None, sd: float | None, timeout_s: float) -> tuple[float, float]:
-    """(below, above) the mean for its +- SD bar, cut at 0 s and at the timeout: no
-    trial is shorter than 0 or longer than the timeout (a failure counts as it)."""
-    if mean is None or not sd:
-        return 0.0, 0.0
-    return min(sd, max(mean, 0.0)), min(sd, max(timeout_s - mean, 0.0))
 
 
 def sweep_figure(result: dict[str, Any]) -> Any:

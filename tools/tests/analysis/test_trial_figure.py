@@ -8,18 +8,19 @@ import random
 import pandas as pd
 import pytest
 
-from graspguide.analysis.trial_figure import TIMEOUT_S, clipped_sd_bar, trial_figure
+from graspguide.analysis.trial_figure import TIMEOUT_S, sd_range, trial_figure
 
 
 def test_sd_bars_stay_between_zero_and_the_timeout():
-    assert clipped_sd_bar(33.0, 30.0) == (30.0, 30.0)
-    assert clipped_sd_bar(10.0, 20.0) == (10.0, 20.0)
-    assert clipped_sd_bar(80.0, 20.0) == (20.0, 10.0)
+    assert sd_range(None, 3.0) == (0.0, 0.0) and sd_range(40.0, None) == (0.0, 0.0)
+    assert sd_range(33.0, 30.0) == (30.0, 30.0)
+    assert sd_range(10.0, 20.0) == (10.0, 20.0)
+    assert sd_range(80.0, 20.0) == (20.0, 10.0)
     rng = random.Random(3)
     for _ in range(1000):
         mean = rng.uniform(0.0, TIMEOUT_S)
         sd = rng.uniform(0.0, 100.0)
-        lo, hi = clipped_sd_bar(mean, sd)
+        lo, hi = sd_range(mean, sd)
         assert 0.0 <= lo <= sd and 0.0 <= hi <= sd
         assert mean - lo >= 0.0 and mean + hi <= TIMEOUT_S
 
