@@ -2,7 +2,8 @@
 # The main job: set up what is missing (tools/bootstrap.sh, idempotent), then
 # `graspguide demo`: the paper's user study end to end, SIMULATED (the simulated device on
 # a virtual clock and 8 virtual participants through protocols/paper.toml), then its
-# analysis (Tables I-II, the ANOVA; Figure 4 and report.md in logs/demo-study/analysis/).
+# analysis (Tables I-II beside the paper's, the trial-level ANOVA, the mixed model and
+# contacts x modality; the figures and report.md in logs/demo-study/analysis/).
 # Killed or interrupted, the same command resumes the study (every trial exactly once).
 # Extra arguments go to `graspguide demo` (--participants, --jobs, --out, --protocol).
 set -euo pipefail

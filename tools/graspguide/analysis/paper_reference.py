@@ -187,25 +187,27 @@ def _rows(table) -> list[list[str]]:
     ]
 
 
-_HEADER = [
-    "k",
-    "modality",
-    "paper success",
-    "simulated success",
-    "paper time [s]",
-    "simulated time [s]",
-    "simulated trials",
-]
+def _header(side: str) -> list[str]:
+    return [
+        "k",
+        "modality",
+        "paper success",
+        f"{side} success",
+        "paper time [s]",
+        f"{side} time [s]",
+        f"{side} trials",
+    ]
 
 
-def format_markdown(table) -> str:
-    """The paper-vs-simulated table as a markdown table."""
-    return _md_table(_HEADER, _rows(table))
+def format_markdown(table, side: str = "simulated") -> str:
+    """The paper-vs-study table as a markdown table; ``side`` names the study's columns
+    ("simulated", or "this study" for people)."""
+    return _md_table(_header(side), _rows(table))
 
 
-def format_text(table) -> str:
-    """The paper-vs-simulated table as aligned plain text."""
-    return _text_table(_HEADER, _rows(table))
+def format_text(table, side: str = "simulated") -> str:
+    """The paper-vs-study table as aligned plain text."""
+    return _text_table(_header(side), _rows(table))
 
 
 def _note(paper: dict[str, Any], note_id: str) -> str:

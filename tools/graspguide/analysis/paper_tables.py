@@ -799,8 +799,11 @@ def _capitalized(text: str) -> str:
 
 
 def report_markdown(
-    res: Result, figure_names: Sequence[str] = ("figure4.png", "figure4.svg")
+    res: Result,
+    figure_names: Sequence[str] = ("figure4.png", "figure4.svg"),
+    after_tables: str = "",
 ) -> str:
+    """report.md's text; ``after_tables`` (markdown) goes between Table II and Table III."""
     st = res.stats
     out: list[str] = ["# GraspGuide study analysis", ""]
     banner = _banner(res)
@@ -845,6 +848,8 @@ def report_markdown(
         _md_table(T2_HEADER, _t2_rows(res.table2)),
         "",
     ]
+    if after_tables:
+        out += [after_tables.rstrip("\n"), ""]
     out += ["## Table III — NASA-TLX workload (1–21, lower is better)", ""]
     unanswered = int(res.tlx[list(TLX_SCALES)].isna().any(axis=1).sum())
     if unanswered:
@@ -872,10 +877,11 @@ def report_markdown(
         ]
 
     out += [
-        "## Statistics (completion time by feedback modality)",
+        "## Per-participant reading (completion time by feedback modality)",
         "",
-        "Per-participant mean completion time per modality, 3 and 4 contact points "
-        "pooled (seconds):",
+        "The paper's tests on per-participant means, one reading of its Section IV (the "
+        "trial-level reading is below). Mean completion time per participant and "
+        "modality, 3 and 4 contact points pooled (seconds):",
         "",
         _md_table(
             ["participant"] + list(MODALITIES),
@@ -1002,7 +1008,8 @@ def report_markdown(
     return "\n".join(out)
 
 
-def summary_text(res: Result) -> str:
+def tables_text(res: Result) -> str:
+    """The banner of a simulated study, then Tables I-II as plain text."""
     lines = []
     banner = _banner(res)
     if banner:
@@ -1013,10 +1020,12 @@ def summary_text(res: Result) -> str:
         "",
         "Table II: completion time",
         _text_table(T2_HEADER, _t2_rows(res.table2)),
-        "",
-        res.stats.anova_line(),
     ]
     return "\n".join(lines)
+
+
+def summary_text(res: Result) -> str:
+    return tables_text(res) + "\n\n" + res.stats.anova_line()
 
 
 def analyze(paths: Iterable[str | os.PathLike], remove_outliers: bool = True) -> Result:

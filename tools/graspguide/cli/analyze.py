@@ -1,5 +1,5 @@
 """`graspguide analyze`: the paper's tables, statistics and Figure 4 from study logs
-(graspguide.analysis.paper_tables)."""
+(graspguide.analysis.study_analysis)."""
 
 from __future__ import annotations
 
@@ -62,21 +62,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from graspguide.analysis.paper_tables import (
-        AnalysisError,
-        analyze,
-        default_out_dir,
-        summary_text,
-        write_outputs,
-    )
+    from graspguide.analysis.paper_tables import AnalysisError, default_out_dir
+    from graspguide.analysis.study_analysis import analyze_study, summary_text, write_outputs
 
     try:
-        res = analyze(args.dirs, remove_outliers=not args.keep_outliers)
+        res = analyze_study(args.dirs, remove_outliers=not args.keep_outliers)
         out = Path(args.out) if args.out else default_out_dir(args.dirs)
         written = write_outputs(res, out)
     except AnalysisError as e:
         return fail("analyze", e)
-    for line in res.left_out:
+    for line in res.base.left_out:
         print(f"graspguide analyze: warning: {line}", file=sys.stderr)
     print(summary_text(res))
     print()

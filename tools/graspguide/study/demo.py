@@ -2,8 +2,8 @@
 
 One command runs the simulated device (virtual clock) and N virtual participants (U1..UN,
 :class:`graspguide.participant.model.VirtualParticipant`) through a study protocol (default
-``protocols/paper.toml``), then the paper's analysis (:mod:`graspguide.analysis.paper_tables`): it
-prints Tables I-II and the repeated-measures ANOVA line and writes Figure 4 (PNG, SVG),
+``protocols/paper.toml``), then its analysis (:mod:`graspguide.analysis.study_analysis`): it
+prints Tables I-II beside the paper's and every reading of the statistics and writes the figures,
 the Markdown report and the CSV tables to ``OUT/analysis/``.
 
 Each participant is one ``graspguide trial --port sim --source participant`` process
@@ -195,11 +195,12 @@ def _run_participants(
 
 
 def _analyse(out: str, run_s: float, t0: float) -> int:
-    from graspguide.analysis.paper_tables import AnalysisError, analyze, summary_text, write_outputs
+    from graspguide.analysis.paper_tables import AnalysisError
+    from graspguide.analysis.study_analysis import analyze_study, summary_text, write_outputs
 
     target = os.path.join(out, "analysis")
     try:
-        res = analyze([out])
+        res = analyze_study([out])
         written = write_outputs(res, target)
     except AnalysisError as e:
         print(f"graspguide demo: error: the analysis failed: {e}", file=sys.stderr)
@@ -209,7 +210,7 @@ def _analyse(out: str, run_s: float, t0: float) -> int:
     print()
     print(f"Wrote {', '.join(p.name for p in written)} to {target}")
     print(
-        f"SIMULATED study: {len(res.participants)} virtual participants; trials "
+        f"SIMULATED study: {len(res.base.participants)} virtual participants; trials "
         f"{run_s:.1f} s, total {time.monotonic() - t0:.1f} s wall time"
     )
     return EXIT_OK
