@@ -34,6 +34,7 @@ COMMANDS = (
     "analyze",
     "demo",
     "sweep",
+    "observer",
     "device",
     "plan",
     "mp",

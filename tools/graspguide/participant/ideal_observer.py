@@ -35,10 +35,9 @@ errs upward, the safe side for an upper bound.
 
 from __future__ import annotations
 
-import argparse
 import math
+import os
 import random
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -48,12 +47,14 @@ import numpy as np
 from graspguide.core import solver
 from graspguide.protocol.study_protocol import (
     Protocol,
-    _candidate,
-    _classify,
+    candidate_wrench,
+    classify_wrench,
     derive_seed,
     draw_wrenches,
     load_protocol,
+    modality_parts,
 )
+from graspguide.repo_root import find_repo_root
 
 #: Mode V reading: 3 ERM time constants (0.18 s) plus a simple reaction time (0.21 s),
 #: the values of graspguide.participant.model.ParticipantParams (docs/participant.md).
@@ -176,8 +177,8 @@ def draw_prior(protocol: Protocol, n: int, seed: int) -> list[tuple[float, ...]]
     rng = random.Random(derive_seed(seed, "ideal-observer-prior", n))
     out: list[tuple[float, ...]] = []
     for _ in range(max(1, protocol.max_draws) * max(1, n)):
-        w = _candidate(rng, protocol)
-        if _classify(protocol, w) is not None:
+        w = candidate_wrench(rng, protocol)
+        if classify_wrench(protocol, w) is not None:
             out.append(w)
             if len(out) == n:
                 break
@@ -414,53 +415,115 @@ def format_table(rows: Sequence[Bounds]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description="Ideal-observer bounds (SIMULATED).")
-    ap.add_argument("--protocol", default="protocols/paper.toml")
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--n-prior", type=int, default=20000)
-    ap.add_argument("--n-trials", type=int, default=500)
-    ap.add_argument("--weber", type=float, default=0.3)
-    ap.add_argument("--per-wrench", action="store_true")
-    a = ap.parse_args(argv)
-    t0 = time.monotonic()
-    p = load_protocol(a.protocol)
-    prior = draw_prior(p, a.n_prior, a.seed)
-    trials = draw_prior(p, a.n_trials, a.seed + 7919)
+def format_per_wrench(rows: Sequence[Bounds]) -> str:
+    """The mode-C posterior masses of each protocol wrench, one table per condition."""
+    out = []
+    for b in rows:
+        if b.mode != "C":
+            continue
+        out += [
+            f"k = {b.k}, {b.policy}+C, per wrench of the protocol:",
+            "",
+            "| wrench | on/off | intensity |",
+            "|---|---|---|",
+        ]
+        out += [
+            f"| {wid} | {100 * x:.1f} % | {100 * y:.1f} % |" for wid, x, y in b.protocol_wrenches
+        ]
+        out.append("")
+    return "\n".join(out).rstrip("\n")
+
+
+def observer_bounds_all(
+    protocol_path: str,
+    seed: int = 1,
+    n_prior: int = 20000,
+    n_trials: int = 500,
+    weber_frac: float = 0.3,
+) -> tuple[Protocol, list[Bounds]]:
+    """The bounds of every condition of the protocol (k x modality, in the protocol's
+    order), from one shared prior sample and one shared trial sample."""
+    p = load_protocol(protocol_path)
+    prior = draw_prior(p, n_prior, seed)
+    trials = draw_prior(p, n_trials, seed + 7919)
     rows = []
-    for k in (3, 4):
-        for mode in ("C", "V"):
-            for policy in ("F", "Fperp"):
-                rows.append(
-                    ideal_observer_bounds(
-                        a.protocol,
-                        k,
-                        mode,
-                        policy,
-                        a.seed,
-                        weber_frac=a.weber,
-                        protocol=p,
-                        prior=prior,
-                        trials=trials,
-                    )
+    for k in p.contact_counts:
+        for modality in p.modalities:
+            policy, mode = modality_parts(modality)
+            rows.append(
+                ideal_observer_bounds(
+                    protocol_path,
+                    k,
+                    mode,
+                    policy,
+                    seed,
+                    weber_frac=weber_frac,
+                    protocol=p,
+                    prior=prior,
+                    trials=trials,
                 )
+            )
+    return p, rows
+
+
+def report_text(
+    protocol_path: str, rows: Sequence[Bounds], seed: int, weber_frac: float, per_wrench: bool
+) -> str:
+    """The Markdown report of :func:`observer_bounds_all`: settings, table, per wrench."""
     b0 = rows[0]
-    print(
-        f"SIMULATED ideal-observer bounds: {a.protocol}, seed {a.seed}, prior sample "
-        f"{len(prior)}, trials {len(trials)}, {b0.n_cells} equal-area cells, search "
+    lines = [
+        "# Ideal-observer bounds (SIMULATED: model bounds, not human data)",
+        "",
+        f"SIMULATED ideal-observer bounds: {protocol_path}, seed {seed}, prior sample "
+        f"{b0.n_prior}, trials {b0.n_trials}, {b0.n_cells} equal-area cells, search "
         f"{b0.caps} caps = {b0.search_area_deg2:.0f} deg^2 ({100 * b0.search_fraction:.1f} % "
-        f"of the sphere), Weber {a.weber}"
-    )
-    print(format_table(rows))
-    if a.per_wrench:
-        for b in rows:
-            if b.mode == "C":
-                print(f"k={b.k} {b.policy}+C per wrench (on/off, intensity):")
-                for wid, x, y in b.protocol_wrenches:
-                    print(f"  {wid}: {100 * x:.1f} % {100 * y:.1f} %")
+        f"of the sphere), Weber {weber_frac:g}",
+        "",
+        format_table(rows),
+        "",
+        "Upper bounds on the success rate of any observer of the cue under the assumptions "
+        "of docs/ideal-observer.md; the V column is what one explicit observer achieves "
+        "(a lower bound on the ideal one).",
+    ]
+    if per_wrench:
+        lines += ["", format_per_wrench(rows)]
+    return "\n".join(lines) + "\n"
+
+
+def run(
+    protocol: str | None = None,
+    seed: int = 1,
+    n_prior: int = 20000,
+    n_trials: int = 500,
+    weber: float = 0.3,
+    per_wrench: bool = False,
+    out: str | None = None,
+) -> int:
+    """``graspguide observer``: print the bounds of every condition of the protocol
+    (default protocols/paper.toml of the repository); with ``out``, also write them as a
+    Markdown file. Exit status 0, or 2 for a protocol file that cannot be used and 1 for
+    an output file that cannot be written (the message says which)."""
+    from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, fail, report
+    from graspguide.protocol.study_protocol import ProtocolFileError
+
+    if protocol is None:
+        root = find_repo_root()
+        protocol = os.path.join(root or "", "protocols", "paper.toml")
+    t0 = time.monotonic()
+    try:
+        _, rows = observer_bounds_all(protocol, seed, n_prior, n_trials, weber)
+    except ProtocolFileError as e:
+        return fail("observer", e, EXIT_USAGE)
+    text = report_text(protocol, rows, seed, weber, per_wrench)
+    if out is not None:
+        try:
+            with open(out, "w", encoding="utf-8") as f:
+                f.write(text)
+        except OSError as e:
+            report("observer", f"cannot write {out}: {e.strerror}")
+            return EXIT_FAILURE
+    print(text.split("\n", 2)[2].rstrip("\n"))
+    if out is not None:
+        print(f"Wrote {out}")
     print(f"wall time {time.monotonic() - t0:.1f} s")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return EXIT_OK

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -104,3 +105,49 @@ def test_bounds_lie_in_unit_interval_and_repeat_for_a_seed(paper):
     assert a.caps == 181
     assert 0.0 < a.search_fraction < 1.0
     assert a.simulated is True
+
+
+# A hand whose contacts all lie in the plane z = 0, with y_axis in that plane: the mirror
+# z -> -z maps the hand onto itself, so a force and its mirror image give the same contact
+# forces up to the mirror, the same norms |lambda_i| (policy F) and so the same cue. An
+# observer cannot tell them apart: from a prior made of such pairs, one cap of search
+# finds one of the two (half the mass), two caps find both.
+PLANAR_K3 = ((0.045, 0.045, 0.0), (0.015, 0.095, 0.0), (-0.010, 0.100, 0.0))
+PAIR_DIRS = [(1, 2, 1), (2, -1, 1), (-1, 1, 2), (1, 1, 1), (-2, -1, 1), (1, -2, 2)]
+
+
+def _mirror_pairs() -> list[tuple[float, ...]]:
+    out: list[tuple[float, ...]] = []
+    for d in PAIR_DIRS:
+        n = math.sqrt(sum(x * x for x in d))
+        fx, fy, fz = (x / n for x in d)
+        out += [(fx, fy, fz, 0.0, 0.0, 0.0), (fx, fy, -fz, 0.0, 0.0, 0.0)]
+    return out
+
+
+def test_the_ideal_observer_bounds_on_a_scene_whose_answer_is_known_by_hand(paper):
+    pairs = _mirror_pairs()
+    planar = dataclasses.replace(
+        paper, hands={3: PLANAR_K3, 4: paper.hands[4]}, moments="zero", moment_max_Nm=0.0
+    )
+    # the premises, on the real core: the mirror gives the same levels, every motor is on
+    for w, m in zip(pairs[::2], pairs[1::2], strict=True):
+        a = io.cue_levels(PLANAR_K3, w, "F", planar.y_axis, planar.constraints)
+        b = io.cue_levels(PLANAR_K3, m, "F", planar.y_axis, planar.constraints)
+        assert a is not None and b is not None
+        assert np.all(a > 0)
+        assert np.array_equal(a, b)
+    # by hand: 3 deg caps of area 2 pi (1 - cos 3 deg); the grid has 27 bands x 54 sectors
+    # = 1458 cells; one cap of search is this many cells
+    per_cap = 2 * math.pi * (1 - math.cos(math.radians(3.0))) / (4 * math.pi / 1458)
+    kw = dict(prior=pairs * 10, trials=pairs, weber_frac=1e-3)
+    for caps, search_s in ((1, 0.0), (2, 0.5)):
+        b = io.ideal_observer_bounds("", 3, "C", "F", protocol=planar, search_s=search_s, **kw)
+        assert (b.caps, b.n_cells) == (caps, 1458)
+        # all motors on for all 12 targets: which are on says nothing, 1 in 12 per cap
+        assert b.onoff_bound == pytest.approx(caps * per_cap / 12, rel=1e-9)
+        # the levels tell the pair, never which of the two: 1 in 2 per cap
+        assert b.intensity_bound == pytest.approx(min(1.0, caps * per_cap / 2), rel=1e-9)
+    # the paper's hand is not planar (z = 35-40 mm): the same targets are told apart
+    b = io.ideal_observer_bounds("", 3, "C", "F", protocol=paper, search_s=0.0, **kw)
+    assert b.intensity_bound == pytest.approx(per_cap, rel=1e-9)

@@ -5,6 +5,7 @@ per-participant plans and their counterbalancing."""
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import tomllib
 
@@ -199,7 +200,11 @@ def set_key(table: str, key: str, literal: str) -> str:
     """paper.toml with ``key`` of ``[table]`` set to the TOML ``literal``."""
     text = paper_text()
     start = text.index(f"\n[{table}]") + 1
-    at = text.index(f"\n{key} ", start) + 1
+    end_of_table = text.find("\n[", start)
+    at = text.find(f"\n{key} ", start, None if end_of_table < 0 else end_of_table) + 1
+    if at == 0:  # a key the file leaves at its default: add it under the table's header
+        at = text.index("\n", start) + 1
+        return text[:at] + f"{key} = {literal}\n" + text[at:]
     end = text.index("\n", at)
     return text[:at] + f"{key} = {literal}" + text[end:]
 
@@ -365,7 +370,12 @@ def test_the_same_hand_in_millimetres_loads_to_the_same_metres(paper):
 def test_a_moment_in_newton_millimetres_is_refused():
     """moment_max_Nm = 5 with force_N = 1 (5 N mm written as N m): a 5 m lever arm."""
     with pytest.raises(pf.ProtocolFileError) as e:
-        loads_protocol(set_key("wrenches", "moment_max_Nm", "5.0"), "my.toml")
+        loads_protocol(
+            set_key("wrenches", "moment_max_Nm", "5.0").replace(
+                'moments = "zero"', 'moments = "drawn"'
+            ),
+            "my.toml",
+        )
     msg = str(e.value)
     assert msg.startswith("my.toml: [wrenches] moment_max_Nm: ")
     assert "looks like N mm" in msg and "divide by 1000" in msg
@@ -493,3 +503,80 @@ def test_fixed_and_random_orders():
     assert {tuple(s.modality for s in pf.session_order(rnd, f"U{n}")) for n in range(1, 9)} != {
         tuple(rnd.modalities)
     }
+
+
+# --------------------------------------------------------------------------------------
+# [wrenches] moments: an explicit factor, "zero" or "drawn"
+# --------------------------------------------------------------------------------------
+DRAWN = os.path.join(REPO_ROOT, "protocols", "paper-moments-drawn.toml")
+
+
+def test_the_paper_protocol_draws_pure_forces(paper, paper_wrenches):
+    assert paper.moments == "zero" and paper.moment_max_Nm == 0.0
+    assert all(w.wrench[3:] == (0.0, 0.0, 0.0) for w in paper_wrenches)
+    assert sum(w.wrench_class == "single" for w in paper_wrenches) == 5
+
+
+def test_the_drawn_level_differs_from_the_paper_file_only_in_the_moments(paper):
+    drawn = pf.load_protocol(DRAWN)
+    assert drawn.moments == "drawn" and drawn.moment_max_Nm == 0.005
+    a, b = paper.to_dict(), drawn.to_dict()
+    assert a["wrenches"].pop("moments") == "zero"
+    assert b["wrenches"].pop("moments") == "drawn"
+    assert (a["wrenches"].pop("moment_max_Nm"), b["wrenches"].pop("moment_max_Nm")) == (0, 0.005)
+    a["study"].pop("name")
+    b["study"].pop("name")
+    assert a == b
+    ws = pf.draw_wrenches(drawn)
+    moments = [math.sqrt(sum(x * x for x in w.wrench[3:])) for w in ws]
+    assert all(0.0 < m <= 0.005 + 1e-4 for m in moments)  # rounded to 4 decimals
+    assert sum(w.wrench_class == "single" for w in ws) == 5
+
+
+def test_the_moments_level_sets_the_candidate_prior(paper):
+    import dataclasses
+    import random
+
+    drawn = dataclasses.replace(paper, moments="drawn", moment_max_Nm=0.005)
+    for p, has_moment in ((paper, False), (drawn, True)):
+        rng = random.Random(3)
+        ws = [pf.candidate_wrench(rng, p) for _ in range(50)]
+        assert all(abs(math.sqrt(sum(x * x for x in w[:3])) - 1.0) < 1e-3 for w in ws)
+        assert any(w[3:] != (0.0, 0.0, 0.0) for w in ws) is has_moment
+
+
+@pytest.mark.parametrize(
+    "lines,moments,radius",
+    [
+        ('moments = "zero"', "zero", 0.0),
+        ('moments = "zero"\nmoment_max_Nm = 0.0', "zero", 0.0),  # what to_dict writes back
+        ('moments = "drawn"\nmoment_max_Nm = 0.002', "drawn", 0.002),
+        ("", "zero", 0.0),  # neither key: the default
+        ("moment_max_Nm = 0.0", "zero", 0.0),  # a file from before the key, radius 0
+    ],
+)
+def test_moments_levels_that_load(lines, moments, radius):
+    text = edited('moments = "zero"', lines)
+    p = loads_protocol(text)
+    assert (p.moments, p.moment_max_Nm) == (moments, radius)
+
+
+@pytest.mark.parametrize(
+    "lines,where,says",
+    [
+        # a file from before the key that draws moments: the fix names both ways
+        ("moment_max_Nm = 0.005", "moment_max_Nm", ['add moments = "drawn"', "remove"]),
+        ('moments = "some"', "moments", ["'zero', 'drawn'"]),
+        ("moments = true", "moments", ["'zero', 'drawn'"]),
+        ('moments = "drawn"', "moments", ["needs moment_max_Nm > 0", 'moments = "zero"']),
+        ('moments = "drawn"\nmoment_max_Nm = 0.0', "moments", ["needs moment_max_Nm > 0"]),
+        ('moments = "zero"\nmoment_max_Nm = 0.005', "moment_max_Nm", ['set moments = "drawn"']),
+    ],
+)
+def test_a_bad_moments_setting_names_the_key_and_the_fix(lines, where, says):
+    with pytest.raises(pf.ProtocolFileError) as e:
+        loads_protocol(edited('moments = "zero"', lines), "my.toml")
+    msg = str(e.value)
+    assert msg.startswith(f"my.toml: [wrenches] {where}: "), msg
+    for part in says:
+        assert part in msg, msg
