@@ -1,6 +1,7 @@
 """An ideal observer of the vibrotactile cue: how much of the target can anyone find?
 
 SIMULATED. These are bounds computed from a model of the task, never human data.
+``graspguide observer`` prints them for every condition of a protocol (:func:`run`).
 
 The observer knows Algorithm 1, the hand's contacts and the task's prior over wrenches,
 but not the wrench of the trial. docs/ideal-observer.md states the definitions and every
@@ -27,7 +28,8 @@ assumption; in short:
   movement and reading times) is reported beside it as a lower bound on the ideal one.
 
 Posterior masses come from ``n_prior`` seeded draws of the protocol's prior (the same
-candidate and acceptance rules as :func:`graspguide.protocol.study_protocol.draw_wrenches`);
+candidate and acceptance rules as :func:`graspguide.protocol.study_protocol.draw_wrenches`:
+``candidate_wrench`` and ``classify_wrench``);
 the expected bound averages over ``n_trials`` further draws. Sampling noise of a finite
 prior sample makes a posterior spikier, which raises its best-region mass: the estimate
 errs upward, the safe side for an upper bound.
