@@ -4,80 +4,56 @@ SIMULATED. Everything this module produces is the output of a model; it is never
 data and must be labelled as simulated wherever it is stored or shown
 (:attr:`VirtualParticipant.SIMULATED` is True for that purpose).
 
-The model (docs/participant.md explains it with every parameter and its source):
+The model (docs/participant.md explains it with every parameter, its distribution across
+participants and its source):
 
 1. **Motors (ERM lag).** The PWM of each motor (0..255, the latest telemetry) drives a
-   first-order lag with time constant ``erm_tau_s``: the motor speed (in PWM units)
-   approaches the commanded PWM as ``1 - exp(-t / tau)``. A motor is *felt* when its
-   speed reaches half of the lowest "on" level (PWM 70, the paper's 0.9 V minimum).
+   first-order lag with time constant ``erm_tau_s``.
 2. **Delay.** Every decision uses what the motors did ``reaction_time_s`` earlier (a
-   delay line on the motor states). The first movement starts ``3 erm_tau_s +
-   reaction_time_s`` after the first felt cue (relative strengths can be judged once the
-   motors are near their steady speed, 95 % at 3 tau), so nothing moves before the cue
-   plus the reaction time; after every submovement the participant again waits
-   ``3 erm_tau_s + reaction_time_s`` to feel its result (mode V).
-3. **Where does the weight pull (the grasping metaphor).** Motor ``i`` vibrates with the
-   contact force at contact ``i``. The thimbles that vibrate are the ones that *hold*
-   the virtual object, so the weight hangs on the opposite side. The participant
-   estimates the weight direction in its hand frame as
-
-       d = -sum_i p_i * y_i / |...|,    y_i = unit(C_i - centroid)
-
-   with ``p_i`` the perceived strength of motor ``i`` above the weakest vibration
-   (``speed_i - 70``), relative to the strongest motor (so only *relative* strengths
-   matter), and ``C_i`` its own contact positions. Perceived strengths carry
-   multiplicative noise from the vibrotactile Weber fraction.
-4. **How far (mode V only).** In mode V the overall strength above the weakest
-   vibration, ``L = |speed - 70| / 185``, is ``sin(error / 2)`` on the device; the
-   participant reads its distance as ``2 asin(L)`` with the noise of the Weber fraction
-   applied to the whole vibration (a faint vibration cannot be told from the weakest
-   one). In mode C it never uses magnitude: its decisions depend only on which motors
-   vibrate and their relative strengths, so scaling every PWM above 70 by a common
-   factor changes nothing.
-5. **Moving.** The hand moves in discrete submovements, each a minimum-jerk rotation
-   (Flash & Hogan 1985) whose duration makes its peak angular speed at most
-   ``peak_speed_deg_s``; its amplitude and axis carry signal-dependent noise
-   (``motor_noise_frac`` of the amplitude). Physiological tremor
-   (``tremor_amplitude_deg`` at ``tremor_frequency_hz``) is added on top.
-6. **Strategy.**
-   * First submovement (both modes): rotate so that the estimated weight direction,
-     mapped to the world through the current orientation (proprioception), points down.
-     Its amplitude is the angle this implies; in mode V it is the felt distance instead.
-   * Mode V, while the cue persists: a compass ("warmer/colder") search. From the best
-     pose known (the base) tilt by the felt distance about a horizontal axis; if the
-     vibration got weaker that pose is the new base and it tilts on the same way,
-     otherwise it goes back to the base, feels it again (readings there are averaged)
-     and tries the next direction (+90, -90, 180 degrees); after four failures in a row
-     the step halves. At a base as faint as can be told from the weakest vibration
-     (one Weber step of the motor speed at PWM 70) it holds still for ``probe_dwell_s``.
-   * Mode C, while the cue persists: the pattern is constant during the whole trial (it
-     depends only on the grasp, not on the orientation; paper Sec. III-A), so the only
-     new information is that the cue has not stopped yet. The participant searches the
-     directions around its estimate systematically, most likely first, over a hexagonal
-     grid of candidate weight directions (hand frame) centred on its first estimate,
-     spacing sqrt(3) * 2/3 * ``task_threshold_deg``. Each time it moves to the candidate
-     not yet ruled out that is nearest to its current estimate (the mean of all its
-     readings of the pattern, so the Weber noise averages out) and holds it for
-     ``task_hold_s + 3 erm_tau_s + reaction_time_s`` (the hold the task needs, then the
-     time to feel that the cue did not stop). A held pose rules out the candidates
-     within a third of the threshold of where the hand actually pointed (their whole
-     cells lie inside the threshold cone just tried); a candidate missed by motor noise
-     is aimed at again. It never uses magnitude.
+   delay line). The first movement starts ``3 erm_tau_s + reaction_time_s`` after the
+   first felt cue (the motors near their steady speed, 95 % at 3 tau, then a reaction).
+3. **Perception** (:mod:`graspguide.participant.perception`): which motors are felt,
+   with counting errors when three or more vibrate; their levels with the amplitude
+   Weber noise and the participant's own per-finger gains.
+4. **Reading** (:mod:`graspguide.participant.bayes_reading`): a posterior over weight
+   directions (hand frame) given the percept, from Algorithm 1 known in full
+   (``reading="full"``) or learned from a few familiarisation trials
+   (``reading="learned"``), with a uniform prior and no moment in the participant's
+   picture of the task.
+5. **Proprioception.** The participant believes its hand is at ``exp(E) q`` when it is at
+   ``q``: ``E`` is its own constant bias, plus a per-trial variable error, plus a drift
+   proportional to each movement. It plans with the belief; the hand moves from ``q``.
+6. **Moving.** Minimum-jerk submovements (Flash & Hogan 1985), peak angular speed at most
+   ``peak_speed_deg_s``, signal-dependent motor noise, physiological tremor on top.
+7. **Strategy.**
+   * Mode C: the pattern never changes during a trial, so after the one reading the only
+     news is that the cue has not stopped. The participant visits the directions in the
+     order of posterior mass covered per second: each time the grid point maximising
+     (the not-yet-covered posterior mass within the threshold of it) / (hold + travel
+     time), moving there continuously and holding it for the hold the task needs (with
+     its own timing noise); a hold covers the grid points within the threshold of where it
+     *believes* the hand pointed, never visited again.
+   * Mode V: the first move turns the most probable direction down by the felt distance;
+     then a compass ("warmer/colder") search with the felt distance, each pose felt after
+     ``3 erm_tau_s + reaction_time_s``; at a pose as faint as it can tell from the weakest
+     vibration it holds for the hold the task needs.
+8. **Between participants** (:mod:`graspguide.participant.population`): ``from_spec``
+   draws the participant's parameters from their stated distributions, seeded by its
+   seed; an explicit ``key=value`` fixes one (``vary=0``: every parameter at its median).
 
 What it does NOT use: the device's error angle, ``alpha`` or the wrench. The wrench
 passed to :meth:`VirtualParticipant.begin_trial` is validated (so a broken caller is
-caught) and then discarded: the decisions depend only on the PWM felt, the participant's
-own contact geometry and its own orientation.
+caught) and then used only to seed the trial's noise: the decisions depend only on the PWM
+felt, the participant's own contact geometry and its belief about its own orientation.
 """
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -99,103 +75,127 @@ from graspguide.core.rotations import (
     quat_angle_deg as quaternion_angle_deg,  # re-exported: tests, analysis
 )
 from graspguide.core.vocabulary import MODES, POLICIES
+from graspguide.participant import bayes_reading, perception, population
+from graspguide.participant.perception import PWM_FLOOR, PWM_RANGE
 
 # Every number a pose depends on is computed on plain Python floats with `math`, in a
 # fixed order. numpy's linear algebra (norm, dot, @) runs in OpenBLAS, whose kernel -- and
 # so the last bit of a sum -- is chosen by the CPU (OPENBLAS_CORETYPE), and numpy's SIMD
-# sin/cos/hypot depend on the CPU's features; a closed loop turns one last-bit difference
-# into a different trajectory, so a seeded study would not reproduce on another machine.
-# numpy stays only for checking inputs and for the seeded random streams (PCG64 draws do
-# not depend on the CPU). Left: the last bit of libm's sin/cos/exp/atan2 (glibc has an FMA
-# code path). tools/tests/test_participant.py checks both: the same bits under another
+# sin/cos/exp/hypot depend on the CPU's features; a closed loop turns one last-bit
+# difference into a different trajectory, so a seeded study would not reproduce on
+# another machine. numpy stays only for checking inputs, for the seeded random streams
+# (PCG64 draws do not depend on the CPU) and for elementwise operations on the reading
+# grid (+, -, *, /, sqrt and comparisons are IEEE-exact per element; no reductions, no
+# SIMD transcendentals: graspguide.participant.bayes_reading). Left: the last bit of
+# libm's sin/cos/exp/log/atan2 (glibc has an FMA code path).
+# tools/tests/participant/test_participant.py checks both: the same bits under another
 # OpenBLAS kernel, and a golden record within a tolerance stated there.
 
-PWM_FLOOR = 70  # lowest "on" PWM of the device (paper: 0.9 V), docs/algorithm.md step 6
-PWM_RANGE = 185  # PWM span above the floor, docs/algorithm.md step 6
 PWM_MAX = 255
 GRAVITY: Vec3 = (0.0, 0.0, -1.0)
+READINGS = ("full", "learned")
+V_SEARCHES = ("bayes", "compass")
+_STR_FIELDS = {"reading": READINGS, "v_search": V_SEARCHES}
 
 
 @dataclass(frozen=True)
 class ParticipantParams:
-    """Parameters of the virtual participant. Sources: docs/participant.md.
+    """Parameters of the virtual participant. Sources and the distributions across
+    participants: docs/participant.md ("Parameters"). The defaults are the population's
+    medians; :meth:`VirtualParticipant.from_spec` draws a participant's own values.
 
     Every field carries its unit in its name (``_s``, ``_deg``, ``_deg_s``, ``_hz``;
-    ``_frac`` is a dimensionless fraction).
+    ``_frac``/``_cv``/``_sd`` are dimensionless).
     """
 
-    #: Pose rate the participant runs at [Hz]: a motion-capture tracking rate (the paper
-    #: tracked the hand with a Vicon system; 100 Hz is a usual Vicon rate). Convention.
-    #: The study runner calls step() every 1 / rate_hz s.
+    #: Pose rate [Hz]: a motion-capture rate (the paper tracked the hand with a Vicon
+    #: system). Convention; the runner calls step() every 1 / rate_hz s.
     rate_hz: float = 100.0
-    #: ERM motor time constant [s]. Precision Microdrives' step-response test of an ERM
-    #: (305-000 at rated voltage) reaches its maximum amplitude ~180 ms after turn-on;
-    #: for a first-order lag that is ~3 tau, so tau ~ 60 ms (PMD, "New testing for the
-    #: Precision Haptic ERMs"). The thimbles' 310-103 datasheet rise/stop times were not
-    #: retrieved: replace this when read.
+    #: ERM time constant [s]: ~180 ms to full amplitude for a PMD 305-000 ERM = 3 tau.
     erm_tau_s: float = 0.06
-    #: Simple reaction time to a vibrotactile cue on the hand [s]: control values of
-    #: 200-220 ms (variability 10-20 ms) for a fingertip vibrotactile reaction-time test
-    #: with sub-millisecond timing (J Sci Med, josam.org/josam/article/view/31, the
-    #: concussion study with the Brain Gauge); 0.21 s is the middle. Bao et al. 2019
-    #: (PLOS ONE 14(8):e0219737) show stimulus factors add 20-300 ms (location 20-120 ms,
-    #: a secondary task > 130 ms): raise it to model a loaded participant.
+    #: Simple reaction time to a fingertip vibration [s]: 200-220 ms (Brain Gauge
+    #: controls); it includes the tactile afferent latency. Drawn across participants.
     reaction_time_s: float = 0.21
-    #: Peak angular speed of a hand reorientation [deg/s]: a deliberate, comfortable
-    #: wrist/forearm speed. Wrist/forearm movement in daily living is mostly slow, the
-    #: likelihood of a speed falling exponentially with it (Anderton et al. 2023, J Hand
-    #: Ther 36(3):580-592); maximal voluntary wrist speeds are several hundred deg/s.
-    #: 90 deg/s is the standard isokinetic test speed of forearm pronation/supination
-    #: (30 deg/s slow, up to ~190 deg/s achievable but hard to maintain; isokinetics.net,
-    #: "Pronation and Supination"): a comfortable voluntary rotation, fixed before any
-    #: study, not fitted to the paper.
+    #: Peak angular speed of a hand reorientation [deg/s]: the standard isokinetic test
+    #: speed of forearm rotation. Drawn across participants.
     peak_speed_deg_s: float = 90.0
-    #: Physiological tremor amplitude [deg]: the modal postural hand tremor is 0.01 g
-    #: peak at ~7 Hz ("A normative study of postural tremor of the hand", Arch Neurol
-    #: 1982;39:358-362, doi:10.1001/archneur.1982.00510180036009), i.e.
-    #: 0.01 * 9.81 / (2 pi 7)^2 = 0.05 mm; over a 0.1 m wrist-to-fingertip lever that
-    #: is 0.03 deg.
+    #: Physiological tremor amplitude [deg] (0.01 g at ~7 Hz over a 0.1 m lever).
     tremor_amplitude_deg: float = 0.03
-    #: Physiological tremor frequency [Hz]: modal ~7 Hz (Arch Neurol 1982, above), inside the
-    #: 6-12 Hz peak of physiological hand tremor (Lakie et al. 2015, J Physiol
-    #: 593:4411-4422).
+    #: Physiological tremor frequency [Hz].
     tremor_frequency_hz: float = 7.0
-    #: Signal-dependent motor noise [fraction of the submovement amplitude, SD]: motor
-    #: output noise grows in proportion to the command (Harris & Wolpert 1998, Nature
-    #: 394:780-784; van Beers, Haggard & Wolpert 2004, J Neurophysiol 91:1050-1063):
-    #: that form is verified (abstracts). The size, 10 % of the amplitude, was quoted
-    #: from memory and no source read gives it: unverified, assumption.
+    #: Signal-dependent motor noise [SD / amplitude] (form: Harris & Wolpert 1998; size
+    #: assumed). Drawn across participants.
     motor_noise_frac: float = 0.10
-    #: Weber fraction of vibrotactile amplitude discrimination [fraction]: median
-    #: difference thresholds of 0.20 (thenar eminence, 125 Hz, 10 dB above threshold) to
-    #: 0.58 across conditions ("Vibrotactile difference thresholds: effects of vibration
-    #: frequency, vibration magnitude, contact area, and body location"; figures and title
-    #: verified, authors/year not: docs/participant.md); 0.20 is the Pacinian, ERM-like
-    #: (125 Hz) case
-    #: and the most favourable one. An ERM's vibration amplitude grows with the square
-    #: of its speed, so the noise (SD) on the perceived motor speed is half of it.
-    weber_frac: float = 0.20
-    #: How long the participant holds a faint-vibration pose in mode V waiting for the
-    #: cue to stop [s]. Model convention, fixed before any simulated study and not tuned
-    #: toward the paper's tables (unverified, assumption).
-    probe_dwell_s: float = 1.0
+    #: Amplitude Weber fraction of a fingertip vibration with other fingers vibrating:
+    #: 3.6-3.7 dB average threshold with masking stimuli (Israr, Tan & Reed 2006, J Acoust
+    #: Soc Am 120(5):2789-2800) = 10^(3.67/20) - 1 = 0.53. Drawn across participants.
+    weber_frac: float = 0.53
+    #: Spread of the per-finger gains [SD of ln gain] (assumption); each participant's
+    #: gains are drawn from its seed and unknown to it.
+    finger_gain_sd: float = 0.2
+    #: Counting errors: the weakest of n >= 3 simultaneous vibrations is missed with
+    #: probability miss_per_extra * (n - 2) (form: Gallace, Tan & Spence 2006; size
+    #: assumed).
+    miss_per_extra: float = 0.1
+    #: Proprioceptive bias [deg, per axis SD across participants]: sqrt(E^2 - VE^2) =
+    #: sqrt(6.83^2 - 4.59^2) of wrist position matching (Front Hum Neurosci 10:316, 2016).
+    prop_bias_sd_deg: float = 5.06
+    #: Proprioceptive variable error [deg, per axis SD, drawn per trial]: VE 4.59 (same).
+    prop_trial_sd_deg: float = 4.59
+    #: Proprioceptive drift [SD / movement amplitude, per axis]: a Weber fraction of about
+    #: 0.09 for wrist movements (Cappello et al. 2016; not re-checked).
+    prop_drift_frac: float = 0.09
+    #: Timing noise of a held interval [CV]: scalar timing (assumption ~0.1). The
+    #: participant aims at task_hold_s (1 + 2 hold_cv) so that ~98 % of its holds are long
+    #: enough. Drawn across participants.
+    hold_cv: float = 0.10
     #: What the participant knows of the task from its instructions and familiarization:
     #: the alignment threshold [deg] (paper Sec. IV: 3 deg) ...
     task_threshold_deg: float = 3.0
     #: ... and how long it must be held for the cue to stop [s] (paper Sec. IV: 0.5 s).
-    #: Mode C uses both: candidate spacing sqrt(3) * 2/3 * task_threshold_deg (see
-    #: _C_AIM_TOL) and a hold per candidate of
-    #: task_hold_s + 3 erm_tau_s + reaction_time_s. Set them to the protocol's values.
     task_hold_s: float = 0.5
+    #: How it reads the pattern: "full" (Algorithm 1 known in full) or "learned" (only
+    #: from familiar_examples trials of its familiarisation, a kernel estimate).
+    reading: str = "full"
+    #: Learned reading: familiarisation trials per hand and policy (the protocol's 4
+    #: familiarisation trials, one per modality: 2 per policy) ...
+    familiar_examples: float = 2
+    #: ... and the kernel width [deg] around each learned direction (assumption).
+    kernel_deg: float = 20.0
+    #: Mode V search: "bayes" (the posterior over directions from the pattern, updated
+    #: with every felt distance; the hand turned to its most probable direction) or
+    #: "compass" (warmer/colder from the best pose known, started from the reading).
+    v_search: str = "bayes"
+    #: 1: from_spec draws the parameters across participants; 0: every parameter at its
+    #: median (the defaults above). Only from_spec reads it.
+    vary: float = 1
 
 
-_NONNEG_FIELDS = ("tremor_amplitude_deg", "motor_noise_frac", "weber_frac")
-_FRAC_FIELDS = ("motor_noise_frac", "weber_frac")
+_NONNEG_FIELDS = (
+    "tremor_amplitude_deg",
+    "weber_frac",
+    "motor_noise_frac",
+    "finger_gain_sd",
+    "miss_per_extra",
+    "prop_bias_sd_deg",
+    "prop_trial_sd_deg",
+    "prop_drift_frac",
+    "hold_cv",
+    "vary",
+)
+_FRAC_FIELDS = ("motor_noise_frac", "weber_frac", "miss_per_extra", "hold_cv")
 
 
 def _validate_params(p: ParticipantParams) -> None:
     for f in fields(p):
         v = getattr(p, f.name)
+        if f.name in _STR_FIELDS:
+            if v not in _STR_FIELDS[f.name]:
+                raise ValueError(
+                    f"participant parameter {f.name} must be one of {_STR_FIELDS[f.name]}, "
+                    f"got {v!r}"
+                )
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise ValueError(f"participant parameter {f.name} must be a finite number, got {v!r}")
         if f.name in _NONNEG_FIELDS:
@@ -207,6 +207,11 @@ def _validate_params(p: ParticipantParams) -> None:
             raise ValueError(
                 f"participant parameter {f.name} is a fraction and must be < 1, got {v!r}"
             )
+    if p.familiar_examples != int(p.familiar_examples):
+        raise ValueError(
+            "participant parameter familiar_examples must be a whole number, "
+            f"got {p.familiar_examples!r}"
+        )
 
 
 class FeelLagError(RuntimeError):
@@ -272,6 +277,10 @@ class VirtualParticipant:
         self._thr_ref = float(PWM_FLOOR)
         if fingers is not None:
             self._set_fingers(fingers)
+        # The person's constants: per-finger gains (unknown to it) and proprioceptive bias.
+        self._gains, self._prop_bias = population.person_constants(
+            self.seed, 4, params.finger_gain_sd, params.prop_bias_sd_deg
+        )
 
     def _set_fingers(self, fingers: Any) -> None:
         """Feel with the fingers of the calibration's simulated person ``fingers``
@@ -295,8 +304,16 @@ class VirtualParticipant:
     @classmethod
     def from_spec(cls, spec: str, seed: int) -> VirtualParticipant:
         """``participant`` or ``participant:key=val,key=val`` (keys: ParticipantParams
-        fields); also just the part after ``participant:`` (``""`` for the defaults)."""
-        params, fingers = _parse_spec(spec)
+        fields); also just the part after ``participant:`` (``""`` for the defaults).
+
+        The participant's parameters are drawn from their distributions across
+        participants, seeded by ``seed`` (:mod:`graspguide.participant.population`); a
+        key given in the spec is fixed to its value, and ``vary=0`` draws none."""
+        params, fingers, given = _parse_spec_keys(spec)
+        if params.vary and not (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
+            drawn = population.draw(int(seed), given)
+            if drawn:
+                params = replace(params, **drawn)  # type: ignore[arg-type]
         return cls(params, seed, fingers=fingers)
 
     # ------------------------------------------------------------------ trial
@@ -371,7 +388,9 @@ class VirtualParticipant:
         self._k = c.shape[0]
         self.policy = policy
         self.mode = mode
-        self._qt = qnormalize(q0)  # commanded (proprioceptive) orientation
+        self._qt = qnormalize(q0)  # the hand's orientation (before tremor)
+        self._contacts = tuple(tuple(float(x) for x in row) for row in points)
+        self._y_axis = tuple(float(x) for x in y.tolist())
         self._motor = [0.0] * self._k  # ERM speeds, PWM units
         self._history: deque[tuple[float, list[float]]] = deque()
         self._t_prev: float | None = None  # time of the last motor update
@@ -389,6 +408,12 @@ class VirtualParticipant:
         # Tremor: two independent horizontal components with random phases.
         self._tremor_phase = self._rng.uniform(0.0, 2.0 * math.pi, size=2).tolist()
         self._tremor_amp = math.radians(p.tremor_amplitude_deg)
+        # Proprioception: the belief error E (world rotation vector, rad) is the person's
+        # bias plus this trial's variable error; each movement adds a drift.
+        v = math.radians(p.prop_trial_sd_deg)
+        e = self._rng.standard_normal(3).tolist()
+        b = self._prop_bias
+        self._prop_err = (b[0] + v * e[0], b[1] + v * e[1], b[2] + v * e[2])
         self._trial = True
 
     # ------------------------------------------------------------------ perception
@@ -397,45 +422,68 @@ class VirtualParticipant:
     ) -> list[float]:
         """Per-finger model only: the perceived strength of each motor,
         ``magnitude_i * max(0, speed_i - threshold_i)``; with ``noise`` (standard normal
-        draws, one per motor) the speed carries the Weber noise of the uniform model's
-        distance reading, SD ``weber_frac / 2`` of the whole speed."""
+        draws, one per motor) the speed carries the Weber noise of the distance reading
+        (SD ``ln(1 + weber_frac) / 2`` of the whole speed)."""
         if self._sens is None:
             raise RuntimeError("perceived() needs the per-finger model (fingers=N)")
         s = [float(v) for v in speeds]
         if noise is not None:
-            g = 0.5 * self.params.weber_frac
+            g = self._speed_sd()
             s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
         return [m * max(0.0, v - thr) for v, (thr, m) in zip(s, self._sens)]
+
+    def _speed_sd(self) -> float:
+        """SD of the perceived motor speed relative to the speed: half the log-SD of the
+        amplitude (an ERM's amplitude grows with the square of its speed)."""
+        return 0.5 * perception.ln_amplitude_sd(self.params.weber_frac)
 
     def _felt(self, speeds: Sequence[float]) -> list[bool]:
         if self._sens is None:
             return [float(v) >= 0.5 * PWM_FLOOR for v in speeds]
         return [float(v) > thr for v, (thr, _) in zip(speeds, self._sens)]
 
-    def _direction(self, speeds: Sequence[float], noise: Sequence[float] | None) -> Vec3 | None:
-        s = [float(v) for v in speeds]
-        felt = self._felt(s)
-        if not any(felt):
-            return None
+    def percept(self, speeds: Sequence[float]) -> bayes_reading.Percept | None:
+        """One reading of the motor speeds (fresh noise from the trial's stream): which
+        motors are felt and their levels (graspguide.participant.perception)."""
+        p = self.params
+        k = self._k
+        normals: list[float] = self._rng.standard_normal(k).tolist()  # type: ignore[assignment]
+        u = float(self._rng.uniform())
         if self._sens is None:
-            above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
+            gains: Sequence[float] = self._gains[:k]
+            thresholds = None
         else:
-            above = self.perceived(s)
-        if noise is not None:
-            g = 0.5 * self.params.weber_frac
-            above = [max(a * (1.0 + g * float(e)), 0.0) for a, e in zip(above, noise)]
-        top = max(above)
-        # Relative strength of each felt motor; all felt motors equal if none is above
-        # the weakest vibration.
-        w = [a / top for a in above] if top > 0 else [float(f) for f in felt]
-        d = [0.0, 0.0, 0.0]
-        for wi, y in zip(w, self._radial):
-            d = [d[0] + wi * y[0], d[1] + wi * y[1], d[2] + wi * y[2]]
-        d = [-d[0], -d[1], -d[2]]
-        n = norm3(d)
-        if n < 1e-9:
-            return None
-        return (d[0] / n, d[1] / n, d[2] / n)
+            gains = [m / self._mag_ref for _, m in self._sens[:k]]
+            thresholds = [thr for thr, _ in self._sens[:k]]
+        return perception.perceive(
+            speeds,
+            normals,
+            u,
+            gains,
+            p.weber_frac,
+            p.finger_gain_sd,
+            perception.miss_probabilities(p.miss_per_extra, k),
+            thresholds,
+        )
+
+    def posterior(self, percept: bayes_reading.Percept) -> np.ndarray:
+        """Posterior weights over the reading grid (bayes_reading.direction_grid) given
+        a percept: the participant's reading of the pattern (maximum 1)."""
+        p = self.params
+        miss = perception.miss_probabilities(p.miss_per_extra, self._k)
+        if p.reading == "learned":
+            return bayes_reading.posterior_learned(
+                self._contacts,
+                self._y_axis,
+                self.policy,
+                percept,
+                miss,
+                int(p.familiar_examples),
+                p.kernel_deg,
+                self.seed,
+            )
+        pm = bayes_reading.pattern_map(self._contacts, self._y_axis, self.policy)
+        return bayes_reading.posterior_full(pm, percept, miss)
 
     def felt_distance_deg(
         self, speeds: Sequence[float] | None = None, noise: Sequence[float] | None = None
@@ -457,7 +505,7 @@ class VirtualParticipant:
             level = min(1.0, math.sqrt(sum(a * a for a in p)) / (self._mag_ref * PWM_RANGE))
             return math.degrees(2.0 * math.asin(level))
         if noise is not None:
-            g = 0.5 * self.params.weber_frac
+            g = self._speed_sd()
             s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
         above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
         level = min(1.0, math.sqrt(sum(a * a for a in above)) / PWM_RANGE)
@@ -468,8 +516,19 @@ class VirtualParticipant:
         [deg]: one Weber step of the motor speed at the floor."""
         # Per-finger model: one Weber step of the speed at the reference's threshold.
         base = PWM_FLOOR if self._sens is None else self._thr_ref
-        step = 0.5 * self.params.weber_frac * base
+        step = self._speed_sd() * base
         return math.degrees(2.0 * math.asin(min(1.0, step / PWM_RANGE)))
+
+    def hold_s(self) -> float:
+        """How long the participant means to hold a pose for the cue to stop [s]: the
+        task's hold, lengthened by two SDs of its own timing noise."""
+        p = self.params
+        return p.task_hold_s * (1.0 + 2.0 * p.hold_cv)
+
+    def believed_quat(self) -> tuple[float, float, float, float]:
+        """Where the participant believes its hand is (proprioception, before tremor)."""
+        self._need_trial()
+        return qnormalize(qmul(qexp(*self._prop_err), self._qt))
 
     # ------------------------------------------------------------------ the loop
     def step(self, t_s: float, pwm: Sequence[int]) -> tuple[float, float, float, float]:
@@ -681,6 +740,11 @@ class VirtualParticipant:
             e = scale3(self._rng.standard_normal(3).tolist(), p.motor_noise_frac * amp)
             rotvec = (rotvec[0] + e[0], rotvec[1] + e[1], rotvec[2] + e[2])
             amp = norm3(rotvec)
+        if amp > 0 and p.prop_drift_frac > 0:
+            # Proprioceptive drift: the belief error grows with each movement.
+            d = scale3(self._rng.standard_normal(3).tolist(), p.prop_drift_frac * amp)
+            e0 = self._prop_err
+            self._prop_err = (e0[0] + d[0], e0[1] + d[1], e0[2] + d[2])
         # Minimum jerk: peak speed 1.875 * amp / T <= peak_speed.
         T = 1.875 * amp / math.radians(p.peak_speed_deg_s)
         self._move = {"t0": t, "T": T, "rotvec_t": rotvec, "q0_t": self._qt, "pause": pause}
@@ -688,9 +752,20 @@ class VirtualParticipant:
     def _hold(self, t: float, duration: float) -> None:
         self._next_decision = t + duration
 
+    def _held_s(self) -> float:
+        """One hold as the participant produces it: hold_s() with its timing noise."""
+        p = self.params
+        e = float(self._rng.standard_normal())
+        return max(0.0, p.task_hold_s * (1.0 + 2.0 * p.hold_cv) * (1.0 + p.hold_cv * e))
+
+    def _believed_down(self) -> Vec3:
+        """Gravity in the hand frame as the participant believes it."""
+        return rotate(qconj(self.believed_quat()), GRAVITY)
+
     def _tilt_to_align(self, d_hand: Vec3) -> tuple[Vec3, float]:
-        """World rotation vector bringing the hand direction d_hand to gravity, and its angle."""
-        u = rotate(self._qt, d_hand)
+        """World rotation vector bringing the hand direction d_hand to gravity (as the
+        participant believes its hand is), and its angle."""
+        u = rotate(self.believed_quat(), d_hand)
         axis = cross3(u, GRAVITY)
         s = norm3(axis)
         angle = math.atan2(s, dot3(u, GRAVITY))
@@ -704,94 +779,209 @@ class VirtualParticipant:
     def _plan(self, t: float) -> None:
         p = self.params
         speeds = self._delayed_speeds(t)
-        direction = self._direction(speeds, self._noise())
-        if direction is None:  # nothing felt (cue over): stay
+        if not any(self._felt(speeds)):  # nothing felt (cue over): stay
             self._hold(t, p.reaction_time_s)
             return
-        distance = self.felt_distance_deg(speeds, self._noise())  # None in mode C
         first = self._plans == 0
         self._plans += 1
         if first:
-            rotvec, angle = self._tilt_to_align(direction)
-            if distance is not None and angle > 0:
-                rotvec = tuple(v / angle * math.radians(distance) for v in rotvec)
+            percept = self.percept(speeds)
+            if percept is None:  # cannot happen: a motor is felt
+                self._hold(t, p.reaction_time_s)
+                return
+            w = self.posterior(percept)
             if self.mode == "C":
-                # The first candidate is the first estimate itself (the centre of the
-                # candidate grid); wait there for the cue to stop.
-                grid = _hex_directions(direction, _C_SPACING * p.task_threshold_deg)
-                self._search = {
-                    "grid": grid,
-                    "readings": direction,
-                    "n_readings": 1,
-                    "tried": np.zeros(len(grid[0]), dtype=bool),
-                }
-                self._start_move(t, rotvec, self.c_dwell_s())
-            else:
-                self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
+                self._begin_search(w)
+                self._plan_candidate(t)
+                return
+            if p.v_search == "bayes":
+                self._begin_v(w)
+                self._plan_v(t, speeds)
+                return
+            gx, gy, gz = bayes_reading.direction_grid()
+            i = int(np.argmax(w))  # the most probable direction (first on ties)
+            direction = (float(gx[i]), float(gy[i]), float(gz[i]))
+            rotvec, angle = self._tilt_to_align(direction)
+            distance = self.felt_distance_deg(speeds, self._noise())
+            if distance is not None and angle > 0:
+                rotvec = scale3(rotvec, math.radians(distance) / angle)
+            self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
             return
         if self.mode == "C":
-            self._plan_candidate(t, direction)
+            self._plan_candidate(t)
+        elif p.v_search == "bayes":
+            self._plan_v(t, speeds)
         else:
-            self._plan_compass(t, float(distance))
+            distance = self.felt_distance_deg(speeds, self._noise())
+            self._plan_compass(t, float(distance) if distance is not None else 0.0)
 
     def _random_horizontal(self) -> Vec3:
         phi = float(self._rng.uniform(0.0, 2.0 * math.pi))
         return (math.cos(phi), math.sin(phi), 0.0)
 
-    def c_dwell_s(self) -> float:
-        """Mode C: how long each candidate pose is held [s]: the task's hold, then the
-        time to feel that the cue did not stop (ERM spin-down to 5 %, reaction time)."""
-        p = self.params
-        return p.task_hold_s + 3.0 * p.erm_tau_s + p.reaction_time_s
+    # ------------------------------------------------------------------ mode C search
+    def _begin_search(self, w: np.ndarray) -> None:
+        """Mode C: the posterior weights ``w`` of the grid points and, per point, the
+        posterior mass a hold there would cover (the points within the threshold)."""
+        nbrs = bayes_reading.cap_neighbours(self.params.task_threshold_deg)
+        wl = w.tolist()
+        gain = [0.0] * len(wl)
+        for i, idx in enumerate(nbrs):
+            acc = 0.0
+            for j in idx.tolist():
+                acc += wl[j]
+            gain[i] = acc
+        self._search = {
+            "w": wl,
+            "gain": np.array(gain),
+            "covered": np.zeros(len(wl), dtype=bool),
+            "nbrs": nbrs,
+            "phase": "start",
+            "holds": 0,
+        }
 
-    def _plan_candidate(self, t: float, direction: Vec3) -> None:
-        """Mode C: the cue did not stop, so the pose just held was wrong. Rule out the
-        candidates it covered, average the new reading of the (constant) pattern into the
-        estimate and move to the candidate not yet ruled out that is nearest to it (most
-        likely first); the search widens as the near candidates are used up and never
-        returns to a ruled-out one."""
+    def _plan_candidate(self, t: float) -> None:
+        """Mode C. After a hold: the grid points within the threshold of where the
+        participant believes the hand pointed are covered (their mass leaves every
+        neighbour's gain). Then the next pose: the point with the most uncovered posterior
+        mass per second of hold and travel (travel: minimum-jerk time over the chord from
+        the believed current direction, a small-angle stand-in for the angle); a
+        movement there, then a hold. After a movement: the hold."""
         st = self._search
-        r = st["readings"]
-        r = st["readings"] = (r[0] + direction[0], r[1] + direction[1], r[2] + direction[2])
-        st["n_readings"] += 1
-        n = norm3(r)
-        centre = (r[0] / n, r[1] / n, r[2] / n)
-        grid, tried = st["grid"], st["tried"]
-        # The pose just held rules out the candidates within the aim tolerance (a third
-        # of the threshold) of where the hand actually pointed (proprioception): with the
-        # grid's spacing their whole cells are then inside the threshold cone just tried.
-        # A candidate missed by more than that (motor noise) stays untried and is aimed
-        # at again, with a small, precise correction.
-        down = rotate(qconj(self._qt), GRAVITY)
-        tol = math.radians(_C_AIM_TOL * self.params.task_threshold_deg)
-        gx, gy, gz = grid  # elementwise only: _hex_directions says why
-        tried |= gx * down[0] + gy * down[1] + gz * down[2] >= math.cos(tol)
-        if tried.all():  # the whole sphere tried: start over
-            tried[:] = False
-        cosines = np.where(tried, -np.inf, gx * centre[0] + gy * centre[1] + gz * centre[2])
-        i = int(np.argmax(cosines))  # the nearest untried candidate (first on ties)
+        p = self.params
+        if st["phase"] == "moving":
+            # The movement is over: hold (the device ends the trial itself on success).
+            st["phase"] = "holding"
+            st["holds"] += 1
+            self._hold(t, self._held_s())
+            return
+        if st["phase"] == "holding":
+            self._cover(self._believed_down())
+        gx, gy, gz = bayes_reading.direction_grid()
+        d = self._believed_down()
+        cx, cy, cz = gx - d[0], gy - d[1], gz - d[2]
+        chord = np.sqrt(cx * cx + cy * cy + cz * cz)
+        cost = self.hold_s() + chord * (1.875 / math.radians(p.peak_speed_deg_s))
+        gain = st["gain"]
+        score = np.where(gain > 1e-12, gain, 0.0) / cost
+        i = int(np.argmax(score))  # first on ties
+        if not score[i] > 0:  # everything covered: start over
+            self._begin_search(np.array(st["w"]))
+            self._search["holds"] = st["holds"]
+            i = int(np.argmax(self._search["gain"] / cost))
         rotvec, _ = self._tilt_to_align((float(gx[i]), float(gy[i]), float(gz[i])))
-        self._start_move(t, rotvec, self.c_dwell_s())
+        self._search["phase"] = "moving"
+        self._start_move(t, rotvec, 0.0)
+
+    def _cover(self, d: Vec3) -> None:
+        st = self._search
+        gx, gy, gz = bayes_reading.direction_grid()
+        c = math.cos(math.radians(self.params.task_threshold_deg))
+        inside = (gx * d[0] + gy * d[1] + gz * d[2] >= c) & ~st["covered"]
+        new = np.nonzero(inside)[0].tolist()
+        st["covered"][new] = True
+        gain, w, nbrs = st["gain"], st["w"], st["nbrs"]
+        for q in new:
+            idx = nbrs[q]
+            gain[idx] = gain[idx] - w[q]
+
+    # ------------------------------------------------------------------ mode V search
+    def _begin_v(self, w: np.ndarray) -> None:
+        """Mode V (bayes): the log-posterior over the grid, from the pattern's reading."""
+        self._search = {
+            "logpost": np.array([math.log(x) if x > 0 else -math.inf for x in w.tolist()]),
+            "holding": False,
+        }
+
+    def _best_cap(self) -> int:
+        """Mode V (bayes): the grid point whose threshold cap holds the most posterior
+        mass (the posterior within 20 nats of its maximum; ties: the lowest index)."""
+        st = self._search
+        lp = st["logpost"]
+        top = float(lp.max())
+        if not top > -math.inf:  # everything ruled out: start over, the prior alone
+            st["logpost"] = lp = np.zeros(len(lp))
+            top = 0.0
+        idx = np.nonzero(lp > top - 20.0)[0].tolist()
+        vals = lp[idx].tolist()
+        nbrs = bayes_reading.cap_neighbours(self.params.task_threshold_deg)
+        mass: dict[int, float] = {}
+        for j, v in zip(idx, vals):
+            wj = math.exp(v - top)
+            for c in nbrs[j].tolist():
+                mass[c] = mass.get(c, 0.0) + wj
+        return max(sorted(mass), key=lambda c: mass[c])
+
+    def _plan_v(self, t: float, speeds: Sequence[float]) -> None:
+        """Mode V (bayes). Each decision: read the overall intensity at the pose the
+        participant believes it holds, ``L = |speed - 70| / 185`` (= sin(error / 2) on the
+        device, with the Weber noise on the speeds), and add its log-likelihood to the
+        posterior: for a target t the predicted level is sin(angle / 2) = |u - t| / 2, u
+        the believed down direction (hand frame), with SD the speed noise at that level,
+        ``h (70 + 185 L) / 185``. After a hold that did not stop the cue the targets within
+        the threshold of u are ruled out (as in mode C). Then the grid point whose
+        threshold cap holds the most posterior mass: if it is within the threshold of u,
+        hold; if it is nearer than the felt distance, turn it down and hold it on arrival;
+        else turn toward it by the felt distance and feel again after
+        ``3 erm_tau_s + reaction_time_s``."""
+        p = self.params
+        st = self._search
+        if st.get("arrived"):
+            # At the point chosen, reached in full: hold it (the hold is the test).
+            st["arrived"] = False
+            st["holding"] = True
+            self._hold(t, self._held_s())
+            return
+        gx, gy, gz = bayes_reading.direction_grid()
+        u = self._believed_down()
+        cx, cy, cz = gx - u[0], gy - u[1], gz - u[2]
+        half_chord = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+        if st["holding"]:
+            c = math.cos(math.radians(p.task_threshold_deg))
+            st["logpost"] = np.where(
+                gx * u[0] + gy * u[1] + gz * u[2] >= c, -math.inf, st["logpost"]
+            )
+            st["holding"] = False
+        distance = self.felt_distance_deg(speeds, self._noise())
+        if distance is not None:
+            level = math.sin(math.radians(distance) / 2.0)
+            sd = self._speed_sd() * (PWM_FLOOR + PWM_RANGE * level) / PWM_RANGE
+            r = (half_chord - level) / max(sd, 1e-3)
+            st["logpost"] = st["logpost"] - 0.5 * (r * r)
+        i = self._best_cap()
+        if float(half_chord[i]) <= math.sin(math.radians(p.task_threshold_deg) / 2.0):
+            st["holding"] = True
+            self._hold(t, self._held_s())
+            return
+        rotvec, angle = self._tilt_to_align((float(gx[i]), float(gy[i]), float(gz[i])))
+        if distance is not None and angle > math.radians(distance) > 0:
+            # Toward it, as far as the felt distance: the target lies about that far away.
+            rotvec = scale3(rotvec, math.radians(distance) / angle)
+            self._start_move(t, rotvec, p.reaction_time_s + 3.0 * p.erm_tau_s)
+            return
+        st["arrived"] = True
+        self._start_move(t, rotvec, 0.0)
 
     def _plan_compass(self, t: float, distance: float) -> None:
         """Mode V: warmer/colder compass search with the felt distance.
 
-        From the best pose known (the base) the participant tilts by ``step`` about a
-        horizontal axis. Warmer (the vibration is weaker than at the base): that pose
-        becomes the base and it tilts on the same way. Colder: it goes back to the base,
-        feels it again (readings at the base are averaged) and tries the next direction
-        (+90, -90, 180 degrees from the last good one); after four failures in a row
-        the step halves. At a base as faint as can be told from the weakest vibration
-        it holds still for probe_dwell_s, waiting for the cue to stop.
+        From the best pose known (the base, as the participant believes it) the
+        participant tilts by ``step`` about a horizontal axis. Warmer (the vibration is
+        weaker than at the base): that pose becomes the base and it tilts on the same
+        way. Colder: it goes back to the base, feels it again (readings at the base are
+        averaged) and tries the next direction (+90, -90, 180 degrees from the last good
+        one); after four failures in a row the step halves. At a base as faint as it can
+        tell from the weakest vibration it holds for the hold the task needs.
         """
         p = self.params
         st = self._search
         res = self.resolution_deg()
         pause = p.reaction_time_s + 3.0 * p.erm_tau_s
+        qb = self.believed_quat()
         if "base_q" not in st:
-            # Right after the first (metaphor) move: this pose is the first base.
+            # Right after the first move: this pose is the first base.
             st.update(
-                base_q=self._qt,
+                base_q=qb,
                 base_sum=distance,
                 base_n=1,
                 axis=self._random_horizontal(),
@@ -807,7 +997,7 @@ class VirtualParticipant:
             base_val = st["base_sum"] / st["base_n"]
             if distance < base_val:  # warmer: new base, same direction
                 st.update(
-                    base_q=self._qt,
+                    base_q=qb,
                     base_sum=distance,
                     base_n=1,
                     tries=0,
@@ -823,83 +1013,19 @@ class VirtualParticipant:
                 if st["tries"] % 4 == 0:
                     st["step"] = max(0.5 * st["step"], 0.5 * res)
                 st["at_base"] = True
-                delta = rotvec_from_quat(qmul(st["base_q"], qconj(self._qt)))
+                delta = rotvec_from_quat(qmul(st["base_q"], qconj(qb)))
                 self._start_move(t, delta, pause)
                 return
         base_val = st["base_sum"] / st["base_n"]
         if st["at_base"] and base_val <= res and not st["held"]:
-            # As faint as can be told from the weakest vibration: wait for it to stop.
+            # As faint as it can tell from the weakest vibration: hold for the cue to stop.
             st["held"] = True
-            self._hold(t, p.probe_dwell_s)
+            self._hold(t, self._held_s())
             return
         target = qmul(qexp(*scale3(st["axis"], math.radians(st["step"]))), st["base_q"])
-        delta = rotvec_from_quat(qmul(target, qconj(self._qt)))
+        delta = rotvec_from_quat(qmul(target, qconj(qb)))
         st["at_base"] = False
         self._start_move(t, delta, pause)
-
-
-#: Mode C, in units of the task threshold r. A held pose within the aim tolerance e of a
-#: candidate rules the candidate out; a hexagonal lattice of spacing s has cells of
-#: covering radius s / sqrt(3), so a cell lies wholly inside the cone of radius r around
-#: the pose when s / sqrt(3) + e <= r: s = sqrt(3) (r - e). e = r / 3 (1 deg for 3 deg)
-#: is about two SDs of the aiming error of a correction of one spacing with the motor
-#: noise (0.1 x 3.5 deg x sqrt(2) = 0.5 deg), so most candidates are held on the first
-#: aim. Fixed from that geometry, before any simulated study.
-_C_AIM_TOL = 1.0 / 3.0
-_C_SPACING = math.sqrt(3.0) * (1.0 - _C_AIM_TOL)
-
-
-def _hex_directions(centre: Vec3, spacing_deg: float) -> tuple[np.ndarray, ...]:
-    """Unit directions on a hexagonal lattice of the given spacing in the tangent plane at
-    ``centre`` (mapped onto the sphere by the exponential map), sorted by their angle to
-    the centre (the centre first), out to 180 degrees; as three arrays (x, y, z).
-
-    The lattice and its sines and cosines (:func:`_hex_lattice`) are built with ``math``
-    on plain floats: numpy's sin/cos depend on the CPU. Here they are only combined
-    elementwise (+, *, /, sqrt), which is IEEE-exact per element, as are the search's own
-    uses of the arrays (+, *, compare), so the search gives the same bits on every CPU."""
-    n0 = norm3(centre)
-    c = (centre[0] / n0, centre[1] / n0, centre[2] / n0)
-    e1 = cross3(c, (1.0, 0.0, 0.0) if abs(c[0]) < 0.9 else (0.0, 1.0, 0.0))
-    m = norm3(e1)
-    e1 = (e1[0] / m, e1[1] / m, e1[2] / m)
-    e2 = cross3(c, e1)
-    a, b, cr, sr = _hex_lattice(spacing_deg)
-    # Point p at the angle r from the centre: d = cos(r) c + sin(r) (a e1 + b e2), then
-    # normalised; the centre itself (r = 0, the first point) is c.
-    d = [cr * c[i] + sr * (a * e1[i] + b * e2[i]) for i in range(3)]
-    for i in range(3):
-        d[i][0] = c[i]
-    m = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    return tuple(v / m for v in d)
-
-
-@functools.lru_cache(maxsize=4)
-def _hex_lattice(spacing_deg: float) -> tuple[np.ndarray, ...]:
-    """The centre-independent part of :func:`_hex_directions` (every mode C trial uses the
-    same spacing): the lattice points within 180 degrees in their order, as the unit
-    tangent direction (a, b) of each and cos(r), sin(r) of its angle r (the centre first,
-    with a = b = 0). Read-only arrays: they are shared."""
-    s = math.radians(spacing_deg)
-    n = int(math.ceil(math.pi / s / 0.8)) + 1
-    h = math.sqrt(3.0) / 2.0
-    # Point (i, j) lies at (i + j/2, j sqrt(3)/2) s, at the distance sqrt(i^2 + i j + j^2) s:
-    # sorting by that integer orders the rings exactly, then by angle within a ring.
-    points = sorted(
-        (k, math.atan2(y, x), x, y, math.sqrt(k) * s)
-        for i in range(-n, n + 1)
-        for j in range(-n, n + 1)
-        for k, x, y in ((i * i + i * j + j * j, (i + 0.5 * j) * s, j * h * s),)
-        if math.sqrt(k) * s <= math.pi + 1e-12
-    )
-    rows = [
-        (x / r, y / r, math.cos(r), math.sin(r)) if r > 0 else (0.0, 0.0, 1.0, 0.0)
-        for _, _, x, y, r in points
-    ]
-    out = tuple(np.array(v, dtype=np.float64) for v in zip(*rows))
-    for v in out:
-        v.flags.writeable = False
-    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -920,6 +1046,12 @@ def parse_spec(spec: str) -> ParticipantParams:
 
 def _parse_spec(spec: str) -> tuple[ParticipantParams, int | None]:
     """(ParticipantParams, the fingers=N seed or None) from a participant spec."""
+    params, fingers, _ = _parse_spec_keys(spec)
+    return params, fingers
+
+
+def _parse_spec_keys(spec: str) -> tuple[ParticipantParams, int | None, dict[str, Any]]:
+    """(ParticipantParams, the fingers=N seed or None, the keys given) from a spec."""
     names = [f.name for f in fields(ParticipantParams)]
     usage = (
         "expected 'participant' or 'participant:key=value,...' with keys "
@@ -932,7 +1064,7 @@ def _parse_spec(spec: str) -> tuple[ParticipantParams, int | None]:
     if head.strip() != "participant":
         # Also accepted: what follows 'participant:' alone ('' = the defaults).
         head, sep, rest = "participant", (":" if spec.strip() else ""), spec
-    values: dict[str, float] = {}
+    values: dict[str, Any] = {}
     fingers: int | None = None
     if sep:
         if not rest.strip():
@@ -961,6 +1093,9 @@ def _parse_spec(spec: str) -> tuple[ParticipantParams, int | None]:
                 )
             if key in values:
                 raise ValueError(f"participant parameter {key!r} given twice")
+            if key in _STR_FIELDS:
+                values[key] = val.strip()
+                continue
             try:
                 x = float(val)
             except ValueError:
@@ -970,7 +1105,7 @@ def _parse_spec(spec: str) -> tuple[ParticipantParams, int | None]:
             values[key] = x
     params = ParticipantParams(**values)
     _validate_params(params)
-    return params, fingers
+    return params, fingers, values
 
 
 __all__ = [

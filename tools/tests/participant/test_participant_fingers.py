@@ -1,6 +1,6 @@
 """The virtual participant's opt-in per-finger model (``participant:fingers=N``): the
-default model is unchanged, the per-finger strengths are the calibration observer's, and
-a calibration equal to the observer's truth equalises them. SIMULATED: a model."""
+per-finger strengths are the calibration observer's, and a calibration equal to the
+observer's truth equalises them. SIMULATED: a model."""
 
 from __future__ import annotations
 
@@ -16,70 +16,12 @@ from graspguide.core import _core
 from graspguide.core.motor_calibration import FINGER_NAMES, MotorCalibration
 from graspguide.core.reference import pwm_from_levels
 from graspguide.participant.model import (
-    PWM_FLOOR,
     PWM_RANGE,
     VirtualParticipant,
     parse_spec,
 )
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
-
-
-class UniformBefore(VirtualParticipant):
-    """The perception of the participant before the per-finger model existed, restated
-    here: every motor felt from half the floor, strength = speed - 70, distance on 185."""
-
-    def _direction(self, speeds, noise):
-        s = [float(v) for v in speeds]
-        felt = [v >= 0.5 * PWM_FLOOR for v in s]
-        if not any(felt):
-            return None
-        above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
-        if noise is not None:
-            g = 0.5 * self.params.weber_frac
-            above = [max(a * (1.0 + g * float(e)), 0.0) for a, e in zip(above, noise)]
-        top = max(above)
-        w = [a / top for a in above] if top > 0 else [float(f) for f in felt]
-        d = [0.0, 0.0, 0.0]
-        for wi, y in zip(w, self._radial):
-            d = [d[0] + wi * y[0], d[1] + wi * y[1], d[2] + wi * y[2]]
-        n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        if n < 1e-9:
-            return None
-        return (-d[0] / n, -d[1] / n, -d[2] / n)
-
-    def felt_distance_deg(self, speeds=None, noise=None):
-        if self.mode != "V":
-            return None
-        s = [float(v) for v in (self._motor if speeds is None else speeds)]
-        felt = [v >= 0.5 * PWM_FLOOR for v in s]
-        if not any(felt):
-            return None
-        if noise is not None:
-            g = 0.5 * self.params.weber_frac
-            s = [v * (1.0 + g * float(e)) for v, e in zip(s, noise)]
-        above = [max(v - PWM_FLOOR, 0.0) if f else 0.0 for v, f in zip(s, felt)]
-        return math.degrees(
-            2.0 * math.asin(min(1.0, math.sqrt(sum(a * a for a in above)) / PWM_RANGE))
-        )
-
-    def resolution_deg(self):
-        step = 0.5 * self.params.weber_frac * PWM_FLOOR
-        return math.degrees(2.0 * math.asin(min(1.0, step / PWM_RANGE)))
-
-    def _advance(self, t, u):
-        dt = 1.0 / self.rate_hz if self._t_prev is None else t - self._t_prev
-        self._t_prev = t
-        gain = 1.0 - math.exp(-dt / self.params.erm_tau_s)
-        motor = [x + (v - x) * gain for x, v in zip(self._motor, u)]
-        self._motor = motor
-        self._history.append((t, motor))
-        if self._cue_onset is None:
-            while len(self._history) > 1 and self._history[1][0] <= t - self.params.reaction_time_s:
-                self._history.popleft()
-            if max(motor) >= 0.5 * PWM_FLOOR:
-                self._cue_onset = t
-                self._next_decision = t + 3.0 * self.params.erm_tau_s + self.params.reaction_time_s
 
 
 def _loop(vp, wrench, mode, seconds, calibration=None):
@@ -108,13 +50,18 @@ def _loop(vp, wrench, mode, seconds, calibration=None):
     return poses
 
 
-@pytest.mark.parametrize("mode", ["V", "C"])
-def test_default_participant_is_the_uniform_model_bit_for_bit(mode):
-    for seed, w in enumerate(_wrenches(3, 2026)):
-        new = _loop(VirtualParticipant.from_spec("participant", 40 + seed), w, mode, 15.0)
-        old = _loop(UniformBefore.from_spec("participant", 40 + seed), w, mode, 15.0)
-        assert new == old, f"wrench {seed}, mode {mode}: the default participant changed"
-        assert VirtualParticipant.from_spec("participant", 1).fingers_seed is None
+def test_default_participant_feels_with_its_own_gains_not_the_calibrations():
+    """Without fingers=N the participant feels every motor from half the floor, with its
+    own per-finger gains (drawn from its seed); fingers=N replaces them with the
+    calibration observer's thresholds and magnitudes."""
+    vp = _vp("participant")
+    assert vp.fingers_seed is None
+    speeds = [200.0, 120.0, 40.0, 30.0]
+    pc = vp.percept(speeds)
+    assert pc.on[:3] == (True, True, True) and not pc.on[3]  # 30 < 35: not felt
+    other = _vp("participant:fingers=3")
+    assert other.fingers_seed == 3
+    assert other.percept([200.0, 0.0, 0.0, 0.0]).ln_level != pc.ln_level
 
 
 def _vp(spec, mode="V"):
@@ -150,10 +97,10 @@ def test_per_finger_strengths_are_the_observers(n):
             assert d is None
     # Below every finger's threshold nothing is felt: no direction, no distance.
     below = [obs.fingers[f].threshold_pwm - 0.5 for f in FINGER_NAMES]
-    assert vp._direction(below, None) is None
+    assert vp.percept(below) is None
     assert vp.felt_distance_deg(below) is None
     # ... though the uniform model feels those speeds (all >= 35).
-    assert _vp("participant")._direction(below, None) is not None
+    assert _vp("participant").percept(below) is not None
 
 
 def _true_calibration(obs):
@@ -169,7 +116,7 @@ def _true_calibration(obs):
 def test_true_calibration_equalises_the_fingers(n, mode):
     obs = VirtualObserver(seed=n)
     vp = _vp(f"participant:fingers={n}", mode)
-    weber_sd = 0.5 * vp.params.weber_frac  # of the perceived speed, per reading
+    weber_sd = vp._speed_sd()  # of the perceived speed, per reading
     cal = _true_calibration(obs)
     worst_uncal = 0.0
     for level in (0.2, 0.5, 0.8):
