@@ -240,7 +240,7 @@ def _run(protocol, out, pid, pipeline):
 
     with SimulatedDevice(virtual_clock=True, start=True) as dev:
         client = dv.DeviceClient(dev)
-        source = open_runner_source("participant", protocol, pid)
+        source = open_runner_source("participant:reaction_time_s=0.21", protocol, pid)
         runner = rn.StudyRunner(
             protocol,
             pid,
@@ -274,7 +274,6 @@ def test_pipelined_and_lockstep_runs_give_identical_trials(tmp_path):
         for r in records(tmp_path / "pipe" / "U2" / "trials.jsonl")
     ]
     assert a == b and len(a) == len(pf.plan(protocol, "U2"))
-    assert any(r["success"] for r in a) or any(not r["success"] for r in a)
     frames = sorted(os.listdir(tmp_path / "lock" / "U2" / "frames"))
     for name in frames:  # every frame, byte for byte
         assert (tmp_path / "lock" / "U2" / "frames" / name).read_bytes() == (
