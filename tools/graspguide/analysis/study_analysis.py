@@ -75,7 +75,9 @@ def analyze_study(
     not_computed: dict[str, str] = {}
     trial_level = reviewer = None
     try:
-        trial_level = trial_statistics.trial_level_statistics(base.trials)
+        trial_level = trial_statistics.trial_level_statistics(
+            base.trials, remove_outliers=remove_outliers
+        )
     except errors as e:
         not_computed["trial-level statistics"] = str(e) or type(e).__name__
     try:

@@ -116,15 +116,6 @@ def trial_figure(
                     linewidth=1,
                 )
         ax.axhline(TIMEOUT_S, color="#777777", linestyle="--", linewidth=0.9)
-        ax.text(
-            len(MODALITIES) - 0.5,
-            TIMEOUT_S - 1.0,
-            "90 s timeout (above: timeouts / trials)",
-            ha="right",
-            va="top",
-            fontsize=7,
-            color="#555555",
-        )
         ax.set_xticks(range(len(MODALITIES)), [shown(m) for m in MODALITIES])
         ax.set_xlim(-0.6, len(MODALITIES) - 0.4)
         ax.set_title(f"{k} contacts", fontsize=10)
@@ -134,6 +125,14 @@ def trial_figure(
     legend = [
         plt.Line2D([], [], marker="o", linestyle="", color="#888888", label="success"),
         plt.Line2D([], [], marker="x", linestyle="", color="#888888", label="timeout (90 s)"),
+        # In the legend, not on the plot: the timeouts' markers fill the line's whole width.
+        plt.Line2D(
+            [],
+            [],
+            linestyle="--",
+            color="#777777",
+            label="90 s timeout (numbers above it: timeouts / trials)",
+        ),
         plt.Line2D(
             [],
             [],

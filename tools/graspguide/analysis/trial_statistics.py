@@ -121,8 +121,11 @@ def _quiet(test, *args, **kwargs):
         return test(*args, **kwargs)
 
 
-def trial_level_statistics(trials, ceiling_s: float = 90.0) -> TrialLevelStatistics:
+def trial_level_statistics(
+    trials, ceiling_s: float = 90.0, remove_outliers: bool = True
+) -> TrialLevelStatistics:
     """The paper's statistics on trials paired by block (see the module docstring).
+    ``remove_outliers=False`` keeps every complete block (the flags are still counted).
 
     ``trials`` is the frame :func:`graspguide.analysis.paper_tables.load` returns;
     familiarization trials are left out. Raises :class:`AnalysisError` when no block has
@@ -163,7 +166,7 @@ def trial_level_statistics(trials, ceiling_s: float = 90.0) -> TrialLevelStatist
         sub = data[data["modality"] == m]
         flags, fences[m] = ceiling_outliers(sub["completion_s"], sub["censored"], ceiling_s)
         flagged_rows.extend(idx for idx, f in zip(sub.index, flags) if f)
-    flagged_blocks = set(data.loc[flagged_rows, "block"])
+    flagged_blocks = set(data.loc[flagged_rows, "block"]) if remove_outliers else set()
     cols = ["block", *BLOCK_KEYS, "modality", "completion_s"]
     removed = data[data["block"].isin(flagged_blocks)][cols].copy()
     removed["flagged"] = removed.index.isin(flagged_rows)
@@ -195,6 +198,8 @@ def trial_level_statistics(trials, ceiling_s: float = 90.0) -> TrialLevelStatist
     within = {"dv": "y", "within": "modality", "subject": "block"}
 
     notes: list[str] = []
+    if not remove_outliers:
+        notes.append("outlier removal off: every complete block is analysed")
     normality = _quiet(pg.normality, long, dv="y", group="modality", method="shapiro")
     normality = normality.reindex(list(MODALITIES))
     if n > 5000:

@@ -12,17 +12,21 @@ from graspguide.exit_codes import EXIT_OK, fail
 HELP = "the paper's Tables I-III, statistics and Figure 4 from study logs"
 
 DESCRIPTION = """\
-The paper's analysis of a study's logs: Table I (successes, failures and success rate
-per condition), Table II (mean and SD of completion time), Table III (NASA-TLX mean and
-SD, C vs V), and the statistics of Section IV: per-participant means per modality
-pooled over contact counts, boxplot outliers (beyond 1.5 IQR) removed with their
-paired values (the participant's row), square-root transform, Shapiro-Wilk, Mauchly's
-test, one-way repeated-measures ANOVA and Bonferroni-corrected paired t-tests; Figure
-4 (mean +- SD with p-values) as PNG and SVG; a Markdown report.
+The paper's analysis of a study's logs, and today's beside it: Table I (successes,
+failures and success rate per condition), Table II (mean and SD of completion time),
+Table III (NASA-TLX mean and SD, C vs V) and the paper's Tables I-II beside them; the
+paper's statistics at trial level (trials paired by participant x contacts x wrench,
+boxplot outliers among the successes removed with their paired trials, timeouts kept
+at 90 s, square root, Shapiro-Wilk, Mauchly, repeated-measures ANOVA with
+Greenhouse-Geisser where needed, Bonferroni pairwise tests, degrees of freedom
+printed); a linear mixed model (participant random intercept, contacts x modality) and
+a two-way contacts x modality ANOVA; the per-participant reading (participant means,
+contacts pooled) with Figure 4; a trial-level figure (trials.png/.svg); a Markdown
+report. docs/analysis.md says what each reading assumes.
 
 DIR is a study folder (one folder per participant, each with trials.jsonl and
-tlx.jsonl) or a participant folder; give several to pool them. Prints Tables I-II and
-the ANOVA; writes report.md, figure4.png, figure4.svg and CSV tables to --out.
+tlx.jsonl) or a participant folder; give several to pool them. Prints every reading;
+writes report.md, figure4.png/.svg, trials.png/.svg and CSV tables to --out.
 Simulated records make the report and the output say SIMULATED DATA. With a single
 participant (a pilot), or a single one left after outlier removal, the tables, the
 participant means and Figure 4 are written and the output says that the inferential
@@ -51,13 +55,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--out",
         metavar="DIR",
         default=None,
-        help="where to write report.md, figure4.png/.svg and the CSV tables "
+        help="where to write report.md, the figures and the CSV tables "
         "(default: analysis/ in the first study folder)",
     )
     p.add_argument(
         "--keep-outliers",
         action="store_true",
-        help="do not remove boxplot outliers before the ANOVA (the paper does)",
+        help="do not remove boxplot outliers before the ANOVAs (the paper does)",
     )
 
 

@@ -87,6 +87,13 @@ def test_planted_outlier_removes_its_block_and_the_timeout_stays():
     assert "| U2 | 3 | W02 | F+V | 80.00 |" in format_markdown(s)
 
 
+def test_outliers_kept_when_asked():
+    s = trial_level_statistics(frame(small_set()), remove_outliers=False)
+    assert s.n_blocks == 9 and len(s.removed) == 0
+    assert s.retained.loc["U2/k3/W02", "F+V"] == 80.0
+    assert "outlier removal off" in format_text(s)
+
+
 def test_anova_matches_sums_of_squares_computed_here():
     rng = np.random.default_rng(7)
     n = 12
