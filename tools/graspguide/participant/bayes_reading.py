@@ -70,6 +70,21 @@ def cap_neighbours(radius_deg: float, n: int = GRID_N) -> tuple[np.ndarray, ...]
     return tuple(out)
 
 
+@functools.lru_cache(maxsize=4)
+def cap_matrix(radius_deg: float, n: int = GRID_N):
+    """:func:`cap_neighbours` as a sparse 0/1 matrix (row i: the points within
+    ``radius_deg`` of point i, in ascending order), so the mass every cap holds is one
+    product. Its rows sum in the order a loop over the neighbours would, so the result is
+    the loop's to the last bit."""
+    from scipy.sparse import csr_matrix
+
+    nbrs = cap_neighbours(radius_deg, n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    indptr[1:] = np.cumsum([len(x) for x in nbrs])
+    indices = np.concatenate(nbrs)
+    return csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+
+
 @dataclass(frozen=True)
 class PatternMap:
     """The pattern Algorithm 1 gives for each grid direction (zero moment): per point and
@@ -258,6 +273,7 @@ __all__ = [
     "GRID_N",
     "PatternMap",
     "Percept",
+    "cap_matrix",
     "cap_neighbours",
     "direction_grid",
     "pattern_likelihood",

@@ -902,15 +902,14 @@ class VirtualParticipant:
         if not top > -math.inf:  # everything ruled out: start over, the prior alone
             st["logpost"] = lp = np.zeros(len(lp))
             top = 0.0
-        idx = np.nonzero(lp > top - 20.0)[0].tolist()
-        vals = lp[idx].tolist()
-        nbrs = bayes_reading.cap_neighbours(self.params.task_threshold_deg)
-        mass: dict[int, float] = {}
-        for j, v in zip(idx, vals):
-            wj = math.exp(v - top)
-            for c in nbrs[j].tolist():
-                mass[c] = mass.get(c, 0.0) + wj
-        return max(sorted(mass), key=lambda c: mass[c])
+        idx = np.nonzero(lp > top - 20.0)[0]
+        w = np.zeros(len(lp))
+        # math.exp, not np.exp: numpy's SIMD exp may differ in the last bit between CPUs.
+        w[idx] = [math.exp(v - top) for v in lp[idx].tolist()]
+        # The caps are symmetric (j covers c iff c covers j): cap c holds the sum of w
+        # over its own neighbours; argmax takes the lowest index among ties.
+        mass = bayes_reading.cap_matrix(self.params.task_threshold_deg) @ w
+        return int(np.argmax(mass))
 
     def _plan_v(self, t: float, speeds: Sequence[float]) -> None:
         """Mode V (bayes). Each decision: read the overall intensity at the pose the
