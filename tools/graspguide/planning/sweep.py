@@ -502,7 +502,8 @@ def sweep_figure(result: dict[str, Any]) -> Any:
                 linewidth=1.0,
             )
         axes[row][0].set_ylabel("success rate [%]")
-        axes[row][0].set_ylim(-3, 103)
+        axes[row][0].set_ylim(-3, 125)  # room for the legend above 100 %
+        axes[row][0].set_yticks(range(0, 101, 20))
         axes[row][1].set_ylabel(f"completion time [s] (failure = {timeout_s:g} s)")
         axes[row][1].set_ylim(0, timeout_s * 1.4)  # room for the legend
         axes[row][1].axhline(timeout_s, color="0.6", linewidth=0.8, linestyle="--")
@@ -516,7 +517,9 @@ def sweep_figure(result: dict[str, Any]) -> Any:
                 ax.minorticks_off()
             else:
                 ax.set_xticks(xs)
-        axes[row][0].legend(fontsize=8, loc="lower right" if row == 0 else "center right")
+        # Above the 100 % line, where no rate can be: a legend inside the data covers
+        # points wherever the rates happen to fall.
+        axes[row][0].legend(fontsize=8, loc="upper center", ncol=len(mods))
     handles = [
         Line2D([], [], markerfacecolor="none", label=shown(m), **_style(m, j))
         for j, m in enumerate(mods)
