@@ -1,0 +1,309 @@
+"""`--source natnet:...` against a stand-in Motive on 127.0.0.1 (unicast, real UDP).
+
+The packets are built here with struct from the published NatNet 3.1/4.1 layout (the
+NatNet SDK's NatNetClient.py: server info; model definitions; frame of data = frame
+number, marker sets, legacy unlabelled markers, rigid bodies (id, position, quaternion
+x,y,z,w, marker error, params bit 0 = tracking valid), skeletons, assets (4.1), labelled
+markers (id, position, size, params bit 0 = occluded, residual), force plates, devices,
+suffix (timecode, timestamp as a double, three 64-bit stamps, 4.x precision timestamp,
+params)), not with the decoder under test. The expected world values come from scipy's
+Rotation and Motive's stated axes (x right, y up, z towards the viewer), not from
+TrackerConvention.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from graspguide.sources.natnet_source import MAX_BAD_PACKETS, parse_spec
+from graspguide.sources.poses import SourceError, open_source
+
+NAT_CONNECT, NAT_SERVERINFO, NAT_REQUEST_MODELDEF, NAT_MODELDEF, NAT_FRAMEOFDATA = 0, 1, 4, 5, 7
+HAND_ID, OTHER_ID, MODEL = 3, 1, 3
+MARKER_IDS = [MODEL << 16 | k for k in (1, 2, 3)]
+# Motive's y-up frame in this project's world: x_t = x_w, y_t = z_w, z_t = -y_w
+WORLD_TO_MOTIVE = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+
+
+def packet(message_id: int, payload: bytes) -> bytes:
+    return struct.pack("<HH", message_id, len(payload)) + payload
+
+
+def server_info(version: tuple[int, int]) -> bytes:
+    return packet(NAT_SERVERINFO, b"Motive".ljust(256, b"\0") + bytes([3, 1, 0, 0, *version, 0, 0]))
+
+
+def model_definitions(version: tuple[int, int], bodies: dict[str, int]) -> bytes:
+    out = struct.pack("<I", len(bodies))
+    for name, body_id in bodies.items():
+        desc = name.encode() + b"\0" + struct.pack("<ii3f", body_id, -1, 0, 0, 0)
+        desc += struct.pack("<I", 0)  # no markers: positions, labels (and 4.x names) empty
+        out += struct.pack("<I", 1)  # data type 1: rigid body
+        if version >= (4, 1):
+            out += struct.pack("<I", len(desc))
+        out += desc
+    return packet(NAT_MODELDEF, out)
+
+
+def frame(version, number, t, bodies, markers) -> bytes:
+    """bodies: (id, pos, quat_xyzw, tracking_valid); markers: (id, pos, occluded)."""
+    sized = version >= (4, 1)
+
+    def section(count: int, body: bytes) -> bytes:
+        return struct.pack("<I", count) + (struct.pack("<I", len(body)) if sized else b"") + body
+
+    p = struct.pack("<I", number)
+    marker_set = b"all\0" + struct.pack("<I", len(markers))
+    marker_set += b"".join(struct.pack("<3f", *m[1]) for m in markers)
+    p += section(1, marker_set)
+    p += section(1, struct.pack("<3f", 0.5, 0.6, 0.7))  # one unlabelled marker
+    p += section(
+        len(bodies),
+        b"".join(
+            struct.pack("<I3f4ffh", i, *pos, *q, 0.0002, 1 if valid else 0)
+            for i, pos, q, valid in bodies
+        ),
+    )
+    p += section(0, b"")  # skeletons
+    if sized:
+        p += section(0, b"")  # assets
+    p += section(
+        len(markers),
+        b"".join(
+            struct.pack("<I3ffhf", i, *pos, 0.014, 0x01 if occ else 0x04, 0.0003)
+            for i, pos, occ in markers
+        ),
+    )
+    p += section(0, b"")  # force plates
+    p += section(0, b"")  # devices
+    p += struct.pack("<IId3Q", 0, 0, t, 11, 12, 13)
+    if version[0] >= 4:
+        p += struct.pack("<II", int(t), 0)  # precision timestamp
+    p += struct.pack("<h", 0)
+    return packet(NAT_FRAMEOFDATA, p)
+
+
+def f32(values) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float32)]
+
+
+class Scene:
+    """A hand pose and three fingertips in the world, and as Motive streams them."""
+
+    def __init__(self, seed: int):
+        rng = np.random.default_rng(seed)
+        self.r_world = Rotation.random(random_state=seed)
+        self.t_world = rng.uniform(-1, 1, 3) + [0, 0, 1.2]
+        self.contacts = [[0.06, 0.03, 0.0], [0.07, -0.02, 0.01], [0.05, -0.05, 0.0]]
+        a = WORLD_TO_MOTIVE
+        r_motive = Rotation.from_matrix(a @ self.r_world.as_matrix() @ a.T)
+        self.pos = f32(a @ self.t_world)
+        self.quat_xyzw = f32(r_motive.as_quat())  # scipy's order is x, y, z, w
+        markers_world = [self.t_world + self.r_world.apply(c) for c in self.contacts]
+        self.markers = [f32(a @ m) for m in markers_world]
+
+    def expected(self):
+        """What the streamed (float32) values are in the world: orientation, contacts."""
+        a = WORLD_TO_MOTIVE
+        r = Rotation.from_matrix(a.T @ Rotation.from_quat(self.quat_xyzw).as_matrix() @ a)
+        t = a.T @ np.array(self.pos)
+        contacts = [r.inv().apply(a.T @ np.array(m) - t) for m in self.markers]
+        return r, contacts
+
+    def frame(self, version, number, t, tracked=True, drop=(), occlude=()):
+        bodies = [
+            (OTHER_ID, [0.1, 0.2, 0.3], [0.0, 0.0, 0.0, 1.0], True),
+            (HAND_ID, self.pos, self.quat_xyzw, tracked),
+        ]
+        markers = [
+            (mid, pos, k in occlude)
+            for k, (mid, pos) in enumerate(zip(MARKER_IDS, self.markers))
+            if k not in drop
+        ]
+        return frame(version, number, t, bodies, markers)
+
+
+class StandIn:
+    """A stand-in Motive: answers the connect request (and the model-definition request)
+    on its command port, then sends the given packets to the client that connected."""
+
+    def __init__(self, version, packets, bodies=None):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(5.0)
+        self.port = self.sock.getsockname()[1]
+        self.version, self.packets, self.bodies = version, packets, bodies
+        self.requests: list[int] = []
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        data, client = self.sock.recvfrom(1 << 16)
+        self.requests.append(struct.unpack_from("<H", data)[0])
+        self.sock.sendto(server_info(self.version), client)
+        if self.bodies is not None:
+            data, client = self.sock.recvfrom(1 << 16)
+            self.requests.append(struct.unpack_from("<H", data)[0])
+            self.sock.sendto(model_definitions(self.version, self.bodies), client)
+        for p in self.packets:
+            self.sock.sendto(p, client)
+            time.sleep(0.002)  # keep the loopback socket's buffer from overflowing
+
+    def spec(self, **extra) -> str:
+        keys = {"server": "127.0.0.1", "local": "127.0.0.1", "multicast": "off"}
+        keys.update(command_port=str(self.port), body=str(HAND_ID), timeout="3")
+        keys.update(extra)
+        return "natnet:" + ",".join(f"{k}={v}" for k, v in keys.items())
+
+    def close(self):
+        self.thread.join(5)
+        self.sock.close()
+
+
+def markers_key() -> str:
+    return ";".join(f"{m >> 16}.{m & 0xFFFF}" for m in MARKER_IDS)
+
+
+def quat_close(wxyz, r: Rotation, tol: float) -> bool:
+    w, x, y, z = wxyz
+    return bool(np.allclose(np.abs(np.dot([x, y, z, w], r.as_quat())), 1.0, atol=tol))
+
+
+@pytest.mark.parametrize("version", [(3, 1), (4, 1)])
+def test_frames_decode_to_world_poses_and_contacts(version):
+    scene = Scene(seed=7)
+    packets = [scene.frame(version, n, 10.0 + n / 120, tracked=True) for n in range(6)]
+    server = StandIn(version, packets, bodies={"Wand": OTHER_ID, "Hand": HAND_ID})
+    try:
+        source = open_source(server.spec(body="Hand", markers=markers_key()))
+        assert source.describe()["natnet_version"] == f"{version[0]}.{version[1]}.0.0"
+        assert source.describe()["body_id"] == HAND_ID
+        samples = [s for _, s in zip(range(6), source)]
+    finally:
+        server.close()
+    assert server.requests == [NAT_CONNECT, NAT_REQUEST_MODELDEF]
+    r, contacts = scene.expected()
+    assert [s[0] for s in samples] == pytest.approx([n / 120 for n in range(6)], abs=1e-9)
+    for _, q, c in samples:
+        assert quat_close(q, r, 1e-6)
+        assert np.allclose(c, contacts, atol=1e-6)
+    # float32 on the wire: the world values come back to float32 precision
+    assert np.allclose(samples[0][2], scene.contacts, atol=1e-5)
+    assert quat_close(samples[0][1], scene.r_world, 1e-6)
+
+
+def test_untracked_body_is_held_then_stops():
+    version = (4, 1)
+    scene, other = Scene(seed=1), Scene(seed=2)
+    packets = [scene.frame(version, n, n * 0.01) for n in range(3)]
+    # untracked: the stream carries another pose the source must not take
+    packets += [other.frame(version, n, n * 0.01, tracked=False) for n in range(3, 9)]
+    server = StandIn(version, packets)
+    samples = []
+    try:
+        source = open_source(server.spec(hold="0.045"))
+        with pytest.raises(SourceError, match=r"rigid body 3 .*not tracked.*hold=0\.045"):
+            for s in source:
+                samples.append(s)
+    finally:
+        server.close()
+    # frames 3..6 are within 0.045 s of the last tracked frame (t=0.02): held
+    assert len(samples) == 7
+    assert all(s[1] == samples[2][1] for s in samples[3:])
+    assert quat_close(samples[0][1], scene.expected()[0], 1e-6)
+
+
+def test_missing_marker_is_held_then_stops():
+    version = (3, 1)
+    scene = Scene(seed=3)
+    packets = [scene.frame(version, n, n * 0.01) for n in range(2)]
+    packets += [scene.frame(version, 2, 0.02, occlude=(1,))]
+    packets += [scene.frame(version, n, n * 0.01, drop=(1,)) for n in range(3, 8)]
+    server = StandIn(version, packets)
+    samples = []
+    try:
+        source = open_source(server.spec(markers=markers_key(), hold="0.035"))
+        with pytest.raises(SourceError, match=rf"labelled marker {MARKER_IDS[1]} .*missing"):
+            for s in source:
+                samples.append(s)
+    finally:
+        server.close()
+    assert len(samples) == 5  # the last seen at t=0.01; held through t=0.04
+    assert all(np.array_equal(s[2], samples[1][2]) for s in samples[2:])
+
+
+def test_malformed_packets_are_skipped_with_a_warning(capfd):
+    version = (4, 1)
+    scene = Scene(seed=4)
+    good = scene.frame(version, 0, 0.0)
+    truncated = good[:40]  # the header still announces the whole frame
+    payload = bytearray(good[4:])
+    struct.pack_into("<I", payload, 4, 10**6)  # a marker-set count far past the data
+    undecodable = packet(NAT_FRAMEOFDATA, bytes(payload))
+    packets = [b"\x07", truncated, undecodable, good, scene.frame(version, 1, 0.01)]
+    server = StandIn(version, packets)
+    try:
+        source = open_source(server.spec())
+        samples = [s for _, s in zip(range(2), source)]
+        assert source.skipped_packets == 3
+    finally:
+        server.close()
+    assert [s[0] for s in samples] == pytest.approx([0.0, 0.01])
+    err = capfd.readouterr().err
+    assert "shorter than the NatNet header" in err
+    assert "truncated packet" in err
+    assert "undecodable frame of data" in err
+
+
+def test_a_run_of_bad_packets_stops_the_source(capfd):
+    server = StandIn((4, 1), [b"\x07\x00\xff\xff"] * MAX_BAD_PACKETS)
+    try:
+        source = open_source(server.spec())
+        with pytest.raises(SourceError, match="undecodable packets in a row"):
+            next(iter(source))
+    finally:
+        server.close()
+
+
+def test_no_server_is_a_clear_error():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        with pytest.raises(SourceError, match=rf"no answer from a NatNet server at .*:{port}"):
+            open_source(
+                f"natnet:server=127.0.0.1,local=127.0.0.1,multicast=off,body=1,"
+                f"command_port={port},timeout=0.3"
+            )
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("natnet:server=127.0.0.1,bdy=3", r'bad option .*did you mean "body"'),
+        ("natnet:server=127.0.0.1,body=3,data_prot=1511", r'did you mean "data_port"'),
+        ("natnet:server=127.0.0.1", "body is required"),
+        ("natnet:server=motive-pc,body=3", "server must be an IPv4 address"),
+        ("natnet:body=3,command_port=70000", "command_port must be a port number"),
+        ("natnet:body=3,markers=1;2", "markers needs 3 or 4 IDs"),
+        ("natnet:body=3,markers=1;x;3", "'x' is not a labelled-marker ID"),
+        ("natnet:body=3,hold=-1", "hold must be seconds"),
+        ("natnet:body=3,multicast=10.0.0.1", "multicast must be a group"),
+        ("natnet:body=3,body=4", "body is given twice"),
+    ],
+)
+def test_bad_spec_names_the_key(spec, message):
+    with pytest.raises(SourceError, match=message):
+        open_source(spec)
+
+
+def test_defaults_are_motives():
+    spec = parse_spec("body=Hand")
+    assert (spec.multicast, spec.command_port, spec.data_port) == ("239.255.42.99", 1510, 1511)
+    assert parse_spec("body=1,markers=65537;1.2;1.3").markers == (65537, 65538, 65539)
