@@ -102,7 +102,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--source",
         required=True,
         metavar="SOURCE",
-        help="replay:FILE.csv, synthetic[:rate=240,duration=10,seed=0], "
+        help="replay:FILE.csv, replay:FILE.xdf[#name=STREAM], "
+        "synthetic[:rate=240,duration=10,seed=0], "
         "plugin:MODULE:CLASS[:ARG] or participant[:seed=N,PARAMS] (SIMULATED)",
     )
     p.add_argument(
@@ -119,6 +120,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="write the session folder DIR (scene.json, device.json, "
         "config.json, poses.csv, telemetry.csv, results.jsonl)",
+    )
+    p.add_argument(
+        "--record",
+        metavar="FILE.xdf",
+        default=None,
+        help="record the run as an XDF file (LabRecorder's format): the poses sent "
+        "(MoCap), the TELEMETRY and the markers, on the poses' trial time; replay it "
+        "with --source replay:FILE.xdf (docs/lab-streams.md). An existing file is "
+        "never overwritten",
     )
     p.add_argument(
         "--trial-id",
@@ -160,4 +170,5 @@ def run(args: argparse.Namespace) -> int:
         virtual_clock=args.virtual_clock,
         lsl=args.lsl,
         lsl_wait=args.lsl_wait,
+        record=args.record,
     )

@@ -150,7 +150,16 @@ def run_stream(
         if view is not None:
             view.update(status)
 
-    on_send = None if log is None else lambda t_us, t_s, q, c: log.pose(t_us, t_s, q, c is not None)
+    # observers that keep the poses too (the XDF recorder) hear each POSE as it is sent
+    pose_observers = [o for o in observers if callable(getattr(o, "on_pose", None))]
+
+    def send_to_all(t_us: int, t_s: float, q: Sequence[float], c: Any) -> None:
+        if log is not None:
+            log.pose(t_us, t_s, q, c is not None)
+        for o in pose_observers:
+            o.on_pose(t_s, q, c)
+
+    on_send = send_to_all if log is not None or pose_observers else None
     if closed:
         model = source.model
         model.begin_trial(
@@ -307,6 +316,7 @@ def stream_command(
     virtual_clock: bool,
     lsl: str | None = None,
     lsl_wait: float = 0.0,
+    record: str | None = None,
 ) -> int:
     """`graspguide stream`: one trial of the scene file ``scene`` with ``wrench`` on the
     device at ``port``, poses from the source spec ``source``; the session folder ``log``
@@ -368,11 +378,31 @@ def stream_command(
             report("stream", e)
             return EXIT_USAGE if isinstance(e, LabStreamsUsageError) else EXIT_FAILURE
     observers: list[ev.TrialObserver] = [streams] if streams is not None else []
+    recorder = None
+    if record:
+        from graspguide.sources.xdf_recording import XdfRecorder
+
+        try:
+            recorder = XdfRecorder(
+                record,
+                session="stream",
+                nominal_rate_hz=0.0 if virtual_clock else float(poses.rate_hz or 0.0),
+                simulated=simulated,
+                extra={"scene_config_hash": trial_scene.config_hash(), "source": source_spec},
+            )
+        except OSError as e:  # an existing file (never overwritten), an unwritable folder
+            if streams is not None:
+                streams.close()
+            report("stream", e)
+            return EXIT_USAGE
+        observers.append(recorder)
     try:
         device = DeviceSession("stream", port, baud, timeout, virtual_clock)
     except LinkError as e:
         if streams is not None:
             streams.close()
+        if recorder is not None:
+            recorder.close()
         return fail("stream", e)
     client = device.client
     session_log = view = None
@@ -393,6 +423,7 @@ def stream_command(
             scene_file=scene_file,
             simulated=simulated,
             lsl=lsl,
+            record=record,
         )
         if log_dir:
             session_log = SessionLog(log_dir)
@@ -459,6 +490,13 @@ def stream_command(
                 streams.on_event(ev.STUDY_END, exit_code=code)
             finally:
                 streams.close()
+        if recorder is not None:
+            try:
+                recorder.on_event(ev.STUDY_END, exit_code=code)
+                recorder.close()
+            except OSError as e:  # the chunks before stay whole (xdf_writer)
+                report("stream", e)
+                code = code or EXIT_FAILURE
     if summary is not None:
         print(summary_line(summary, simulated))
     return code
