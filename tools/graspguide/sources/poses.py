@@ -158,14 +158,29 @@ class TrackerConvention:
 
 
 WORLD = TrackerConvention("m", "z", "right", "wxyz")
-# Typical defaults; verify against your tracker's settings.
+# Typical defaults; verify against your tracker's settings. Sources and what each fact rests
+# on, confirmed or not: docs/trackers.md.
 TRACKER_PRESETS: dict[str, TrackerConvention] = {
-    # Vicon (Nexus/Tracker, DataStream SDK): millimetres, z up, right-handed, x,y,z,w.
+    # Vicon (Nexus/Tracker, DataStream SDK): mm, z up, right-handed, x,y,z,w -- the SDK's
+    # Output_GetSegmentGlobalRotationQuaternion has Rotation[4]; the order and units are
+    # not confirmed in a vendor page found here.
     "vicon": TrackerConvention("mm", "z", "right", "xyzw"),
-    # OptiTrack (Motive, NatNet streaming): metres, y up, right-handed, x,y,z,w.
+    # OptiTrack Motive, NatNet: right-handed y up (Motive docs, Data Export: "Y-up
+    # right-hand"), Streaming pane's Up Axis default; x,y,z,w (NatNet SDK NatNetClient.py
+    # unpacks qx,qy,qz,qw); metres (the SDK's layout; not confirmed in a vendor page).
     "optitrack": TrackerConvention("m", "y", "right", "xyzw"),
-    # Leap Motion / Ultraleap: millimetres, y up, right-handed, x,y,z,w.
+    # Motive streaming with Up Axis = Z Up (Data Streaming pane).
+    "motive-zup": TrackerConvention("m", "z", "right", "xyzw"),
+    # Leap Motion / Ultraleap: mm, y up, right-handed (LeapC 4.1 "Leap Concepts",
+    # Coordinate System); x,y,z,w is LEAP_QUATERNION's field order, not confirmed here.
     "leap": TrackerConvention("mm", "y", "right", "xyzw"),
+    # Qualisys QTM: mm, z up by default (its calibration sets the axes), right-handed; QTM
+    # gives a rotation matrix, not a quaternion (QTM manual, Rotation angle calculations):
+    # write it as w,x,y,z.
+    "qualisys": TrackerConvention("mm", "z", "right", "wxyz"),
+    # Xsens MTi: ENU, z up, right-handed (MTi Family Reference Manual 4.2.3); quaternion
+    # q0 (real) first (MTi and MTx User Manual 4.3.1); no positions (metres if added).
+    "xsens": TrackerConvention("m", "z", "right", "wxyz"),
     "world": WORLD,
 }
 
