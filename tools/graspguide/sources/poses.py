@@ -3,7 +3,7 @@ contacts_or_None)`` -- time in seconds from the source's start, the hand -> worl
 orientation as a unit quaternion [w, x, y, z] in this project's world (z up,
 right-handed), and optionally the contacts (metres, hand frame) -- at the source's rate.
 
-Spec strings (:func:`open_source`):
+Spec strings (:func:`graspguide.sources.source_spec.open_source`):
 
 * ``replay:FILE.csv`` -- a recorded stream. A header line is required and names the
   columns: ``t_s,qw,qx,qy,qz`` and optionally ``thumb_x,thumb_y,thumb_z,index_x,index_y,
@@ -63,7 +63,9 @@ class SourceError(ValueError):
 
 #: Every ``--source`` kind and how it is written: the one list `stream` and `trial` show.
 SOURCE_KINDS: dict[str, str] = {
-    "replay": "replay:FILE.csv",
+    "replay": "replay:FILE.csv|FILE.xdf",
+    "lsl": "lsl:name=NAME,type=MoCap,source_id=ID",
+    "natnet": "natnet:server=IP,body=NAME",
     "synthetic": "synthetic[:rate=240,duration=10,seed=0]",
     "plugin": "plugin:MODULE:CLASS[:ARG]",
     "participant": "participant[:KEY=VALUE,...]",
@@ -552,7 +554,7 @@ def tracker_convention(name: str) -> TrackerConvention:
     return TrackerConvention(*parts)
 
 
-def _open_plugin(rest: str) -> Source:
+def open_plugin(rest: str) -> Source:
     module_name, _, tail = rest.partition(":")
     class_name, _, arg = tail.partition(":")
     if not module_name or not class_name:
@@ -570,43 +572,6 @@ def _open_plugin(rest: str) -> Source:
     return cls(arg) if arg else cls()
 
 
-def open_source(spec: str, tracker: str | None = None) -> Source:
-    """A Source from ``replay:FILE.csv``, ``synthetic[:rate=..,duration=..,seed=..]`` or
-    ``plugin:MODULE:CLASS[:ARG]``. ``tracker`` (a preset name or UNITS/UP/HANDEDNESS/ORDER)
-    says in which convention a replay file is written."""
-    kind, _, rest = spec.partition(":")
-    if tracker is not None and kind != "replay":
-        raise SourceError(
-            f"--tracker only applies to replay sources (a plugin declares its "
-            f"own convention), not to {kind!r}"
-        )
-    if kind == "replay":
-        if not rest:
-            raise SourceError("replay needs a file: --source replay:FILE.csv")
-        return ReplaySource(rest, tracker_convention(tracker) if tracker else None)
-    if kind == "plugin":
-        return _open_plugin(rest)
-    if kind == "synthetic":
-        from graspguide.core.suggest import did_you_mean
-
-        kw: dict[str, float] = {}
-        conv = SYNTHETIC_OPTIONS
-        for item in filter(None, rest.split(",")):
-            key, eq, value = item.partition("=")
-            key = key.strip()
-            if not eq or key not in conv:
-                raise SourceError(
-                    f"synthetic: bad option {item!r}{did_you_mean(key, conv)}; options are "
-                    f"{', '.join(k + '=N' for k in conv)}"
-                )
-            try:
-                kw[key] = conv[key](value)
-            except ValueError:
-                raise SourceError(f"synthetic: {key} must be a number, got {value!r}") from None
-        return SyntheticSource(**kw)  # type: ignore[arg-type]
-    raise unknown_source(spec)
-
-
 __all__ = [
     "Source",
     "ReplaySource",
@@ -620,7 +585,6 @@ __all__ = [
     "tracker_convention",
     "TRACKER_PRESETS",
     "WORLD",
-    "open_source",
     "aligned_quaternion",
     "quat_mul",
     "quat_from_axis_angle",

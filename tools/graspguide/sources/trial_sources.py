@@ -163,7 +163,8 @@ class OpenLoopSource(RunnerSource):
 
 def open_runner_source(spec: str, protocol: Protocol, participant: str) -> RunnerSource:
     """The source of ``--source SPEC`` for this protocol and participant."""
-    from graspguide.sources.poses import SourceError, SyntheticSource, TrackerAdapter, open_source
+    from graspguide.sources.poses import SourceError, SyntheticSource, TrackerAdapter
+    from graspguide.sources.source_spec import open_source
 
     kind, _, rest = spec.partition(":")
     seed = derive_seed(protocol.seed, "source", participant) % 2**32

@@ -331,7 +331,8 @@ def stream_command(
         LabStreamsUsageError,
         open_lab_streams,
     )
-    from graspguide.sources.poses import SourceError, SyntheticSource, open_source
+    from graspguide.sources.poses import SourceError, SyntheticSource
+    from graspguide.sources.source_spec import open_source
     from graspguide.sources.trial_sources import simulation
     from graspguide.study.live_view import StatusView, TrialProgress
 

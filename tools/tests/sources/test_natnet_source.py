@@ -23,7 +23,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from graspguide.sources.natnet_source import MAX_BAD_PACKETS, parse_spec
-from graspguide.sources.poses import SourceError, open_source
+from graspguide.sources.poses import SourceError
+from graspguide.sources.source_spec import open_source
 
 NAT_CONNECT, NAT_SERVERINFO, NAT_REQUEST_MODELDEF, NAT_MODELDEF, NAT_FRAMEOFDATA = 0, 1, 4, 5, 7
 HAND_ID, OTHER_ID, MODEL = 3, 1, 3

@@ -16,6 +16,7 @@ from conftest import REPO_ROOT
 from graspguide.participant.model import ParticipantParams, VirtualParticipant
 from graspguide.sources import poses as sources
 from graspguide.sources import trial_sources
+from graspguide.sources.source_spec import open_source
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 PROTOCOL = os.path.join(REPO_ROOT, "protocols", "paper.toml")
@@ -81,7 +82,7 @@ def test_a_misspelt_participant_key_in_trial_suggests_the_parameter(tmp_path):
 
 def test_a_misspelt_synthetic_option_gets_a_did_you_mean():
     with pytest.raises(sources.SourceError, match='did you mean "rate"'):
-        sources.open_source("synthetic:rat=100")
+        open_source("synthetic:rat=100")
 
 
 def test_the_participant_keys_are_the_ones_the_participant_takes():

@@ -10,6 +10,7 @@ import pytest
 from graspguide.core import rotations as rot
 from graspguide.core import solver
 from graspguide.sources import poses as src
+from graspguide.sources.source_spec import open_source
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 WRENCH = [0.3, -1.2, -0.8, 0, 0, 0]
@@ -94,7 +95,7 @@ def test_replay_reads_quaternions_and_contacts(tmp_path):
     rows = [
         f"{10 + i * 0.01},1,0,0,0," + ",".join(str(v) for c in HAND3 for v in c) for i in range(5)
     ]
-    s = src.open_source("replay:" + write(tmp_path, "\n".join([head] + rows) + "\n"))
+    s = open_source("replay:" + write(tmp_path, "\n".join([head] + rows) + "\n"))
     got = list(s)
     assert len(got) == 5 and got[0][0] == 0.0 and got[1][0] == pytest.approx(0.01)
     assert got[0][1] == (1, 0, 0, 0) and got[0][2] == HAND3
@@ -102,7 +103,7 @@ def test_replay_reads_quaternions_and_contacts(tmp_path):
 
 
 def test_replay_without_contacts(tmp_path):
-    s = src.open_source("replay:" + write(tmp_path, "t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,0,1,0,0\n"))
+    s = open_source("replay:" + write(tmp_path, "t_s,qw,qx,qy,qz\n0,1,0,0,0\n0.1,0,1,0,0\n"))
     assert [x[2] for x in s] == [None, None]
 
 
@@ -122,15 +123,15 @@ def test_replay_without_contacts(tmp_path):
 def test_replay_errors_name_the_line(tmp_path, text, where, words):
     path = write(tmp_path, text)
     with pytest.raises(src.SourceError) as e:
-        src.open_source("replay:" + path)
+        open_source("replay:" + path)
     assert str(e.value).startswith(path + where) and words in str(e.value), str(e.value)
 
 
 # ---- synthetic ----------------------------------------------------------------------------
 def test_synthetic_deterministic_rate_and_duration():
-    a = list(src.open_source("synthetic:rate=100,duration=2,seed=3"))
-    b = list(src.open_source("synthetic:rate=100,duration=2,seed=3"))
-    c = list(src.open_source("synthetic:rate=100,duration=2,seed=4"))
+    a = list(open_source("synthetic:rate=100,duration=2,seed=3"))
+    b = list(open_source("synthetic:rate=100,duration=2,seed=3"))
+    c = list(open_source("synthetic:rate=100,duration=2,seed=4"))
     assert a == b and a != c
     assert len(a) == 201 and a[-1][0] == pytest.approx(2.0)
     assert all(abs(np.linalg.norm(q) - 1) < 1e-9 for _, q, _ in a)
@@ -160,7 +161,7 @@ def test_synthetic_converges_to_aligned_orientation():
 )
 def test_bad_specs(spec, words):
     with pytest.raises(src.SourceError, match=words):
-        src.open_source(spec)
+        open_source(spec)
 
 
 # ---- tracker exports and live adapters --------------------------------------------------
@@ -185,14 +186,14 @@ def test_replay_with_tracker_converts_a_raw_export(tmp_path):
         "\n".join([VICON_HEAD, vicon_row(0, CASES["vicon"][0]), vicon_row(0.01, CASES["vicon"][1])])
         + "\n",
     )
-    got = list(src.open_source("replay:" + path, tracker="vicon"))
+    got = list(open_source("replay:" + path, tracker="vicon"))
     assert rot.quat_angle_deg(got[0][1], world([0, 0, 1])) < 1e-9
     assert rot.quat_angle_deg(got[1][1], world([1, 0, 0])) < 1e-9
     assert np.allclose(got[0][2], HAND3)
     # the same file read as if it were already in world convention (metres) is refused:
     # its contacts span 78 "m", no hand
     with pytest.raises(src.SourceError) as e:
-        src.open_source("replay:" + path)
+        open_source("replay:" + path)
     assert str(e.value).startswith(path + ":2:") and "looks like millimetres" in str(e.value)
     assert "--tracker mm/z/right/wxyz" in str(e.value)
 
@@ -204,7 +205,7 @@ def test_tracker_by_explicit_convention_and_bad_names(tmp_path):
     with pytest.raises(src.SourceError, match="up_axis"):
         src.tracker_convention("mm/x/right/xyzw")
     with pytest.raises(src.SourceError, match="only applies to replay"):
-        src.open_source("synthetic", tracker="vicon")
+        open_source("synthetic", tracker="vicon")
 
 
 class _FakeOptiTrack(src.TrackerAdapter):
@@ -247,11 +248,11 @@ def test_plugin_source_loads_an_adapter_class(monkeypatch):
     module.Hand = _FakeOptiTrack
     module.NotAnAdapter = dict
     monkeypatch.setitem(sys.modules, "lab_tracker_for_test", module)
-    s = src.open_source("plugin:lab_tracker_for_test:Hand:about-x")
+    s = open_source("plugin:lab_tracker_for_test:Hand:about-x")
     assert rot.quat_angle_deg(next(iter(s))[1], world([1, 0, 0])) < 1e-9
     with pytest.raises(src.SourceError, match="TrackerAdapter subclass"):
-        src.open_source("plugin:lab_tracker_for_test:NotAnAdapter")
+        open_source("plugin:lab_tracker_for_test:NotAnAdapter")
     with pytest.raises(src.SourceError, match="cannot import 'no_such_tracker_mod'"):
-        src.open_source("plugin:no_such_tracker_mod:X")
+        open_source("plugin:no_such_tracker_mod:X")
     with pytest.raises(src.SourceError, match="needs a module and a class"):
-        src.open_source("plugin:lab_tracker_for_test")
+        open_source("plugin:lab_tracker_for_test")
