@@ -22,9 +22,11 @@ fsync'ed only at :meth:`close`: a power loss can lose what the OS had not writte
 
 What pyxdf (1.17.5) does with a file whose *last* chunk is cut (a power loss, a copy cut
 short): a cut Samples chunk or footer is dropped with a logged error and everything
-before it is read; a cut inside a chunk's 2-byte tag, a StreamHeader's XML or a
-ClockOffset chunk makes ``load_xdf`` raise (struct.error / ParseError). The chunk-whole
-appends above never leave such a file behind a killed process.
+before it is read -- except a cut inside the values of the chunk's *last* sample, which
+pyxdf keeps with that sample's values partly the previous sample's bytes; a cut inside a
+chunk's 2-byte tag, a StreamHeader's XML or a ClockOffset chunk makes ``load_xdf`` raise
+(struct.error / ParseError). The chunk-whole appends above never leave such a file
+behind a killed process.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ BOUNDARY_UUID = bytes.fromhex("43A546DCCBF5410FB30ED5467383CBE4")
 #: channel_format -> the struct code of one value (strings are written apart).
 NUMERIC_FORMATS = {"float32": "f", "double64": "d"}
 CHANNEL_FORMATS = (*NUMERIC_FORMATS, "string")
+FLOAT32_MAX = struct.unpack("<f", b"\xff\xff\x7f\x7f")[0]
 
 _HINT = " (or give another --record file)"
 
@@ -245,9 +248,8 @@ class XdfWriter:
         are buffered or ``chunk_s`` passed since the last chunk. ``timestamp`` None: deduced
         from the one before and the nominal rate (a regular stream only)."""
         s = self._stream(stream_id)
-        self._check(s, timestamp, values)
+        s.pending_v.append(self._check(s, timestamp, values))
         s.pending_t.append(timestamp)
-        s.pending_v.append(values)
         if len(s.pending_t) >= self.chunk_samples:
             self._flush_stream(s)
         elif time.monotonic() - self._last_chunk >= self.chunk_s:
@@ -265,13 +267,13 @@ class XdfWriter:
             raise XdfFormatError(
                 f"stream {s.name!r}: {len(timestamps)} timestamps for {len(samples)} samples"
             )
-        for t, v in zip(timestamps, samples):
-            self._check(s, t, v)
+        checked = [self._check(s, t, v) for t, v in zip(timestamps, samples)]
         self._flush_stream(s)
-        s.pending_t, s.pending_v = list(timestamps), list(samples)
+        s.pending_t, s.pending_v = list(timestamps), checked
         self._flush_stream(s)
 
-    def _check(self, s: _Stream, timestamp: float | None, values: Sequence[Any]) -> None:
+    def _check(self, s: _Stream, timestamp: float | None, values: Sequence[Any]) -> list[Any]:
+        """The sample's values as the stream's format takes them, or XdfFormatError."""
         if len(values) != s.channel_count:
             raise XdfFormatError(
                 f"stream {s.name!r} has {s.channel_count} channels, a sample gave {len(values)}"
@@ -280,6 +282,23 @@ class XdfWriter:
             raise XdfFormatError(
                 f"stream {s.name!r} is irregular (nominal_srate 0): every sample needs a timestamp"
             )
+        if s.channel_format == "string":
+            return [str(v) for v in values]
+        try:
+            floats = [float(v) for v in values]
+        except (TypeError, ValueError):
+            raise XdfFormatError(
+                f"stream {s.name!r} ({s.channel_format}): a sample's values are not "
+                f"numbers: {list(values)}"
+            ) from None
+        if s.channel_format == "float32" and any(
+            math.isfinite(v) and abs(v) > FLOAT32_MAX for v in floats
+        ):
+            raise XdfFormatError(
+                f"stream {s.name!r} is float32: a value is beyond its range "
+                f"(+-{FLOAT32_MAX:.4g}): {floats}; use double64"
+            )
+        return floats
 
     def _flush_stream(self, s: _Stream) -> None:
         if not s.pending_t:
@@ -296,16 +315,10 @@ class XdfWriter:
             else:
                 parts.append(b"\x08" + struct.pack("<d", t))
             if pack is not None:
-                try:
-                    parts.append(pack(*v))
-                except struct.error as e:
-                    raise XdfFormatError(
-                        f"stream {s.name!r} ({s.channel_format}): a sample's values are not "
-                        f"numbers ({e}): {list(v)}"
-                    ) from None
+                parts.append(pack(*v))
             else:
                 for text in v:
-                    raw = str(text).encode("utf-8")
+                    raw = text.encode("utf-8")
                     parts.append(varlen_int(len(raw)) + raw)
             last = float(t)
         self._write(chunk(TAG_SAMPLES, b"".join(parts)))
