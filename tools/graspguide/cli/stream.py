@@ -34,7 +34,10 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          plugin:MODULE:CLASS[:ARG] (a live tracker: a graspguide.sources.poses.TrackerAdapter
          subclass that reads the lab's tracker SDK),
          participant[:seed=N,PARAMS] (the virtual participant as a closed loop: it feels
-         the motors and turns the hand, as in `graspguide trial`).
+         the motors and turns the hand, as in `graspguide trial`),
+         lsl:name=NAME[,type=MoCap,body=Hand,markers=Thumb;Index;Middle,hold=0.2,
+         tol_mm=1.0,...] (a live LSL MoCap stream: the hand's rigid body and fingertip
+         markers; `--source lsl --list` lists the streams seen; docs/lab-streams.md).
 A run is SIMULATED -- said at the start, on the result line, in the panel, the log and
 the LSL streams, by the rule `graspguide trial` follows -- when its source is (the
 participant, synthetic, a replayed file) or its device is (--port sim, promini-sim, qemu).
@@ -81,16 +84,15 @@ def wrench_arg(text: str) -> list[float]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_port_arguments(p, required=True)
+    # --port, --scene and --wrench are required but for --list: run() checks them
+    add_port_arguments(p, required=False)
     p.add_argument(
         "--scene",
-        required=True,
         metavar="SCENE.toml",
         help="scene file (tools/examples/scene_paper_3.toml shows the format)",
     )
     p.add_argument(
         "--wrench",
-        required=True,
         type=wrench_arg,
         metavar="FX,FY,FZ[,MX,MY,MZ]",
         help="the virtual object's wrench in the object frame: force in N, "
@@ -143,7 +145,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="with --port sim: the device's clock follows the poses' times, so "
         "the trial runs as fast as possible",
     )
+    p.add_argument(
+        "--list",
+        action="store_true",
+        help="with --source lsl[:wait=S]: list the LSL streams seen within S seconds "
+        "(default 2): name, type, source_id, channels, rate, host; then exit",
+    )
     add_lsl_arguments(p)
+
+
+def list_streams(parser: argparse.ArgumentParser, source: str) -> int:
+    """`stream --source lsl --list`: the LSL streams seen, one line each."""
+    from graspguide.exit_codes import EXIT_FAILURE, EXIT_OK, report
+    from graspguide.sources.lsl_inlet import list_lsl_streams, parse_spec, stream_table
+    from graspguide.sources.poses import SourceError
+
+    kind, _, rest = source.partition(":")
+    if kind != "lsl":
+        parser.error(f"--list is for --source lsl (lists the LSL streams), not {kind!r}")
+    try:
+        wait = parse_spec(rest).wait_s if "wait=" in rest else 2.0
+        rows = list_lsl_streams(wait)
+    except SourceError as e:
+        report("stream", e)
+        return EXIT_FAILURE
+    if not rows:
+        print(f"no LSL stream seen within {wait:g} s (docs/lab-streams.md: lsl_api.cfg)")
+        return EXIT_OK
+    print(stream_table(rows))
+    return EXIT_OK
 
 
 @signals_interrupt()  # SIGTERM and SIGHUP end the trial like Ctrl-C: STOP, end record
@@ -151,6 +181,19 @@ def run(args: argparse.Namespace) -> int:
     from graspguide.study.stream_session import stream_command
 
     parser = args.command_parser
+    if args.list:
+        return list_streams(parser, args.source)
+    missing = [
+        flag
+        for flag, value in (
+            ("--port/-p", args.port),
+            ("--scene", args.scene),
+            ("--wrench", args.wrench),
+        )
+        if value is None
+    ]
+    if missing:
+        parser.error(f"the following arguments are required: {', '.join(missing)}")
     if args.virtual_clock and args.port != SIM_PORT:
         parser.error("--virtual-clock is for --port sim (a board's clock is its own)")
     if args.lsl_wait and args.lsl is None:
