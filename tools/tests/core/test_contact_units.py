@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from graspguide.sources import poses as src
+from graspguide.sources.source_spec import open_source
 
 HAND3 = [[0.045, 0.045, 0.035], [0.015, 0.095, 0.040], [-0.010, 0.100, 0.040]]
 HEAD = "t_s,qw,qx,qy,qz," + ",".join(
@@ -27,7 +28,7 @@ def replay(tmp_path, scale, rows=3, bad_row=None):
 def test_replay_in_millimetres_read_as_metres_names_the_line_and_the_fix(tmp_path):
     path = replay(tmp_path, 1000.0, bad_row=2)  # rows 0, 1 in metres, row 2 in mm
     with pytest.raises(src.SourceError) as e:
-        src.open_source("replay:" + path)
+        open_source("replay:" + path)
     msg = str(e.value)
     assert msg.startswith(path + ":4: contacts span 77.9"), msg
     assert "looks like millimetres" in msg and "--tracker mm/z/right/wxyz" in msg
@@ -35,15 +36,15 @@ def test_replay_in_millimetres_read_as_metres_names_the_line_and_the_fix(tmp_pat
 
 def test_replay_in_millimetres_with_a_millimetre_convention_is_read(tmp_path):
     path = replay(tmp_path, 1000.0)
-    got = list(src.open_source("replay:" + path, tracker="mm/z/right/wxyz"))
+    got = list(open_source("replay:" + path, tracker="mm/z/right/wxyz"))
     assert [x for c in got[0][2] for x in c] == pytest.approx([x for c in HAND3 for x in c])
     with pytest.raises(src.SourceError, match="looks like metres"):
-        src.open_source("replay:" + replay(tmp_path, 1.0), tracker="mm/z/right/wxyz")
+        open_source("replay:" + replay(tmp_path, 1.0), tracker="mm/z/right/wxyz")
 
 
 def test_replay_of_a_hand_of_no_unit_says_to_check(tmp_path):
     with pytest.raises(src.SourceError, match="check their unit"):
-        src.open_source("replay:" + replay(tmp_path, 1e-5))
+        open_source("replay:" + replay(tmp_path, 1e-5))
 
 
 class _Tracker(src.TrackerAdapter):
@@ -70,4 +71,4 @@ def test_adapter_with_contacts_in_another_unit_than_declared():
 def test_contacts_at_one_point_are_left_to_the_device(tmp_path):
     path = tmp_path / "same.csv"
     path.write_text(HEAD + "\n0,1,0,0,0," + ",".join(["0.05"] * 9) + "\n")
-    assert list(src.open_source("replay:" + str(path)))[0][2] == [[0.05] * 3] * 3
+    assert list(open_source("replay:" + str(path)))[0][2] == [[0.05] * 3] * 3

@@ -14,6 +14,7 @@ import pytest
 from conftest import REPO_ROOT
 
 from graspguide.sources import poses as sources
+from graspguide.sources.source_spec import open_source
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 
@@ -62,11 +63,11 @@ def test_a_logged_pose_with_contacts_is_refused_by_name(tmp_path):
         "0.02,200,0.01,1.0,0.0,0.0,0.0,1\n"
     )
     with pytest.raises(sources.SourceError, match=r"poses.csv:3: .*contacts"):
-        sources.open_source(f"replay:{log}")
+        open_source(f"replay:{log}")
 
 
 def test_an_unknown_column_is_named(tmp_path):
     path = tmp_path / "p.csv"
     path.write_text("t_s,qw,qx,qy,qz,speed\n0,1,0,0,0,3\n")
     with pytest.raises(sources.SourceError, match=r"p.csv:1: .*speed"):
-        sources.open_source(f"replay:{path}")
+        open_source(f"replay:{path}")

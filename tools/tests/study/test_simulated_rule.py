@@ -17,6 +17,7 @@ from conftest import REPO_ROOT, small_protocol_toml, subprocess_env
 
 from graspguide.sources import poses as sources
 from graspguide.sources import trial_sources
+from graspguide.sources.source_spec import open_source
 
 SCENE3 = os.path.join(REPO_ROOT, "tools", "examples", "scene_paper_3.toml")
 
@@ -54,8 +55,8 @@ def test_the_rule(spec, source_simulated, port, simulated):
 def test_the_sources_say_whether_they_are_simulated(tmp_path):
     path = tmp_path / "p.csv"
     path.write_text("t_s,qw,qx,qy,qz\n0,1,0,0,0\n")
-    assert sources.open_source("synthetic").simulated is True
-    assert sources.open_source(f"replay:{path}").simulated is True
+    assert open_source("synthetic").simulated is True
+    assert open_source(f"replay:{path}").simulated is True
 
     class Live(sources.TrackerAdapter):
         def raw_samples(self):

@@ -13,6 +13,7 @@ import pytest
 from conftest import TOOLS_DIR
 
 from graspguide.protocol import scene_file as gs
+from graspguide.sources.source_spec import open_source
 
 _TOOLS = TOOLS_DIR
 SCENE3 = os.path.join(_TOOLS, "examples", "scene_paper_3.toml")
@@ -133,7 +134,7 @@ def test_tracker_export_replayed_with_tracker_flag_succeeds(tmp_path):
     from graspguide.sources import poses as sources
 
     scene = gs.load_scene(SCENE3)
-    hand = sources.open_source("synthetic:rate=100,duration=6,seed=3")
+    hand = open_source("synthetic:rate=100,duration=6,seed=3")
     hand.aim(
         scene.contacts, [0.3, -1.2, -0.8, 0, 0, 0], scene.policy, scene.constraints, scene.y_axis
     )
@@ -183,11 +184,10 @@ def test_run_stream_then_stop_leaves_device_idle():
     from graspguide.devices import sim as link_sim
     from graspguide.link import client as gd
     from graspguide.link import messages as m
-    from graspguide.sources import poses as sources
     from graspguide.study.stream_session import run_stream
 
     scene = gs.load_scene(SCENE3)
-    src = sources.open_source("synthetic:rate=100,duration=0.5")
+    src = open_source("synthetic:rate=100,duration=0.5")
     with link_sim.SimulatedDevice(virtual_clock=True) as sim:
         client = gd.DeviceClient(sim, timeout=2.0)
         client.hello()
