@@ -459,6 +459,13 @@ SLOW_TESTS = {
             "test_larger_threshold_never_makes_the_same_trajectory_take_longer",
         ],
     ),
+    "test_lsl_inlet.py": (
+        "streams trials from a live LSL outlet in real time",
+        [
+            "test_a_stream_trial_from_lsl_matches_the_same_poses_replayed",
+            "test_cli_lists_streams_and_refuses_a_missing_stream",
+        ],
+    ),
     "test_lab_streams.py": (
         "streams and runs trials from lab-stream sources",
         [

@@ -409,6 +409,9 @@ class LslSource(Source):
             full = self.inlet.info(timeout=spec.wait_s)
             # connected now: what the app pushes from here on is buffered for the trial
             self.inlet.open_stream(timeout=spec.wait_s)
+            # proc_clocksync's first sample waits for liblsl's first clock offset (about
+            # half a second): got here, before the trial, not in its first POSE
+            self.inlet.time_correction(timeout=spec.wait_s)
         except Exception as e:
             raise SourceError(
                 f"lsl: cannot open the stream {info.name()} ({e}); is its app still running?"
