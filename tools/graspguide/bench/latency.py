@@ -614,6 +614,7 @@ class TrackerLatencyResult:
     parts: list[TrackerPart]
     total: TrackerPart
     total_is_upper_bound: bool
+    round_trip: dict[str, Any]
     poses_sent: int
     samples_pushed: int
     samples_superseded: int
@@ -636,6 +637,7 @@ class TrackerLatencyResult:
             "parts": [p.to_dict() for p in self.parts],
             "total": self.total.to_dict(),
             "total_is_upper_bound": self.total_is_upper_bound,
+            "pose_to_telemetry": self.round_trip,
             "poses_sent": self.poses_sent,
             "samples_pushed": self.samples_pushed,
             "samples_superseded": self.samples_superseded,
@@ -873,6 +875,9 @@ def measure_tracker_latency(
         parts=parts,
         total=TrackerPart(total_name, total_what, summarize(totals)),
         total_is_upper_bound=upper,
+        round_trip=summarize(
+            [(samples[i].answered_ns - samples[i].written_ns) / 1e3 for i in keep]
+        ),
         poses_sent=len(samples),
         samples_pushed=len(tracker.pushed_s),
         samples_superseded=superseded,
