@@ -244,6 +244,7 @@ CROSS_PORTS = {
 # "module.py" -> (what its tests below launch themselves, [test function names]).
 CROSS_TESTS = {
     "test_latency.py": ("QEMU runs the m4f firmware", ["test_latency_on_qemu"]),
+    "test_latency_lsl.py": ("QEMU runs the m4f firmware", ["test_tracker_latency_on_qemu"]),
     "test_motors_cmd.py": (
         "QEMU runs the m4f firmware",
         [
@@ -473,6 +474,10 @@ SLOW_TESTS = {
             "test_trial_lsl_matches_the_trial_records",
             "test_observer_interface_pushes_in_order",
         ],
+    ),
+    "test_latency_lsl.py": (
+        "streams a real LSL outlet's samples to the simulated device",
+        ["test_tracker_latency_on_sim"],
     ),
     "test_bench.py": (
         "solves the benchmark's scene sets",
