@@ -176,6 +176,8 @@ CASES = [
             "--lsl",
             "--lsl-wait",
             "2",
+            "--record",
+            "r.xdf",
         ],
         "graspguide.study.stream_session:stream_command",
         dict(
@@ -191,6 +193,7 @@ CASES = [
             virtual_clock=True,
             lsl="GraspGuide",
             lsl_wait=2.0,
+            record="r.xdf",
         ),
     ),
     (
