@@ -19,6 +19,11 @@ every POSE changes the motors' duties (a change is what the device-side figures 
   - ``qemu`` and a serial board: not measured (no device-side clock the host can read
     per POSE); on ``qemu`` the motor registers are read once at the end and compared with
     the last TELEMETRY's PWM.
+
+:func:`measure_tracker_latency` (``--via lsl``) times the path from a tracker instead: an
+LSL MoCap outlet's push -> the host's receipt (the product's ``--source lsl:`` source, or
+a StreamInlet) -> the POSE written -> the motors (the same device-side figures; on
+``qemu`` and a board the TELEMETRY's arrival, an upper bound).
 """
 
 from __future__ import annotations
@@ -853,9 +858,10 @@ def measure_tracker_latency(
     total_name = "push_to_telemetry" if upper else "push_to_pwm"
     if kind == "promini-sim":
         total_what = (
-            "push -> PWM: the host's part on the host clock, the POSE's line time computed, "
-            "UART receipt -> PWM in AVR cycles; without the pty's hand-over to the simavr "
-            "runner (a board: without the USB-serial adapter's latency)"
+            "push -> PWM as a Pro Mini on a directly attached serial line would have it: "
+            "the host's parts (host clock) + the POSE's line time (computed) + UART receipt "
+            "-> PWM (AVR cycles); without the pty's hand-over to the simavr runner and, on "
+            "a board, without a USB-serial adapter's latency"
         )
     elif upper:
         total_what = (
