@@ -36,7 +36,7 @@ sources: replay:FILE.csv (columns t_s,qw,qx,qy,qz[,thumb_x,...]; with --tracker 
          participant[:seed=N,PARAMS] (the virtual participant as a closed loop: it feels
          the motors and turns the hand, as in `graspguide trial`),
          lsl:name=NAME[,type=MoCap,body=Hand,markers=Thumb;Index;Middle,hold=0.2,
-         tol_mm=1.0,...] (a live LSL MoCap stream: the hand's rigid body and fingertip
+         tol_mm=2.0,...] (a live LSL MoCap stream: the hand's rigid body and fingertip
          markers; `--source lsl --list` lists the streams seen; docs/lab-streams.md).
 A run is SIMULATED -- said at the start, on the result line, in the panel, the log and
 the LSL streams, by the rule `graspguide trial` follows -- when its source is (the

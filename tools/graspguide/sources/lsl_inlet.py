@@ -19,7 +19,7 @@ colon) is read past when the whole label does not match.
 Spec keys (:data:`LSL_KEYS`): ``name``, ``type`` (default MoCap; ``any``), ``source_id``,
 ``hostname`` select the stream; ``body`` (Hand), ``markers`` (Thumb;Index;Middle, in the
 device's contact order thumb, index, middle[, palm]; ``none`` for no contacts),
-``hold`` (0.2 s), ``tol_mm`` (1.0), ``wait`` (5 s to find the stream), ``stall`` (0.5 s),
+``hold`` (0.2 s), ``tol_mm`` (2.0), ``wait`` (5 s to find the stream), ``stall`` (0.5 s),
 ``end`` (10 s) and ``newest`` (1).
 
 Timestamps: the inlet is opened with liblsl's ``proc_clocksync | proc_monotonize``: liblsl
@@ -28,13 +28,14 @@ on this machine's ``local_clock()``), and keeps them increasing. ``t_s`` is the 
 the first sample sent (the hold rule works on the LSL timestamps themselves).
 
 What the runner sees: samples ``(t_s, quat_wxyz, contacts_or_None)`` as of any source.
-``contacts`` is None when the per-posture re-run rule
-(:class:`graspguide.sources.marker_contacts.RerunRule`) keeps the last ones. A *pause* (a
-marker lost longer than ``hold``; the rigid body lost) and a *stall* (no sample for
-``stall`` seconds) are gaps: no sample is yielded, so no POSE is sent and the device's
-watchdog turns the motors off 200 ms after the last POSE; the source says so once per
-episode on stderr and counts it (:meth:`LslSource.stats`). After ``end`` seconds without a
-sample the source ends (the trial ends as "the source ended first").
+Each sample goes through :class:`graspguide.sources.marker_contacts.HandTracking`, the rule
+NatNet's source follows too: a marker or the rigid body lost for at most ``hold`` keeps its
+last value; longer is a *pause*. ``contacts`` is None when the per-posture re-run rule
+keeps the last ones. A pause, the wait for the body's and every marker's first sight, and
+a *stall* (no sample for ``stall`` seconds) are gaps: no sample is yielded, so no POSE is
+sent and the device's watchdog turns the motors off 200 ms after the last POSE; the source
+says so once per episode on stderr and counts it (:meth:`LslSource.stats`). After ``end``
+seconds without a sample the source ends (the trial ends as "the source ended first").
 """
 
 from __future__ import annotations
@@ -51,7 +52,12 @@ import numpy as np
 
 from graspguide.core.suggest import did_you_mean
 from graspguide.link.messages import POSE_WATCHDOG_MS
-from graspguide.sources.marker_contacts import PAUSED, MarkerContacts, RerunRule
+from graspguide.sources.marker_contacts import (
+    DEFAULT_HOLD_S,
+    DEFAULT_TOL_MM,
+    HandTracking,
+    Pose,
+)
 from graspguide.sources.poses import WORLD, Sample, Source, SourceError, TrackerConvention
 
 #: Every key of ``lsl:KEY=VALUE,...`` and its default.
@@ -62,8 +68,8 @@ LSL_KEYS: dict[str, str] = {
     "hostname": "",
     "body": "Hand",
     "markers": "Thumb;Index;Middle",
-    "hold": "0.2",
-    "tol_mm": "1.0",
+    "hold": f"{DEFAULT_HOLD_S:g}",
+    "tol_mm": f"{DEFAULT_TOL_MM:.1f}",
     "wait": "5",
     "stall": "0.5",
     "end": "10",
@@ -101,8 +107,8 @@ class LslSpec:
     hostname: str = ""
     body: str = "Hand"
     markers: tuple[str, ...] = ("Thumb", "Index", "Middle")
-    hold_s: float = 0.2
-    tol_mm: float = 1.0
+    hold_s: float = DEFAULT_HOLD_S
+    tol_mm: float = DEFAULT_TOL_MM
     wait_s: float = 5.0
     stall_s: float = 0.5
     end_s: float = 10.0
@@ -433,15 +439,10 @@ class LslSource(Source):
         self.convention = self._convention(convention, self.channels.units)
         self.info = _row(full)
         self.rate_hz = full.nominal_srate() or None
-        self.tracker = MarkerContacts(spec.markers, spec.hold_s) if spec.markers else None
-        self.rule = RerunRule(spec.tol_mm / 1000.0)
-        self.counts = {
-            "samples": 0,
-            "poses": 0,
-            "skipped": 0,
-            "body_lost": 0,
-            "stalls": 0,
-        }
+        self.tracking = HandTracking(
+            spec.markers, spec.body, self._say, spec.hold_s, spec.tol_mm / 1000.0
+        )
+        self.counts = {"skipped": 0, "stalls": 0}
 
     def _convention(self, given: TrackerConvention | None, units: str) -> TrackerConvention:
         if given is not None and units and given.units != units:
@@ -458,70 +459,38 @@ class LslSource(Source):
         print(f"LSL stream {self.stream_name}: {text}", file=self.notice or sys.stderr, flush=True)
 
     # ---- the samples
-    def _convert(self, row: np.ndarray):
-        """(quat_wxyz, position, markers world) of one raw sample, or None when the rigid
-        body is lost (a NaN, a zero quaternion)."""
+    def _convert(self, row: np.ndarray) -> tuple[Pose | None, np.ndarray | None, Any]:
+        """(pose or None when the rigid body is lost (a NaN, a zero quaternion), the
+        markers in the world (None without markers), their occlusion flags or None) of
+        one raw sample."""
         ch = self.channels
+        conv = self.convention
         q = row[ch.body_quat]
         p = row[ch.body_position]
         n = float(np.linalg.norm(q))
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(p)) and n > 0.5):
-            return None
-        conv = self.convention
-        quat = conv.quaternion(q / n)
-        pos = conv.position(p)
+        pose = None
+        if np.all(np.isfinite(q)) and np.all(np.isfinite(p)) and n > 0.5:
+            pose = (conv.quaternion(q / n), conv.position(p))
         if not ch.markers:
-            return quat, pos, None, None
-        m = conv.matrix
+            return pose, None, None
         scale = 1000.0 if conv.units == "mm" else 1.0
-        world = (row[np.asarray(ch.markers)] @ m.T) / scale
+        world = (row[np.asarray(ch.markers)] @ conv.matrix.T) / scale
         occluded = [
             None if f is None else (row[f] == 0 if valid else row[f] != 0)
             for f, valid in zip(ch.flags, ch.flag_valid)
         ]
         flags = [bool(o) for o in occluded] if any(o is not None for o in occluded) else None
-        return quat, pos, world, flags
+        return pose, world, flags
 
-    def _process(self, stamp: float, row: np.ndarray, state: dict[str, Any]):
-        """The sample to send for one raw sample (its LSL time, quat, contacts before the
-        re-run rule), or None (paused, body lost), saying when a pause begins or ends."""
-        self.counts["samples"] += 1
-        got = self._convert(row)
-        if got is None:
-            self.counts["body_lost"] += 1
-            if not state["body_lost"]:
-                state["body_lost"] = True
-                self._say(
-                    f"rigid body {self.spec.body} lost: no POSE sent while it is (the device's "
-                    f"watchdog turns the motors off {POSE_WATCHDOG_MS} ms after the last POSE)"
-                )
-            return None
-        if state["body_lost"]:
-            state["body_lost"] = False
-            self._say(f"rigid body {self.spec.body} seen again: POSEs resume")
-        quat, pos, world, flags = got
-        if self.tracker is None:
-            return (stamp, quat, None)
-        upd = self.tracker.update(stamp, quat, pos, world, flags)
-        if upd.state == PAUSED:
-            if not state["paused"]:
-                state["paused"] = True
-                self._say(
-                    f"marker {', '.join(upd.lost)} lost for more than {self.spec.hold_s:g} s: "
-                    f"paused, no POSE sent (the device's watchdog turns the motors off "
-                    f"{POSE_WATCHDOG_MS} ms after the last POSE) until it is seen again"
-                )
-            return None
-        if state["paused"]:
-            state["paused"] = False
-            self._say("every marker seen again: contacts and POSEs resume")
-        return (stamp, quat, upd.contacts)
+    def _process(self, stamp: float, row: np.ndarray) -> Sample | None:
+        """The sample to send for one raw sample (its LSL time, quat, every contact), or
+        None (waiting, paused): :meth:`HandTracking.update`."""
+        return self.tracking.update(stamp, *self._convert(row))
 
     def __iter__(self) -> Iterator[Sample]:
         spec = self.spec
         inlet = self.inlet
         t0: float | None = None
-        state = {"paused": False, "body_lost": False}
         last = time.monotonic()
         stalled = False
         try:
@@ -549,18 +518,15 @@ class LslSource(Source):
                 ready = []
                 for row, stamp in zip(rows, stamps):
                     # the hold rule works on LSL time; t_s counts from the first sample sent
-                    sample = self._process(stamp, np.asarray(row, dtype=float), state)
+                    sample = self._process(stamp, np.asarray(row, dtype=float))
                     if sample is not None:
                         ready.append(sample)
                 if spec.newest and len(ready) > 1:
                     self.counts["skipped"] += len(ready) - 1
                     ready = ready[-1:]
-                for stamp, quat, contacts in ready:
-                    t0 = stamp if t0 is None else t0
-                    t_s = float(stamp - t0)
-                    send = self.rule.choose(t_s, contacts) if self.tracker is not None else None
-                    self.counts["poses"] += 1
-                    yield (t_s, quat, send)
+                for sample in ready:
+                    t0 = sample[0] if t0 is None else t0
+                    yield self.tracking.send(float(sample[0] - t0), sample)
         finally:
             try:
                 inlet.close_stream()
@@ -576,16 +542,10 @@ class LslSource(Source):
         )
 
     def stats(self) -> dict[str, Any]:
-        """What the source did: samples read, POSEs yielded, samples skipped for newer
-        ones, rigid-body-lost samples, stalls; with markers the held and paused samples,
-        the pause episodes and the per-posture re-runs (:meth:`RerunRule.stats`)."""
-        out: dict[str, Any] = dict(self.counts)
-        if self.tracker is not None:
-            out.update(
-                held=self.tracker.held, paused=self.tracker.paused, pauses=self.tracker.pauses
-            )
-            out.update(self.rule.stats())
-        return out
+        """What the source did: samples skipped for newer ones, stalls, and
+        :meth:`HandTracking.stats` (samples read, POSEs yielded, waiting, rigid-body-lost,
+        held and paused samples, pause episodes; with markers the per-posture re-runs)."""
+        return {**self.counts, **self.tracking.stats()}
 
     def describe(self) -> dict[str, Any]:
         return {

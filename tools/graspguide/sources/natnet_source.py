@@ -4,7 +4,8 @@ Spec keys (every one optional but ``body``; an unknown key is refused with the c
 known one)::
 
     natnet:server=127.0.0.1,local=0.0.0.0,body=Hand,markers=65537;65538;65539[;65540],
-           multicast=239.255.42.99,data_port=1511,command_port=1510,hold=0.2,timeout=5
+           multicast=239.255.42.99,data_port=1511,command_port=1510,hold=0.2,tol_mm=2,
+           timeout=5
 
 * ``server``: the Motive PC; ``local``: this PC's interface address (the multicast group
   is joined there; unicast binds it). ``command_port``/``data_port``: Motive's
@@ -18,10 +19,17 @@ known one)::
   ``MODEL.INDEX``. Contacts are then those markers in the hand frame, ``R^T (p - t)``
   after both are converted to this project's world (metres, z up).
 * ``hold``: seconds a pose or contact is kept when the body is not tracked (the frame's
-  tracking-valid bit is off) or a marker is missing or occluded; past it the source stops
-  with a SourceError naming what is lost. Times are Motive's frame timestamps.
+  tracking-valid bit is off, or the body is not in the frame) or a marker is missing or
+  occluded; past it the trial is paused: no sample is yielded (so no POSE is sent and the
+  device's watchdog turns the motors off) until what was lost is seen again, said once
+  on stderr when the pause begins and once when it ends. Times are Motive's frame
+  timestamps. This is the rule of :class:`graspguide.sources.marker_contacts.HandTracking`,
+  which the LSL source follows too.
+* ``tol_mm``: the per-posture re-run tolerance: a sample carries the contacts only when
+  one of them moved more than this from the contacts last sent (default 2 mm).
 * ``timeout``: seconds to wait for the server's answer, for the first tracked frame and
-  between frames.
+  every marker's first sight (a rigid body or marker not seen by then is a SourceError:
+  its ID is wrong or it is not streamed), and between frames.
 
 Samples are ``(t_s, quat_wxyz, contacts_or_None)``, ``t_s`` from Motive's frame timestamp
 (seconds since the first frame), converted with the ``optitrack`` tracker convention
@@ -61,13 +69,12 @@ import socket
 import struct
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any, TextIO
 
-import numpy as np
-
-from graspguide.core.rotations import quat_to_matrix
 from graspguide.core.suggest import did_you_mean
+from graspguide.sources.marker_contacts import DEFAULT_HOLD_S, DEFAULT_TOL_MM, HandTracking
 from graspguide.sources.poses import (
     TRACKER_PRESETS,
     Sample,
@@ -80,9 +87,6 @@ from graspguide.sources.poses import (
 DEFAULT_MULTICAST = "239.255.42.99"
 DEFAULT_COMMAND_PORT = 1510
 DEFAULT_DATA_PORT = 1511
-#: How long a lost body or marker is bridged by default: a few frames at Motive's usual
-#: 120-240 Hz, short enough that the hand cannot turn far meanwhile.
-DEFAULT_HOLD_S = 0.2
 DEFAULT_TIMEOUT_S = 5.0
 #: This many undecodable packets in a row mean the stream is not NatNet as announced.
 MAX_BAD_PACKETS = 20
@@ -97,7 +101,8 @@ NATNET_OPTIONS: dict[str, str] = {
     "multicast": f"the multicast group ({DEFAULT_MULTICAST}) or off for unicast",
     "data_port": f"Motive's data port ({DEFAULT_DATA_PORT})",
     "command_port": f"Motive's command port ({DEFAULT_COMMAND_PORT})",
-    "hold": f"seconds a lost body or marker is kept ({DEFAULT_HOLD_S})",
+    "hold": f"seconds a lost body or marker is kept, then paused ({DEFAULT_HOLD_S})",
+    "tol_mm": f"the per-posture re-run tolerance, mm ({DEFAULT_TOL_MM:g})",
     "timeout": f"seconds to wait for the server and for frames ({DEFAULT_TIMEOUT_S})",
 }
 SPEC = "natnet:server=IP,body=NAME_OR_ID[,markers=ID;ID;ID[;ID]][,multicast=GROUP|off]"
@@ -124,6 +129,7 @@ class NatNetSpec:
     data_port: int = DEFAULT_DATA_PORT
     command_port: int = DEFAULT_COMMAND_PORT
     hold: float = DEFAULT_HOLD_S
+    tol_mm: float = DEFAULT_TOL_MM
     timeout: float = DEFAULT_TIMEOUT_S
 
 
@@ -155,6 +161,19 @@ def _seconds(key: str, value: str, low: float) -> float:
     if not (math.isfinite(s) and low < s <= 3600):
         raise SourceError(f"natnet: {key} must be seconds in ({low:g}, 3600], got {value!r}")
     return s
+
+
+def _millimetres(key: str, value: str) -> float:
+    try:
+        mm = float(value)
+    except ValueError:
+        mm = math.nan
+    if not (math.isfinite(mm) and 0 <= mm <= 1000):
+        raise SourceError(
+            f"natnet: {key} must be millimetres in 0..1000, got {value!r} (e.g. "
+            f"{key}={DEFAULT_TOL_MM:g})"
+        )
+    return mm
 
 
 def marker_id(text: str) -> int:
@@ -205,6 +224,8 @@ def parse_spec(rest: str) -> NatNetSpec:
             values[key] = _seconds(key, value, 0.0)
         elif key == "timeout":
             values[key] = _seconds(key, value, 0.0)
+        elif key == "tol_mm":
+            values[key] = _millimetres(key, value)
         elif key == "body":
             if not value:
                 raise SourceError("natnet: body needs a rigid body's Streaming ID or name")
@@ -224,15 +245,6 @@ def parse_spec(rest: str) -> NatNetSpec:
     return NatNetSpec(**values)  # type: ignore[arg-type]
 
 
-def hand_frame_contacts(
-    quat_wxyz: Sequence[float], origin: Sequence[float], points: Sequence[Sequence[float]]
-) -> list[list[float]]:
-    """World points (metres) in the hand frame of the pose (quat_wxyz, origin): R^T (p - t)."""
-    r = quat_to_matrix(quat_wxyz)
-    t = np.asarray(origin, dtype=float)
-    return [[float(v) for v in r.T @ (np.asarray(p, dtype=float) - t)] for p in points]
-
-
 def _request(message_id: int, text: str = "") -> bytes:
     body = text.encode("utf-8") + b"\0"
     return struct.pack("<HH", message_id, len(body)) + body
@@ -242,56 +254,22 @@ def _warn(text: str) -> None:
     print(f"warning: natnet: {text}", file=sys.stderr, flush=True)
 
 
-class HeldContacts:
-    """Contacts from tracked markers, each kept for ``hold`` seconds while its marker is
-    missing: a fingertip on the object moves with the hand, so the last hand-frame
-    position is the better guess than the last world one."""
-
-    def __init__(self, ids: Sequence[int], hold: float):
-        self.ids = list(ids)
-        self.hold = hold
-        self.last: dict[int, tuple[float, list[float]]] = {}
-
-    def update(
-        self,
-        t: float,
-        quat_wxyz: Sequence[float],
-        origin: Sequence[float],
-        world: dict[int, Sequence[float]],
-        waiting: bool = False,
-    ) -> list[list[float]] | None:
-        """The contacts at time t from the markers seen now (world positions by ID, metres),
-        or None while ``waiting`` for a marker never seen yet; SourceError when a marker has
-        been missing longer than ``hold`` (or never seen once no longer ``waiting``)."""
-        ids = [i for i in self.ids if i in world]
-        for i, c in zip(ids, hand_frame_contacts(quat_wxyz, origin, [world[i] for i in ids])):
-            self.last[i] = (t, c)
-        for i in self.ids:
-            if i not in self.last:
-                if waiting:
-                    return None
-                raise SourceError(
-                    f"natnet: labelled marker {i} ({i >> 16}.{i & 0xFFFF}) is not in the "
-                    "stream: check its ID and that it is labelled in Motive"
-                )
-            if t - self.last[i][0] > self.hold:
-                raise SourceError(
-                    f"natnet: labelled marker {i} ({i >> 16}.{i & 0xFFFF}) missing for "
-                    f"{t - self.last[i][0]:.3f} s, longer than hold={self.hold:g} s: keep it "
-                    "visible to the cameras, or raise hold to bridge longer gaps"
-                )
-        return [list(self.last[i][1]) for i in self.ids]
-
-
 class NatNetSource(Source):
-    """Rigid-body poses (and labelled-marker contacts) from Motive's NatNet stream."""
+    """Rigid-body poses (and labelled-marker contacts) from Motive's NatNet stream.
+    ``notice``: where the one-line notices of a pause go (stderr when None)."""
 
     name = "natnet"
     simulated = False
     live = True
 
-    def __init__(self, spec: NatNetSpec, convention: TrackerConvention | None = None):
+    def __init__(
+        self,
+        spec: NatNetSpec,
+        convention: TrackerConvention | None = None,
+        notice: TextIO | None = None,
+    ):
         self.spec = spec
+        self.notice = notice
         self.convention = convention or TRACKER_PRESETS["optitrack"]
         self.protocol_version: str | None = None
         self.body_id: int | None = int(spec.body) if spec.body.isdigit() else None
@@ -302,6 +280,16 @@ class NatNetSource(Source):
         self._data: socket.socket | None = None
         self._version = None
         self._connect()
+        self.tracking = HandTracking(
+            [f"{i} ({i >> 16}.{i & 0xFFFF})" for i in spec.markers],
+            f"{spec.body} (ID {self.body_id})" if spec.body != str(self.body_id) else spec.body,
+            self._say,
+            spec.hold,
+            spec.tol_mm / 1000.0,
+        )
+
+    def _say(self, text: str) -> None:
+        print(f"natnet: {text}", file=self.notice or sys.stderr, flush=True)
 
     # -- connection ---------------------------------------------------------------------
     def _connect(self) -> None:
@@ -463,37 +451,17 @@ class NatNetSource(Source):
     def _samples(self) -> Iterator[Sample]:
         s = self.spec
         conv = self.convention
+        tracking = self.tracking
         t0: float | None = None
-        pose: tuple[tuple[float, float, float, float], list[float]] | None = None
-        pose_t = 0.0
-        contacts = HeldContacts(s.markers, s.hold)
         start = time.monotonic()
         for frame in self.frames():
             t = float(frame.suffix.timestamp)  # type: ignore[attr-defined]
             rigid_bodies = frame.rigid_bodies  # type: ignore[attr-defined]
             body = next((rb for rb in rigid_bodies if rb.id_num == self.body_id), None)
+            pose = None
             if body is not None and body.tracking_valid is not False:
-                pose, pose_t = (conv.quaternion(body.rot), conv.position(body.pos)), t
-            starting = time.monotonic() - start <= s.timeout
-            if pose is None:
-                if starting:
-                    continue
-                raise SourceError(
-                    f"natnet: the rigid body {s.body} (ID {self.body_id}) has not been "
-                    f"tracked for {s.timeout:g} s: "
-                    + (
-                        "it is not in the stream; check its Streaming ID in Motive's Assets pane"
-                        if body is None
-                        else "make it visible to the cameras"
-                    )
-                )
-            if t - pose_t > s.hold:
-                raise SourceError(
-                    f"natnet: the rigid body {s.body} (ID {self.body_id}) was not tracked for "
-                    f"{t - pose_t:.3f} s, longer than hold={s.hold:g} s: keep it in the "
-                    "cameras' view, or raise hold to bridge longer gaps"
-                )
-            held = None
+                pose = (conv.quaternion(body.rot), conv.position(body.pos))
+            world = None
             if s.markers:
                 seen = {
                     m.id_num: m.pos
@@ -501,12 +469,42 @@ class NatNetSource(Source):
                     # an occluded marker's position is Motive's guess, not a measurement
                     if not (m.param or 0) & 0x01
                 }
-                fresh = {mid: conv.position(seen[mid]) for mid in s.markers if mid in seen}
-                held = contacts.update(t, pose[0], pose[1], fresh, waiting=starting)
-                if held is None:
-                    continue
+                world = [conv.position(seen[i]) if i in seen else [math.nan] * 3 for i in s.markers]
+            sample = tracking.update(t, pose, world)
+            if sample is None:
+                if time.monotonic() - start > s.timeout:
+                    self._never_seen(body is None)
+                continue
             t0 = t if t0 is None else t0
-            yield (t - t0, pose[0], held)
+            yield tracking.send(t - t0, sample)
+
+    def _never_seen(self, body_absent: bool) -> None:
+        """SourceError when the rigid body or a marker has not been seen once since the
+        source started: a wrong ID, or not streamed (not a loss, which pauses)."""
+        s = self.spec
+        unseen = self.tracking.unseen()
+        if not unseen:
+            return
+        if unseen[0].startswith("rigid body"):
+            raise SourceError(
+                f"natnet: the rigid body {s.body} (ID {self.body_id}) has not been "
+                f"tracked for {s.timeout:g} s: "
+                + (
+                    "it is not in the stream; check its Streaming ID in Motive's Assets pane"
+                    if body_absent
+                    else "make it visible to the cameras"
+                )
+            )
+        raise SourceError(
+            f"natnet: labelled {unseen[0]} has not been seen for {s.timeout:g} s: check its "
+            "ID and that it is labelled in Motive and streamed (Labeled Markers on)"
+        )
+
+    def stats(self) -> dict[str, Any]:
+        """What the source did: packets skipped, and :meth:`HandTracking.stats` (frames
+        read as samples, POSEs yielded, waiting, rigid-body-lost, held and paused samples,
+        pause episodes; with markers the per-posture re-runs)."""
+        return {"skipped_packets": self.skipped_packets, **self.tracking.stats()}
 
     def describe(self) -> dict[str, object]:
         s = self.spec
@@ -520,6 +518,7 @@ class NatNetSource(Source):
             "body_id": self.body_id,
             "markers": list(s.markers),
             "hold_s": s.hold,
+            "tol_mm": s.tol_mm,
             "tracker_convention": self.convention.describe(),
         }
 
@@ -531,10 +530,8 @@ def open_natnet_source(rest: str, convention: TrackerConvention | None = None) -
 
 __all__ = [
     "NATNET_OPTIONS",
-    "HeldContacts",
     "NatNetSource",
     "NatNetSpec",
-    "hand_frame_contacts",
     "marker_id",
     "open_natnet_source",
     "parse_spec",

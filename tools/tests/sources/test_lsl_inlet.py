@@ -145,31 +145,43 @@ def test_samples_and_contacts_equal_what_was_pushed(lsl, k, y_up_mm, style):
     assert stats["samples"] == stats["poses"] == stats["reruns"] == len(rows)
 
 
-def test_a_lost_marker_holds_then_pauses_then_resumes_without_a_jump(lsl):
+def _stream_with_losses(lsl, seed: int, columns: slice):
+    """3 s of a hand pushed through a real outlet with ``columns`` NaN for 0.1 s (at 0.5 s)
+    and for 1 s (at 1.5 s), read with hold=0.205: the losses (short, long), which samples
+    are paused (worked out here), the samples read and the source."""
     from graspguide.sources.source_spec import open_source
 
-    hand = recorded_hand(seed=7, duration=3.0)
+    hand = recorded_hand(seed=seed, duration=3.0)
     rows = tracker_rows(hand, 3, False)
     t = hand["t"]
     short = (t >= 0.5) & (t < 0.6)
     long_ = (t >= 1.5) & (t < 2.5)
-    rows[short | long_, 10:13] = np.nan  # Index
-    # independently: which samples are paused (Index last seen more than 0.2 s before)
+    rows[short | long_, columns] = np.nan
+    # paused: last seen more than hold before. The hold falls between two samples:
+    # liblsl's clock correction moves the timestamps by microseconds, which at hold = 0.2 s
+    # would decide the 20th sample either way
     last_seen = t[int(np.argmax(long_)) - 1]
-    paused = long_ & (t - last_seen > 0.2 + 1e-9)
+    paused = long_ & (t - last_seen > 0.205)
     name = _name()
     outlet = mocap_outlet(lsl, name, labels_for(3), fmt=lsl.cf_double64)
-    src = open_source(f"lsl:name={name},tol_mm=0,newest=0,hold=0.2,wait=10,end=5")
+    src = open_source(f"lsl:name={name},tol_mm=0,newest=0,hold=0.205,wait=10,end=5")
     src.notice = io.StringIO()
     push_all(outlet, rows, lsl)
     got = list(itertools.islice(iter(src), int(np.sum(~paused))))
-    times = np.array([g[0] for g in got])
-    np.testing.assert_allclose(times, t[~paused], atol=1e-4)
+    np.testing.assert_allclose([g[0] for g in got], t[~paused], atol=1e-4)
+    s = src.stats()
+    assert s["pauses"] == 1 and s["paused"] == int(np.sum(paused))
+    assert s["held"] == int(np.sum((short | long_) & ~paused))
+    return rows, short | long_, paused, got, src
+
+
+def test_a_lost_marker_holds_then_pauses_then_resumes_without_a_jump(lsl):
+    _, lost, paused, got, src = _stream_with_losses(lsl, 7, slice(10, 13))  # Index
     index_at_loss = None
     prev = None
     for (t_s, _, contacts), i in zip(got, np.flatnonzero(~paused)):
         c = np.asarray(contacts)
-        if short[i] or long_[i]:
+        if lost[i]:
             if index_at_loss is None:
                 index_at_loss = prev[1]
             np.testing.assert_allclose(c[1], index_at_loss, atol=0)  # held, not made up
@@ -179,11 +191,29 @@ def test_a_lost_marker_holds_then_pauses_then_resumes_without_a_jump(lsl):
             assert np.max(np.linalg.norm(c - prev, axis=1)) < 0.004, t_s
         prev = c
     text = src.notice.getvalue()
-    assert text.count("paused") == 1 and "marker Index lost for more than 0.2 s" in text, text
+    assert text.count("paused") == 1 and "marker Index lost for more than 0.205 s" in text, text
     assert text.count("resume") == 1, text
-    s = src.stats()
-    assert s["pauses"] == 1 and s["paused"] == int(np.sum(paused))
-    assert s["held"] == int(np.sum((short | long_) & ~paused))
+    assert src.stats()["body_lost"] == 0
+
+
+def test_a_lost_rigid_body_holds_its_pose_then_pauses_then_resumes(lsl):
+    # the body lost; its markers still stream
+    rows, lost, paused, got, src = _stream_with_losses(lsl, 8, slice(0, 7))
+    prev_quat = None
+    for (_, quat, contacts), i in zip(got, np.flatnonzero(~paused)):
+        if lost[i]:
+            # the last pose and contacts stand in: a stale pose would misplace the markers
+            assert quat == prev_quat and contacts is None  # tol 0: nothing moved, none sent
+        else:
+            q, c = expected_from(rows[i], 3, False)
+            sign = 1 if np.dot(q, quat) > 0 else -1
+            np.testing.assert_allclose(np.asarray(quat) * sign, q, atol=1e-9)
+            np.testing.assert_allclose(contacts, c, atol=1e-9)
+        prev_quat = quat
+    text = src.notice.getvalue()
+    assert text.count("paused") == 1 and "rigid body Hand lost for more than 0.205 s" in text
+    assert text.count("resume") == 1 and "rigid body Hand and every marker seen again" in text
+    assert src.stats()["body_lost"] == int(np.sum(lost))
 
 
 def us_after(later: int, earlier: int) -> int:
@@ -400,7 +430,7 @@ def test_a_missing_channel_names_what_was_asked_and_found(lsl):
         open_source(f"lsl:name={name},wait=10,body=Wrist")
     # the rigid body alone is enough without markers
     src = open_source(f"lsl:name={name},wait=10,markers=none")
-    assert src.tracker is None
+    assert src.tracking.contacts is None
     del _outlet
 
 

@@ -1,5 +1,6 @@
 """Contacts from markers (graspguide.sources.marker_contacts): the hand-frame contacts
-against an independent numpy computation, the hold-then-pause rule for lost markers, and
+against an independent numpy computation, the hold-then-pause rule for lost markers,
+HandTracking (the live sources' per-sample rule: every state and its notices), and
 the per-posture re-run rule on a recorded-like 60 s hand at 100 Hz (its re-run rates are
 reported in the summary: `python -m pytest -q tools/tests/sources/test_marker_contacts.py`)."""
 
@@ -14,6 +15,7 @@ from graspguide.sources.marker_contacts import (
     HELD,
     PAUSED,
     TRACKED,
+    HandTracking,
     MarkerContacts,
     RerunRule,
 )
@@ -254,6 +256,180 @@ def test_rerun_rates_on_a_recorded_like_hand(report_figure):
     # a wider tolerance re-runs less; at 2 mm the noise alone does not trigger it
     assert rates[0.5]["reruns"] > rates[1.0]["reruns"] > rates[2.0]["reruns"] >= 1
     assert rates[2.0]["reruns_per_s"] < 2.0
+
+
+def test_the_default_tolerance_is_2_mm():
+    rule = RerunRule()
+    assert rule.choose(0.0, HAND[:3].tolist()) is not None
+    assert rule.choose(0.01, (HAND[:3] + [0.0019, 0, 0]).tolist()) is None
+    assert rule.choose(0.02, (HAND[:3] + [0.0021, 0, 0]).tolist()) is not None
+    assert HandTracking(NAMES3, "Hand", print).rule.tol_m == 0.002
+
+
+class Hand:
+    """A hand at a fixed turn moving along x, its fingertips at HAND (hand frame); sample
+    times on a 0.25 s grid (exact in binary), so that hold=0.5 falls on a sample."""
+
+    Q = axis_angle_quat([0.3, -0.5, 0.2])
+
+    def pose(self, t):
+        return (self.Q, [0.2 + 0.01 * t, 0.1, 0.9])
+
+    def markers(self, t, shift=0.0):
+        quat, pos = self.pose(t)
+        return (HAND[:3] + [shift, 0, 0]) @ rotation(quat).T + pos
+
+
+def tracking(names=NAMES3, **kw):
+    said: list[str] = []
+    return HandTracking(names, "Hand", said.append, **kw), said
+
+
+def test_hand_tracking_waits_for_the_first_sight_of_the_body_and_every_marker():
+    tr, said = tracking(hold_s=0.5)
+    h = Hand()
+    assert tr.unseen() == ("rigid body Hand", "marker Thumb", "marker Index", "marker Middle")
+    assert tr.update(0.0, None, h.markers(0.0)) is None
+    lost_middle = h.markers(0.25)
+    lost_middle[2] = np.nan
+    assert tr.update(0.25, h.pose(0.25), lost_middle) is None
+    assert tr.unseen() == ("marker Middle",)
+    assert tr.update(0.5, h.pose(0.5), h.markers(0.5), [False, False, True]) is None
+    got = tr.update(0.75, h.pose(0.75), h.markers(0.75))
+    assert tr.unseen() == () and got is not None
+    np.testing.assert_allclose(got[2], HAND[:3], atol=1e-12)
+    # one notice, naming what was awaited then; waiting is not a pause
+    assert said == [
+        "waiting for the first sight of rigid body Hand, marker Thumb, marker Index, marker "
+        "Middle: no POSE sent until then"
+    ]
+    st = tr.stats()
+    assert (st["samples"], st["waiting"], st["paused"], st["pauses"]) == (4, 3, 0, 0)
+
+
+def test_hand_tracking_body_lost_holds_the_pose_then_pauses_then_resumes():
+    tr, said = tracking(hold_s=0.5)
+    h = Hand()
+    t = 0.0
+    first = tr.update(t, h.pose(t), h.markers(t))
+    assert first is not None
+    # the body lost, the markers still seen (and moved 5 mm): the last pose and contacts
+    # stand in; the markers are not put in the frame of a stale pose
+    for t in (0.25, 0.5):
+        got = tr.update(t, None, h.markers(t, shift=0.005))
+        assert got is not None and got[0] == t
+        np.testing.assert_allclose(got[1], Hand.Q / np.linalg.norm(Hand.Q), atol=1e-12)
+        np.testing.assert_allclose(got[2], HAND[:3], atol=1e-12)
+    assert said == []  # a hold is not said
+    for t in (0.75, 1.0, 1.25):  # longer than hold: paused, said once
+        assert tr.update(t, None, h.markers(t)) is None
+    assert said == [
+        "rigid body Hand lost for more than 0.5 s: paused, no POSE sent (the device's "
+        "watchdog turns the motors off 200 ms after the last POSE) until it is seen again"
+    ]
+    # back: the new pose and the markers where they are now (no jump: the true ones)
+    got = tr.update(1.5, h.pose(1.5), h.markers(1.5, shift=0.001))
+    assert got is not None
+    np.testing.assert_allclose(got[1], Hand.Q / np.linalg.norm(Hand.Q), atol=1e-12)
+    np.testing.assert_allclose(got[2], HAND[:3] + [0.001, 0, 0], atol=1e-12)
+    assert said[1:] == ["rigid body Hand and every marker seen again: POSEs resume"]
+    st = tr.stats()
+    assert (st["samples"], st["body_lost"], st["held"], st["paused"], st["pauses"]) == (
+        7,
+        5,
+        2,
+        3,
+        1,
+    )
+
+
+def test_hand_tracking_marker_lost_holds_then_pauses_once_per_episode():
+    tr, said = tracking(hold_s=0.5)
+    h = Hand()
+    states = []
+    lost = {0.5, 0.75, 1.0, 1.25, 1.5, 2.5, 2.75, 3.0, 3.25}  # two episodes of the index
+    for k in range(16):
+        t = k * 0.25
+        m = h.markers(t, shift=0.0001 * k)
+        if t in lost:
+            m[1] = np.nan
+        got = tr.update(t, h.pose(t), m)
+        states.append(got is not None)
+        if got is not None:
+            want = HAND[:3] + [0.0001 * k, 0, 0]
+            if t in lost:  # the index where it was last seen, in the hand frame
+                last = max(x for x in range(k) if x * 0.25 not in lost)
+                want[1] = HAND[1] + [0.0001 * last, 0, 0]
+            np.testing.assert_allclose(got[2], want, atol=1e-12)
+    # last seen at 0.25: held to 0.75 (0.5 s), paused 1.0-1.5; again at 2.25: held to 2.75
+    assert [k * 0.25 for k in range(16) if not states[k]] == [1.0, 1.25, 1.5, 3.0, 3.25]
+    pause = (
+        "marker Index lost for more than 0.5 s: paused, no POSE sent (the device's watchdog "
+        "turns the motors off 200 ms after the last POSE) until it is seen again"
+    )
+    resume = "rigid body Hand and every marker seen again: POSEs resume"
+    assert said == [pause, resume, pause, resume]
+    st = tr.stats()
+    assert (st["samples"], st["held"], st["paused"], st["pauses"], st["body_lost"]) == (
+        16,
+        4,
+        5,
+        2,
+        0,
+    )
+
+
+def test_hand_tracking_one_episode_whatever_its_causes():
+    tr, said = tracking(hold_s=0.5)
+    h = Hand()
+    tr.update(0.0, h.pose(0.0), h.markers(0.0))
+    m = h.markers(0.25)
+    m[0] = np.nan
+    assert tr.update(0.25, h.pose(0.25), m) is not None  # thumb held
+    assert tr.update(0.5, None, None) is not None  # and the body: both held
+    assert tr.update(1.0, None, None) is None  # the body first past hold: paused
+    m = h.markers(1.25)
+    m[0] = np.nan
+    assert tr.update(1.25, h.pose(1.25), m) is None  # the body back, the thumb still lost
+    assert tr.update(1.5, h.pose(1.5), h.markers(1.5)) is not None
+    assert len(said) == 2 and said[0].startswith("rigid body Hand lost for more than 0.5 s")
+    assert said[1].endswith("POSEs resume")
+    st = tr.stats()
+    assert (st["held"], st["paused"], st["pauses"], st["body_lost"]) == (2, 2, 1, 2)
+
+
+def test_hand_tracking_occlusion_flags_and_poses_only():
+    tr, said = tracking(hold_s=0.25)
+    h = Hand()
+    tr.update(0.0, h.pose(0.0), h.markers(0.0))
+    # the tracker's flag: the position it sends with it is ignored
+    got = tr.update(0.25, h.pose(0.25), h.markers(0.25, shift=0.01), [False, True, False])
+    assert got is not None
+    np.testing.assert_allclose(got[2][1], HAND[1], atol=1e-12)
+    np.testing.assert_allclose(got[2][0], HAND[0] + [0.01, 0, 0], atol=1e-12)
+    # without markers: poses only, the contacts always None, a lost body still pauses
+    tr, said = tracking(names=())
+    assert tr.unseen() == ("rigid body Hand",)
+    got = tr.update(0.0, h.pose(0.0))
+    assert got is not None and got[2] is None and tr.send(0.0, got) == (0.0, got[1], None)
+    assert tr.update(0.25, None) is None and len(said) == 1
+    st = tr.stats()
+    assert (st["poses"], st["paused"], st["pauses"]) == (1, 1, 1) and "reruns" not in st
+
+
+def test_hand_tracking_send_applies_the_rerun_rule():
+    tr, _ = tracking(hold_s=0.5, tol_m=0.002)
+    h = Hand()
+    out = []
+    for k in range(8):  # the fingertips slide 0.75 mm a sample
+        t = k * 0.25
+        got = tr.update(t, h.pose(t), h.markers(t, shift=0.00075 * k))
+        out.append(tr.send(t, got))
+    # sent at 0; then when 2 mm is passed: 2.25 mm at k=3, 4.5 mm at k=6
+    assert [k for k, s in enumerate(out) if s[2] is not None] == [0, 3, 6]
+    np.testing.assert_allclose(out[3][2], HAND[:3] + [0.00225, 0, 0], atol=1e-12)
+    st = tr.stats()
+    assert (st["poses"], st["reruns"], st["tol_mm"]) == (8, 3, 2.0)
 
 
 def test_bad_arguments():

@@ -13,6 +13,7 @@ TrackerConvention.
 
 from __future__ import annotations
 
+import io
 import socket
 import struct
 import threading
@@ -98,11 +99,16 @@ def f32(values) -> list[float]:
 class Scene:
     """A hand pose and three fingertips in the world, and as Motive streams them."""
 
-    def __init__(self, seed: int):
+    def __init__(self, seed: int, shift: float = 0.0):
+        """``shift``: metres the fingertips are moved along the hand's x."""
         rng = np.random.default_rng(seed)
         self.r_world = Rotation.random(random_state=seed)
         self.t_world = rng.uniform(-1, 1, 3) + [0, 0, 1.2]
-        self.contacts = [[0.06, 0.03, 0.0], [0.07, -0.02, 0.01], [0.05, -0.05, 0.0]]
+        self.contacts = [
+            [0.06 + shift, 0.03, 0.0],
+            [0.07 + shift, -0.02, 0.01],
+            [0.05 + shift, -0.05, 0.0],
+        ]
         a = WORLD_TO_MOTIVE
         r_motive = Rotation.from_matrix(a @ self.r_world.as_matrix() @ a.T)
         self.pos = f32(a @ self.t_world)
@@ -192,52 +198,117 @@ def test_frames_decode_to_world_poses_and_contacts(version):
     assert server.requests == [NAT_CONNECT, NAT_REQUEST_MODELDEF]
     r, contacts = scene.expected()
     assert [s[0] for s in samples] == pytest.approx([n / 120 for n in range(6)], abs=1e-9)
-    for _, q, c in samples:
+    for _, q, _c in samples:
         assert quat_close(q, r, 1e-6)
-        assert np.allclose(c, contacts, atol=1e-6)
+    # the hand holds still: the first sample carries the contacts, the rest none (the
+    # device keeps them: the re-run rule, tol_mm 2 by default)
+    assert np.allclose(samples[0][2], contacts, atol=1e-6)
+    assert [s[2] for s in samples[1:]] == [None] * 5
     # float32 on the wire: the world values come back to float32 precision
     assert np.allclose(samples[0][2], scene.contacts, atol=1e-5)
     assert quat_close(samples[0][1], scene.r_world, 1e-6)
+    stats = source.stats()
+    assert (stats["samples"], stats["poses"], stats["reruns"], stats["tol_mm"]) == (6, 6, 1, 2)
 
 
-def test_untracked_body_is_held_then_stops():
+@pytest.mark.parametrize("tol_mm, sent", [("0.5", [0, 1, 2, 3, 4, 5]), ("2", [0, 3])])
+def test_contacts_are_sent_only_when_they_moved_past_tol_mm(tol_mm, sent):
+    version = (4, 1)
+    # the fingertips slide 0.7 mm a frame along the hand's x: past 2 mm on the 3rd frame
+    packets = [Scene(seed=5, shift=n * 0.0007).frame(version, n, n * 0.01) for n in range(6)]
+    server = StandIn(version, packets)
+    try:
+        source = open_source(server.spec(markers=markers_key(), tol_mm=tol_mm))
+        samples = [s for _, s in zip(range(6), source)]
+    finally:
+        server.close()
+    assert [n for n, s in enumerate(samples) if s[2] is not None] == sent
+    for n in sent:
+        assert np.allclose(samples[n][2], Scene(seed=5, shift=n * 0.0007).expected()[1], atol=1e-6)
+    assert source.stats()["reruns"] == len(sent)
+    assert source.describe()["tol_mm"] == float(tol_mm)
+
+
+def test_untracked_body_is_held_then_paused_then_resumes():
     version = (4, 1)
     scene, other = Scene(seed=1), Scene(seed=2)
     packets = [scene.frame(version, n, n * 0.01) for n in range(3)]
     # untracked: the stream carries another pose the source must not take
-    packets += [other.frame(version, n, n * 0.01, tracked=False) for n in range(3, 9)]
+    packets += [other.frame(version, n, n * 0.01, tracked=False) for n in range(3, 12)]
+    packets += [scene.frame(version, n, n * 0.01) for n in range(12, 15)]
     server = StandIn(version, packets)
-    samples = []
     try:
         source = open_source(server.spec(hold="0.045"))
-        with pytest.raises(SourceError, match=r"rigid body 3 .*not tracked.*hold=0\.045"):
-            for s in source:
-                samples.append(s)
+        source.notice = io.StringIO()
+        # frames 3..6 are within 0.045 s of the last tracked frame (t=0.02): held; frames
+        # 7..11 paused (not sent); 12..14 tracked again
+        samples = [s for _, s in zip(range(10), source)]
     finally:
         server.close()
-    # frames 3..6 are within 0.045 s of the last tracked frame (t=0.02): held
-    assert len(samples) == 7
-    assert all(s[1] == samples[2][1] for s in samples[3:])
-    assert quat_close(samples[0][1], scene.expected()[0], 1e-6)
+    assert [s[0] for s in samples] == pytest.approx([n * 0.01 for n in (*range(7), 12, 13, 14)])
+    assert all(s[1] == samples[2][1] for s in samples[3:7])
+    r = scene.expected()[0]
+    assert all(quat_close(s[1], r, 1e-6) for s in samples)  # never the other pose
+    text = source.notice.getvalue()
+    assert text.count("paused") == 1 and text.count("resume") == 1, text
+    assert "rigid body 3 lost for more than 0.045 s: paused, no POSE sent" in text
+    assert "rigid body 3 seen again: POSEs resume" in text
+    stats = source.stats()
+    assert (stats["body_lost"], stats["held"], stats["paused"], stats["pauses"]) == (9, 4, 5, 1)
 
 
-def test_missing_marker_is_held_then_stops():
+def test_missing_marker_is_held_then_paused_then_resumes_without_a_jump():
     version = (3, 1)
-    scene = Scene(seed=3)
-    packets = [scene.frame(version, n, n * 0.01) for n in range(2)]
-    packets += [scene.frame(version, 2, 0.02, occlude=(1,))]
-    packets += [scene.frame(version, n, n * 0.01, drop=(1,)) for n in range(3, 8)]
+    # the fingertips slide 0.1 mm a frame: every frame's contacts differ (tol_mm=0.05)
+    scenes = [Scene(seed=3, shift=n * 0.0001) for n in range(14)]
+    packets = [scenes[n].frame(version, n, n * 0.01) for n in range(2)]
+    packets += [scenes[2].frame(version, 2, 0.02, occlude=(1,))]
+    packets += [scenes[n].frame(version, n, n * 0.01, drop=(1,)) for n in range(3, 8)]
+    packets += [scenes[n].frame(version, n, n * 0.01) for n in range(8, 11)]
+    # a second episode: one message each again
+    packets += [scenes[n].frame(version, n, n * 0.01, drop=(1,)) for n in range(11, 14)]
     server = StandIn(version, packets)
-    samples = []
     try:
-        source = open_source(server.spec(markers=markers_key(), hold="0.035"))
-        with pytest.raises(SourceError, match=rf"labelled marker {MARKER_IDS[1]} .*missing"):
-            for s in source:
-                samples.append(s)
+        source = open_source(server.spec(markers=markers_key(), hold="0.035", tol_mm="0.05"))
+        source.notice = io.StringIO()
+        # the last sight at t=0.01: held through t=0.04 (frames 2..4), paused 5..7, seen
+        # again 8..10; lost again at 11, held through 13
+        samples = [s for _, s in zip(range(11), source)]
     finally:
         server.close()
-    assert len(samples) == 5  # the last seen at t=0.01; held through t=0.04
-    assert all(np.array_equal(s[2], samples[1][2]) for s in samples[2:])
+    frames = [0, 1, 2, 3, 4, 8, 9, 10, 11, 12, 13]
+    assert [s[0] for s in samples] == pytest.approx([n * 0.01 for n in frames])
+    for n, s in zip(frames, samples):
+        want = scenes[n].expected()[1]
+        if n in (2, 3, 4):  # the index keeps its last hand-frame position; the others live
+            want[1] = scenes[1].expected()[1][1]
+        elif n in (11, 12, 13):
+            want[1] = scenes[10].expected()[1][1]
+        assert np.allclose(s[2], want, atol=1e-6), n
+    # no jump on resuming: the index comes back where the hand has it, 0.7 mm on
+    moved = np.linalg.norm(np.subtract(samples[5][2][1], samples[4][2][1]))
+    assert moved == pytest.approx(0.0007, abs=1e-6)
+    text = source.notice.getvalue()
+    name = f"marker {MARKER_IDS[1]} (3.2)"
+    assert text.count("paused") == 1 and text.count("resume") == 1, text
+    assert f"{name} lost for more than 0.035 s: paused" in text
+    stats = source.stats()
+    assert (stats["held"], stats["paused"], stats["pauses"]) == (6, 3, 1)
+
+
+def test_a_marker_never_seen_is_an_error_naming_it():
+    version = (4, 1)
+    scene = Scene(seed=6)
+    packets = [scene.frame(version, n, n * 0.01, drop=(2,)) for n in range(150)]
+    server = StandIn(version, packets)
+    try:
+        source = open_source(server.spec(markers=markers_key(), timeout="0.2"))
+        source.notice = io.StringIO()
+        with pytest.raises(SourceError, match=rf"labelled marker {MARKER_IDS[2]} \(3\.3\) has not"):
+            next(iter(source))
+    finally:
+        server.close()
+    assert source.notice.getvalue().count("waiting for the first sight of marker") == 1
 
 
 def test_malformed_packets_are_skipped_with_a_warning(capfd):
@@ -295,6 +366,8 @@ def test_no_server_is_a_clear_error():
         ("natnet:body=3,markers=1;2", "markers needs 3 or 4 IDs"),
         ("natnet:body=3,markers=1;x;3", "'x' is not a labelled-marker ID"),
         ("natnet:body=3,hold=-1", "hold must be seconds"),
+        ("natnet:body=3,tol_mm=-1", "tol_mm must be millimetres in 0..1000"),
+        ("natnet:body=3,tol=1", r'did you mean "tol_mm"'),
         ("natnet:body=3,multicast=10.0.0.1", "multicast must be a group"),
         ("natnet:body=3,body=4", "body is given twice"),
     ],
@@ -307,4 +380,5 @@ def test_bad_spec_names_the_key(spec, message):
 def test_defaults_are_motives():
     spec = parse_spec("body=Hand")
     assert (spec.multicast, spec.command_port, spec.data_port) == ("239.255.42.99", 1510, 1511)
+    assert (spec.hold, spec.tol_mm) == (0.2, 2.0)
     assert parse_spec("body=1,markers=65537;1.2;1.3").markers == (65537, 65538, 65539)
