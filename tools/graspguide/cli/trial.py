@@ -41,9 +41,16 @@ Run the same command again after a crash or Ctrl-C: completed trials are skipped
 is lost or repeated. STOP is sent on every way out.
 
 sources: participant[:PARAMS] (the virtual participant, closed loop), synthetic[:...] and
-         replay:FILE.csv (open loop; the last pose is held until the device ends the
-         trial), plugin:MODULE:CLASS[:ARG] (a sources.TrackerAdapter -- a live tracker, a
-         person -- or a closed-loop class with begin_trial/step).
+         replay:FILE.csv or FILE.xdf (open loop; each trial replays the file from its
+         start, and its last pose is held until the device ends the trial),
+         plugin:MODULE:CLASS[:ARG] (a sources.TrackerAdapter -- a live tracker, a
+         person -- or a closed-loop class with begin_trial/step),
+         lsl:name=NAME[,...] (a live LSL MoCap stream, a person, in real time: the stream
+         runs on between trials and each trial takes its samples from its START on; a
+         gap in the tracking -- a stall, a lost marker -- sends no POSE, so the device's
+         watchdog turns the motors off, and is said on stderr, not taken for a link
+         fault; a stream silent for its end= time ends the run unrecorded, resumable;
+         docs/lab-streams.md, "LSL MoCap source").
 With --port sim the simulated device runs on its virtual clock for simulated sources (a
 90 s trial takes about a second).
 
@@ -67,6 +74,9 @@ trial, the NASA-TLX with its anchors, the best and worst total time. Writes noth
 --lsl [NAME] publishes the run as two Lab Streaming Layer streams, NAME-Telemetry (error,
 alpha, PWM per finger, status per TELEMETRY) and NAME-Markers (session_start, trial_start,
 trial_end, pause, redo, skip, note, study_end), for LabRecorder (docs/lab-streams.md).
+--record FILE.xdf records the run's poses as sent (MoCap), its TELEMETRY and its markers
+in one XDF file, on a session clock (a trial's start offset plus its t_s, since t_s
+restarts every trial); docs/lab-streams.md, "Recording and replaying as XDF".
 
 A stored calibration, OUT/PID/calibration.json (graspguide calibrate), is sent to the device
 before the first trial (each motor's PWM floor and gain, docs/calibration.md); without one
@@ -84,6 +94,8 @@ examples:
       --source participant --hostless --out runs/hostless
   graspguide trial --protocol protocols/paper.toml --participant U3 --port /dev/ttyACM0 \\
       --source plugin:my_lab.vicon:ViconHand --out runs/study --tlx u3_tlx.jsonl
+  graspguide trial --protocol protocols/paper.toml --participant U3 --port /dev/ttyACM0 \\
+      --source lsl:name=Hand --out runs/study --tlx u3_tlx.jsonl --record runs/u3.xdf
   graspguide trial --protocol protocols/paper.toml --participant U3 --dry-run --rest-s 10
 
 exit status: 0 when every trial and questionnaire is done, 1 on a link or run error, 2 on
@@ -103,8 +115,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--source",
         metavar="SOURCE",
-        help="participant[:PARAMS], synthetic[:...], replay:FILE.csv or plugin:MODULE:CLASS[:ARG] "
+        help="participant[:PARAMS], synthetic[:...], replay:FILE.csv, replay:FILE.xdf"
+        "[#name=STREAM], lsl:name=NAME[,...] or plugin:MODULE:CLASS[:ARG] "
         "(required unless --dry-run)",
+    )
+    p.add_argument(
+        "--record",
+        metavar="FILE.xdf",
+        default=None,
+        help="record the run as an XDF file (LabRecorder's format): the poses sent (MoCap), "
+        "the TELEMETRY and the markers, on a session clock (a trial's start offset plus "
+        "its t_s); an existing file is never overwritten",
     )
     p.add_argument(
         "--operator",
@@ -169,8 +190,8 @@ def run(args: argparse.Namespace) -> int:
     from graspguide.exit_codes import EXIT_USAGE, report
 
     if args.dry_run:
-        if args.hostless or args.operator:
-            report("trial", "--dry-run goes without --hostless and --operator")
+        if args.hostless or args.operator or args.record is not None:
+            report("trial", "--dry-run goes without --hostless, --operator and --record")
             return EXIT_USAGE
         from graspguide.study.dry_run import dry_run_command
 
@@ -183,6 +204,13 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if args.hostless and args.operator:
         report("trial", "--operator goes without --hostless (the device runs those trials)")
+        return EXIT_USAGE
+    if args.hostless and args.record is not None:
+        report(
+            "trial",
+            "--record goes without --hostless (a host-less device sends nothing during its "
+            "trials; its records are downloaded into OUT)",
+        )
         return EXIT_USAGE
     if args.hostless and args.lsl is not None:
         report(
@@ -225,4 +253,5 @@ def run(args: argparse.Namespace) -> int:
         operator=args.operator,
         lsl=args.lsl,
         lsl_wait=args.lsl_wait,
+        record=args.record,
     )

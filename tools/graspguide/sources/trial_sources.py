@@ -140,8 +140,10 @@ class OpenLoopSource(RunnerSource):
         simulated: bool,
         live: bool,
         info: dict[str, Any],
+        base: Any = None,
     ):
         self.spec = spec
+        self.base = base
         self.make = make
         self.rate_hz = float(rate_hz)
         self.simulated = simulated
@@ -150,6 +152,12 @@ class OpenLoopSource(RunnerSource):
 
     def samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
         return iter(self.make(trial))
+
+    def stats(self) -> dict[str, Any] | None:
+        """What a live tracker source counted so far (its ``stats()``: samples, stalls,
+        pauses ...), or None for a source that counts nothing."""
+        counted = getattr(self.base, "stats", None) if self.base is not None else None
+        return dict(counted()) if callable(counted) else None
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -248,9 +256,48 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             False,
             base.describe(),
         )
+    if kind == "lsl":
+        return _lsl_source(spec, protocol)
     from graspguide.sources.poses import unknown_source
 
     raise RunnerError(f"--source: {unknown_source(spec)}", usage=True)
+
+
+def _lsl_source(spec: str, protocol: Protocol) -> OpenLoopSource:
+    """A live LSL MoCap stream (graspguide.sources.lsl_inlet) for every trial of the run.
+
+    The stream runs on between trials; each trial takes its samples from its START on
+    (its first sample is its t_s = 0): what the inlet buffered before -- the hand during
+    the rest, the ready prompt -- is dropped, as a replay restarts its file each trial."""
+    from graspguide.sources.poses import SourceError
+    from graspguide.sources.source_spec import open_source
+
+    try:
+        base = open_source(spec)
+    except SourceError as e:
+        raise RunnerError(f"--source: {e}", usage=True) from None
+
+    def make(trial: PlannedTrial) -> Any:
+        return _from_now(base)
+
+    return OpenLoopSource(
+        spec,
+        make,
+        base.rate_hz or protocol.pose_rate_hz,
+        simulated=bool(base.simulated),
+        live=True,
+        info=base.describe(),
+        base=base,
+    )
+
+
+def _from_now(base: Any) -> Iterator[tuple[float, Any, Any]]:
+    """``base``'s samples from now on: the inlet's queue is flushed when the trial asks
+    for its first sample (after START_TRIAL)."""
+    inlet = getattr(base, "inlet", None)
+    if inlet is not None:
+        inlet.flush()
+    yield from base
 
 
 __all__ = [

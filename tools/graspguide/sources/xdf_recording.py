@@ -60,6 +60,20 @@ CLOCK_TEXT = (
     "a POSE is this time in microseconds on --virtual-clock); a TELEMETRY is stamped with "
     "the t_s of the POSE it answers, a marker with the t_s of the last POSE sent before it"
 )
+#: `graspguide trial`'s clock (name, description): its t_s restarts every trial, so the
+#: streams share a session clock instead.
+SESSION_CLOCK = (
+    "session_time",
+    "seconds on the run's session clock: a trial's start offset plus the POSE's t_s (the "
+    "trial's time, which restarts every trial: the frames files' t_s and the TELEMETRY's "
+    "trial_time_s channel). The offset: on the virtual clock (--port sim, a simulated "
+    "source) the device's time base of the trial (a POSE's device timestamp is the "
+    "session time in microseconds, modulo 2^32; each trial starts at least 1 s after the last "
+    "pose of the one before); in real time the host's monotonic time of the trial's "
+    "start since the run began. A TELEMETRY is stamped with the time of the POSE it "
+    "answers, a trial_start marker with its trial's start offset, any other marker with "
+    "the time of the last POSE sent before it (0 before the first)",
+)
 
 
 class XdfRecorder:
@@ -81,16 +95,20 @@ class XdfRecorder:
         nominal_rate_hz: float = 0.0,
         simulated: bool = False,
         extra: dict[str, Any] | None = None,
+        clock: tuple[str, str] = (CLOCK_NAME, CLOCK_TEXT),
     ):
         self.path = path
+        self.clock_name, self.clock_text = clock
         self.name = name
         self.participant = participant
         self.session = session
         self.nominal_rate_hz = float(nominal_rate_hz) if math.isfinite(nominal_rate_hz) else 0.0
         self.simulated = simulated
         self.extra = {str(k): str(v) for k, v in (extra or {}).items()}
-        self.writer = XdfWriter(path, header={"recorder": "graspguide", "clock": CLOCK_NAME})
+        self.writer = XdfWriter(path, header={"recorder": "graspguide", "clock": self.clock_name})
         self.now_s = 0.0
+        # added to every t_s given (on_trial_clock): 0 for one trial, as `stream` records
+        self.offset_s = 0.0
         self.poses = self.samples = self.markers = 0
         self._contact_fingers = 0
         self._hand_id: int | None = None
@@ -118,7 +136,11 @@ class XdfRecorder:
             source_id=source_id(self.name, self.participant, self.session, kind.lower()),
             created_at=self.now_s,
             desc={
-                "clock": {"name": CLOCK_NAME, "unit": "seconds", "description": CLOCK_TEXT},
+                "clock": {
+                    "name": self.clock_name,
+                    "unit": "seconds",
+                    "description": self.clock_text,
+                },
                 "acquisition": acquisition,
                 **desc,
             },
@@ -145,9 +167,15 @@ class XdfRecorder:
                 for i in range(self._contact_fingers):
                     p = contacts[i] if i < len(contacts) else (math.nan,) * 3
                     values += [float(x) for x in p]
-        self.now_s = float(t_s)
+        self.now_s = self.offset_s + float(t_s)
         self.writer.push(self._hand_id, self.now_s, values)
         self.poses += 1
+
+    def on_trial_clock(self, offset_s: float) -> None:
+        """A trial starts ``offset_s`` into the session: its t_s are recorded from there,
+        and a marker from now on is stamped no earlier (never back in time)."""
+        self.offset_s = float(offset_s)
+        self.now_s = max(self.now_s, self.offset_s)
 
     # ---- TrialObserver
     def on_event(self, name: str, **fields: Any) -> None:
@@ -161,7 +189,7 @@ class XdfRecorder:
         duty += [0.0] * (len(FINGERS) - len(duty))
         self.writer.push(
             self.telemetry_id,
-            float(t_s),
+            self.offset_s + float(t_s),
             [float(error_deg), float(alpha), *duty, float(int(status)), float(t_s)],
         )
         self.samples += 1
@@ -178,4 +206,11 @@ class XdfRecorder:
         self.close()
 
 
-__all__ = ["XdfRecorder", "MOCAP_TYPE", "QUAT_CHANNELS", "CONTACT_CHANNELS", "CLOCK_NAME"]
+__all__ = [
+    "XdfRecorder",
+    "MOCAP_TYPE",
+    "QUAT_CHANNELS",
+    "CONTACT_CHANNELS",
+    "CLOCK_NAME",
+    "SESSION_CLOCK",
+]

@@ -76,6 +76,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TextIO
 
 from graspguide.core.motor_calibration import MotorCalibration
+from graspguide.link.messages import POSE_WATCHDOG_MS
 from graspguide.protocol.study_protocol import (
     PlannedTrial,
     Protocol,
@@ -243,6 +244,11 @@ class StudyRunner:
         self.plan = plan(self.protocol, self.participant, self.wrenches, self.fam_wrenches)
         self.config_hash = self.protocol.config_hash
         self._vt_base_us = 0
+        # The session clock of the observers that keep poses (--record): a trial's start
+        # offset (see _trial_offset_s) plus the pose's t_s.
+        self._session_t0 = time.monotonic()
+        self._pose_observers = [o for o in self.observers if callable(getattr(o, "on_pose", None))]
+        self._clocked = [o for o in self.observers if callable(getattr(o, "on_trial_clock", None))]
         self._scene_key: tuple[int, str, str] | None = None
         self._lock_fd: int | None = None
         self.ran = 0
@@ -433,15 +439,50 @@ class StudyRunner:
         self._start_trial(trial, model, contacts)
         frames = FramesFile(self.files.partial_frames(trial.trial_index), _RESUME_HINT)
         wall0 = time.monotonic()
+        counted = self._source_stats()
         try:
             done = self._drive(trial, model, contacts, frames)
             frames.sync()
         finally:
             frames.close()
+            self._say_gaps(trial, counted, self._source_stats())
         result = self._checked_result(trial, done)
         self._keep_frames(trial)
         self._vt_base_us += int(round((done.t_s + 1.0) * 1e6))
         return self._record(trial, result, done.frames, wall0)
+
+    def _source_stats(self) -> dict[str, Any] | None:
+        stats = getattr(self.source, "stats", None)
+        return stats() if callable(stats) else None
+
+    def _say_gaps(
+        self, trial: PlannedTrial, before: dict[str, Any] | None, after: dict[str, Any] | None
+    ) -> None:
+        """On stderr, the gaps of a live tracker during the trial (lsl_inlet: a stall, a
+        marker lost past its hold, the rigid body lost): no POSE then, so the device's
+        watchdog turned the motors off; the trial ran on. The source says each gap as it
+        happens; this is the trial's account, so that none reads as a link fault."""
+        if before is None or after is None:
+            return
+        gaps = [
+            (after.get(key, 0) - before.get(key, 0), what)
+            for key, what in (
+                ("stalls", "stalls (no sample)"),
+                ("pauses", "pauses (a marker lost past its hold)"),
+                ("body_lost", "samples without the rigid body"),
+            )
+        ]
+        said = [f"{what}: {n}" for n, what in gaps if n > 0]
+        if not said:
+            return
+        print(
+            f"graspguide trial: trial {trial.trial_index}: gaps in the tracker's stream, "
+            f"{', '.join(said)}: no POSE was sent then and the device's watchdog turned the "
+            f"motors off {POSE_WATCHDOG_MS} ms after the last one; a gap in the tracking, "
+            "not a link fault: the trial ran on, its time includes the gap",
+            file=self.err,
+            flush=True,
+        )
 
     def _start_trial(self, trial: PlannedTrial, model: Any, contacts: list[list[float]]) -> None:
         """SET_SCENE when the condition changed, START_TRIAL, and the closed-loop model
@@ -487,6 +528,12 @@ class StudyRunner:
         console = self.operator
         window = 1 if console is not None else self._window(model is not None)
         on_frames = self._frames_sink(trial, frames)
+        pose_observers = self._pose_observers
+
+        def on_send(t_us: int, t_s: float, quat: Sequence[float], contacts: Any) -> None:
+            for obs in pose_observers:
+                obs.on_pose(t_s, quat, contacts)  # type: ignore[attr-defined]
+
         while True:
             loop = PoseLoop(
                 self.client,
@@ -494,8 +541,10 @@ class StudyRunner:
                 base_us=self._vt_base_us,
                 limit_s=p.timeout_s + RESULT_MARGIN_S,
                 wall_limit_s=p.timeout_s + 10 * RESULT_MARGIN_S,
+                on_send=on_send if pose_observers else None,
                 on_frames=on_frames,
             )
+            self._tell_clock(self._trial_offset_s(loop))
             poses = self._trial_poses(trial, model, window)
             if console is not None:
                 poses = _Keyed(poses, lambda: self._poll_keys(trial))
@@ -525,6 +574,20 @@ class StudyRunner:
                 ) from None
             except PoseLoopError as e:
                 raise RunnerError(f"trial {trial.trial_index}: {e}") from None
+
+    def _trial_offset_s(self, loop: PoseLoop | None) -> float:
+        """Where a trial's t_s = 0 lies on the session clock: on the virtual clock the
+        device's time base of the trial (its POSE timestamps / 1e6), in real time the
+        host's monotonic time of its start (the pose loop's, else now) since the run
+        began."""
+        if self.virtual_clock:
+            return self._vt_base_us / 1e6
+        start = time.monotonic() if loop is None else loop.wall0
+        return start - self._session_t0
+
+    def _tell_clock(self, offset_s: float) -> None:
+        for obs in self._clocked:
+            obs.on_trial_clock(offset_s)  # type: ignore[attr-defined]
 
     def _window(self, closed: bool) -> int:
         """POSEs in flight: 1 (lockstep) unless the source is a closed loop on the virtual
@@ -593,12 +656,21 @@ class StudyRunner:
         return LockstepPoses(model.step, rate, trial.k)
 
     def _held_samples(self, trial: PlannedTrial) -> Iterator[tuple[float, Any, Any]]:
-        """Open loop: the source's samples, then its last pose held at its rate."""
+        """Open loop: the source's samples, then its last pose held at its rate. A live
+        source (a tracker) that ends is no pose to hold: a person's hand is not where it
+        was seconds ago, so the trial ends unrecorded (RunnerError)."""
         period = 1.0 / self.source.rate_hz
         last = None
         for sample in self.source.samples(trial):  # type: ignore[attr-defined]
             last = sample
             yield sample
+        if self.source.live:
+            raise RunnerError(
+                f"trial {trial.trial_index}: the live source "
+                f"{self.source.describe()['source']} ended before the device ended the "
+                "trial (no sample for its end time); the trial is not recorded: make sure "
+                "the tracker streams, then run the same command again to resume"
+            )
         if last is None:
             raise RunnerError(f"--source {self.source.describe()['source']} gave no pose")
         t, q, c = last
@@ -674,6 +746,7 @@ class StudyRunner:
 
     def _begin(self, trial: PlannedTrial, done: set, attempt: int) -> None:
         self.progress.trial_start(trial, len(self.plan), len(self.sessions), self._left_s(done))
+        self._tell_clock(self._trial_offset_s(None))
         self._notify(
             TRIAL_START,
             trial_index=trial.trial_index,
@@ -959,6 +1032,11 @@ class StudyRunner:
                         completed=len(done),
                         planned=total,
                         skipped_by_operator=sorted(self.skipped_by_operator),
+                        **(
+                            {"source_stats": stats}
+                            if (stats := self._source_stats()) is not None
+                            else {}
+                        ),
                     )
                 except RecordWriteError as e:
                     if outcome == "complete":
@@ -1005,13 +1083,16 @@ def trial_command(
     operator: bool = False,
     lsl: str | None = None,
     lsl_wait: float = 0.0,
+    record: str | None = None,
 ) -> int:
     """`graspguide trial`: ``participant``'s trials of the protocol file ``protocol`` on
     the device at ``port`` into ``out``, poses from the source spec ``source``, the
     NASA-TLX answers from the file ``tlx`` when given; resumed where an earlier run
     stopped; STOP on every way out. ``lsl``: publish the run as the LSL streams
     LSL-Telemetry and LSL-Markers (graspguide.sources.lab_streams), after waiting up to
-    ``lsl_wait`` s for a recorder. With a person (a source not SIMULATED, or
+    ``lsl_wait`` s for a recorder. ``record``: the run's poses, TELEMETRY and markers
+    into this XDF file (graspguide.sources.xdf_recording, on the session clock). With a
+    person (a source not SIMULATED, or
     ``operator``) and a terminal on stdin: the ready prompt, the rest (``rest_s``, default
     PERSON_REST_S; 0 for a simulated source) and the operator's keys. Returns the exit
     code."""
@@ -1107,6 +1188,26 @@ def trial_command(
         except LabStreamsError as e:
             report("trial", e)
             return EXIT_USAGE if isinstance(e, LabStreamsUsageError) else EXIT_FAILURE
+    recorder = None
+    if record:
+        from graspguide.sources.xdf_recording import SESSION_CLOCK, XdfRecorder
+
+        try:
+            recorder = XdfRecorder(
+                record,
+                participant=participant,
+                session="trial",
+                nominal_rate_hz=0.0 if virtual_clock else float(poses.rate_hz),
+                simulated=simulated,
+                extra={"protocol": protocol_file, "source": source_spec},
+                clock=SESSION_CLOCK,
+            )
+        except OSError as e:  # an existing file (never overwritten), an unwritable folder
+            for obs in observers:
+                obs.close()  # type: ignore[attr-defined]
+            report("trial", e)
+            return EXIT_USAGE
+        observers.append(recorder)
     try:
         device = DeviceSession("trial", port, baud, timeout, virtual_clock)
     except LinkError as e:
@@ -1189,7 +1290,11 @@ def trial_command(
         if not device.close():
             code = code or EXIT_FAILURE
         for obs in observers:
-            obs.close()  # type: ignore[attr-defined]
+            try:
+                obs.close()  # type: ignore[attr-defined]
+            except OSError as e:  # the recording's disk: the chunks before stay whole
+                report("trial", e)
+                code = code or EXIT_FAILURE
     return code
 
 
