@@ -99,6 +99,10 @@ class MarkerContacts:
         """The markers never seen yet."""
         return tuple(n for n, t in zip(self.names, self._seen_t) if t == -math.inf)
 
+    def overdue(self, t_s: float) -> tuple[str, ...]:
+        """The markers last seen more than hold_s before ``t_s`` (or never)."""
+        return tuple(n for n, t in zip(self.names, self._seen_t) if not t_s - t <= self.hold_s)
+
     def update(
         self,
         t_s: float,
@@ -265,7 +269,7 @@ class HandTracking:
             if self.contacts.unseen():
                 return self._wait()
             if upd.state == PAUSED:
-                lost = ", ".join(upd.lost)
+                lost = ", ".join(self.contacts.overdue(t_s))
                 return self._pause(f"marker {lost} lost for more than {self.hold_s:g} s")
             held = held or upd.state == HELD
             contacts = upd.contacts

@@ -398,6 +398,15 @@ def test_hand_tracking_one_episode_whatever_its_causes():
     assert (st["held"], st["paused"], st["pauses"], st["body_lost"]) == (2, 2, 1, 2)
 
 
+def test_hand_tracking_names_only_the_markers_lost_past_hold():
+    tr, said = tracking(hold_s=0.5)
+    h = Hand()
+    for k, flags in enumerate([(0, 0, 0), (0, 1, 0), (0, 1, 0), (0, 1, 0), (1, 1, 0)]):
+        tr.update(k * 0.25, h.pose(k * 0.25), h.markers(k * 0.25), [bool(f) for f in flags])
+    # at 1.0 s the index is 0.75 s gone, the thumb just lost (held): only the index named
+    assert len(said) == 1 and said[0].startswith("marker Index lost for more than 0.5 s")
+
+
 def test_hand_tracking_occlusion_flags_and_poses_only():
     tr, said = tracking(hold_s=0.25)
     h = Hand()
