@@ -491,6 +491,7 @@ class LslSource(Source):
         spec = self.spec
         inlet = self.inlet
         t0: float | None = None
+        self.tracking.new_run()
         last = time.monotonic()
         stalled = False
         try:

@@ -280,6 +280,12 @@ class HandTracking:
         c["held"] += held
         return (t_s, quat, contacts)
 
+    def new_run(self) -> None:
+        """A new run of POSEs begins (a source iterated again, as for each trial): its first
+        POSE carries the contacts whatever was sent before, as the device may not hold
+        them any more."""
+        self.rule.sent = None
+
     def send(self, t_s: float, sample: Sample) -> Sample:
         """What the source yields for a sample of :meth:`update` it sends, at ``t_s`` (its
         time from the first one sent): the contacts only when the re-run rule says so

@@ -439,6 +439,11 @@ def test_hand_tracking_send_applies_the_rerun_rule():
     np.testing.assert_allclose(out[3][2], HAND[:3] + [0.00225, 0, 0], atol=1e-12)
     st = tr.stats()
     assert (st["poses"], st["reruns"], st["tol_mm"]) == (8, 3, 2.0)
+    # a new run (the next trial): its first POSE carries the contacts, unmoved as they are
+    again = tr.update(2.0, h.pose(2.0), h.markers(2.0, shift=0.00075 * 7))
+    assert tr.send(2.0, again)[2] is None
+    tr.new_run()
+    np.testing.assert_allclose(tr.send(2.0, again)[2], HAND[:3] + [0.00525, 0, 0], atol=1e-12)
 
 
 def test_bad_arguments():
