@@ -475,6 +475,13 @@ SLOW_TESTS = {
             "test_observer_interface_pushes_in_order",
         ],
     ),
+    "test_trial_lsl.py": (
+        "runs `graspguide trial` from a live LSL outlet in real time",
+        [
+            "test_trial_from_lsl_matches_the_same_motion_replayed_and_a_stall_is_no_fault",
+            "test_a_silent_stream_ends_the_run_unrecorded_and_a_resume_completes_it",
+        ],
+    ),
     "test_latency_lsl.py": (
         "streams a real LSL outlet's samples to the simulated device",
         ["test_tracker_latency_on_sim"],

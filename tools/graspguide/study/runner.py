@@ -77,6 +77,7 @@ from typing import Any, TextIO
 
 from graspguide.core.motor_calibration import MotorCalibration
 from graspguide.link.messages import POSE_WATCHDOG_MS
+from graspguide.link.transport import LinkError
 from graspguide.protocol.study_protocol import (
     PlannedTrial,
     Protocol,
@@ -436,16 +437,20 @@ class StudyRunner:
         _OperatorStop when the operator pressed p, r or s."""
         contacts = [list(c) for c in self.protocol.hands[trial.k]]
         model = self.source.model if self.source.closed_loop else None  # type: ignore[attr-defined]
+        counted = self._source_stats()
+        stale = self._stale_events() if counted is not None else None
         self._start_trial(trial, model, contacts)
         frames = FramesFile(self.files.partial_frames(trial.trial_index), _RESUME_HINT)
         wall0 = time.monotonic()
-        counted = self._source_stats()
         try:
             done = self._drive(trial, model, contacts, frames)
             frames.sync()
         finally:
             frames.close()
-            self._say_gaps(trial, counted, self._source_stats())
+        if counted is not None:
+            after = self._stale_events() if stale is not None else None
+            watchdog = None if after is None or stale is None else (after - stale) % 2**32
+            self._say_gaps(trial, counted, self._source_stats(), watchdog)
         result = self._checked_result(trial, done)
         self._keep_frames(trial)
         self._vt_base_us += int(round((done.t_s + 1.0) * 1e6))
@@ -455,14 +460,26 @@ class StudyRunner:
         stats = getattr(self.source, "stats", None)
         return stats() if callable(stats) else None
 
+    def _stale_events(self) -> int | None:
+        """The device's count of POSE watchdog expiries (STATUS), None when not known."""
+        try:
+            return int(self.client.status().stale_events)
+        except (LinkError, AttributeError):
+            return None
+
     def _say_gaps(
-        self, trial: PlannedTrial, before: dict[str, Any] | None, after: dict[str, Any] | None
+        self,
+        trial: PlannedTrial,
+        before: dict[str, Any],
+        after: dict[str, Any] | None,
+        watchdog: int | None,
     ) -> None:
         """On stderr, the gaps of a live tracker during the trial (lsl_inlet: a stall, a
         marker lost past its hold, the rigid body lost): no POSE then, so the device's
-        watchdog turned the motors off; the trial ran on. The source says each gap as it
-        happens; this is the trial's account, so that none reads as a link fault."""
-        if before is None or after is None:
+        watchdog turned the motors off (``watchdog``: how often its STATUS says it did);
+        the trial ran on. The source says each gap as it happens; this is the trial's
+        account, so that none reads as a link fault."""
+        if after is None:
             return
         gaps = [
             (after.get(key, 0) - before.get(key, 0), what)
@@ -475,11 +492,12 @@ class StudyRunner:
         said = [f"{what}: {n}" for n, what in gaps if n > 0]
         if not said:
             return
+        fired = "" if watchdog is None else f" ({watchdog} time{'s' * (watchdog != 1)})"
         print(
             f"graspguide trial: trial {trial.trial_index}: gaps in the tracker's stream, "
             f"{', '.join(said)}: no POSE was sent then and the device's watchdog turned the "
-            f"motors off {POSE_WATCHDOG_MS} ms after the last one; a gap in the tracking, "
-            "not a link fault: the trial ran on, its time includes the gap",
+            f"motors off {POSE_WATCHDOG_MS} ms after the last one{fired}; a gap in the "
+            "tracking, not a link fault: the trial ran on, its time includes the gap",
             file=self.err,
             flush=True,
         )

@@ -15,42 +15,11 @@ import sys
 import numpy as np
 import pytest
 import pyxdf
-from conftest import subprocess_env
+from conftest import small_protocol_toml, subprocess_env
 
-TINY = """
-[study]
-name = "tiny-record"
-seed = 11
-participants = 1
-pose_rate_hz = 100.0
-
-[trial]
-threshold_deg = 3.0
-hold_s = 0.5
-timeout_s = 15.0
-constraints = "paper"
-start_quat = [1.0, 0.0, 0.0, 0.0]
-
-[hand]
-units = "m"
-y_axis = [0.0, 1.0, 0.0]
-
-[hand.k3]
-thumb  = [0.045, 0.045, 0.035]
-index  = [0.015, 0.095, 0.040]
-middle = [-0.010, 0.100, 0.040]
-
-[conditions]
-modalities = ["F+C"]
-contact_counts = [3]
-
-[wrenches]
-count = 2
-single_motor = 1
-
-[familiarization]
-trials = 0
-"""
+TINY = small_protocol_toml(
+    "tiny-record", seed=11, participants=1, timeout_s=15.0, modalities=("F+C",), wrenches=2
+)
 
 
 def trial(protocol, out, *args):
