@@ -49,7 +49,8 @@ sources: participant[:PARAMS] (the virtual participant, closed loop), synthetic[
          runs on between trials and each trial takes its samples from its START on; a
          gap in the tracking -- a stall, a lost marker -- sends no POSE, so the device's
          watchdog turns the motors off, and is said on stderr, not taken for a link
-         fault; a stream silent for its end= time ends the run unrecorded, resumable;
+         fault; a stream silent for its end= time ends the run, that trial unrecorded
+         (run the same command again to resume);
          docs/lab-streams.md, "LSL MoCap source").
 With --port sim the simulated device runs on its virtual clock for simulated sources (a
 90 s trial takes about a second).

@@ -15,7 +15,9 @@ Timestamps: a POSE's is its ``t_s`` (the source's time from its start, the time 
 POSE's device timestamp is made of); a TELEMETRY's is the ``t_s`` of the POSE it answers;
 a marker's is the ``t_s`` of the last POSE sent before it (0 before the first). Every
 stream has one ClockOffset of 0: they share this clock, and pyxdf's clock
-synchronisation leaves the timestamps exactly as written.
+synchronisation leaves the timestamps exactly as written. A run of several trials
+(`graspguide trial`) records on :data:`SESSION_CLOCK` instead: each trial's times from
+its start offset on (:meth:`XdfRecorder.on_trial_clock`).
 
 :class:`XdfRecorder` is a :class:`graspguide.records.events.TrialObserver` with one more
 hook, :meth:`XdfRecorder.on_pose`, which the pose loop's ``on_send`` calls.

@@ -38,8 +38,12 @@ without its newline or not valid JSON (a write cut by a power loss) is reported,
 one stops the run (it needs a person to look).
 
 Sources (``--source``): ``synthetic[:...]`` and ``replay:FILE`` (open loop: the hand moves
-whatever the motors do; after the source ends its last pose is held until the device
-ends the trial), ``participant[:PARAMS]`` (the virtual participant,
+whatever the motors do; each trial replays the file from its start; after the source
+ends its last pose is held until the device ends the trial), ``lsl:...`` (a live LSL
+MoCap stream, real time: each trial takes its samples from its START on; a gap sends no
+POSE, the device's watchdog turns the motors off, and the trial goes on; a live source
+that ends is no pose to hold: the trial ends unrecorded, RunnerError),
+``participant[:PARAMS]`` (the virtual participant,
 ``graspguide.participant.model.VirtualParticipant.from_spec(PARAMS, seed)``), and
 ``plugin:MODULE:CLASS[:ARG]``: a :class:`graspguide.sources.poses.TrackerAdapter` (a live
 tracker, a person: real time, TLX asked) or a closed-loop class. A closed-loop source has

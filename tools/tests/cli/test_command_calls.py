@@ -267,6 +267,8 @@ CASES = [
             "L",
             "--lsl-wait",
             "3",
+            "--record",
+            "u3.xdf",
         ],
         "graspguide.study.runner:trial_command",
         dict(
@@ -282,6 +284,7 @@ CASES = [
             operator=True,
             lsl="L",
             lsl_wait=3.0,
+            record="u3.xdf",
         ),
     ),
     (

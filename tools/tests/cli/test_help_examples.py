@@ -89,4 +89,4 @@ def test_the_examples_are_found():
     """The test above checks something: the commands with examples have them parsed."""
     found = {" ".join(p): len(_examples(parser.format_help())) for p, parser in ALL}
     assert found["graspguide stream"] == 3
-    assert found["graspguide trial"] == 4
+    assert found["graspguide trial"] == 5
