@@ -478,19 +478,19 @@ class StudyRunner:
         after: dict[str, Any] | None,
         watchdog: int | None,
     ) -> None:
-        """On stderr, the gaps of a live tracker during the trial (lsl_inlet: a stall, a
-        marker lost past its hold, the rigid body lost): no POSE then, so the device's
-        watchdog turned the motors off (``watchdog``: how often its STATUS says it did);
-        the trial ran on. The source says each gap as it happens; this is the trial's
-        account, so that none reads as a link fault."""
+        """On stderr, the gaps of a live tracker during the trial (a stall; a marker or the
+        rigid body lost past its hold, a pause): no POSE then, so the device's watchdog
+        turned the motors off (``watchdog``: how often its STATUS says it did); the trial
+        ran on. The source says each gap as it happens; this is the trial's account, so
+        that none reads as a link fault. A loss within the hold is no gap (the last
+        position stands in, POSEs go on) and is not counted here."""
         if after is None:
             return
         gaps = [
             (after.get(key, 0) - before.get(key, 0), what)
             for key, what in (
                 ("stalls", "stalls (no sample)"),
-                ("pauses", "pauses (a marker lost past its hold)"),
-                ("body_lost", "samples without the rigid body"),
+                ("pauses", "pauses (a marker or the rigid body lost past its hold)"),
             )
         ]
         said = [f"{what}: {n}" for n, what in gaps if n > 0]
