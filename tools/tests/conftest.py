@@ -482,6 +482,10 @@ SLOW_TESTS = {
             "test_a_silent_stream_ends_the_run_unrecorded_and_a_resume_completes_it",
         ],
     ),
+    "test_natnet_source.py": (
+        "runs `graspguide trial` from a stand-in NatNet server in real time",
+        ["test_trial_from_natnet_succeeds_both_trials"],
+    ),
     "test_latency_lsl.py": (
         "streams a real LSL outlet's samples to the simulated device",
         ["test_tracker_latency_on_sim"],

@@ -45,13 +45,14 @@ sources: participant[:PARAMS] (the virtual participant, closed loop), synthetic[
          start, and its last pose is held until the device ends the trial),
          plugin:MODULE:CLASS[:ARG] (a sources.TrackerAdapter -- a live tracker, a
          person -- or a closed-loop class with begin_trial/step),
-         lsl:name=NAME[,...] (a live LSL MoCap stream, a person, in real time: the stream
-         runs on between trials and each trial takes its samples from its START on; a
+         lsl:name=NAME[,...] or natnet:server=IP,body=NAME[,...] (a live LSL MoCap
+         stream or Motive's NatNet stream, a person, in real time: the stream runs on
+         between trials and each trial takes its samples from its START on; a
          gap in the tracking -- a stall, a lost marker -- sends no POSE, so the device's
          watchdog turns the motors off, and is said on stderr, not taken for a link
          fault; a stream silent for its end= time ends the run, that trial unrecorded
          (run the same command again to resume);
-         docs/lab-streams.md, "LSL MoCap source").
+         docs/lab-streams.md, "LSL MoCap source"; docs/trackers.md for NatNet).
 With --port sim the simulated device runs on its virtual clock for simulated sources (a
 90 s trial takes about a second).
 
@@ -117,7 +118,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--source",
         metavar="SOURCE",
         help="participant[:PARAMS], synthetic[:...], replay:FILE.csv, replay:FILE.xdf"
-        "[#name=STREAM], lsl:name=NAME[,...] or plugin:MODULE:CLASS[:ARG] "
+        "[#name=STREAM], lsl:name=NAME[,...], natnet:server=IP,body=NAME[,...] or "
+        "plugin:MODULE:CLASS[:ARG] "
         "(required unless --dry-run)",
     )
     p.add_argument(

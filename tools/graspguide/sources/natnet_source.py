@@ -5,7 +5,7 @@ known one)::
 
     natnet:server=127.0.0.1,local=0.0.0.0,body=Hand,markers=65537;65538;65539[;65540],
            multicast=239.255.42.99,data_port=1511,command_port=1510,hold=0.2,tol_mm=2,
-           timeout=5
+           stall=0.5,end=10,timeout=5
 
 * ``server``: the Motive PC; ``local``: this PC's interface address (the multicast group
   is joined there; unicast binds it). ``command_port``/``data_port``: Motive's
@@ -27,9 +27,21 @@ known one)::
   which the LSL source follows too.
 * ``tol_mm``: the per-posture re-run tolerance: a sample carries the contacts only when
   one of them moved more than this from the contacts last sent (default 2 mm).
-* ``timeout``: seconds to wait for the server's answer, for the first tracked frame and
-  every marker's first sight (a rigid body or marker not seen by then is a SourceError:
-  its ID is wrong or it is not streamed), and between frames.
+* ``stall``: seconds without a frame that are a *stall* (default 0.5): no sample is
+  yielded, so no POSE is sent and the device's watchdog turns the motors off; said once
+  on stderr when it begins and once when frames come again, and counted (``stalls`` in
+  :meth:`NatNetSource.stats`). A short silence of Motive (a dropped packet run, a busy
+  network) is no error.
+* ``end``: seconds without a frame after which an iteration ends (default 10; not shorter
+  than ``stall``): for `graspguide trial` the trial ends as "the source ended first".
+* ``timeout``: seconds to wait for the server's answer, for the first frame after the
+  source opened (none by then is a SourceError: Motive does not stream to this PC), and
+  for the first tracked frame and every marker's first sight (a rigid body or marker not
+  seen by then is a SourceError: its ID is wrong or it is not streamed).
+
+The source can be iterated again (as `graspguide trial` does for each trial): the sockets
+stay open until :meth:`NatNetSource.close`; each iteration's ``t_s`` counts from its first
+sample, and :meth:`NatNetSource.flush` drops the frames buffered meanwhile.
 
 Samples are ``(t_s, quat_wxyz, contacts_or_None)``, ``t_s`` from Motive's frame timestamp
 (seconds since the first frame), converted with the ``optitrack`` tracker convention
@@ -74,6 +86,7 @@ from dataclasses import dataclass
 from typing import Any, TextIO
 
 from graspguide.core.suggest import did_you_mean
+from graspguide.link.messages import POSE_WATCHDOG_MS
 from graspguide.sources.marker_contacts import DEFAULT_HOLD_S, DEFAULT_TOL_MM, HandTracking
 from graspguide.sources.poses import (
     TRACKER_PRESETS,
@@ -88,6 +101,8 @@ DEFAULT_MULTICAST = "239.255.42.99"
 DEFAULT_COMMAND_PORT = 1510
 DEFAULT_DATA_PORT = 1511
 DEFAULT_TIMEOUT_S = 5.0
+DEFAULT_STALL_S = 0.5
+DEFAULT_END_S = 10.0
 #: This many undecodable packets in a row mean the stream is not NatNet as announced.
 MAX_BAD_PACKETS = 20
 #: Seconds between unicast keep-alives (the SDK's sample sends one when idle).
@@ -103,7 +118,9 @@ NATNET_OPTIONS: dict[str, str] = {
     "command_port": f"Motive's command port ({DEFAULT_COMMAND_PORT})",
     "hold": f"seconds a lost body or marker is kept, then paused ({DEFAULT_HOLD_S})",
     "tol_mm": f"the per-posture re-run tolerance, mm ({DEFAULT_TOL_MM:g})",
-    "timeout": f"seconds to wait for the server and for frames ({DEFAULT_TIMEOUT_S})",
+    "stall": f"seconds without a frame that are a stall, no POSE sent ({DEFAULT_STALL_S})",
+    "end": f"seconds without a frame that end the source ({DEFAULT_END_S:g})",
+    "timeout": f"seconds to wait for the server and the first frame ({DEFAULT_TIMEOUT_S})",
 }
 SPEC = "natnet:server=IP,body=NAME_OR_ID[,markers=ID;ID;ID[;ID]][,multicast=GROUP|off]"
 
@@ -130,6 +147,8 @@ class NatNetSpec:
     command_port: int = DEFAULT_COMMAND_PORT
     hold: float = DEFAULT_HOLD_S
     tol_mm: float = DEFAULT_TOL_MM
+    stall: float = DEFAULT_STALL_S
+    end: float = DEFAULT_END_S
     timeout: float = DEFAULT_TIMEOUT_S
 
 
@@ -222,7 +241,7 @@ def parse_spec(rest: str) -> NatNetSpec:
             values[key] = _port(key, value)
         elif key == "hold":
             values[key] = _seconds(key, value, 0.0)
-        elif key == "timeout":
+        elif key in ("timeout", "stall", "end"):
             values[key] = _seconds(key, value, 0.0)
         elif key == "tol_mm":
             values[key] = _millimetres(key, value)
@@ -242,6 +261,13 @@ def parse_spec(rest: str) -> NatNetSpec:
             values[key] = ids
     if "body" not in values:
         raise SourceError(f"natnet: body is required (the hand's rigid body); written {SPEC}")
+    stall = float(values.get("stall", DEFAULT_STALL_S))  # type: ignore[arg-type]
+    end = float(values.get("end", DEFAULT_END_S))  # type: ignore[arg-type]
+    if end < stall:
+        raise SourceError(
+            f"natnet: end ({end:g} s) must not be shorter than stall ({stall:g} s); e.g. "
+            f"stall={DEFAULT_STALL_S:g},end={DEFAULT_END_S:g}"
+        )
     return NatNetSpec(**values)  # type: ignore[arg-type]
 
 
@@ -274,7 +300,11 @@ class NatNetSource(Source):
         self.protocol_version: str | None = None
         self.body_id: int | None = int(spec.body) if spec.body.isdigit() else None
         self.skipped_packets = 0
+        self.stalls = 0
         self._bad_run = 0
+        # a frame seen since the source opened: silence is a stall, not a setup error
+        self._had_frame = False
+        self._last_keepalive = -math.inf
         self._nn = _natnet()
         self._command: socket.socket | None = None
         self._data: socket.socket | None = None
@@ -398,37 +428,74 @@ class NatNetSource(Source):
         return int(bodies[name])
 
     def close(self) -> None:
+        """Close the sockets (again: nothing); the source cannot be iterated after."""
         for sock in {self._command, self._data}:
             if sock is not None:
                 sock.close()
         self._command = self._data = None
 
+    def flush(self) -> int:
+        """Drop what the data socket buffered (frames from before now), without blocking:
+        the next iteration starts from the frames that arrive after this. Returns how many
+        packets were dropped."""
+        sock = self._data
+        if sock is None:
+            return 0
+        dropped = 0
+        sock.setblocking(False)
+        try:
+            while True:
+                try:
+                    sock.recvfrom(1 << 16)
+                except (BlockingIOError, ConnectionRefusedError):
+                    break
+                dropped += 1
+        finally:
+            sock.setblocking(True)
+        return dropped
+
     # -- frames -------------------------------------------------------------------------
     def frames(self) -> Iterator[object]:
-        """Decoded frames of data (``natnet.DataFrame``), skipping undecodable packets;
-        SourceError when none arrives within the timeout."""
+        """Decoded frames of data (``natnet.DataFrame``), skipping undecodable packets.
+        No frame for ``stall`` s is a stall (said, counted; the wait goes on), for ``end`` s
+        the end of the iteration; no frame at all within ``timeout`` s of the source's
+        opening is a SourceError."""
         nn = self._nn
         s = self.spec
         if self._data is None:
             raise SourceError("natnet: the source is closed")
         sock = self._data
-        last_keepalive = last_packet = time.monotonic()
+        last_packet = time.monotonic()
+        stalled = False
         decode_errors = (struct.error, UnicodeDecodeError, ValueError, TypeError, nn.NatNetError)
         while True:
             now = time.monotonic()
-            if s.multicast is None and now - last_keepalive > KEEPALIVE_S:
+            if s.multicast is None and now - self._last_keepalive > KEEPALIVE_S:
                 sock.sendto(_request(nn.NatNetClient.NAT_KEEPALIVE), (s.server, s.command_port))
-                last_keepalive = now
-            if now - last_packet >= s.timeout:
-                raise SourceError(
-                    f"natnet: no frame from {s.server} for {s.timeout:g} s: check that "
-                    "Motive is live (not paused) and streams to this PC"
-                )
-            sock.settimeout(min(s.timeout - (now - last_packet), KEEPALIVE_S))
+                self._last_keepalive = now
+            gap = now - last_packet
+            if not self._had_frame:
+                if gap >= s.timeout:
+                    raise SourceError(
+                        f"natnet: no frame from {s.server} for {s.timeout:g} s: check that "
+                        "Motive is live (not paused) and streams to this PC"
+                    )
+                wait = s.timeout - gap
+            else:
+                if gap > s.stall and not stalled:
+                    stalled = True
+                    self.stalls += 1
+                    self._say(self._stall_text(gap))
+                if gap >= s.end:
+                    self._say(f"no frame for {s.end:g} s: the source ends")
+                    return
+                # wake at the stall's and the end's times to say them when they are due
+                wait = (s.stall if not stalled else s.end) - gap
+            sock.settimeout(max(0.001, min(wait, KEEPALIVE_S)))
             try:
                 data, _ = sock.recvfrom(1 << 16)
             except (TimeoutError, ConnectionRefusedError):
-                # refused: a keep-alive found the server gone; the timeout above reports it
+                # refused: a keep-alive found the server gone; a stall or the end says so
                 continue
             head = self._header(data)
             if head is None or head[0] != nn.NatNetClient.NAT_FRAMEOFDATA:
@@ -439,14 +506,24 @@ class NatNetSource(Source):
                 self._bad(f"an undecodable frame of data ({type(e).__name__}: {e})")
                 continue
             self._bad_run = 0
-            last_packet = time.monotonic()
+            now = time.monotonic()
+            if stalled:
+                self._say(f"frames again after {now - last_packet:.2f} s: POSEs resume")
+                stalled = False
+            self._had_frame = True
+            last_packet = now
             yield frame
 
+    def _stall_text(self, gap: float) -> str:
+        return (
+            f"stalled for {gap:.1f} s: no frame from {self.spec.server}, no POSE sent; the "
+            f"device's watchdog turns the motors off {POSE_WATCHDOG_MS} ms after the last POSE"
+        )
+
     def __iter__(self) -> Iterator[Sample]:
-        try:
-            yield from self._samples()
-        finally:
-            self.close()
+        # the sockets stay open: the source is iterated again for the next trial
+        self.tracking.new_run()
+        return self._samples()
 
     def _samples(self) -> Iterator[Sample]:
         s = self.spec
@@ -501,10 +578,14 @@ class NatNetSource(Source):
         )
 
     def stats(self) -> dict[str, Any]:
-        """What the source did: packets skipped, and :meth:`HandTracking.stats` (frames
+        """What the source did: packets skipped, stalls, and :meth:`HandTracking.stats` (frames
         read as samples, POSEs yielded, waiting, rigid-body-lost, held and paused samples,
         pause episodes; with markers the per-posture re-runs)."""
-        return {"skipped_packets": self.skipped_packets, **self.tracking.stats()}
+        return {
+            "skipped_packets": self.skipped_packets,
+            "stalls": self.stalls,
+            **self.tracking.stats(),
+        }
 
     def describe(self) -> dict[str, object]:
         s = self.spec
@@ -519,6 +600,8 @@ class NatNetSource(Source):
             "markers": list(s.markers),
             "hold_s": s.hold,
             "tol_mm": s.tol_mm,
+            "stall_s": s.stall,
+            "end_s": s.end,
             "tracker_convention": self.convention.describe(),
         }
 

@@ -256,19 +256,22 @@ def open_runner_source(spec: str, protocol: Protocol, participant: str) -> Runne
             False,
             base.describe(),
         )
-    if kind == "lsl":
-        return _lsl_source(spec, protocol)
+    if kind in ("lsl", "natnet"):
+        return _live_source(spec, protocol)
     from graspguide.sources.poses import unknown_source
 
     raise RunnerError(f"--source: {unknown_source(spec)}", usage=True)
 
 
-def _lsl_source(spec: str, protocol: Protocol) -> OpenLoopSource:
-    """A live LSL MoCap stream (graspguide.sources.lsl_inlet) for every trial of the run.
+def _live_source(spec: str, protocol: Protocol) -> OpenLoopSource:
+    """A live tracker -- an LSL MoCap stream (graspguide.sources.lsl_inlet) or Motive's
+    NatNet stream (graspguide.sources.natnet_source) -- opened once for every trial of the
+    run.
 
     The stream runs on between trials; each trial takes its samples from its START on
-    (its first sample is its t_s = 0): what the inlet buffered before -- the hand during
-    the rest, the ready prompt -- is dropped, as a replay restarts its file each trial."""
+    (its first sample is its t_s = 0): what the inlet or socket buffered before -- the hand
+    during the rest, the ready prompt -- is dropped, as a replay restarts its file each
+    trial."""
     from graspguide.sources.poses import SourceError
     from graspguide.sources.source_spec import open_source
 
@@ -292,11 +295,14 @@ def _lsl_source(spec: str, protocol: Protocol) -> OpenLoopSource:
 
 
 def _from_now(base: Any) -> Iterator[tuple[float, Any, Any]]:
-    """``base``'s samples from now on: the inlet's queue is flushed when the trial asks
-    for its first sample (after START_TRIAL)."""
-    inlet = getattr(base, "inlet", None)
-    if inlet is not None:
-        inlet.flush()
+    """``base``'s samples from now on: what it buffered (an LSL inlet's queue, a NatNet
+    socket's frames) is dropped when the trial asks for its first sample (after
+    START_TRIAL)."""
+    flush = getattr(base, "flush", None)
+    if flush is None:
+        flush = getattr(getattr(base, "inlet", None), "flush", None)
+    if flush is not None:
+        flush()
     yield from base
 
 

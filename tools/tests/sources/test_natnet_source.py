@@ -13,14 +13,20 @@ TrackerConvention.
 
 from __future__ import annotations
 
+import csv
 import io
+import json
+import os
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
 
 import numpy as np
 import pytest
+from conftest import small_protocol_toml, subprocess_env
 from scipy.spatial.transform import Rotation
 
 from graspguide.sources.natnet_source import MAX_BAD_PACKETS, parse_spec
@@ -139,12 +145,14 @@ class Scene:
 
 class StandIn:
     """A stand-in Motive: answers the connect request (and the model-definition request)
-    on its command port, then sends the given packets to the client that connected."""
+    on its command port, then sends the given packets to the client that connected. An
+    item that is a number is a pause of that many seconds; an Event is set when reached;
+    a (Event, "wait") pair waits for that event."""
 
-    def __init__(self, version, packets, bodies=None):
+    def __init__(self, version, packets, bodies=None, wait=5.0):
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(5.0)
+        self.sock.settimeout(wait)
         self.port = self.sock.getsockname()[1]
         self.version, self.packets, self.bodies = version, packets, bodies
         self.requests: list[int] = []
@@ -160,8 +168,15 @@ class StandIn:
             self.requests.append(struct.unpack_from("<H", data)[0])
             self.sock.sendto(model_definitions(self.version, self.bodies), client)
         for p in self.packets:
-            self.sock.sendto(p, client)
-            time.sleep(0.002)  # keep the loopback socket's buffer from overflowing
+            if isinstance(p, float):
+                time.sleep(p)
+            elif isinstance(p, threading.Event):
+                p.set()
+            elif isinstance(p, tuple):
+                p[0].wait(10)
+            else:
+                self.sock.sendto(p, client)
+                time.sleep(0.002)  # keep the loopback socket's buffer from overflowing
 
     def spec(self, **extra) -> str:
         keys = {"server": "127.0.0.1", "local": "127.0.0.1", "multicast": "off"}
@@ -370,6 +385,8 @@ def test_no_server_is_a_clear_error():
         ("natnet:body=3,tol=1", r'did you mean "tol_mm"'),
         ("natnet:body=3,multicast=10.0.0.1", "multicast must be a group"),
         ("natnet:body=3,body=4", "body is given twice"),
+        ("natnet:body=3,stall=0", "stall must be seconds"),
+        ("natnet:body=3,stall=2,end=1", r"end \(1 s\) must not be shorter than stall"),
     ],
 )
 def test_bad_spec_names_the_key(spec, message):
@@ -381,4 +398,246 @@ def test_defaults_are_motives():
     spec = parse_spec("body=Hand")
     assert (spec.multicast, spec.command_port, spec.data_port) == ("239.255.42.99", 1510, 1511)
     assert (spec.hold, spec.tol_mm) == (0.2, 2.0)
+    assert (spec.stall, spec.end) == (0.5, 10.0)
     assert parse_spec("body=1,markers=65537;1.2;1.3").markers == (65537, 65538, 65539)
+
+
+def test_a_stall_is_said_once_and_samples_resume():
+    version = (4, 1)
+    scene = Scene(seed=8)
+    packets = [scene.frame(version, n, n * 0.01) for n in range(5)]
+    packets += [0.45]  # Motive goes quiet for longer than stall, then streams again
+    packets += [scene.frame(version, n, n * 0.01) for n in range(50, 55)]
+    server = StandIn(version, packets)
+    try:
+        source = open_source(server.spec(stall="0.15", end="2"))
+        source.notice = io.StringIO()
+        got = []
+        for sample in source:
+            got.append((time.monotonic(), sample))
+            if len(got) == 10:
+                break
+    finally:
+        server.close()
+    assert [s[0] for _, s in got] == pytest.approx([n * 0.01 for n in (*range(5), *range(50, 55))])
+    r = scene.expected()[0]
+    assert all(quat_close(s[1], r, 1e-6) for _, s in got)
+    waits = np.diff([t for t, _ in got])
+    assert waits[4] >= 0.4 and np.delete(waits, 4).max() < 0.1, waits
+    text = source.notice.getvalue()
+    assert text.count("stalled for") == 1 and text.count("POSEs resume") == 1, text
+    assert (
+        "no POSE sent; the device's watchdog turns the motors off 200 ms after the last POSE"
+        in (text)
+    )
+    resumed = float(text.split("frames again after ")[1].split(" s")[0])
+    assert resumed == pytest.approx(waits[4], abs=0.02)
+    assert source.stats()["stalls"] == 1
+
+
+def test_silence_longer_than_end_ends_the_iteration():
+    version = (4, 1)
+    scene = Scene(seed=11)
+    done = threading.Event()
+    # the server stays up but sends nothing after three frames
+    server = StandIn(version, [scene.frame(version, n, n * 0.01) for n in range(3)] + [(done, "w")])
+    try:
+        source = open_source(server.spec(stall="0.1", end="0.4"))
+        source.notice = io.StringIO()
+        start = time.monotonic()
+        samples = list(source)
+        elapsed = time.monotonic() - start
+    finally:
+        done.set()
+        server.close()
+    assert [s[0] for s in samples] == pytest.approx([0.0, 0.01, 0.02])
+    assert 0.4 <= elapsed < 1.0, elapsed
+    text = source.notice.getvalue()
+    assert text.count("stalled for") == 1 and "no frame for 0.4 s: the source ends" in text, text
+    assert source.stats()["stalls"] == 1
+
+
+def test_a_second_iteration_takes_the_frames_from_its_flush_on():
+    version = (3, 1)
+    scene, other = Scene(seed=9), Scene(seed=10)
+    between, go = threading.Event(), threading.Event()
+    packets = [scene.frame(version, n, n * 0.01) for n in range(4)]
+    # between the iterations the hand is elsewhere: no sample of the second one
+    packets += [other.frame(version, n, n * 0.01) for n in range(4, 10)] + [between, (go, "w")]
+    packets += [scene.frame(version, n, n * 0.01) for n in range(10, 14)]
+    server = StandIn(version, packets)
+    try:
+        source = open_source(server.spec(markers=markers_key()))
+        first = [s for _, s in zip(range(4), source)]
+        assert between.wait(5)
+        time.sleep(0.05)  # the last of them reach the socket
+        dropped = source.flush()
+        go.set()
+        second = [s for _, s in zip(range(4), source)]
+        source.close()
+        source.close()  # again: nothing
+        with pytest.raises(SourceError, match="the source is closed"):
+            next(iter(source))
+    finally:
+        go.set()
+        server.close()
+    assert dropped == 6
+    r, contacts = scene.expected()
+    for run in (first, second):
+        assert [s[0] for s in run] == pytest.approx([0.0, 0.01, 0.02, 0.03])
+        assert all(quat_close(s[1], r, 1e-6) for s in run)
+        # each iteration's first sample carries the contacts: the device may have dropped them
+        assert np.allclose(run[0][2], contacts, atol=1e-6)
+        assert [s[2] for s in run[1:]] == [None] * 3
+    assert source.stats()["stalls"] == 0
+
+
+# --------------------------------------------------------------------------------------
+# graspguide trial --source natnet:... on the simulated device, in real time
+# --------------------------------------------------------------------------------------
+LSL_CONFIG = """\
+[ports]
+IPv6 = disable
+[lab]
+KnownPeers = {127.0.0.1}
+ResolveScope = machine
+[log]
+level = -2
+"""
+RATE = 100.0
+HAND_AT = np.array([0.3, 0.1, 0.9])  # the rigid body's place in the world (m)
+TLX = '{"session": 1, "MD": 5, "TD": 3, "PD": 2, "PE": 4, "EF": 6, "FR": 3}\n'
+
+
+def trial_motions(protocol_path):
+    """Each planned trial's motion (world quaternions w, x, y, z at RATE): a scripted hand
+    turning to align the trial's force with gravity within 1.5 s, then holding; and the
+    hand's contacts."""
+    from graspguide.protocol import study_protocol as pf
+    from graspguide.sources.poses import SyntheticSource
+
+    proto = pf.load_protocol(str(protocol_path))
+    planned = pf.plan(proto, "U1", pf.draw_wrenches(proto), pf.draw_familiarization_wrenches(proto))
+    out = {}
+    for t in planned:
+        contacts = [list(c) for c in proto.hands[t.k]]
+        src = SyntheticSource(rate=RATE, duration=2.5, seed=t.trial_index).aim(
+            contacts, list(t.wrench), t.policy, proto.constraints, list(proto.y_axis)
+        )
+        out[t.trial_index] = [np.asarray(q) for _, q, _ in src]
+    return out, np.asarray(proto.hands[planned[0].k])
+
+
+def motive_frame(number: int, t: float, q_wxyz, contacts) -> bytes:
+    """The hand at world orientation ``q_wxyz`` (at HAND_AT, its contacts as labelled
+    markers) as Motive streams it (y up)."""
+    a = WORLD_TO_MOTIVE
+    w, x, y, z = q_wxyz
+    r = Rotation.from_quat([x, y, z, w]).as_matrix()
+    quat = Rotation.from_matrix(a @ r @ a.T).as_quat()
+    markers = [(mid, a @ (HAND_AT + r @ c), False) for mid, c in zip(MARKER_IDS, contacts)]
+    return frame((4, 1), number, t, [(HAND_ID, a @ HAND_AT, quat, True)], markers)
+
+
+def tracker(marks_ready, holder, motion, contacts, seen):
+    """Motive's frames: each trial's motion from its trial_start marker (the run's LSL
+    markers), its last pose held until trial_end, then a far-off hand for 0.3 s (which
+    no trial may take), then nothing until the next trial."""
+    marks_ready.wait(60)
+    marks = holder["marks"]
+    start = due = time.monotonic()
+    number = 0
+    rows: list = []
+    hold = None
+    while True:
+        m, _ = marks.pull_sample(timeout=0.0)
+        if m is not None:
+            event = json.loads(m[0])
+            seen.append(event)
+            if event["event"] == "study_end":
+                return
+            if event["event"] == "trial_start":
+                rows, hold = list(motion[event["trial_index"]]), True
+            elif event["event"] == "trial_end":
+                rows, hold = [np.array([0.0, 1.0, 0.0, 0.0])] * int(0.3 * RATE), None
+        if rows:
+            q = rows.pop(0) if len(rows) > 1 or not hold else rows[0]
+            number += 1
+            yield motive_frame(number, time.monotonic() - start, q, contacts)
+        due += 1.0 / RATE
+        time.sleep(max(0.0, due - time.monotonic()))
+
+
+def test_trial_from_natnet_succeeds_both_trials(tmp_path, monkeypatch, report_figure):
+    cfg = tmp_path / "lsl_api.cfg"
+    cfg.write_text(LSL_CONFIG)
+    monkeypatch.setenv("LSLAPICFG", str(cfg))
+    import pylsl
+
+    protocol = tmp_path / "p.toml"
+    protocol.write_text(
+        small_protocol_toml(
+            "natnet-trial", seed=5, participants=1, timeout_s=10.0, modalities=("F+C",)
+        )
+    )
+    motion, contacts = trial_motions(protocol)
+    assert sorted(motion) == [1, 2]
+    marks_ready, holder, seen = threading.Event(), {}, []
+    server = StandIn((4, 1), tracker(marks_ready, holder, motion, contacts, seen), wait=30)
+    (tmp_path / "tlx.jsonl").write_text(TLX)
+    out, ours = tmp_path / "out", f"GGNatNet{os.getpid()}"
+    source = server.spec(markers=markers_key(), stall="0.25", end="3", timeout="5")
+    began = time.monotonic()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "graspguide", "trial", "--protocol", str(protocol)]
+        + ["--participant", "U1", "--port", "sim", "--source", source, "--out", str(out)]
+        + ["--rest-s", "1", "--tlx", str(tmp_path / "tlx.jsonl"), "--lsl", ours]
+        + ["--lsl-wait", "30"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        env=subprocess_env(),
+    )
+    try:
+        inlets = {}
+        # the run waits (--lsl-wait) for a recorder of both its streams
+        for kind in ("Markers", "Telemetry"):
+            found = pylsl.resolve_byprop("name", f"{ours}-{kind}", 1, 20)
+            assert found, f"the run's {kind} stream was not found"
+            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60)
+            inlets[kind].open_stream(20)
+        holder["marks"] = inlets["Markers"]
+        marks_ready.set()
+        stdout, stderr = proc.communicate(timeout=90)
+    finally:
+        marks_ready.set()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        server.close()
+    took = time.monotonic() - began
+    assert proc.returncode == 0, stdout + stderr
+    assert [e["event"] for e in seen].count("trial_start") == 2
+    with open(out / "U1" / "trials.jsonl", encoding="utf-8") as f:
+        records = {r["trial_index"]: r for r in map(json.loads, f)}
+    assert sorted(records) == [1, 2] and all(records[i]["success"] is True for i in (1, 2))
+    for index in (1, 2):
+        with open(out / "U1" / "frames" / f"trial-{index:04d}.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+        quats = [np.array([float(r[k]) for k in ("qw", "qx", "qy", "qz")]) for r in rows]
+        # the trial's first POSE is one of its motion's first samples (float32 on the wire),
+        # and the far-off hand sent between trials is no POSE of any trial
+        dist = [
+            min(np.linalg.norm(quats[0] - q), np.linalg.norm(quats[0] + q)) for q in motion[index]
+        ]
+        assert min(dist) < 1e-5 and int(np.argmin(dist)) <= 30, (index, min(dist))
+        assert all(abs(q[1]) < 0.99 for q in quats), index
+    with open(out / "U1" / "runs.jsonl", encoding="utf-8") as f:
+        end = [json.loads(line) for line in f][-1]
+    assert end["outcome"] == "complete" and end["source_stats"]["stalls"] == 0, end
+    assert "gaps in the tracker's stream" not in stderr, stderr
+    report_figure(
+        "trial natnet (completion_s per trial; wall s)",
+        f"{records[1]['completion_s']:.3f}, {records[2]['completion_s']:.3f}; {took:.1f}",
+    )
